@@ -1,0 +1,33 @@
+"""drake_hybrid: hybrid velocity/force control (Li & Sastry 1987) on Drake.
+
+Layers (each imports only the ones above it):
+
+* ``charts``       coordinate charts of the end-effector configuration (section 2.1)
+* ``constraints``  C(r) = 0 and its derivatives E_f, E_f-dot r-dot (sections 2.2, 3.0)
+* ``projections``  E_p and the constraint space E = [E_p; E_f] (sections 3.0, 3.3)
+* ``kinematics``   chart quantities (r, r-dot, J, J-dot q-dot) from a MultibodyPlant
+"""
+
+from drake_hybrid.charts import EulerZXZChart, PlanarChart, PoseChart
+from drake_hybrid.constraints import (
+    Constraint,
+    SelectingConstraint,
+    crank_constraint,
+    sphere_constraint,
+    surface_constraint,
+    window_constraint,
+)
+from drake_hybrid.errors import (
+    BranchError,
+    ChartSingularityError,
+    ConstraintRankError,
+    DimensionError,
+    DrakeHybridError,
+    GainError,
+    OffConstraintError,
+    UnknownVariableError,
+)
+from drake_hybrid.kinematics import EndEffectorKinematics, TaskKinematics
+from drake_hybrid.projections import ConstraintSpace, GivenVelocityProjection, KernelVelocityProjection
+
+__version__ = "0.1.0"

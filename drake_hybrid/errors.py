@@ -1,0 +1,44 @@
+"""Typed errors raised by drake_hybrid.
+
+Every error is a ``ValueError`` subclass, so callers that do not care about the
+kind can catch ``ValueError``; tests and users that do care can catch the
+specific type. Messages always name the offending object and the numbers.
+"""
+
+
+class DrakeHybridError(ValueError):
+    """Base class of every error raised on purpose by drake_hybrid."""
+
+
+class ChartSingularityError(DrakeHybridError):
+    """A coordinate chart was evaluated at (or too near) its singular set.
+
+    For z-x-z Euler angles this is |sin(theta)| below the chart's tolerance,
+    where the Euler-rate map T(eta) loses rank (spec section 1).
+    """
+
+
+class ConstraintRankError(DrakeHybridError):
+    """dC (the force projection E_f) lost rank, or E = [E_p; E_f] is singular."""
+
+
+class UnknownVariableError(DrakeHybridError):
+    """A symbolic expression uses variables that are not the chart's coordinates."""
+
+
+class DimensionError(DrakeHybridError):
+    """An array has the wrong shape for the object it is given to."""
+
+
+class GainError(DrakeHybridError):
+    """A gain matrix is not of the right size or not positive definite."""
+
+
+class BranchError(DrakeHybridError):
+    """A configuration satisfies C(r) = 0 on the wrong branch (e.g. the tool
+    pointing away from the workpiece instead of toward it)."""
+
+
+class OffConstraintError(DrakeHybridError):
+    """A configuration that should satisfy C(r) = 0 does not (e.g. a start
+    configuration off the constraint)."""

@@ -1,0 +1,109 @@
+"""End-effector kinematics in chart coordinates, from a MultibodyPlant.
+
+``EndEffectorKinematics`` turns Drake's geometric quantities of an
+end-effector point P fixed in a frame E (pose, geometric Jacobian J_g, bias
+spatial acceleration J_g-dot v) into the chart's x, nu, analytic Jacobian J
+and J-dot q-dot (spec section 1, last part). Works for float and AutoDiffXd
+plants; frames are resolved by index, so the same object can be rebuilt on a
+scalar-converted plant with ``for_plant``.
+"""
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from pydrake.multibody.tree import FrameIndex, JacobianWrtVariable
+
+from drake_hybrid.errors import DimensionError
+
+
+@dataclass
+class TaskKinematics:
+    """Chart quantities of the end-effector point at one plant state."""
+
+    configuration: np.ndarray        # x (the paper's r)
+    velocity: np.ndarray             # nu = J q-dot (the paper's r-dot)
+    jacobian: np.ndarray             # J (d x n)
+    bias: np.ndarray                 # J-dot q-dot (d)
+    rotation: np.ndarray             # R_WE (3 x 3)
+    position: np.ndarray             # p_WP (3)
+    spatial_jacobian: np.ndarray     # J_g (6 x n), rows [omega; v]
+
+
+def frame_names(plant):
+    """Names of all frames of ``plant`` (for error messages)."""
+    return sorted({plant.get_frame(FrameIndex(i)).name() for i in range(plant.num_frames())})
+
+
+def resolve_frame(plant, frame):
+    """The Frame of ``plant`` given one of its Frames or a frame name. Raises
+    ValueError naming the plant's frames if it is not there."""
+    if isinstance(frame, str):
+        if not plant.HasFrameNamed(frame):
+            raise ValueError(f"frame '{frame}' is not in the plant; its frames are {frame_names(plant)}")
+        return plant.GetFrameByName(frame)
+    try:
+        name = frame.name()
+    except AttributeError:
+        raise TypeError(f"expected a Frame or a frame name, got {type(frame).__name__}") from None
+    if frame.GetParentPlant() is not plant:
+        raise ValueError(f"frame '{name}' is not in the plant; its frames are {frame_names(plant)}")
+    return frame
+
+
+class EndEffectorKinematics:
+    """Chart coordinates of the point P (``point_in_frame`` = p_EP) of frame E.
+
+    Args:
+        plant: a finalized MultibodyPlant (float or AutoDiffXd) with nq == nv.
+        frame: the end-effector frame E (a Frame of ``plant`` or its name).
+        point_in_frame: p_EP, the end-effector point in E (m).
+        chart: the coordinate chart; the end-effector orientation is E's.
+    """
+
+    def __init__(self, plant, frame, point_in_frame, chart):
+        if not plant.is_finalized():
+            raise ValueError("EndEffectorKinematics: the plant must be finalized")
+        if plant.num_positions() != plant.num_velocities():
+            raise ValueError(
+                f"EndEffectorKinematics needs q-dot = v (nq == nv); the plant has nq = {plant.num_positions()}, "
+                f"nv = {plant.num_velocities()}")
+        point = np.asarray(point_in_frame, dtype=float)
+        if point.shape != (3,):
+            raise DimensionError(f"point_in_frame must be a 3-vector, got shape {point.shape}")
+        self.plant = plant
+        self.frame = resolve_frame(plant, frame)
+        self.point_in_frame = point
+        self.chart = chart
+        self._world = plant.world_frame()
+
+    def for_plant(self, plant):
+        """The same kinematics on another scalar type of the same plant."""
+        return EndEffectorKinematics(plant, plant.get_frame(self.frame.index()), self.point_in_frame, self.chart)
+
+    def evaluate(self, plant_context, check=True):
+        """TaskKinematics at the state in ``plant_context``."""
+        plant = self.plant
+        X_WE = plant.CalcRelativeTransform(plant_context, self._world, self.frame)
+        R_WE = X_WE.rotation().matrix()
+        p_WP = X_WE.translation() + R_WE @ self.point_in_frame
+        J_spatial = plant.CalcJacobianSpatialVelocity(
+            plant_context, JacobianWrtVariable.kV, self.frame, self.point_in_frame, self._world, self._world)
+        A_bias = plant.CalcBiasSpatialAcceleration(
+            plant_context, JacobianWrtVariable.kV, self.frame, self.point_in_frame, self._world, self._world
+        ).get_coeffs()
+        v = plant.GetVelocities(plant_context)
+        chart = self.chart
+        x = chart.configuration(R_WE, p_WP)
+        if check:
+            chart.check(x)
+        nu = chart.task_velocity(x, J_spatial @ v)
+        return TaskKinematics(
+            configuration=x,
+            velocity=nu,
+            jacobian=chart.task_jacobian(x, J_spatial),
+            bias=chart.task_bias(x, nu, A_bias),
+            rotation=R_WE,
+            position=p_WP,
+            spatial_jacobian=J_spatial,
+        )

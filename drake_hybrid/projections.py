@@ -1,0 +1,228 @@
+"""Velocity projections E_p and the constraint space E = [E_p; E_f] (paper sections 3.0, 3.3).
+
+The velocity-controlled coordinates are r-dot_p = E_p r-dot (3.0-6), with
+E_p of rank d - m and E = [E_p; E_f] invertible. Three ways to get E_p:
+
+``GivenVelocityProjection``
+    written by the user as E_p(x), e.g. the paper's (3.3-1), (3.3-6) or
+    (3.3-11), or the "true-velocity rows" E_t of spec section 6 (Option A).
+    Its rows need not be orthogonal to E_f.
+``KernelVelocityProjection``
+    automatic: a smooth orthonormal basis of ker E_f, anchored at a
+    configuration x_0 (rows = Gram-Schmidt of G P_N(x), with G the orthonormal
+    basis of ker E_f(x_0) and P_N the projector onto ker E_f(x)).
+
+``ConstraintSpace`` combines a constraint with a projection. It always uses
+the general inverse E^-1 [a_p; 0] (spec section 3), never
+E_p^T (E_p E_p^T)^-1, so non-orthogonal E_p are handled exactly.
+"""
+
+from dataclasses import dataclass
+
+import numpy as np
+import sympy
+
+from drake_hybrid.errors import ConstraintRankError, DimensionError
+from drake_hybrid.linalg import inv, is_autodiff, rank_margin, solve, value
+from drake_hybrid.symbolic import CompiledFunction, to_sympy_matrix
+
+
+class GivenVelocityProjection:
+    """E_p(x) given symbolically in the chart's configuration symbols.
+
+    E_p-dot nu is derived symbolically (x-dot = L(x) nu), like E_f-dot nu.
+    """
+
+    def __init__(self, chart, rows, name="E_p"):
+        self.chart = chart
+        self.name = name
+        E_p = to_sympy_matrix(rows, chart.configuration_symbols, what=f"velocity projection '{name}'")
+        d = chart.velocity_size
+        if E_p.cols != d:
+            raise DimensionError(f"velocity projection '{name}' must have {d} columns (the chart's d), got {E_p.cols}")
+        self.size = E_p.rows
+        x = sympy.Matrix(chart.configuration_symbols)
+        nu = sympy.Matrix(chart.velocity_symbols)
+        E_p_nu = E_p * nu
+        rate = E_p_nu.jacobian(x) * chart.configuration_rate           # E_p-dot nu   (3.0-9)
+        self._matrix = CompiledFunction(f"E_p[{name}]", [x], E_p)
+        self._rate = CompiledFunction(f"E_p-dot nu[{name}]", [x, nu], rate, vector=True)
+
+    def __repr__(self):
+        return f"GivenVelocityProjection('{self.name}', rows={self.size})"
+
+    def matrix(self, x):
+        """E_p(x)."""
+        return self._matrix(x)
+
+    def evaluate(self, x, nu, force_projection=None, force_projection_rate=None):
+        """(E_p, E_p-dot nu) at (x, nu)."""
+        return self._matrix(x), self._rate(x, nu)
+
+
+def _cholesky(S):
+    """Lower-triangular L with L L^T = S, for float or AutoDiffXd S (small)."""
+    if not is_autodiff(S):
+        return np.linalg.cholesky(S)
+    from pydrake.math import sqrt
+
+    k = S.shape[0]
+    L = np.zeros((k, k), dtype=object)
+    for j in range(k):
+        diagonal = S[j, j] - sum(L[j, i] * L[j, i] for i in range(j))
+        L[j, j] = sqrt(diagonal)
+        for row in range(j + 1, k):
+            L[row, j] = (S[row, j] - sum(L[row, i] * L[j, i] for i in range(j))) / L[j, j]
+    return L
+
+
+class KernelVelocityProjection:
+    """Automatic E_p: a smooth orthonormal basis of ker E_f(x).
+
+    With G the orthonormal basis (rows) of ker E_f(x_0) at the anchor x_0,
+    P_N(x) = I - E_f^T (E_f E_f^T)^-1 E_f, Y = G P_N and L L^T = Y Y^T
+    (Cholesky), E_p = L^-1 Y. The rows are orthonormal, span ker E_f, equal G
+    at the anchor and vary smoothly. E_p-dot follows by differentiating each
+    step (using E_f-dot from the constraint). Far from the anchor (where ker
+    E_f has turned by about 90 degrees) Y loses rank and ``evaluate`` raises
+    ConstraintRankError; anchor the projection nearer the task.
+    """
+
+    def __init__(self, constraint, anchor, rank_tolerance=1e-3):
+        self.constraint = constraint
+        self.chart = constraint.chart
+        self.name = f"ker E_f[{constraint.name}]"
+        self.rank_tolerance = float(rank_tolerance)
+        anchor = np.asarray(anchor, dtype=float)
+        if anchor.shape != (self.chart.configuration_size,):
+            raise DimensionError(
+                f"KernelVelocityProjection: anchor must have size {self.chart.configuration_size}, got {anchor.shape}")
+        E_f0 = constraint.force_projection(anchor)
+        constraint.check_rank(anchor, E_f0)
+        rows = E_f0.shape[0]
+        self.basis = np.linalg.svd(E_f0)[2][rows:]              # G: (d - m) x d
+        self.size = self.basis.shape[0]
+
+    def __repr__(self):
+        return f"KernelVelocityProjection('{self.name}', rows={self.size})"
+
+    def matrix(self, x):
+        return self.evaluate(x, np.zeros(self.chart.velocity_size))[0]
+
+    def evaluate(self, x, nu, force_projection=None, force_projection_rate=None):
+        E_f = self.constraint.force_projection(x) if force_projection is None else force_projection
+        E_f_dot = (self.constraint.force_projection_rate(x, nu) if force_projection_rate is None
+                   else force_projection_rate)
+        G = self.basis
+        d = G.shape[1]
+        A_inverse = inv(E_f @ E_f.T)
+        pseudo_inverse = E_f.T @ A_inverse                       # E_f^+
+        P_N = np.eye(d) - pseudo_inverse @ E_f
+        A_dot = E_f_dot @ E_f.T + E_f @ E_f_dot.T
+        P_N_dot = -(E_f_dot.T @ A_inverse @ E_f + pseudo_inverse @ E_f_dot
+                    - pseudo_inverse @ A_dot @ A_inverse @ E_f)
+        Y = G @ P_N
+        Y_dot = G @ P_N_dot
+        S = Y @ Y.T
+        margin = rank_margin(Y)
+        if margin < self.rank_tolerance:
+            raise ConstraintRankError(
+                f"automatic velocity projection of '{self.constraint.name}' lost rank (margin {margin:.3g}) "
+                "far from its anchor: ker E_f has turned too far; re-anchor the KernelVelocityProjection")
+        L = _cholesky(S)
+        L_inverse = inv(L)
+        E_p = L_inverse @ Y
+        S_dot = Y_dot @ Y.T + Y @ Y_dot.T
+        Phi = L_inverse @ S_dot @ L_inverse.T
+        Phi = np.tril(Phi) - 0.5 * np.diag(np.diag(Phi))        # lower triangle, half diagonal
+        L_dot = L @ Phi
+        E_p_dot = L_inverse @ (Y_dot - L_dot @ E_p)
+        return E_p, E_p_dot @ nu
+
+
+@dataclass
+class ConstraintSpaceValues:
+    """E and its pieces at one (x, nu)."""
+
+    constraint_value: np.ndarray     # C(x)                   (m)
+    force_projection: np.ndarray     # E_f                    (m x d)
+    velocity_projection: np.ndarray  # E_p                    (d-m x d)
+    force_curvature: np.ndarray      # E_f-dot nu             (m)
+    velocity_curvature: np.ndarray   # E_p-dot nu             (d-m)
+    matrix: np.ndarray               # E = [E_p; E_f]         (d x d)
+
+
+class ConstraintSpace:
+    """The constraint space of (3.0-x): E = [E_p; E_f] and the maps built on it.
+
+    Args:
+        constraint: a Constraint (or SelectingConstraint).
+        velocity_projection: GivenVelocityProjection or KernelVelocityProjection
+            with d - m rows.
+        invertibility_tolerance: ``evaluate`` raises ConstraintRankError when
+            the rank margin of E (see ``linalg.rank_margin``) is below it.
+    """
+
+    def __init__(self, constraint, velocity_projection, invertibility_tolerance=1e-3):
+        chart = constraint.chart
+        d, m = chart.velocity_size, constraint.size
+        if velocity_projection.size != d - m:
+            raise DimensionError(
+                f"velocity projection '{velocity_projection.name}' has {velocity_projection.size} rows; "
+                f"constraint '{constraint.name}' has m = {m} rows on a d = {d} chart, so E_p needs d - m = {d - m}")
+        if velocity_projection.chart is not chart:
+            raise ValueError("the velocity projection and the constraint must use the same chart object")
+        self.constraint = constraint
+        self.velocity_projection = velocity_projection
+        self.chart = chart
+        self.force_size = m
+        self.velocity_size = d - m
+        self.invertibility_tolerance = float(invertibility_tolerance)
+
+    def evaluate(self, x, nu, check=True):
+        """All of E's pieces at (x, nu); checks the chart, rank E_f and invertibility of E."""
+        if check:
+            self.chart.check(x)
+        constraint = self.constraint
+        E_f = constraint.force_projection(x)
+        if check:
+            constraint.check_rank(x, E_f)
+        E_f_dot = None
+        if isinstance(self.velocity_projection, KernelVelocityProjection):
+            E_f_dot = constraint.force_projection_rate(x, nu)
+        E_p, E_p_dot_nu = self.velocity_projection.evaluate(x, nu, E_f, E_f_dot)
+        E = np.vstack([E_p, E_f])
+        if check:
+            margin = rank_margin(E)
+            if margin < self.invertibility_tolerance:
+                raise ConstraintRankError(
+                    f"E = [E_p; E_f] is singular (rank margin {margin:.3g}) for constraint '{constraint.name}' and "
+                    f"velocity projection '{self.velocity_projection.name}': E_p must be one-to-one on "
+                    "ker E_f (spec section 3)")
+        return ConstraintSpaceValues(
+            constraint_value=constraint.value(x),
+            force_projection=E_f,
+            velocity_projection=E_p,
+            force_curvature=constraint.curvature(x, nu),
+            velocity_curvature=E_p_dot_nu,
+            matrix=E,
+        )
+
+    def task_acceleration(self, values, velocity_acceleration):
+        """r-ddot* = E^-1 ([a_p; 0] - E-dot nu) (3.0-11, spec section 4).
+
+        Satisfies E_p r-ddot* + E_p-dot nu = a_p and E_f r-ddot* + E_f-dot nu = 0.
+        """
+        rhs = np.concatenate([velocity_acceleration - values.velocity_curvature, -values.force_curvature])
+        return solve(values.matrix, rhs)
+
+    def split_wrench(self, values, generalized_force):
+        """(F_v, F) with w = E_p^T F_v + E_f^T F, i.e. [F_v; F] = E^-T w.
+
+        ``generalized_force`` is the chart covector w of the wrench on the
+        robot by the environment (sign convention of spec section 0). F is in
+        the coordinates of this E_f: rescaling a row of C rescales F inversely.
+        """
+        split = solve(values.matrix.T, generalized_force)
+        k = self.velocity_size
+        return split[:k], split[k:]

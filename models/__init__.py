@@ -1,0 +1,1 @@
+"""Models shipped with drake_hybrid (found through package.xml as package://drake_hybrid/...)."""
