@@ -85,6 +85,14 @@ class Chart:
         """d, the dimension of the task (3 planar, 6 spatial)."""
         return len(self.velocity_symbols)
 
+    def configuration_rate_at(self, x, nu):
+        """x-dot = L(x) nu, numerically (float or AutoDiffXd)."""
+        if getattr(self, "_configuration_rate_function", None) is None:
+            self._configuration_rate_function = CompiledFunction(
+                f"L nu[{self.name}]", [self.configuration_symbols, self.velocity_symbols], self.configuration_rate,
+                vector=True)
+        return self._configuration_rate_function(x, nu)
+
     @property
     def symbols(self):
         """The configuration symbols, for ``x, y, theta = chart.symbols``."""

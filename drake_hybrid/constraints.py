@@ -34,7 +34,7 @@ import sympy
 from drake_hybrid.charts import EulerZXZChart, PlanarChart
 from drake_hybrid.errors import BranchError, ConstraintRankError, DimensionError, OffConstraintError
 from drake_hybrid.linalg import rank_margin, value
-from drake_hybrid.symbolic import CompiledFunction, to_sympy_matrix
+from drake_hybrid.symbolic import CompiledFunction, time_derivative, to_sympy_matrix
 
 
 def _format_configuration(chart, x):
@@ -122,14 +122,10 @@ class Constraint:
     def force_projection_rate(self, x, nu):
         """The matrix E_f-dot = sum_i dE_f/dx_i x-dot_i (m x d)."""
         if self._force_projection_rate is None:
-            xs = sympy.Matrix(self.chart.configuration_symbols)
-            x_dot = self.chart.configuration_rate
-            rate = sympy.zeros(*self._E_f_symbolic.shape)
-            for i, symbol in enumerate(xs):
-                if x_dot[i] != 0:
-                    rate += self._E_f_symbolic.diff(symbol) * x_dot[i]
+            chart = self.chart
+            rate = time_derivative(self._E_f_symbolic, chart.configuration_symbols, chart.configuration_rate)
             self._force_projection_rate = CompiledFunction(
-                f"E_f-dot[{self.name}]", [xs, sympy.Matrix(self.chart.velocity_symbols)], rate)
+                f"E_f-dot[{self.name}]", [chart.configuration_symbols, chart.velocity_symbols], rate)
         return self._force_projection_rate(x, nu)
 
     # -- checks -----------------------------------------------------------------

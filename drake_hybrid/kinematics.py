@@ -12,7 +12,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from pydrake.common.value import AbstractValue
 from pydrake.multibody.tree import FrameIndex, JacobianWrtVariable
+from pydrake.systems.framework import ValueProducer
 
 from drake_hybrid.errors import DimensionError
 
@@ -107,3 +109,21 @@ class EndEffectorKinematics:
             position=p_WP,
             spatial_jacobian=J_spatial,
         )
+
+
+def declare_plant_context_cache(system, plant, state_port):
+    """Declare, on ``system``, a cache entry holding a context of ``plant`` whose
+    positions and velocities are those on ``state_port`` ([q; v]).
+
+    Per-context plant state lives in the system's cache (as in Drake's
+    JointStiffnessController), never in a member shared by every context.
+    Returns the CacheEntry; ``entry.Eval(context)`` is the plant context.
+    """
+
+    def calc(context, abstract_value):
+        plant.SetPositionsAndVelocities(abstract_value.get_mutable_value(), state_port.Eval(context))
+
+    return system.DeclareCacheEntry(
+        description="plant context",
+        value_producer=ValueProducer(allocate=lambda: AbstractValue.Make(plant.CreateDefaultContext()), calc=calc),
+        prerequisites_of_calc={state_port.ticket()})

@@ -24,7 +24,7 @@ import sympy
 
 from drake_hybrid.errors import ConstraintRankError, DimensionError
 from drake_hybrid.linalg import inv, is_autodiff, rank_margin, solve, value
-from drake_hybrid.symbolic import CompiledFunction, to_sympy_matrix
+from drake_hybrid.symbolic import CompiledFunction, time_derivative, to_sympy_matrix
 
 
 class GivenVelocityProjection:
@@ -47,6 +47,8 @@ class GivenVelocityProjection:
         rate = E_p_nu.jacobian(x) * chart.configuration_rate           # E_p-dot nu   (3.0-9)
         self._matrix = CompiledFunction(f"E_p[{name}]", [x], E_p)
         self._rate = CompiledFunction(f"E_p-dot nu[{name}]", [x, nu], rate, vector=True)
+        self._symbolic = E_p
+        self._rate_matrix = None
 
     def __repr__(self):
         return f"GivenVelocityProjection('{self.name}', rows={self.size})"
@@ -58,6 +60,15 @@ class GivenVelocityProjection:
     def evaluate(self, x, nu, force_projection=None, force_projection_rate=None):
         """(E_p, E_p-dot nu) at (x, nu)."""
         return self._matrix(x), self._rate(x, nu)
+
+    def rate_matrix(self, x, nu, force_projection=None, force_projection_rate=None):
+        """The matrix E_p-dot = sum_i dE_p/dx_i x-dot_i at (x, nu)."""
+        if self._rate_matrix is None:
+            chart = self.chart
+            rate = time_derivative(self._symbolic, chart.configuration_symbols, chart.configuration_rate)
+            self._rate_matrix = CompiledFunction(
+                f"E_p-dot[{self.name}]", [chart.configuration_symbols, chart.velocity_symbols], rate)
+        return self._rate_matrix(x, nu)
 
 
 def _cholesky(S):
@@ -110,6 +121,15 @@ class KernelVelocityProjection:
         return self.evaluate(x, np.zeros(self.chart.velocity_size))[0]
 
     def evaluate(self, x, nu, force_projection=None, force_projection_rate=None):
+        """(E_p, E_p-dot nu) at (x, nu)."""
+        E_p, E_p_dot = self._matrix_and_rate(x, nu, force_projection, force_projection_rate)
+        return E_p, E_p_dot @ nu
+
+    def rate_matrix(self, x, nu, force_projection=None, force_projection_rate=None):
+        """The matrix E_p-dot at (x, nu)."""
+        return self._matrix_and_rate(x, nu, force_projection, force_projection_rate)[1]
+
+    def _matrix_and_rate(self, x, nu, force_projection, force_projection_rate):
         E_f = self.constraint.force_projection(x) if force_projection is None else force_projection
         E_f_dot = (self.constraint.force_projection_rate(x, nu) if force_projection_rate is None
                    else force_projection_rate)
@@ -137,7 +157,7 @@ class KernelVelocityProjection:
         Phi = np.tril(Phi) - 0.5 * np.diag(np.diag(Phi))        # lower triangle, half diagonal
         L_dot = L @ Phi
         E_p_dot = L_inverse @ (Y_dot - L_dot @ E_p)
-        return E_p, E_p_dot @ nu
+        return E_p, E_p_dot
 
 
 @dataclass

@@ -148,3 +148,13 @@ class CompiledFunction:
         if autodiff:
             return self._autodiff(*arguments)
         return self._float(*arguments)
+
+
+def time_derivative(matrix, configuration_symbols, configuration_rate):
+    """d/dt of a sympy matrix of the configuration x along x-dot = ``configuration_rate``:
+    sum_i (d matrix / d x_i) x-dot_i."""
+    rate = sympy.zeros(*matrix.shape)
+    for symbol, symbol_rate in zip(configuration_symbols, configuration_rate):
+        if symbol_rate != 0:
+            rate += matrix.diff(symbol) * symbol_rate
+    return rate

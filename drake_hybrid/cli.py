@@ -1,0 +1,135 @@
+"""Command line: ``drake-hybrid simulate|analyze|tasks``.
+
+    drake-hybrid simulate window-washing [--duration S] [--out DIR] [--mode MODE] [--config FILE] [--html FILE]
+    drake-hybrid analyze window-washing [--mode MODE] [--json FILE] [--config FILE]
+    drake-hybrid tasks
+"""
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from drake_hybrid.gains import ControlMode
+from drake_hybrid.tasks import TASKS, get_task
+
+
+def _config(args):
+    from drake_hybrid.scenarios import load_config
+
+    task = get_task(args.task)
+    config = task.default_config()
+    if getattr(args, "config", None):
+        config = load_config(path=args.config, defaults=config)
+        if config.task != task.name:
+            raise SystemExit(f"--config is for task '{config.task}', not '{task.name}'")
+    if getattr(args, "mode", None):
+        config.mode = args.mode
+    if getattr(args, "duration", None) is not None:
+        if not args.duration > 0:
+            raise SystemExit(f"--duration must be positive, got {args.duration}")
+        config.duration = args.duration
+    return config
+
+
+def _fmt(values):
+    return ", ".join(f"{v.real:.4g}{v.imag:+.4g}j" if abs(v.imag) > 1e-9 else f"{v.real:.4g}" for v in values)
+
+
+def command_simulate(args):
+    from drake_hybrid.simulation import simulate, write_run
+
+    config = _config(args)
+    out = Path(args.out) if args.out else Path("runs") / config.task
+    meshcat = None
+    if args.html:
+        from pydrake.geometry import Meshcat
+
+        meshcat = Meshcat()
+    result = simulate(config, progress=not args.no_progress, meshcat=meshcat, record_html=bool(args.html))
+    files = write_run(result, out, plots=not args.no_plots)
+    if args.html:
+        Path(args.html).write_text(result.html)
+        files.append(Path(args.html))
+    s = result.summary
+    print(f"{s['task']} ({s['mode']}), {s['duration']:.2f} s simulated in {s['wall_time']:.1f} s "
+          f"(real-time factor {s['real_time_factor']:.2f})")
+    print(f"  designed eigenvalues: {_fmt(np.array([complex(*e) for e in s['predicted_eigenvalues']]))}"
+          f" (slowest time constant {s['design_time_constant']:.3f} s)")
+    print(f"  final velocity error {s['final_velocity_error_percent']:.3f} % of the commanded speed, "
+          f"final force error {s['final_force_error_percent']:.3f} % of the commanded force")
+    print(f"  within 1 % after {s['velocity_settling_time_1_percent']:.3f} s (velocity), "
+          f"{s['force_settling_time_1_percent']:.3f} s (force); max |C(r)| {s['max_constraint_residual']:.3g}")
+    print(f"  wrote {', '.join(str(f) for f in files)}")
+    return 0
+
+
+def command_analyze(args):
+    from drake_hybrid.analysis import linearize_continuous
+
+    config = _config(args)
+    result = linearize_continuous(config, tolerance=args.tolerance)
+    match = result.match
+    controller_mode = ControlMode.parse(config.mode)
+    task = get_task(config.task)
+    space = task.constraint_space(config)
+    k, m = space.velocity_size, space.force_size
+    print(f"{config.task} ({controller_mode.value}): closed-loop linearization at a contact equilibrium "
+          f"(residual {result.equilibrium_residual:.2g}) in {result.wall_time:.2f} s")
+    print(f"  {'predicted':>22}  {'linearized':>22}  rel. error")
+    for p, q, e in zip(match.predicted, match.partner, match.relative_error):
+        print(f"  {_fmt([p]):>22}  {_fmt([q]):>22}  {100 * e:8.3f} %")
+    print(f"  other modes (contact, filter, joint space): {_fmt(np.sort_complex(match.extra))}")
+    print(f"  matched within {100 * args.tolerance:.0f} % and no other mode unstable: {match.matched}")
+    if args.json:
+        payload = match.as_dict()
+        payload.update({"gains": config.gains.as_lists(k, m, controller_mode), "mode": controller_mode.value,
+                        "velocity_dim": k, "force_dim": m, "task": config.task,
+                        "equilibrium_residual": result.equilibrium_residual, "wall_time": result.wall_time})
+        Path(args.json).write_text(json.dumps(payload, indent=2))
+        print(f"  wrote {args.json}")
+    return 0 if match.matched else 1
+
+
+def command_tasks(args):
+    for name, task in TASKS.items():
+        print(f"{name:18s} {task.description}")
+    return 0
+
+
+def make_parser():
+    parser = argparse.ArgumentParser(prog="drake-hybrid", description=__doc__,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    sub = parser.add_subparsers(dest="command", required=True)
+    modes = [m.value for m in ControlMode]
+    simulate = sub.add_parser("simulate", help="simulate a task (discrete 1 kHz plant and controller)")
+    simulate.add_argument("task", choices=sorted(TASKS))
+    simulate.add_argument("--duration", type=float, help="simulated time (s)")
+    simulate.add_argument("--out", help="output directory (default ./runs/<task>)")
+    simulate.add_argument("--mode", choices=modes)
+    simulate.add_argument("--config", help="YAML scenario config (on top of the task's defaults)")
+    simulate.add_argument("--html", help="also write a self-contained Meshcat animation to this file")
+    simulate.add_argument("--no-progress", action="store_true", help="no progress bar")
+    simulate.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
+    simulate.set_defaults(func=command_simulate)
+    analyze = sub.add_parser("analyze", help="linearize the closed loop; predicted vs. measured eigenvalues")
+    analyze.add_argument("task", choices=sorted(TASKS))
+    analyze.add_argument("--mode", choices=modes)
+    analyze.add_argument("--config", help="YAML scenario config")
+    analyze.add_argument("--json", help="write the eigenvalues to this JSON file")
+    analyze.add_argument("--tolerance", type=float, default=0.05, help="relative tolerance of the match")
+    analyze.set_defaults(func=command_analyze)
+    tasks = sub.add_parser("tasks", help="list the tasks")
+    tasks.set_defaults(func=command_tasks)
+    return parser
+
+
+def main(argv=None):
+    args = make_parser().parse_args(argv)
+    return args.func(args)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,278 @@
+"""Wrench sensing for the controller's ``measured_wrench`` input.
+
+All sensors output the SpatialForce [n; f] (6-vector) exerted **on the robot
+by the environment**, at the end-effector point P, expressed in the world
+frame: the sign convention of spec section 0.
+
+``ContactWrenchSensor``
+    ideal: sums the contact results on the robot's bodies and shifts them to P.
+``WristForceTorqueSensor``
+    a force/torque sensor in a weld joint between the wrist and the tool: the
+    joint's reaction force (on the tool, from the wrist) is what the sensor
+    measures; subtracting it from zero and removing the tool's weight gives
+    the contact wrench (static compensation: tool inertia is neglected).
+``LowPassFilter``
+    first-order low-pass with a bandwidth in Hz, continuous or sampled. On a
+    continuous plant, the contact results are direct feedthrough of the
+    actuation, so plant -> sensor -> controller -> plant is an algebraic loop;
+    a filter breaks it (see docs/drake_notes.md).
+
+All are TemplateSystems (float and AutoDiffXd) so closed loops linearize.
+"""
+
+import math
+
+import numpy as np
+
+from pydrake.autodiffutils import AutoDiffXd
+from pydrake.common.cpp_param import List
+from pydrake.common.value import AbstractValue, Value
+from pydrake.math import RigidTransform_
+from pydrake.multibody.math import SpatialForce_
+from pydrake.multibody.plant import ContactResults_
+from pydrake.systems.framework import LeafSystem_
+from pydrake.systems.scalar_conversion import TemplateSystem
+
+from drake_hybrid.kinematics import resolve_frame
+
+
+def _robot_geometry_ids(plant, robot_bodies):
+    ids = set()
+    for body in robot_bodies:
+        ids.update(plant.GetCollisionGeometriesForBody(body))
+    return ids
+
+
+def _point_in_world(body_poses, body_index, point_in_body):
+    X_WB = body_poses[int(body_index)]
+    return X_WB.translation() + X_WB.rotation().matrix() @ point_in_body
+
+
+def _shift(F_coefficients, p_from_to_W):
+    """Shift a spatial force [n; f] applied at point A to point B (p_from_to = p_AB): n_B = n_A - p_AB x f."""
+    torque, force = F_coefficients[:3], F_coefficients[3:]
+    return np.concatenate([torque - np.cross(p_from_to_W, force), force])
+
+
+@TemplateSystem.define("ContactWrenchSensor_", T_list=[float, AutoDiffXd])
+def ContactWrenchSensor_(T):
+
+    class Impl(LeafSystem_[T]):
+        """Ideal contact-wrench sensor: the environment's wrench on the robot at P.
+
+        .. pydrake_system::
+
+            name: ContactWrenchSensor
+            input_ports:
+            - contact_results
+            - body_poses
+            output_ports:
+            - wrench
+
+        Sums, over hydroelastic and point contacts between a robot body and a
+        non-robot body, the spatial force on the robot body, shifted from the
+        contact point (centroid) to P, in world.
+
+        Args:
+            plant: the simulation plant (float, finalized, with a SceneGraph).
+            robot_bodies: the bodies that count as "the robot" (e.g. all bodies
+                of the arm and tool model instances).
+            end_effector_frame: frame E of ``plant`` (or its name) holding P.
+            end_effector_point: p_EP (m).
+        """
+
+        def _construct(self, plant, robot_bodies, end_effector_frame, end_effector_point, converter=None):
+            LeafSystem_[T].__init__(self, converter)
+            self._plant = plant
+            self._robot_bodies = list(robot_bodies)
+            self._robot_body_indices = {int(b.index()) for b in self._robot_bodies}
+            self._robot_geometries = _robot_geometry_ids(plant, self._robot_bodies)
+            frame = resolve_frame(plant, end_effector_frame)
+            self._frame = frame
+            self._end_effector_point = np.asarray(end_effector_point, dtype=float)
+            self._body_index = frame.body().index()
+            self._point_in_body = frame.GetFixedPoseInBodyFrame().multiply(self._end_effector_point)
+            self.DeclareAbstractInputPort("contact_results", AbstractValue.Make(ContactResults_[T]()))
+            self.DeclareAbstractInputPort("body_poses", Value[List[RigidTransform_[T]]]([]))
+            self.DeclareVectorOutputPort("wrench", 6, self._calc_wrench)
+
+        def _construct_copy(self, other, converter=None):
+            Impl._construct(self, other._plant, other._robot_bodies, other._frame, other._end_effector_point,
+                            converter=converter)
+
+        def _calc_wrench(self, context, output):
+            results = self.get_input_port(0).Eval(context)
+            body_poses = self.get_input_port(1).Eval(context)
+            p_WP = _point_in_world(body_poses, self._body_index, self._point_in_body)
+            total = np.zeros(6, dtype=p_WP.dtype)
+            for i in range(results.num_hydroelastic_contacts()):
+                info = results.hydroelastic_contact_info(i)
+                surface = info.contact_surface()
+                on_M = surface.id_M() in self._robot_geometries
+                on_N = surface.id_N() in self._robot_geometries
+                if on_M == on_N:
+                    continue
+                # F_Ac_W: on the body of geometry M, at the centroid; the other body gets its negative.
+                F = info.F_Ac_W().get_coeffs() * (1.0 if on_M else -1.0)
+                total = total + _shift(F, p_WP - surface.centroid())
+            for i in range(results.num_point_pair_contacts()):
+                info = results.point_pair_contact_info(i)
+                on_A = int(info.bodyA_index()) in self._robot_body_indices
+                on_B = int(info.bodyB_index()) in self._robot_body_indices
+                if on_A == on_B:
+                    continue
+                # F_Bc_W: on body B at the contact point; body A gets its negative.
+                F = info.contact_force() * (1.0 if on_B else -1.0)
+                total = total + _shift(np.concatenate([np.zeros(3), F]), p_WP - info.contact_point())
+            output.SetFromVector(total)
+
+    return Impl
+
+
+ContactWrenchSensor = ContactWrenchSensor_[None]
+
+
+@TemplateSystem.define("WristForceTorqueSensor_", T_list=[float, AutoDiffXd])
+def WristForceTorqueSensor_(T):
+
+    class Impl(LeafSystem_[T]):
+        """Wrist force/torque sensor in the weld joint between wrist and tool.
+
+        .. pydrake_system::
+
+            name: WristForceTorqueSensor
+            input_ports:
+            - reaction_forces
+            - body_poses
+            output_ports:
+            - wrench
+
+        The plant's reaction force of the weld joint J is F_CJc_Jc, the force
+        on the child (tool) at the joint's child frame, expressed there. For a
+        tool of mass m_t at rest, F_contact + F_CJc + m_t g = 0, so
+
+            wrench = -(F_CJc shifted to P) - (m_t g at the tool's centre of mass, shifted to P)
+
+        in world. During motion the tool's own inertia (m_t a) remains in the
+        reading; for the light tools here it is far below the contact forces.
+        On a continuous plant use ``contact_model="hydroelastic_with_fallback"``
+        or a discrete plant: with strict hydroelastic, continuous reaction
+        forces leave out gravity (DRAKE_NOTES).
+
+        Args:
+            plant: simulation plant (float, finalized).
+            weld_joint: the WeldJoint between wrist (parent) and tool (child).
+            end_effector_frame, end_effector_point: P, as for the controller.
+        """
+
+        def _construct(self, plant, weld_joint, end_effector_frame, end_effector_point, converter=None):
+            LeafSystem_[T].__init__(self, converter)
+            self._plant = plant
+            self._weld_joint = weld_joint
+            self._joint_index = int(weld_joint.index())
+            tool = weld_joint.child_body()
+            self._tool_index = tool.index()
+            self._child_frame = weld_joint.frame_on_child()
+            self._X_tool_Jc = self._child_frame.GetFixedPoseInBodyFrame()
+            self._tool_mass = tool.default_mass()
+            self._tool_com = tool.default_com()
+            self._gravity = plant.gravity_field().gravity_vector()
+            frame = resolve_frame(plant, end_effector_frame)
+            self._frame = frame
+            self._end_effector_point = np.asarray(end_effector_point, dtype=float)
+            self._body_index = frame.body().index()
+            self._point_in_body = frame.GetFixedPoseInBodyFrame().multiply(self._end_effector_point)
+            self.DeclareAbstractInputPort("reaction_forces", Value[List[SpatialForce_[T]]]([]))
+            self.DeclareAbstractInputPort("body_poses", Value[List[RigidTransform_[T]]]([]))
+            self.DeclareVectorOutputPort("wrench", 6, self._calc_wrench)
+
+        def _construct_copy(self, other, converter=None):
+            Impl._construct(self, other._plant, other._weld_joint, other._frame, other._end_effector_point,
+                            converter=converter)
+
+        def tool_mass(self):
+            return self._tool_mass
+
+        def _calc_wrench(self, context, output):
+            reaction = self.get_input_port(0).Eval(context)[self._joint_index]
+            body_poses = self.get_input_port(1).Eval(context)
+            X_W_tool = body_poses[int(self._tool_index)]
+            R_W_tool = X_W_tool.rotation().matrix()
+            p_WP = _point_in_world(body_poses, self._body_index, self._point_in_body)
+            R_WJc = R_W_tool @ self._X_tool_Jc.rotation().matrix()
+            p_WJc = X_W_tool.translation() + R_W_tool @ self._X_tool_Jc.translation()
+            coefficients = reaction.get_coeffs()
+            on_tool_from_wrist = np.concatenate([R_WJc @ coefficients[:3], R_WJc @ coefficients[3:]])
+            p_Wcom = X_W_tool.translation() + R_W_tool @ self._tool_com
+            weight = np.concatenate([np.zeros(3), self._tool_mass * self._gravity])
+            wrench = -_shift(on_tool_from_wrist, p_WP - p_WJc) - _shift(weight, p_WP - p_Wcom)
+            output.SetFromVector(wrench)
+
+    return Impl
+
+
+WristForceTorqueSensor = WristForceTorqueSensor_[None]
+
+
+@TemplateSystem.define("LowPassFilter_", T_list=[float, AutoDiffXd])
+def LowPassFilter_(T):
+
+    class Impl(LeafSystem_[T]):
+        """First-order low-pass y-dot = 2 pi f_c (u - y), continuous or sampled exactly.
+
+        .. pydrake_system::
+
+            name: LowPassFilter
+            input_ports:
+            - u
+            output_ports:
+            - y
+
+        The output is the state (no direct feedthrough). With ``period`` h the
+        update is y+ = y + (1 - exp(-2 pi f_c h)) (u - y), the exact
+        discretization for a held input. Set the initial state with
+        ``set_initial_output``.
+        """
+
+        def _construct(self, size, bandwidth_hz, period=None, converter=None):
+            LeafSystem_[T].__init__(self, converter)
+            if not bandwidth_hz > 0:
+                raise ValueError(f"LowPassFilter: bandwidth_hz must be positive, got {bandwidth_hz}")
+            if period is not None and not period > 0:
+                raise ValueError(f"LowPassFilter: period must be positive or None, got {period}")
+            self._size, self.bandwidth_hz, self.period = size, float(bandwidth_hz), period
+            self._rate = 2 * math.pi * self.bandwidth_hz
+            self.DeclareVectorInputPort("u", size)
+            if period is None:
+                state = self.DeclareContinuousState(size)
+                self.DeclareStateOutputPort("y", state)
+            else:
+                self._alpha = 1.0 - math.exp(-self._rate * period)
+                state = self.DeclareDiscreteState(size)
+                self.DeclarePeriodicDiscreteUpdateEvent(period, 0.0, self._update)
+                self.DeclareStateOutputPort("y", state)
+
+        def _construct_copy(self, other, converter=None):
+            Impl._construct(self, other._size, other.bandwidth_hz, other.period, converter=converter)
+
+        def DoCalcTimeDerivatives(self, context, derivatives):
+            u = self.get_input_port(0).Eval(context)
+            y = context.get_continuous_state_vector().CopyToVector()
+            derivatives.get_mutable_vector().SetFromVector(self._rate * (u - y))
+
+        def _update(self, context, discrete_state):
+            u = self.get_input_port(0).Eval(context)
+            y = context.get_discrete_state(0).get_value()
+            discrete_state.get_mutable_vector(0).SetFromVector(y + self._alpha * (u - y))
+
+        def set_initial_output(self, context, y0):
+            """Set the filter's state (= output) in its own context."""
+            if self.period is None:
+                context.get_mutable_continuous_state_vector().SetFromVector(y0)
+            else:
+                context.get_mutable_discrete_state(0).SetFromVector(y0)
+
+    return Impl
+
+
+LowPassFilter = LowPassFilter_[None]
