@@ -251,7 +251,7 @@ def HybridController_(T):
         def _integrals(self, context):
             if self.control_period is None:
                 return context.get_continuous_state_vector().CopyToVector()
-            return context.get_discrete_state(0).get_value()[:self._integrated_size]
+            return context.get_discrete_state(0).CopyToVector()[:self._integrated_size]
 
         def _calc_solution(self, context, abstract_value):
             plant_context = self._plant_context_cache.Eval(context)
@@ -344,7 +344,7 @@ def HybridController_(T):
             output.SetFromVector(self._solution(context).actuation)
 
         def _calc_held_actuation(self, context, output):
-            output.SetFromVector(context.get_discrete_state(0).get_value()[self._integrated_size:])
+            output.SetFromVector(context.get_discrete_state(0).CopyToVector()[self._integrated_size:])
 
         def _calc_position_error(self, context, output):
             m, k = self.force_size, self.velocity_size

@@ -127,3 +127,36 @@ def declare_plant_context_cache(system, plant, state_port):
         description="plant context",
         value_producer=ValueProducer(allocate=lambda: AbstractValue.Make(plant.CreateDefaultContext()), calc=calc),
         prerequisites_of_calc={state_port.ticket()})
+
+
+def inverse_kinematics(kinematics, plant_context, X_target, q_guess, tolerance=1e-12, max_iterations=100):
+    """Joint positions that put the end-effector pose at ``X_target`` (RigidTransform of E with
+    its point P at X_target's origin), by damped Gauss-Newton from ``q_guess``.
+
+    Uses the world-frame pose error [log(R_target R^T); p_target - p] and J_g, so it works for
+    every chart; for a redundant arm it moves as little as possible from ``q_guess``. Raises
+    ValueError if it does not converge (target out of reach or singular).
+    """
+    from pydrake.math import RotationMatrix
+    from pydrake.common.eigen_geometry import AngleAxis
+
+    plant = kinematics.plant
+    q = np.array(q_guess, dtype=float)
+    target_R = X_target.rotation()
+    target_p = X_target.translation()
+    error_norm = np.inf
+    for _ in range(max_iterations):
+        plant.SetPositions(plant_context, q)
+        task = kinematics.evaluate(plant_context, check=False)
+        R_error = target_R.multiply(RotationMatrix(task.rotation).inverse()).ToAngleAxis()
+        error = np.concatenate([R_error.angle() * R_error.axis(), target_p - task.position])
+        error_norm = np.linalg.norm(error)
+        if error_norm < tolerance:
+            return q
+        J = task.spatial_jacobian
+        damping = 1e-9
+        q = q + J.T @ np.linalg.solve(J @ J.T + damping * np.eye(6), error) if J.shape[1] >= 6 else \
+            q + np.linalg.lstsq(J, error, rcond=None)[0]
+    if error_norm < 1e-8:
+        return q
+    raise ValueError(f"inverse kinematics did not converge (pose error {error_norm:.3g}); is the target reachable?")

@@ -57,6 +57,7 @@ class StartConfig:
 
     configuration: List[float] = field(default_factory=list)   # task-specific start (see the task's docs)
     in_contact: bool = True                      # start pressing with the desired force
+    tolerance: float = 5.0e-3                    # max |C(r)| allowed at the start (units of C's rows)
     force_integral: List[float] = field(default_factory=list)  # xi(0); empty = zeros
     position_error: List[float] = field(default_factory=list)  # e_p(0); empty = zeros
 
@@ -150,7 +151,7 @@ def build_plant(task, config, builder, time_step=None):
         MultibodyPlantConfig(time_step=time_step, contact_model=config.contact.model,
                              discrete_contact_approximation="sap"),
         builder)
-    robot = task.add_robot(plant)
+    robot = task.add_robot(plant, config)
     workpiece_geometries = task.add_workpiece(plant, config)
     _set_contact_properties(plant, scene_graph, robot.pad_geometries, config.contact, pad=True)
     _set_contact_properties(plant, scene_graph, workpiece_geometries, config.contact, pad=False)
@@ -158,10 +159,10 @@ def build_plant(task, config, builder, time_step=None):
     return plant, scene_graph, robot
 
 
-def build_controller_plant(task):
+def build_controller_plant(task, config):
     """The controller's own model: the robot and tool only, no workpiece."""
     plant = MultibodyPlant(0.0)
-    robot = task.add_robot(plant)
+    robot = task.add_robot(plant, config)
     plant.Finalize()
     return plant, robot
 
@@ -185,7 +186,7 @@ def build_scenario(config, meshcat=None, with_loggers=True):
 
     builder = DiagramBuilder()
     plant, scene_graph, robot = build_plant(task, config, builder)
-    controller_plant, _ = build_controller_plant(task)
+    controller_plant, _ = build_controller_plant(task, config)
     constraint_space = task.constraint_space(config)
     controller = builder.AddNamedSystem("controller", HybridController(
         controller_plant, robot.end_effector_frame, robot.end_effector_point, constraint_space,
@@ -256,6 +257,7 @@ def set_initial_conditions(scenario, root_context):
     config, task, plant = scenario.config, scenario.task, scenario.plant
     plant_context = scenario.plant_context(root_context)
     q0 = task.start_positions(scenario)
+    check_start(scenario, q0)
     plant.SetPositions(plant_context, scenario.robot.arm, q0)
     plant.SetVelocities(plant_context, scenario.robot.arm, np.zeros(len(q0)))
     controller = scenario.controller
@@ -282,6 +284,21 @@ def set_initial_conditions(scenario, root_context):
         filter_context = scenario.wrench_filter.GetMyMutableContextFromRoot(root_context)
         reading = scenario.sensor.get_output_port(0).Eval(scenario.sensor.GetMyContextFromRoot(root_context))
         scenario.wrench_filter.set_initial_output(filter_context, reading)
+
+
+def check_start(scenario, q):
+    """Raise a typed error if the arm at ``q`` is not a valid start of the hybrid law: off the
+    constraint (OffConstraintError), on the wrong branch (BranchError), at a chart singularity
+    (ChartSingularityError) or where E loses rank (ConstraintRankError)."""
+    plant = scenario.controller_plant
+    context = plant.CreateDefaultContext()
+    plant.SetPositions(context, q)
+    task = scenario.controller.kinematics.evaluate(context)
+    x = task.configuration
+    scenario.constraint_space.evaluate(x, task.velocity)
+    constraint = scenario.constraint_space.constraint
+    constraint.check_satisfied(x, scenario.config.start.tolerance)
+    constraint.check_branch(x)
 
 
 def static_torque(scenario, q):

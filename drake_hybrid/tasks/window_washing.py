@@ -15,7 +15,9 @@ force on the robot is downward and F_d < 0 (spec section 0: "push up with
 10 N" is F_d = -10).
 
 Start (``start.configuration``): [x, theta] of the pad centre on the window.
-Task parameters: ``window_height`` (m).
+Task parameters: ``window_height`` (m); ``joints``: 3 (default, the paper's
+square case n = d) or 4 (``models/planar_4r.sdf``, a redundant arm n > d,
+controlled with the dynamically consistent law and null-space damping).
 """
 
 import math
@@ -28,13 +30,13 @@ from pydrake.multibody.parsing import Parser
 from drake_hybrid.charts import PlanarChart
 from drake_hybrid.constraints import window_constraint
 from drake_hybrid.gains import HybridGains
-from drake_hybrid.models import ConfigureParser, model_url
+from drake_hybrid.parsing import ConfigureParser, model_url
 from drake_hybrid.projections import ConstraintSpace, GivenVelocityProjection
 from drake_hybrid.sources import Profile, ProfileSource
 
 PAD_RADIUS = 0.02            # m, the pad sphere of models/pad_tool.sdf
 PAD_CENTER_IN_TOOL = 0.05    # m along the tool's +z axis
-LINK_LENGTHS = (1.0, 0.8, 0.3)
+ARMS = {3: ("planar_3r.sdf", (1.0, 0.8, 0.3)), 4: ("planar_4r.sdf", (0.8, 0.7, 0.5, 0.2))}
 
 
 def add_pad_tool(plant, parser, wrist_frame, X_wrist_flange):
@@ -75,17 +77,24 @@ class WindowWashing:
                 "force": ["F (along E_f = [0 1 0])"], "force_units": "N"}
 
     # -- models --------------------------------------------------------------------------------
-    def add_robot(self, plant):
+    def _arm(self, config):
+        joints = int(config.task_parameters.get("joints", 3))
+        if joints not in ARMS:
+            raise ValueError(f"window-washing: task_parameters.joints must be 3 or 4, got {joints}")
+        return joints, ARMS[joints]
+
+    def add_robot(self, plant, config):
         from drake_hybrid.scenarios import RobotModel
 
+        joints, (file_name, lengths) = self._arm(config)
         parser = Parser(plant)
         ConfigureParser(parser)
-        arm = parser.AddModelsFromUrl(model_url("planar_3r.sdf"))[0]
+        arm = parser.AddModelsFromUrl(model_url(file_name))[0]
         plant.WeldFrames(plant.world_frame(), plant.GetFrameByName("base", arm))
-        # Tool +z along link 3's +x, pad centre exactly at the tip (x = 0.3 m in link 3).
-        X_link3_flange = RigidTransform(RotationMatrix.MakeYRotation(math.pi / 2),
-                                        [LINK_LENGTHS[2] - PAD_CENTER_IN_TOOL, 0, 0])
-        tool, weld, pad = add_pad_tool(plant, parser, plant.GetFrameByName("link3", arm), X_link3_flange)
+        # Tool +z along the last link's +x, pad centre exactly at the tip.
+        X_last_flange = RigidTransform(RotationMatrix.MakeYRotation(math.pi / 2),
+                                       [lengths[-1] - PAD_CENTER_IN_TOOL, 0, 0])
+        tool, weld, pad = add_pad_tool(plant, parser, plant.GetFrameByName(f"link{joints}", arm), X_last_flange)
         return RobotModel(arm=arm, model_instances=[arm, tool], end_effector_frame="tip",
                           end_effector_point=np.zeros(3), tool_weld=weld, pad_geometries=pad)
 
@@ -112,9 +121,10 @@ class WindowWashing:
                              constraint_space.force_size)
 
     # -- start -----------------------------------------------------------------------------------
-    def inverse_kinematics(self, x, y, theta):
-        """q of the planar 3R arm with its tip at (x, y) and link-3 angle theta (elbow below the wrist)."""
-        L1, L2, L3 = LINK_LENGTHS
+    @staticmethod
+    def three_link_inverse_kinematics(lengths, x, y, theta):
+        """q of a planar 3R chain with its tip at (x, y) and last-link angle theta (elbow below the wrist)."""
+        L1, L2, L3 = lengths
         wx, wy = x - L3 * math.cos(theta), y - L3 * math.sin(theta)
         cos_q2 = (wx * wx + wy * wy - L1 * L1 - L2 * L2) / (2 * L1 * L2)
         if not -1 < cos_q2 < 1:
@@ -122,6 +132,17 @@ class WindowWashing:
         q2 = math.acos(cos_q2)
         q1 = math.atan2(wy, wx) - math.atan2(L2 * math.sin(q2), L1 + L2 * math.cos(q2))
         return np.array([q1, q2, theta - q1 - q2])
+
+    def inverse_kinematics(self, config, x, y, theta):
+        """Arm positions with the pad centre at (x, y) and tool angle theta. The 4R arm takes the
+        3R solution of its last three links with its first joint pointing 0.35 rad above the target."""
+        joints, (_, lengths) = self._arm(config)
+        if joints == 3:
+            return self.three_link_inverse_kinematics(lengths, x, y, theta)
+        q1 = math.atan2(y, x) + 0.35
+        ex, ey = lengths[0] * math.cos(q1), lengths[0] * math.sin(q1)
+        rest = self.three_link_inverse_kinematics(lengths[1:], x - ex, y - ey, theta)
+        return np.concatenate([[q1, rest[0] - q1], rest[1:]])
 
     def start_positions(self, scenario):
         from drake_hybrid.scenarios import pressing_positions
@@ -133,7 +154,7 @@ class WindowWashing:
         touching = self._height(config) - PAD_RADIUS
 
         def positions_at_depth(depth):
-            return self.inverse_kinematics(x0, touching + depth, theta0)
+            return self.inverse_kinematics(config, x0, touching + depth, theta0)
 
         if not config.start.in_contact:
             return positions_at_depth(-0.01)

@@ -1,0 +1,146 @@
+"""Desired-motion sources, the low-pass filter and the contact sensor's sign and shift."""
+
+import math
+
+import numpy as np
+import pytest
+import sympy
+
+from pydrake.autodiffutils import AutoDiffXd
+
+from drake_hybrid import ConstraintSpace, KernelVelocityProjection
+from drake_hybrid.errors import DimensionError, UnknownVariableError
+from drake_hybrid.linalg import value
+from drake_hybrid.scenarios import build_controller_plant, build_scenario, set_initial_conditions
+from drake_hybrid.sensors import LowPassFilter
+from drake_hybrid.sources import DesiredFieldSource, Profile, ProfileSource
+from drake_hybrid.tasks import get_task
+
+EPS = 1e-6
+
+
+@pytest.mark.parametrize("profile", [
+    Profile(kind="constant", value=[0.1, -0.2]),
+    Profile(kind="smooth_step", value=[0.0, 0.0], final_value=[0.2, -0.1], start_time=0.1, duration=0.5),
+    Profile(kind="sine", value=[0.05, 0.0], amplitude=[0.1, 0.3], frequency=0.7, start_time=0.2),
+])
+def test_profile_source_acceleration_is_the_time_derivative(profile):
+    dut = ProfileSource(profile, Profile(kind="constant", value=[-5.0]), 2, 1)
+    context = dut.CreateDefaultContext()
+    for t in (0.0, 0.13, 0.35, 0.61, 1.2):
+        context.SetTime(t)
+        acceleration = dut.GetOutputPort("desired_acceleration").Eval(context)
+        velocities = []
+        for dt in (EPS, -EPS):
+            context.SetTime(t + dt)
+            velocities.append(dut.GetOutputPort("desired_velocity").Eval(context).copy())
+        np.testing.assert_allclose(acceleration, (velocities[0] - velocities[1]) / (2 * EPS), atol=1e-7)
+        context.SetTime(t)
+        np.testing.assert_allclose(dut.GetOutputPort("desired_force").Eval(context), [-5.0])
+    assert dut.ToAutoDiffXd() is not None
+
+
+def test_profile_validation():
+    with pytest.raises(DimensionError, match="velocity profile: value must have 2 entries, got 1"):
+        ProfileSource(Profile(value=[0.1]), Profile(value=[-1.0]), 2, 1)
+    with pytest.raises(ValueError, match="unknown profile kind 'ramp'"):
+        ProfileSource(Profile(kind="ramp", value=[0.1, 0]), Profile(value=[-1.0]), 2, 1)
+
+
+def field_source(projection="given"):
+    task = get_task("window-washing")
+    config = task.default_config()
+    plant, robot = build_controller_plant(task, config)
+    space = task.constraint_space(config)
+    chart = space.chart
+    x, y, theta = chart.symbols
+    if projection == "kernel":
+        anchor = np.array([0.9, 0.98, 1.5])
+        space = ConstraintSpace(space.constraint, KernelVelocityProjection(space.constraint, anchor))
+    # A wiping field: faster near x = 1, turning the tool toward the window's normal.
+    velocity_field = [0.1 + 0.2 * sympy.sin(x), 0, -0.5 * (theta - sympy.pi / 2)]
+    force_field = [-8.0 - 2.0 * x]
+    source = DesiredFieldSource(plant, robot.end_effector_frame, robot.end_effector_point, space, velocity_field,
+                                force_field)
+    return task, config, plant, source, space
+
+
+@pytest.mark.parametrize("projection", ["given", "kernel"])
+def test_field_source_acceleration_is_the_derivative_along_the_motion(projection, rng):
+    task, config, plant, dut, space = field_source(projection)
+    context = dut.CreateDefaultContext()
+    q = task.inverse_kinematics(config, 0.95, 0.98, 1.4)
+    v = rng.normal(size=3) * 0.3
+    dut.get_input_port(0).FixValue(context, np.concatenate([q, v]))
+    acceleration = dut.GetOutputPort("desired_acceleration").Eval(context).copy()
+    velocities = []
+    for dt in (EPS, -EPS):
+        dut.get_input_port(0).FixValue(context, np.concatenate([q + dt * v, v]))
+        velocities.append(dut.GetOutputPort("desired_velocity").Eval(context).copy())
+    np.testing.assert_allclose(acceleration, (velocities[0] - velocities[1]) / (2 * EPS), atol=1e-7)
+    dut.get_input_port(0).FixValue(context, np.concatenate([q, v]))
+    x = dut.kinematics.evaluate(dut._plant_context_cache.Eval(context)).configuration
+    np.testing.assert_allclose(dut.GetOutputPort("desired_force").Eval(context), [-8.0 - 2.0 * x[0]])
+    if projection == "given":   # r-dot_pd = E_p Y_d = (Y_x, Y_theta) with E_p = [[1 0 0], [0 0 1]]
+        np.testing.assert_allclose(dut.GetOutputPort("desired_velocity").Eval(context),
+                                   [0.1 + 0.2 * math.sin(x[0]), -0.5 * (x[2] - math.pi / 2)])
+
+
+def test_field_source_autodiff_equals_float(rng):
+    task, config, plant, dut, space = field_source()
+    dut_ad = dut.ToAutoDiffXd()
+    q = task.inverse_kinematics(config, 0.95, 0.98, 1.4)
+    state = np.concatenate([q, rng.normal(size=3)])
+    context, context_ad = dut.CreateDefaultContext(), dut_ad.CreateDefaultContext()
+    dut.get_input_port(0).FixValue(context, state)
+    dut_ad.get_input_port(0).FixValue(context_ad, np.array([AutoDiffXd(s) for s in state], dtype=object))
+    for name in ("desired_velocity", "desired_acceleration", "desired_force"):
+        np.testing.assert_allclose(value(dut_ad.GetOutputPort(name).Eval(context_ad)),
+                                   dut.GetOutputPort(name).Eval(context), atol=1e-13)
+
+
+def test_field_source_validates_its_fields():
+    task, config, plant, _, space = field_source()
+    with pytest.raises(DimensionError, match="velocity field must have d = 3 entries"):
+        DesiredFieldSource(plant, "tip", np.zeros(3), space, [0.1, 0.0], [-5.0])
+    with pytest.raises(UnknownVariableError, match=r"force field uses variables \['s'\]"):
+        DesiredFieldSource(plant, "tip", np.zeros(3), space, [0.1, 0, 0], [sympy.Symbol("s")])
+
+
+@pytest.mark.parametrize("period", [None, 1e-3])
+def test_low_pass_filter_step_response(period):
+    from pydrake.systems.analysis import Simulator
+
+    bandwidth = 20.0
+    dut = LowPassFilter(2, bandwidth, period)
+    simulator = Simulator(dut)
+    simulator.get_mutable_integrator().set_target_accuracy(1e-10)
+    context = simulator.get_mutable_context()
+    dut.get_input_port(0).FixValue(context, [1.0, -2.0])
+    dut.set_initial_output(context, [0.0, 0.0])
+    t = 0.02
+    simulator.AdvanceTo(t)
+    if period is None:
+        expected = 1 - math.exp(-2 * math.pi * bandwidth * t)
+        np.testing.assert_allclose(dut.get_output_port(0).Eval(context), [expected, -2 * expected], rtol=1e-6)
+    else:
+        # AdvanceTo(20 ms) applies the updates at 0, 1, ..., 19 ms: 20 exact steps of the held input,
+        # which equal the continuous response at 20 ms.
+        expected = 1 - math.exp(-2 * math.pi * bandwidth * period) ** 20
+        np.testing.assert_allclose(dut.get_output_port(0).Eval(context), [expected, -2 * expected], rtol=1e-9)
+    with pytest.raises(ValueError, match="bandwidth_hz must be positive"):
+        LowPassFilter(2, 0.0)
+
+
+def test_contact_sensor_sign_and_shift():
+    """Pressing up on the window: the wrench on the robot at the pad centre is (0, 0, 0, 0, 0, -F_d) and
+    the torque at another point is n = p x f."""
+    task = get_task("window-washing")
+    config = task.default_config()
+    scenario = build_scenario(config, with_loggers=False)
+    context = scenario.diagram.CreateDefaultContext()
+    set_initial_conditions(scenario, context)
+    sensor = scenario.sensor
+    wrench = sensor.get_output_port(0).Eval(sensor.GetMyContextFromRoot(context))
+    np.testing.assert_allclose(wrench[3:], [0, 0, -10.0], atol=1e-6)
+    np.testing.assert_allclose(wrench[:3], 0, atol=1e-3)              # through the pad centre (ball pad)

@@ -1,0 +1,181 @@
+"""The window-washing task end to end: 1 kHz simulation, linearization, CLI files, sensors."""
+
+import json
+
+import numpy as np
+import pytest
+
+from pydrake.systems.framework import DiagramBuilder
+
+from drake_hybrid.analysis import design_time_constant, linearize_continuous, predicted_eigenvalues
+from drake_hybrid.cli import main
+from drake_hybrid.scenarios import build_plant, build_scenario, dump_config, load_config, set_initial_conditions
+from drake_hybrid.sensors import ContactWrenchSensor, WristForceTorqueSensor
+from drake_hybrid.simulation import simulate
+from drake_hybrid.tasks import get_task
+
+TASK = get_task("window-washing")
+
+
+@pytest.fixture(scope="module")
+def default_run():
+    return simulate(TASK.default_config())
+
+
+def test_velocity_and_force_errors_settle_below_one_percent_within_five_time_constants(default_run):
+    log, summary = default_run.log, default_run.summary
+    tau = summary["design_time_constant"]
+    settled = log["t"] >= 5 * tau
+    speed = np.linalg.norm(log["desired_velocity"], axis=1)
+    force = np.linalg.norm(log["desired_force"], axis=1)
+    velocity_error = np.linalg.norm(log["velocity_error"], axis=1)
+    force_error = np.linalg.norm(log["force_error"], axis=1)
+    assert np.all(velocity_error[settled] < 0.01 * speed[settled])
+    assert np.all(force_error[settled] < 0.01 * force[settled])
+    assert summary["velocity_settling_time_1_percent"] <= 5 * tau
+    assert summary["force_settling_time_1_percent"] <= 5 * tau
+    # The start really had the designed transients to settle from.
+    assert velocity_error[0] == pytest.approx(0.1)
+    assert np.max(force_error) > 0.15 * force[0]
+    # On the window throughout: the pad centre stays within its compression (about 1 mm) of y = 0.98.
+    assert summary["max_constraint_residual"] < 2e-3
+    assert np.all(np.abs(log["torque"]) <= np.array([150.0, 80.0, 30.0]))
+
+
+def test_transients_follow_the_designed_exponentials(default_run):
+    """Velocity error e^(-K_v t) e(0) and force error -G e^(-G t) xi(0), within 5 % of the initial error."""
+    from drake_hybrid.simulation import predicted_tracking
+
+    log = default_run.log
+    predicted_velocity, predicted_force = predicted_tracking(default_run.scenario, default_run.config, log)
+    early = log["t"] <= 0.5
+    velocity_deviation = np.abs(log["velocity"] - predicted_velocity)[early].max()
+    assert velocity_deviation < 0.05 * np.abs(log["velocity_error"][0]).max()
+    after_contact_transient = (log["t"] >= 0.05) & early     # the compliant contact needs ~20 ms to build F
+    force_deviation = np.abs(log["force"] - predicted_force)[after_contact_transient].max()
+    initial_force_error = 10.0 * 0.2                          # G xi(0) = (15 / 1.5) * 0.2 N
+    assert force_deviation < 0.05 * initial_force_error
+
+
+def test_position_mode_tracks(tmp_path):
+    config = TASK.default_config()
+    config.mode = "position-force"
+    config.duration = 3.0          # slowest designed root -2 (s^2 + 10 s + 16): 5 time constants = 2.5 s
+    result = simulate(config)
+    log, summary = result.log, result.summary
+    assert summary["max_velocity_error_percent_after_5_time_constants"] < 1.0
+    assert summary["max_force_error_percent_after_5_time_constants"] < 1.0
+    assert np.abs(log["position_error"][-1]).max() < 1e-3          # the integrated position error is regulated
+
+
+@pytest.mark.parametrize("mode", ["velocity-force", "position-force"])
+def test_linearized_eigenvalues_match_the_design(mode):
+    config = TASK.default_config()
+    config.mode = mode
+    result = linearize_continuous(config)
+    match = result.match
+    assert result.equilibrium_residual < 1e-6
+    assert match.matched, match.as_dict()
+    assert np.all(match.relative_error <= 0.05)
+    assert np.all(match.extra.real < 1e-6)
+    designed = predicted_eigenvalues(config.gains.matrices(2, 1, mode), mode)
+    assert len(match.predicted) == len(designed.designed) + 2        # the k = 2 marginal zeros
+
+
+def test_cli_simulate_and_analyze_write_the_documented_files(tmp_path, capsys):
+    out = tmp_path / "run"
+    assert main(["simulate", "window-washing", "--duration", "0.3", "--out", str(out), "--no-progress"]) == 0
+    log = np.load(out / "log.npz")
+    n = len(log["t"])
+    assert n >= 300
+    assert log["velocity"].shape == log["desired_velocity"].shape == (n, 2)
+    assert log["force"].shape == log["desired_force"].shape == log["constraint"].shape == (n, 1)
+    assert log["torque"].shape == (n, 3)
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["mode"] == "velocity-force"
+    assert set(summary["gains"]) == {"velocity", "position", "force_proportional", "force_integral"}
+    assert summary["gains"]["velocity"] == [[10.0, 0.0], [0.0, 8.0]]
+    assert summary["predicted_eigenvalues"] == [[-10.0, 0.0], [-8.0, 0.0], [-10.0, 0.0]]
+    assert (out / "velocity_tracking.png").stat().st_size > 10_000
+    assert (out / "force_tracking.png").stat().st_size > 10_000
+    assert "final velocity error" in capsys.readouterr().out
+    eigen = tmp_path / "eig.json"
+    assert main(["analyze", "window-washing", "--mode", "position-force", "--json", str(eigen)]) == 0
+    data = json.loads(eigen.read_text())
+    assert data["matched"] is True
+    assert data["mode"] == "position-force" and data["velocity_dim"] == 2 and data["force_dim"] == 1
+    assert {"predicted", "closed_loop", "gains"} <= set(data)
+    assert all(len(pair) == 2 for pair in data["predicted"] + data["closed_loop"])
+
+
+def test_config_round_trips_through_yaml():
+    config = TASK.default_config()
+    text = dump_config(config)
+    loaded = load_config(data=text)
+    assert loaded == config
+    changed = load_config(data="mode: position-force\ngains:\n  velocity: [3.0]\n", defaults=config)
+    assert changed.mode == "position-force" and changed.gains.velocity == [3.0]
+    assert changed.gains.force_integral == config.gains.force_integral
+
+
+def test_start_off_the_window_is_rejected():
+    config = TASK.default_config()
+    config.start.in_contact = False
+    scenario = build_scenario(config, with_loggers=False)
+    with pytest.raises(ValueError, match=r"not on constraint 'window': C = \[-0.01\] exceeds tolerance"):
+        set_initial_conditions(scenario, scenario.diagram.CreateDefaultContext())
+
+
+def test_wrist_sensor_agrees_with_contact_sensor_once_tool_weight_is_compensated():
+    """Both sensors on one discrete plant pressing on the window at rest; one forced step, then compare."""
+    config = TASK.default_config()
+    scenario = build_scenario(config, with_loggers=False)
+    builder = DiagramBuilder()
+    plant, _, robot = build_plant(TASK, config, builder)
+    bodies = [plant.get_body(i) for m in robot.model_instances for i in plant.GetBodyIndices(m)]
+    contact = builder.AddSystem(ContactWrenchSensor(plant, bodies, robot.end_effector_frame, robot.end_effector_point))
+    wrist = builder.AddSystem(WristForceTorqueSensor(plant, robot.tool_weld, robot.end_effector_frame,
+                                                     robot.end_effector_point))
+    builder.Connect(plant.get_contact_results_output_port(), contact.get_input_port(0))
+    builder.Connect(plant.get_reaction_forces_output_port(), wrist.get_input_port(0))
+    for sensor in (contact, wrist):
+        builder.Connect(plant.get_body_poses_output_port(), sensor.get_input_port(1))
+    diagram = builder.Build()
+    context = diagram.CreateDefaultContext()
+    plant_context = plant.GetMyMutableContextFromRoot(context)
+    q = TASK.start_positions(scenario)
+    plant.SetPositions(plant_context, robot.arm, q)
+    from drake_hybrid.scenarios import static_torque
+
+    plant.get_actuation_input_port(robot.arm).FixValue(plant_context, static_torque(scenario, q))
+    plant.ExecuteForcedEvents(plant_context, publish=False)
+    plant.SetPositions(plant_context, robot.arm, q)
+    plant.SetVelocities(plant_context, robot.arm, np.zeros(3))
+    from_contact = contact.get_output_port(0).Eval(contact.GetMyContextFromRoot(context))
+    from_wrist = wrist.get_output_port(0).Eval(wrist.GetMyContextFromRoot(context))
+    assert from_contact[5] == pytest.approx(-10.0, rel=1e-3)                 # pressing up: -10 N on the robot
+    # The residual is the tool's inertia (m a) during the one step: the arm accelerates by ~1e-5 m/s^2.
+    np.testing.assert_allclose(from_wrist, from_contact, atol=1e-6 * 10.0)
+    assert abs(wrist.tool_mass() * 9.81) > 1.0                               # the compensation mattered
+
+
+@pytest.mark.parametrize("sensor", ["wrist"])
+def test_simulation_with_the_wrist_sensor_and_filter(sensor):
+    config = TASK.default_config()
+    config.sensor.kind = sensor
+    config.sensor.bandwidth_hz = 100.0
+    config.duration = 1.5
+    summary = simulate(config).summary
+    assert summary["max_velocity_error_percent_after_5_time_constants"] < 1.0
+    assert summary["max_force_error_percent_after_5_time_constants"] < 1.0
+
+
+def test_redundant_four_joint_arm_tracks_and_damps_its_null_space():
+    config = TASK.default_config()
+    config.task_parameters["joints"] = 4
+    config.duration = 1.5
+    result = simulate(config)
+    summary = result.summary
+    assert summary["max_velocity_error_percent_after_5_time_constants"] < 1.0
+    assert summary["max_force_error_percent_after_5_time_constants"] < 1.0
+    assert design_time_constant(result.scenario.controller.validated_gains(), "velocity-force") == pytest.approx(0.125)
