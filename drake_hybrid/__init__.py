@@ -28,6 +28,14 @@ from drake_hybrid.errors import (
     UnknownVariableError,
 )
 from drake_hybrid.kinematics import EndEffectorKinematics, TaskKinematics
-from drake_hybrid.projections import ConstraintSpace, GivenVelocityProjection, KernelVelocityProjection
+from drake_hybrid.projections import (
+    ConstraintSpace,
+    GivenVelocityProjection,
+    KernelVelocityProjection,
+    crank_paper_projection,
+    crank_true_velocity_projection,
+    sphere_paper_projection,
+    sphere_true_velocity_projection,
+)
 
 __version__ = "0.1.0"

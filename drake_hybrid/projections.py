@@ -246,3 +246,87 @@ class ConstraintSpace:
         split = solve(values.matrix.T, generalized_force)
         k = self.velocity_size
         return split[:k], split[k:]
+
+
+# ------------------------------------------------------------------------------------------------
+# The paper's velocity projections (section 3.3) and the true-velocity rows of spec section 6.
+# ------------------------------------------------------------------------------------------------
+
+def crank_paper_projection(chart, center=(0.0, 0.0)):
+    """(3.3-6): E_p = [[0 0 0 0 0 1], [-Y X 0 1 0 0]] (X = x - c_x, Y = y - c_y), EulerZXZChart.
+
+    Orthogonal to the (2.2-5) E_f identically. Its second row mixes units: on
+    the circle of radius rho it reads (rho^2 + 1) times the crank rate, the
+    paper's pseudo-velocity (spec section 6).
+    """
+    x, y = chart.symbols[:2]
+    X, Y = x - sympy.Float(center[0]), y - sympy.Float(center[1])
+    return GivenVelocityProjection(chart, [[0, 0, 0, 0, 0, 1], [-Y, X, 0, 1, 0, 0]], name="E_p crank (3.3-6)")
+
+
+def crank_true_velocity_projection(chart, center=(0.0, 0.0), radius=1.0):
+    """Option A rows E_t for the crank: (psi-dot, crank angle rate alpha-dot) (spec section 6).
+
+    Row 2 is (-Y x-dot + X y-dot) / radius^2, which is alpha-dot in rad/s on the
+    circle. Not orthogonal to E_f: ConstraintSpace uses the general E^-1 block.
+    """
+    x, y = chart.symbols[:2]
+    X, Y = x - sympy.Float(center[0]), y - sympy.Float(center[1])
+    rho2 = sympy.Float(radius) ** 2
+    return GivenVelocityProjection(chart, [[0, 0, 0, 0, 0, 1], [-Y / rho2, X / rho2, 0, 0, 0, 0]],
+                                   name="E_t crank (Option A)")
+
+
+def _sphere_tangents(chart, center, radius):
+    p = chart.position
+    P_hat = sympy.Matrix([(p[i] - sympy.Float(center[i])) / sympy.Float(radius) for i in range(3)])
+    t1 = sympy.Matrix([0, 0, 1]).cross(P_hat)           # e_z x P: along the latitude circle
+    t2 = t1.cross(P_hat)                                # t2 . p-dot = -z-dot on the sphere
+    return P_hat, t1, t2
+
+
+def sphere_paper_projection(chart, center=(0.0, 0.0, 0.0), radius=1.0):
+    """(3.3-11) with the corrected (3.3-13a): rows e_1 = psi-dot and e_i = (t_i, beta_i, 0),
+    beta_i = -A^-1 B t_i with A, B the (phi, theta) and p blocks of rows 2-3 of the (2.2-8) E_f
+    (EulerZXZChart; singular where det A = -sin(theta) cos(theta) = 0: poles and equator).
+    """
+    from drake_hybrid.charts import EulerZXZChart
+
+    if not isinstance(chart, EulerZXZChart):
+        raise TypeError(f"sphere_paper_projection needs an EulerZXZChart, got {type(chart).__name__}")
+    x, y, z, phi, theta, psi = chart.symbols
+    p = chart.position
+    P = sympy.Matrix([p[i] - sympy.Float(center[i]) for i in range(3)])
+    cross = P.cross(chart.approach)
+    rows_2_3 = sympy.Matrix([cross[0], cross[1]]).jacobian([x, y, z, phi, theta])
+    B, A = rows_2_3[:, :3], rows_2_3[:, 3:5]
+    A_inverse = sympy.Matrix([[A[1, 1], -A[0, 1]], [-A[1, 0], A[0, 0]]]) / (A[0, 0] * A[1, 1] - A[0, 1] * A[1, 0])
+    _, t1, t2 = _sphere_tangents(chart, center, radius)
+    rows = [[0, 0, 0, 0, 0, 1]]
+    for t in (t1, t2):
+        beta = -A_inverse * (B * t)
+        rows.append(list(t) + list(beta) + [0])
+    return GivenVelocityProjection(chart, rows, name="E_p sphere (3.3-11)")
+
+
+def sphere_true_velocity_projection(chart, center=(0.0, 0.0, 0.0), radius=1.0):
+    """Option A rows E_t for the sphere: the spin about the approach axis and the tool-point
+    velocity along t_1 = e_z x P-hat and t_2 = t_1 x P-hat (spec section 6; m/s on the sphere).
+
+    The spin row is psi-dot on the EulerZXZChart (as in the paper) and omega . a on the PoseChart.
+    """
+    from drake_hybrid.charts import EulerZXZChart
+
+    _, t1, t2 = _sphere_tangents(chart, center, radius)
+    if isinstance(chart, EulerZXZChart):
+        spin = [0, 0, 0, 0, 0, 1]
+    else:
+        spin = [0, 0, 0] + list(chart.approach)
+    return GivenVelocityProjection(chart, [spin, list(t1) + [0, 0, 0], list(t2) + [0, 0, 0]],
+                                   name="E_t sphere (Option A)")
+
+
+def pseudo_desired_velocity(paper_rows, true_rows, true_desired_velocity, velocity):
+    """The paper's desired pseudo-velocity (3.3-8), (3.3-16), corrected:
+    r-dot_pd = r-dot_td + (E_p - E_t) r-dot, which mixes the command with the measured r-dot."""
+    return true_desired_velocity + (paper_rows - true_rows) @ velocity

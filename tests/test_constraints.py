@@ -196,6 +196,16 @@ def test_sphere_pole_euler_chart_fails_and_pose_chart_works():
     assert np.linalg.matrix_rank(sphere.force_projection(x)) == 3
 
 
+def test_appendix_b_case_iii_never_occurs_on_N(rng):
+    """-det A = z sin(theta) (p . a) (B-2), and p . a = -1 on the inward branch of the unit sphere."""
+    for r in random_sphere_points(rng, 20):
+        p = r[:3]
+        a = EulerZXZChart().pose(r).rotation().matrix()[:, 2]
+        assert p @ a == pytest.approx(-1.0)
+        A = corrected_sphere_E_f(r)[1:, 3:5]
+        assert -np.linalg.det(A) == pytest.approx(r[2] * np.sin(r[4]) * (p @ a))
+
+
 def test_appendix_b_pole_row_on_N():
     """Case (i): on N at sin(theta) = 0, x = y = 0 and E_f row 2 is (0, 1, 0, 0, z cos(phi) cos(theta), 0)."""
     r = sphere_point(0.7, 0.0, 0.1)

@@ -8,6 +8,10 @@ from pydrake.autodiffutils import InitializeAutoDiff
 
 from drake_hybrid import (
     ConstraintRankError,
+    crank_paper_projection,
+    crank_true_velocity_projection,
+    sphere_paper_projection,
+    sphere_true_velocity_projection,
     ConstraintSpace,
     DimensionError,
     EulerZXZChart,
@@ -71,27 +75,58 @@ def test_crank_det_of_true_velocity_E_is_2_on_N(rng):
     assert np.linalg.det(space.evaluate(r, np.zeros(6)).matrix) == pytest.approx(2.0)
 
 
-def test_sphere_paper_projection_from_symbols_matches_3_3_13(rng):
-    """The paper's E_p (3.3-11) with corrected (3.3-13a), written as a GivenVelocityProjection."""
+def test_sphere_paper_projection_is_3_3_11_with_the_corrected_3_3_13(rng):
     chart = EulerZXZChart()
-    x, y, z, phi, theta, psi = chart.symbols
-    c, s = sympy.cos, sympy.sin
-    A = sympy.Matrix([[-z * s(phi) * s(theta), -y * s(theta) + z * c(phi) * c(theta)],
-                      [z * c(phi) * s(theta), z * s(phi) * c(theta) + x * s(theta)]])
-    p = sympy.Matrix([x, y, z])
-    t1 = sympy.Matrix([0, 0, 1]).cross(p)
-    rows = [[0, 0, 0, 0, 0, 1]]
-    for alpha in (t1, t1.cross(p)):
-        beta = A.inv() * sympy.Matrix([-alpha[1] * c(theta) - alpha[2] * c(phi) * s(theta),
-                                       alpha[0] * c(theta) - alpha[2] * s(phi) * s(theta)])
-        rows.append(list(alpha) + list(beta) + [0])
-    E_p = GivenVelocityProjection(chart, rows, name="(3.3-11)")
     sphere = sphere_constraint(chart, radius=1.0, form="paper", dropped_component=3)
-    space = ConstraintSpace(sphere, E_p)
+    space = ConstraintSpace(sphere, sphere_paper_projection(chart, radius=1.0))
     for r in random_sphere_points(rng, 20):
         values = space.evaluate(r, rng.normal(size=6))
         np.testing.assert_allclose(values.velocity_projection, sphere_paper_E_p(r), atol=1e-10)
         np.testing.assert_allclose(values.force_projection @ values.velocity_projection.T, 0, atol=1e-12)
+    # Off the unit sphere at the origin too: E_f E_p^T = 0 on N of a shifted, scaled sphere.
+    center, radius = (0.4, -0.1, 0.3), 0.15
+    shifted = ConstraintSpace(sphere_constraint(chart, center=center, radius=radius, form="paper",
+                                                dropped_component=3),
+                              sphere_paper_projection(chart, center=center, radius=radius))
+    for r in random_sphere_points(rng, 10):
+        r = np.r_[np.asarray(center) + radius * r[:3], r[3:]]
+        values = shifted.evaluate(r, np.zeros(6))
+        np.testing.assert_allclose(values.constraint_value, 0, atol=1e-14)
+        np.testing.assert_allclose(values.force_projection @ values.velocity_projection.T, 0, atol=1e-12)
+
+
+def test_pseudo_velocity_error_equals_the_true_velocity_error(rng):
+    """Spec section 6: E_p r-dot - r-dot_pd^pseudo == E_t r-dot - r-dot_td for every r-dot (crank and sphere)."""
+    from drake_hybrid.projections import pseudo_desired_velocity
+
+    chart = EulerZXZChart()
+    cases = [(crank_paper_projection(chart), crank_true_velocity_projection(chart), crank_point(0.3, 0.2)),
+             (sphere_paper_projection(chart), sphere_true_velocity_projection(chart), sphere_point(0.4, 2.2, 0.1))]
+    for paper, true, r in cases:
+        E_p, E_t = paper.matrix(r), true.matrix(r)
+        for _ in range(5):
+            r_dot, r_dot_td = rng.normal(size=6), rng.normal(size=E_p.shape[0])
+            pseudo = pseudo_desired_velocity(E_p, E_t, r_dot_td, r_dot)
+            np.testing.assert_allclose(E_p @ r_dot - pseudo, E_t @ r_dot - r_dot_td, atol=1e-12)
+
+
+def test_true_velocity_rows_have_the_units_of_the_task(rng):
+    """Crank: E_t r-dot = (psi-dot, alpha-dot) on a circle of radius 0.2; sphere: t_2 . p-dot = -z-dot."""
+    chart = EulerZXZChart()
+    crank = crank_constraint(chart, radius=0.2, center=(0.5, 0.1), form="paper")
+    E_t = crank_true_velocity_projection(chart, center=(0.5, 0.1), radius=0.2)
+    alpha, alpha_dot = 0.7, 1.3
+    r = crank_point(alpha, 0.0, radius=0.2, height=0.3, center=(0.5, 0.1))
+    r_dot = np.array([-0.2 * np.cos(alpha) * alpha_dot, -0.2 * np.sin(alpha) * alpha_dot, 0, alpha_dot, 0, 0.4])
+    np.testing.assert_allclose(crank.force_projection(r) @ r_dot, 0, atol=1e-12)
+    np.testing.assert_allclose(E_t.matrix(r) @ r_dot, [0.4, alpha_dot], atol=1e-12)
+    sphere_rows = sphere_true_velocity_projection(PoseChart(), center=(0, 0, 0.1), radius=0.15)
+    x = PoseChart().configuration_of_pose(EulerZXZChart().pose(np.r_[[0, 0, 0.1] + 0.15 * sphere_point(0.3, 2.0, 0)[:3],
+                                                                     0.3, 2.0, 0.0]))
+    v = rng.normal(size=3)
+    p_hat = (x[:3] - [0, 0, 0.1]) / 0.15
+    v -= (v @ p_hat) * p_hat                                            # tangent to the sphere
+    np.testing.assert_allclose((sphere_rows.matrix(x) @ np.r_[v, 0, 0, 0])[2], -v[2], atol=1e-12)
 
 
 def check_projection_rate(space, x, nu, x_dot):
