@@ -48,7 +48,7 @@ def velocity_loop_matrix(gains, mode):
     return -K_v
 
 
-def predicted_eigenvalues(gains, mode):
+def predicted_eigenvalues(gains, mode, kinematic_rows=0):
     """The closed-loop eigenvalues the validated gains design (``ValidatedGains``).
 
     Besides the designed ones, a linearized closed loop has k = d - m zero
@@ -56,17 +56,28 @@ def predicted_eigenvalues(gains, mode):
     regulated (any point of N is an equilibrium); in position and impedance
     modes the controller's integral e_p and the plant's tangent position move
     together (their difference is conserved), which leaves one zero per row.
+
+    Each of ``kinematic_rows`` (rows the controller holds, not the contact)
+    replaces a force eigenvalue by the roots -w_c, -2 w_c of C-ddot + 3 w_c C-dot
+    + 2 w_c^2 C = 0 and leaves its (frozen) force integral as another zero.
+    The force loop's eigenvalues are then those of the force-controlled rows
+    (``gains.force_rate`` restricted to them).
     """
     mode = ControlMode.parse(mode)
     velocity = np.linalg.eigvals(velocity_loop_matrix(gains, mode))
-    force = np.linalg.eigvals(-gains.force_rate)
-    return PredictedEigenvalues(velocity=np.sort_complex(velocity), force=np.sort_complex(force),
-                                marginal=gains.velocity.shape[0])
+    kinematic = list(kinematic_rows) if not isinstance(kinematic_rows, int) else list(range(kinematic_rows))
+    m = gains.force_rate.shape[0]
+    physical = [i for i in range(m) if i not in kinematic]
+    force = np.linalg.eigvals(-gains.force_rate[np.ix_(physical, physical)]) if physical else np.zeros(0)
+    held = np.tile([-gains.constraint_frequency, -2.0 * gains.constraint_frequency], len(kinematic)).astype(complex)
+    return PredictedEigenvalues(velocity=np.sort_complex(velocity), force=np.sort_complex(np.concatenate([force, held])),
+                                marginal=gains.velocity.shape[0] + len(kinematic))
 
 
-def predicted_errors(gains, mode, times, velocity_error0, force_integral0, position_error0=None):
+def predicted_errors(gains, mode, times, velocity_error0, force_integral0, position_error0=None, kinematic_rows=()):
     """Errors predicted by (3.1-14), (3.1-15) / Remark 3 from an initial condition.
 
+    Kinematic rows have no force loop (their force error is zero).
     Returns (velocity_error (N x k), force_error (N x m), position_error (N x k)).
     """
     mode = ControlMode.parse(mode)
@@ -81,15 +92,18 @@ def predicted_errors(gains, mode, times, velocity_error0, force_integral0, posit
     else:
         velocity = np.array([expm(A * t) @ velocity_error0 for t in times])
         position = np.zeros_like(velocity)
-    G = gains.force_rate
+    G = gains.force_rate.copy()
+    kinematic = list(kinematic_rows)
+    G[kinematic, :] = 0.0
+    G[:, kinematic] = 0.0
     xi = np.array([expm(-G * t) @ np.asarray(force_integral0, dtype=float) for t in times])
     force = -(G @ xi.T).T                                             # e_f = xi-dot = -G xi
     return velocity, force, position
 
 
-def design_time_constant(gains, mode):
+def design_time_constant(gains, mode, kinematic_rows=()):
     """The slowest designed time constant 1 / min |Re(lambda)| (s)."""
-    eigenvalues = predicted_eigenvalues(gains, mode).designed
+    eigenvalues = predicted_eigenvalues(gains, mode, kinematic_rows).designed
     return 1.0 / np.min(np.abs(eigenvalues.real))
 
 
@@ -98,45 +112,54 @@ class EigenvalueMatch:
     predicted: np.ndarray
     measured: np.ndarray                               # all closed-loop eigenvalues
     partner: np.ndarray                                # measured eigenvalue matched to each predicted one
-    relative_error: np.ndarray                         # |partner - predicted| / max(|predicted|, floor)
+    relative_error: np.ndarray                         # |partner - predicted| / |predicted|
     tolerance: float
     matched: bool
     extra: np.ndarray = field(default_factory=lambda: np.zeros(0, complex))   # measured, not matched
     unstable_extra: np.ndarray = field(default_factory=lambda: np.zeros(0, complex))
+    marginal_partners: np.ndarray = field(default_factory=lambda: np.zeros(0, complex))  # nearest 0
 
     def as_dict(self):
         pairs = lambda values: [[float(np.real(v)), float(np.imag(v))] for v in values]
         return {"predicted": pairs(self.predicted), "closed_loop": pairs(self.measured),
                 "matched_partners": pairs(self.partner), "relative_error": [float(e) for e in self.relative_error],
                 "tolerance": self.tolerance, "matched": bool(self.matched), "extra_modes": pairs(self.extra),
-                "unstable_extra_modes": pairs(self.unstable_extra)}
+                "marginal_modes": pairs(self.marginal_partners), "unstable_modes": pairs(self.unstable_extra)}
 
 
-def match_eigenvalues(predicted, measured, tolerance=0.05, zero_floor=1.0, marginal_real=1e-6):
-    """Assign each predicted eigenvalue a distinct measured one (Hungarian algorithm on the
-    relative distance |mu - lambda| / max(|lambda|, zero_floor)).
+def match_eigenvalues(designed, measured, tolerance=0.05, marginal=0, marginal_real=None):
+    """Pair each designed eigenvalue with a distinct measured one (Hungarian algorithm on the
+    relative distance |mu - lambda| / |lambda|) and sort out the rest.
 
-    ``matched`` is True when every relative distance is within ``tolerance``
-    and every unmatched measured eigenvalue has real part < ``marginal_real``
-    (in the closed left half-plane up to numerical noise; the extra modes are
-    the contact, filter and joint-space modes the paper's rigid model has not).
-    A predicted 0 (an unregulated position) is matched with absolute tolerance
-    ``tolerance * zero_floor``.
+    The designed eigenvalues are the nonzero ones of ``predicted_eigenvalues``. The theory also
+    predicts ``marginal`` zero eigenvalues (unregulated positions, frozen integrals): the
+    ``marginal`` unmatched measured eigenvalues nearest to 0 are reported as their partners
+    (``marginal_partners``); compliant contact may move them slightly either way. Every other
+    unmatched eigenvalue is an extra mode (contact, filter, sampling, joint space).
+
+    ``matched`` is True when every designed eigenvalue has a partner within ``tolerance`` and no
+    unmatched eigenvalue (marginal or extra) has a real part above ``marginal_real`` (default
+    ``tolerance`` times 1 1/s: slower than 5 % per second of growth is counted as marginal, not
+    unstable).
     """
-    predicted = np.asarray(predicted, dtype=complex)
+    designed = np.asarray(designed, dtype=complex)
     measured = np.asarray(measured, dtype=complex)
-    scale = np.maximum(np.abs(predicted), zero_floor)
-    cost = np.abs(measured[None, :] - predicted[:, None]) / scale[:, None]
+    marginal_real = tolerance * 1.0 if marginal_real is None else marginal_real
+    cost = np.abs(measured[None, :] - designed[:, None]) / np.abs(designed)[:, None]
     rows, cols = linear_sum_assignment(cost)
     order = np.argsort(rows)
     rows, cols = rows[order], cols[order]
     partner = measured[cols]
     relative_error = cost[rows, cols]
-    extra = np.delete(measured, cols)
-    unstable = extra[extra.real >= marginal_real]
+    rest = np.delete(measured, cols)
+    by_size = np.argsort(np.abs(rest))
+    marginal_partners = rest[by_size[:marginal]]
+    extra = rest[by_size[marginal:]]
+    unstable = rest[rest.real > marginal_real]
     matched = bool(np.all(relative_error <= tolerance) and unstable.size == 0)
-    return EigenvalueMatch(predicted=predicted, measured=measured, partner=partner, relative_error=relative_error,
-                           tolerance=tolerance, matched=matched, extra=extra, unstable_extra=unstable)
+    return EigenvalueMatch(predicted=designed, measured=measured, partner=partner, relative_error=relative_error,
+                           tolerance=tolerance, matched=matched, extra=extra, unstable_extra=unstable,
+                           marginal_partners=marginal_partners)
 
 
 # ------------------------------------------------------------------------------------------------
@@ -147,8 +170,6 @@ def equilibrium_config(config, bandwidth_hz=200.0):
     """The continuous-time version of ``config`` at rest: continuous plant and controller, a
     low-pass on the wrench (to break the algebraic loop), zero desired velocity, zero start
     integrals. Its start (in contact, pressing with F_d) is an equilibrium of the closed loop."""
-    from drake_hybrid.scenarios import ScenarioConfig  # noqa: F401  (type of config)
-    from drake_hybrid.sources import Profile
     import copy
 
     c = copy.deepcopy(config)
@@ -156,13 +177,21 @@ def equilibrium_config(config, bandwidth_hz=200.0):
     c.control_period = 0.0
     if not c.sensor.bandwidth_hz > 0:
         c.sensor.bandwidth_hz = bandwidth_hz
-    size = len(c.desired_velocity.value)
-    c.desired_velocity = Profile(kind="constant", value=[0.0] * size)
-    c.desired_force = Profile(kind="constant", value=list(c.desired_force.evaluate(0.0)[0]))
-    c.start.force_integral = []
-    c.start.position_error = []
+    _at_rest(c)
     c.start.in_contact = True
     return c
+
+
+def _at_rest(config):
+    """Zero desired velocity, constant desired force F_d(0), zero start integrals (in place)."""
+    from drake_hybrid.sources import Profile
+    from drake_hybrid.tasks import get_task
+
+    size = get_task(config.task).constraint_space(config).velocity_size
+    config.desired_velocity = Profile(kind="constant", value=[0.0] * size)
+    config.desired_force = Profile(kind="constant", value=list(config.desired_force.evaluate(0.0)[0]))
+    config.start.force_integral = []
+    config.start.position_error = []
 
 
 @dataclass
@@ -202,7 +231,98 @@ def linearize_continuous(config, tolerance=0.05, bandwidth_hz=200.0):
     wall = time.perf_counter() - start
     A = np.asarray(linear.A())
     eigenvalues = np.linalg.eigvals(A)
-    predicted = predicted_eigenvalues(scenario.controller.validated_gains(), scenario.controller.mode)
-    match = match_eigenvalues(predicted.all, eigenvalues, tolerance=tolerance)
+    controller = scenario.controller
+    predicted = predicted_eigenvalues(controller.validated_gains(), controller.mode, controller.kinematic_rows)
+    match = match_eigenvalues(predicted.designed, eigenvalues, tolerance=tolerance, marginal=predicted.marginal)
     return Linearization(A=A, eigenvalues=eigenvalues, equilibrium_residual=residual, predicted=predicted,
                          match=match, wall_time=wall)
+
+
+@dataclass
+class DiscreteLinearization:
+    A: np.ndarray                    # Jacobian of the one-period map x+ = f(x)
+    multipliers: np.ndarray          # eig(A)
+    eigenvalues: np.ndarray          # log(multipliers) / period: the equivalent continuous eigenvalues
+    period: float
+    equilibrium_residual: float      # max |f(x) - x| at the linearization point
+    predicted: PredictedEigenvalues
+    match: EigenvalueMatch
+    wall_time: float
+
+
+def linearize_discrete(config, tolerance=0.05, epsilon=1e-6, settle_time=0.0):
+    """Linearize a discrete closed loop (discrete SAP plant and sampled controller) at its equilibrium.
+
+    For plants that only exist in discrete time (the crank: its SAP weld constraint needs a discrete
+    plant). The closed loop is rebuilt with every discrete update at the same instants (the
+    controller ticks at k h, one period of delay; the plant's output ports unsampled, so the state
+    is just the plant's and the controller's), which makes it one map x+ = f(x) per period
+    (``EvalUniquePeriodicDiscreteUpdate``). Its Jacobian is taken by central differences
+    (``epsilon``; DRAKE_NOTES: much smaller is noisy with SAP), and the multipliers mu are mapped
+    to continuous-time eigenvalues log(mu) / h. The one period of actuation delay shifts the
+    designed eigenvalues by about lambda^2 h / 2 (0.5 % at -10 1/s and 1 kHz).
+
+    ``settle_time`` (s): first simulate the rebuilt loop at rest for this long, so that the
+    compliant constraint forces settle onto the equilibrium.
+    """
+    import copy
+    import time
+
+    from pydrake.systems.analysis import Simulator
+
+    from drake_hybrid.scenarios import build_scenario, set_initial_conditions
+
+    c = copy.deepcopy(config)
+    if not c.time_step > 0:
+        raise ValueError("linearize_discrete needs a discrete plant (time_step > 0)")
+    c.control_period = c.time_step
+    c.log_period = c.time_step
+    c.sensor.bandwidth_hz = 0.0
+    _at_rest(c)
+    scenario = build_scenario(c, with_loggers=False, sampled_plant_outputs=False, controller_sample_lead=False)
+    simulator = Simulator(scenario.diagram)
+    context = simulator.get_mutable_context()
+    set_initial_conditions(scenario, context)
+    simulator.Initialize()
+    if settle_time > 0:
+        simulator.AdvanceTo(settle_time)
+    if context.num_abstract_states() != 0 or context.num_continuous_states() != 0:
+        raise ValueError("linearize_discrete needs a closed loop with discrete state only")
+    diagram = scenario.diagram
+
+    def state_vector(ctx):
+        return np.concatenate([ctx.get_discrete_state(i).CopyToVector()
+                               for i in range(ctx.num_discrete_state_groups())])
+
+    def set_state(ctx, x):
+        start = 0
+        for i in range(ctx.num_discrete_state_groups()):
+            size_i = ctx.get_discrete_state(i).size()
+            ctx.SetDiscreteState(i, x[start:start + size_i])
+            start += size_i
+
+    def step(x):
+        work = context.Clone()
+        set_state(work, x)
+        update = diagram.EvalUniquePeriodicDiscreteUpdate(work)
+        return np.concatenate([update.get_vector(i).CopyToVector() for i in range(update.num_groups())])
+
+    x0 = state_vector(context)
+    start = time.perf_counter()
+    residual = float(np.max(np.abs(step(x0) - x0)))
+    A = np.zeros((x0.size, x0.size))
+    for j in range(x0.size):
+        dx = np.zeros(x0.size)
+        dx[j] = epsilon
+        A[:, j] = (step(x0 + dx) - step(x0 - dx)) / (2 * epsilon)
+    wall = time.perf_counter() - start
+    multipliers = np.linalg.eigvals(A)
+    h = c.time_step
+    # Multipliers at 0 (pure delays, e.g. the held torque) have no continuous-time counterpart.
+    keep = np.abs(multipliers) > 1e-9
+    eigenvalues = np.log(multipliers[keep].astype(complex)) / h
+    controller = scenario.controller
+    predicted = predicted_eigenvalues(controller.validated_gains(), controller.mode, controller.kinematic_rows)
+    match = match_eigenvalues(predicted.designed, eigenvalues, tolerance=tolerance, marginal=predicted.marginal)
+    return DiscreteLinearization(A=A, multipliers=multipliers, eigenvalues=eigenvalues, period=h,
+                                 equilibrium_residual=residual, predicted=predicted, match=match, wall_time=wall)

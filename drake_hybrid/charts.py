@@ -114,6 +114,10 @@ class Chart:
     def check(self, x):
         """Raise ChartSingularityError if x is at or near the chart's singular set."""
 
+    def singularity_margin(self, x):
+        """Distance-like measure to the chart's singular set (1: far; 0: singular)."""
+        return 1.0
+
     def task_velocity(self, x, V_WE):
         """nu from the spatial velocity V_WE = [omega; v] (6-vector)."""
         raise NotImplementedError
@@ -272,6 +276,9 @@ class EulerZXZChart(Chart):
                 "vector is along +-z, where phi and psi rotate about the same axis. Use PoseChart "
                 "(singularity-free) or orient the task away from +-z."
             )
+
+    def singularity_margin(self, x):
+        return abs(math.sin(float(value(x[4]))))
 
     def configuration(self, R_WE, p_WE):
         R, p = R_WE, p_WE

@@ -67,25 +67,34 @@ def command_simulate(args):
 
 
 def command_analyze(args):
-    from drake_hybrid.analysis import linearize_continuous
+    from drake_hybrid.analysis import linearize_continuous, linearize_discrete
 
     config = _config(args)
-    result = linearize_continuous(config, tolerance=args.tolerance)
+    task = get_task(config.task)
+    if getattr(task, "continuous_plant", True):
+        result = linearize_continuous(config, tolerance=args.tolerance)
+        how = "Linearize of the continuous closed loop"
+    else:
+        result = linearize_discrete(config, tolerance=args.tolerance, settle_time=0.5)
+        how = (f"Jacobian of the discrete closed loop's one-period map (h = {result.period * 1e3:g} ms), "
+               "eigenvalues log(mu)/h,")
     match = result.match
     controller_mode = ControlMode.parse(config.mode)
-    task = get_task(config.task)
     space = task.constraint_space(config)
     k, m = space.velocity_size, space.force_size
-    print(f"{config.task} ({controller_mode.value}): closed-loop linearization at a contact equilibrium "
+    print(f"{config.task} ({controller_mode.value}): {how} at a contact equilibrium "
           f"(residual {result.equilibrium_residual:.2g}) in {result.wall_time:.2f} s")
     print(f"  {'predicted':>22}  {'linearized':>22}  rel. error")
     for p, q, e in zip(match.predicted, match.partner, match.relative_error):
         print(f"  {_fmt([p]):>22}  {_fmt([q]):>22}  {100 * e:8.3f} %")
-    print(f"  other modes (contact, filter, joint space): {_fmt(np.sort_complex(match.extra))}")
+    print(f"  marginal (theory: {len(match.marginal_partners)} x 0, unregulated positions): "
+          f"{_fmt(match.marginal_partners)}")
+    print(f"  other modes (contact, filter, sampling, joint space): {_fmt(np.sort_complex(match.extra))}")
     print(f"  matched within {100 * args.tolerance:.0f} % and no other mode unstable: {match.matched}")
     if args.json:
         payload = match.as_dict()
         payload.update({"gains": config.gains.as_lists(k, m, controller_mode), "mode": controller_mode.value,
+                        "method": "continuous" if getattr(task, "continuous_plant", True) else "discrete",
                         "velocity_dim": k, "force_dim": m, "task": config.task,
                         "equilibrium_residual": result.equilibrium_residual, "wall_time": result.wall_time})
         Path(args.json).write_text(json.dumps(payload, indent=2))

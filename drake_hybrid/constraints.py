@@ -283,7 +283,7 @@ def crank_constraint(chart, radius=0.2, height=0.3, center=(0.0, 0.0), form="pap
 
 
 def sphere_constraint(chart, center=(0.0, 0.0, 0.0), radius=0.15, form="approach", dropped_component="auto",
-                      name="sphere", kinematic_rows=None):
+                      name="sphere", kinematic_rows=None, force_in_newtons=False):
     """Example 2.3: the end-effector point on a sphere with the approach vector toward its centre.
 
     Args:
@@ -298,6 +298,9 @@ def sphere_constraint(chart, center=(0.0, 0.0, 0.0), radius=0.15, form="approach
             |a_k| at each evaluation, so E_f keeps rank 3 at the equator too.
         kinematic_rows: rows not enforced by a point contact (orientation rows);
             default: none for ``"approach"``, (1, 2) for ``"paper"``.
+        force_in_newtons: for ``"paper"``, divide the first row by 2 radius, so
+            that its E_f row is the unit normal on N and its force is the
+            normal force in N (the paper's row gives F = f / (2 radius)).
     """
     _spatial_chart(chart, "sphere_constraint")
     c = [sympy.Float(v) for v in center]
@@ -318,7 +321,8 @@ def sphere_constraint(chart, center=(0.0, 0.0, 0.0), radius=0.15, form="approach
 
     def piece(dropped):
         kept = [k for k in (1, 2, 3) if k != dropped]
-        rows = [P.dot(P) - rho**2] + [cross[k - 1] for k in kept]
+        radial = (P.dot(P) - rho**2) / (2 * rho) if force_in_newtons else P.dot(P) - rho**2
+        rows = [radial] + [cross[k - 1] for k in kept]
         return Constraint(chart, rows, name=f"{name} (2.2-8, without component {dropped} of (p-c) x a)",
                           branch=branch, branch_description=branch_description, kinematic_rows=rows_kinematic)
 

@@ -94,7 +94,16 @@ def HybridController_(T):
                    - N^T M K_n q-dot,  Lambda = (J M^-1 J^T)^-1                  (n > d)
 
         with K_0 = I + M_fp^T M_f^-1 M_fp - M_p recomputed every evaluation
-        (spec section 5). With an exact model and rigid contact the closed loop
+        (spec section 5).
+
+        Kinematic rows (``constraint.kinematic_rows``, e.g. the orientation rows
+        of a point contact, which the environment does not enforce) are held by
+        the controller instead of force-controlled: their row of [a_p; a_f] is
+        a_f = -3 w_c C-dot - 2 w_c^2 C (C-dot = E_f r-dot), so C-ddot + 3 w_c C-dot
+        + 2 w_c^2 C = 0: eigenvalues -w_c and -2 w_c (``gains.constraint_frequency``;
+        distinct roots, so a linearization can tell them apart).
+        Their force error is zero: no force feedback and no integral, only the
+        feedforward -F_d (normally 0). With an exact model and rigid contact the closed loop
         is (3.1-13)-(3.1-15)::
 
             e_p'-dot + K_v e_p' (+ K_p e_p) = 0 (+ F_v in impedance mode)
@@ -133,10 +142,14 @@ def HybridController_(T):
             gains: HybridGains.
             mode: ControlMode or its string ("velocity-force", ...).
             control_period: None (continuous) or the sampling period (s).
+            sample_lead: with a control period, tick just before the multiples of
+                the period (zero-delay hold, default) or exactly at them (every
+                torque one period late; all discrete updates then share one
+                timing, which the discrete-time linearization needs).
         """
 
         def _construct(self, plant, end_effector_frame, end_effector_point, constraint_space, gains=None,
-                       mode=ControlMode.VELOCITY_FORCE, control_period=None, converter=None):
+                       mode=ControlMode.VELOCITY_FORCE, control_period=None, sample_lead=True, converter=None):
             LeafSystem_[T].__init__(self, converter)
             if plant.is_finalized() is False:
                 raise ValueError("HybridController: the plant must be finalized")
@@ -147,6 +160,7 @@ def HybridController_(T):
             self.gains = gains if gains is not None else HybridGains()
             self.mode = ControlMode.parse(mode)
             self.control_period = control_period
+            self.sample_lead = bool(sample_lead)
             chart = constraint_space.chart
             d, m, k = chart.velocity_size, constraint_space.force_size, constraint_space.velocity_size
             n = plant.num_velocities()
@@ -158,6 +172,9 @@ def HybridController_(T):
             if control_period is not None and not float(control_period) > 0:
                 raise ValueError(f"HybridController: control_period must be positive or None, got {control_period}")
             self._gains = self.gains.matrices(k, m, self.mode)
+            self.kinematic_rows = tuple(constraint_space.constraint.kinematic_rows)
+            self._force_controlled = np.ones(m)
+            self._force_controlled[list(self.kinematic_rows)] = 0.0
             actuation_matrix = plant.MakeActuationMatrix()
             if actuation_matrix.shape != (n, n) or abs(np.linalg.det(actuation_matrix)) < 0.5:
                 raise ValueError(
@@ -188,8 +205,8 @@ def HybridController_(T):
             else:
                 # Discrete state: [xi; e_p; held actuation].
                 self.DeclareDiscreteState(integrated + n)
-                self.DeclarePeriodicDiscreteUpdateEvent(
-                    float(control_period), float(control_period) * (1.0 - SAMPLE_LEAD), self._discrete_update)
+                offset = float(control_period) * (1.0 - SAMPLE_LEAD) if self.sample_lead else 0.0
+                self.DeclarePeriodicDiscreteUpdateEvent(float(control_period), offset, self._discrete_update)
                 self.DeclareInitializationDiscreteUpdateEvent(self._initialize_actuation)
                 state_ticket = self.xd_ticket()
             self._solution_cache = self.DeclareCacheEntry(
@@ -216,7 +233,7 @@ def HybridController_(T):
         def _construct_copy(self, other, converter=None):
             Impl._construct(self, other._float_plant, other._float_frame, other._end_effector_point,
                             other.constraint_space, other.gains, other.mode, other.control_period,
-                            converter=converter)
+                            other.sample_lead, converter=converter)
 
         # -- public helpers ---------------------------------------------------------------
         def plant(self):
@@ -280,7 +297,7 @@ def HybridController_(T):
                 tangential_force, force = space.split_wrench(values, self.kinematics.chart.generalized_force(x, wrench))
             else:
                 tangential_force, force = np.zeros(k), desired_force
-            force_error = force - desired_force                                 # e_f = F - F_d
+            force_error = (force - desired_force) * self._force_controlled     # e_f = F - F_d (0 on kinematic rows)
             projected_velocity = values.velocity_projection @ nu                # r-dot_p = E_p r-dot  (3.0-6)
             velocity_error = projected_velocity - desired_velocity              # e_p'
 
@@ -302,7 +319,14 @@ def HybridController_(T):
                 K_0 = np.eye(k) + M_fp.T @ solve(M_f, M_fp) - M_p                # spec section 5
                 acceleration = acceleration + K_0 @ tangential_force             # (3.2-6)
 
-            task_acceleration = space.task_acceleration(values, acceleration)    # r-ddot* (3.0-11)
+            constraint_acceleration = None
+            if self.kinematic_rows:
+                # Kinematic rows are held by the controller: C-ddot = -3 w_c C-dot - 2 w_c^2 C.
+                w_c = gains.constraint_frequency
+                C_dot = values.force_projection @ nu
+                held = (-3.0 * w_c * C_dot - 2.0 * w_c * w_c * values.constraint_value) * (1.0 - self._force_controlled)
+                constraint_acceleration = held
+            task_acceleration = space.task_acceleration(values, acceleration, constraint_acceleration)  # (3.0-11)
             force_command = -desired_force + gains.force_proportional @ force_error + gains.force_integral @ xi
             force_torque = J.T @ (values.force_projection.T @ force_command)    # J^T E_f^T u_f
 

@@ -10,6 +10,7 @@ position          K_p         (d-m) x (d-m)           position/impedance modes (
 force_proportional K_fp       m x m                   force loop, (I + K_fp) xi-dot + K_fi xi = 0
 force_integral    K_fi        m x m                   force loop
 null_space_damping K_n        scalar (1/s)            n > d only: q-ddot_0 = -K_n q-dot
+constraint_frequency w_c      scalar (rad/s)          kinematic rows: C-ddot + 3 w_c C-dot + 2 w_c^2 C = 0
 ================  ==========  ======================  =================================
 
 Each gain may be given as a scalar (times I), a vector (diagonal) or a matrix.
@@ -102,6 +103,7 @@ class HybridGains:
     force_proportional: List[float] = field(default_factory=lambda: [0.5])
     force_integral: List[float] = field(default_factory=lambda: [15.0])
     null_space_damping: float = 10.0
+    constraint_frequency: float = 15.0
 
     def __post_init__(self):
         for name in ("velocity", "position", "force_proportional", "force_integral"):
@@ -120,7 +122,9 @@ class HybridGains:
         K_fi = gain_matrix(self.force_integral, force_size, "force_integral (K_fi)")
         if not float(self.null_space_damping) >= 0:
             raise GainError(f"gain null_space_damping must be >= 0, got {self.null_space_damping}")
-        return ValidatedGains(K_v, K_p, K_fp, K_fi, float(self.null_space_damping))
+        if not float(self.constraint_frequency) > 0:
+            raise GainError(f"gain constraint_frequency must be positive, got {self.constraint_frequency}")
+        return ValidatedGains(K_v, K_p, K_fp, K_fi, float(self.null_space_damping), float(self.constraint_frequency))
 
     def as_lists(self, velocity_size, force_size, mode):
         """The gains as nested lists (for summary.json), keyed as in the CLI's summary."""
@@ -136,6 +140,7 @@ class ValidatedGains:
     force_proportional: np.ndarray
     force_integral: np.ndarray
     null_space_damping: float = 0.0
+    constraint_frequency: float = 20.0
     force_rate: np.ndarray = field(init=False)
 
     def __post_init__(self):

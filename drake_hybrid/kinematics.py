@@ -129,19 +129,20 @@ def declare_plant_context_cache(system, plant, state_port):
         prerequisites_of_calc={state_port.ticket()})
 
 
-def inverse_kinematics(kinematics, plant_context, X_target, q_guess, tolerance=1e-12, max_iterations=100):
+def inverse_kinematics(kinematics, plant_context, X_target, q_guess, tolerance=1e-12, max_iterations=200):
     """Joint positions that put the end-effector pose at ``X_target`` (RigidTransform of E with
     its point P at X_target's origin), by damped Gauss-Newton from ``q_guess``.
 
     Uses the world-frame pose error [log(R_target R^T); p_target - p] and J_g, so it works for
-    every chart; for a redundant arm it moves as little as possible from ``q_guess``. Raises
-    ValueError if it does not converge (target out of reach or singular).
+    every chart; for a redundant arm it moves as little as possible from ``q_guess``. Steps are
+    limited to 0.2 rad, the result is wrapped to the turn nearest ``q_guess`` and checked against
+    the plant's position limits. Raises ValueError if it does not converge or violates a limit.
     """
     from pydrake.math import RotationMatrix
-    from pydrake.common.eigen_geometry import AngleAxis
 
     plant = kinematics.plant
-    q = np.array(q_guess, dtype=float)
+    q_guess = np.array(q_guess, dtype=float)
+    q = q_guess.copy()
     target_R = X_target.rotation()
     target_p = X_target.translation()
     error_norm = np.inf
@@ -152,11 +153,17 @@ def inverse_kinematics(kinematics, plant_context, X_target, q_guess, tolerance=1
         error = np.concatenate([R_error.angle() * R_error.axis(), target_p - task.position])
         error_norm = np.linalg.norm(error)
         if error_norm < tolerance:
-            return q
+            break
         J = task.spatial_jacobian
-        damping = 1e-9
-        q = q + J.T @ np.linalg.solve(J @ J.T + damping * np.eye(6), error) if J.shape[1] >= 6 else \
-            q + np.linalg.lstsq(J, error, rcond=None)[0]
-    if error_norm < 1e-8:
-        return q
-    raise ValueError(f"inverse kinematics did not converge (pose error {error_norm:.3g}); is the target reachable?")
+        step = J.T @ np.linalg.solve(J @ J.T + 1e-6 * np.eye(6), error)
+        largest = np.max(np.abs(step))
+        q = q + (step * (0.2 / largest) if largest > 0.2 else step)
+    if error_norm > 1e-8:
+        raise ValueError(f"inverse kinematics did not converge (pose error {error_norm:.3g}); is the target reachable?")
+    # Revolute joints: the same pose on the turn nearest the guess.
+    q = q_guess + np.remainder(q - q_guess + np.pi, 2 * np.pi) - np.pi
+    lower, upper = plant.GetPositionLowerLimits(), plant.GetPositionUpperLimits()
+    if np.any(q < lower - 1e-9) or np.any(q > upper + 1e-9):
+        raise ValueError(f"inverse kinematics: the solution {np.round(q, 3).tolist()} violates the joint limits "
+                         f"[{np.round(lower, 3).tolist()}, {np.round(upper, 3).tolist()}]")
+    return q

@@ -22,7 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 import sympy
 
-from drake_hybrid.errors import ConstraintRankError, DimensionError
+from drake_hybrid.errors import ChartSingularityError, ConstraintRankError, DimensionError
 from drake_hybrid.linalg import inv, is_autodiff, rank_margin, solve, value
 from drake_hybrid.symbolic import CompiledFunction, time_derivative, to_sympy_matrix
 
@@ -214,6 +214,12 @@ class ConstraintSpace:
         E = np.vstack([E_p, E_f])
         if check:
             margin = rank_margin(E)
+            if margin < self.invertibility_tolerance and self.chart.singularity_margin(x) < 0.1:
+                raise ChartSingularityError(
+                    f"E = [E_p; E_f] is singular (rank margin {margin:.3g}) because the {self.chart.name} chart is "
+                    f"near its singularity (margin {self.chart.singularity_margin(x):.3g}): with z-x-z Euler angles "
+                    "phi and psi turn about the same axis when the approach vector is along +-z. Use PoseChart "
+                    "(singularity-free) for tasks that pass there.")
             if margin < self.invertibility_tolerance:
                 raise ConstraintRankError(
                     f"E = [E_p; E_f] is singular (rank margin {margin:.3g}) for constraint '{constraint.name}' and "
@@ -228,12 +234,17 @@ class ConstraintSpace:
             matrix=E,
         )
 
-    def task_acceleration(self, values, velocity_acceleration):
-        """r-ddot* = E^-1 ([a_p; 0] - E-dot nu) (3.0-11, spec section 4).
+    def task_acceleration(self, values, velocity_acceleration, constraint_acceleration=None):
+        """r-ddot* = E^-1 ([a_p; a_f] - E-dot nu) (3.0-11, spec section 4).
 
-        Satisfies E_p r-ddot* + E_p-dot nu = a_p and E_f r-ddot* + E_f-dot nu = 0.
+        Satisfies E_p r-ddot* + E_p-dot nu = a_p and E_f r-ddot* + E_f-dot nu = a_f,
+        with a_f = 0 (the paper) unless ``constraint_acceleration`` is given (the
+        stabilization of kinematic rows, see HybridController).
         """
-        rhs = np.concatenate([velocity_acceleration - values.velocity_curvature, -values.force_curvature])
+        force_rows = -values.force_curvature
+        if constraint_acceleration is not None:
+            force_rows = force_rows + constraint_acceleration
+        rhs = np.concatenate([velocity_acceleration - values.velocity_curvature, force_rows])
         return solve(values.matrix, rhs)
 
     def split_wrench(self, values, generalized_force):
@@ -277,11 +288,11 @@ def crank_true_velocity_projection(chart, center=(0.0, 0.0), radius=1.0):
                                    name="E_t crank (Option A)")
 
 
-def _sphere_tangents(chart, center, radius):
+def _sphere_tangents(chart, center, radius, axis=(0.0, 0.0, 1.0)):
     p = chart.position
     P_hat = sympy.Matrix([(p[i] - sympy.Float(center[i])) / sympy.Float(radius) for i in range(3)])
-    t1 = sympy.Matrix([0, 0, 1]).cross(P_hat)           # e_z x P: along the latitude circle
-    t2 = t1.cross(P_hat)                                # t2 . p-dot = -z-dot on the sphere
+    t1 = sympy.Matrix([sympy.nsimplify(c) for c in axis]).cross(P_hat)   # e x P: along the circles about e
+    t2 = t1.cross(P_hat)                                # with e = e_z: t2 . p-dot = -z-dot on the sphere
     return P_hat, t1, t2
 
 
@@ -309,15 +320,19 @@ def sphere_paper_projection(chart, center=(0.0, 0.0, 0.0), radius=1.0):
     return GivenVelocityProjection(chart, rows, name="E_p sphere (3.3-11)")
 
 
-def sphere_true_velocity_projection(chart, center=(0.0, 0.0, 0.0), radius=1.0):
+def sphere_true_velocity_projection(chart, center=(0.0, 0.0, 0.0), radius=1.0, axis=(0.0, 0.0, 1.0)):
     """Option A rows E_t for the sphere: the spin about the approach axis and the tool-point
-    velocity along t_1 = e_z x P-hat and t_2 = t_1 x P-hat (spec section 6; m/s on the sphere).
+    velocity along t_1 = e x P-hat and t_2 = t_1 x P-hat, e = ``axis`` (spec section 6 uses
+    e = e_z; m/s on the sphere, times |t_1| = sin of the angle between P-hat and e).
 
-    The spin row is psi-dot on the EulerZXZChart (as in the paper) and omega . a on the PoseChart.
+    t_1 and t_2 vanish where P-hat is parallel to e (the poles of e): E = [E_t; E_f] is singular
+    there whatever the chart. To cross the z-pole choose another axis (e.g. e_y for a path in the
+    x-z plane). The spin row is psi-dot on the EulerZXZChart (as in the paper) and omega . a on
+    the PoseChart.
     """
     from drake_hybrid.charts import EulerZXZChart
 
-    _, t1, t2 = _sphere_tangents(chart, center, radius)
+    _, t1, t2 = _sphere_tangents(chart, center, radius, axis)
     if isinstance(chart, EulerZXZChart):
         spin = [0, 0, 0, 0, 0, 1]
     else:

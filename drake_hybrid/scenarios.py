@@ -22,7 +22,7 @@ import numpy as np
 from scipy.optimize import brentq
 
 from pydrake.common.yaml import yaml_dump_typed, yaml_load_typed
-from pydrake.geometry import ProximityProperties, RoleAssign
+from pydrake.geometry import ProximityProperties, Role, RoleAssign
 from pydrake.multibody.plant import AddMultibodyPlant, CoulombFriction, MultibodyPlant, MultibodyPlantConfig
 from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import LogVectorOutput
@@ -40,7 +40,9 @@ class ContactConfig:
 
     model: str = "hydroelastic"                  # or "hydroelastic_with_fallback"
     pad_modulus: float = 5.0e6                   # Pa, the pad's hydroelastic modulus
-    pad_dissipation: float = 10.0                # s/m, Hunt-Crossley dissipation
+    pad_dissipation: float = 10.0                # s/m, Hunt-Crossley dissipation (continuous plants)
+    relaxation_time: float = -1.0                # s, SAP's linear dissipation (discrete plants); < 0: Drake's default
+    sap_near_rigid_threshold: float = 1.0        # SAP's beta: smaller = stiffer near-rigid constraints (Drake: 1.0)
     friction: float = 0.0                        # Coulomb mu (static = dynamic) of pad and workpiece
     pad_resolution: float = 0.003                # m, mesh resolution hint of the pad (see docs: tessellation torque)
 
@@ -79,6 +81,7 @@ class ScenarioConfig:
     desired_force: Profile = field(default_factory=Profile)
     start: StartConfig = field(default_factory=StartConfig)
     task_parameters: Dict[str, float] = field(default_factory=dict)
+    task_options: Dict[str, str] = field(default_factory=dict)
 
     def replace(self, **changes):
         """A copy with some top-level fields changed."""
@@ -105,6 +108,7 @@ class RobotModel:
     end_effector_point: np.ndarray               # p_EP
     tool_weld: object = None                     # WeldJoint wrist -> tool (for the wrist sensor)
     pad_geometries: list = field(default_factory=list)
+    passive_geometries: list = field(default_factory=list)   # collision geometries to drop (arm links)
 
 
 @dataclass
@@ -139,20 +143,28 @@ def _set_contact_properties(plant, scene_graph, geometry_ids, config, pad):
             properties.UpdateProperty("hydroelastic", "hydroelastic_modulus", float(config.pad_modulus))
             properties.UpdateProperty("hydroelastic", "resolution_hint", float(config.pad_resolution))
             properties.UpdateProperty("material", "hunt_crossley_dissipation", float(config.pad_dissipation))
+            if config.relaxation_time >= 0:
+                properties.UpdateProperty("material", "relaxation_time", float(config.relaxation_time))
         properties.UpdateProperty("material", "coulomb_friction",
                                   CoulombFriction(float(config.friction), float(config.friction)))
         scene_graph.AssignRole(plant.get_source_id(), geometry_id, properties, RoleAssign.kReplace)
 
 
-def build_plant(task, config, builder, time_step=None):
-    """Add the task's plant (robot, tool, workpiece, contact properties) to ``builder``."""
+def build_plant(task, config, builder, time_step=None, sampled_outputs=True):
+    """Add the task's plant (robot, tool, workpiece, contact properties) to ``builder``.
+
+    ``sampled_outputs=False`` makes a discrete plant's contact results and reaction forces those
+    of the step being taken (used by the discrete-time linearization)."""
     time_step = config.time_step if time_step is None else time_step
     plant, scene_graph = AddMultibodyPlant(
         MultibodyPlantConfig(time_step=time_step, contact_model=config.contact.model,
-                             discrete_contact_approximation="sap"),
+                             discrete_contact_approximation="sap", use_sampled_output_ports=sampled_outputs,
+                             sap_near_rigid_threshold=config.contact.sap_near_rigid_threshold),
         builder)
     robot = task.add_robot(plant, config)
     workpiece_geometries = task.add_workpiece(plant, config)
+    for geometry_id in robot.passive_geometries:
+        scene_graph.RemoveRole(plant.get_source_id(), geometry_id, Role.kProximity)
     _set_contact_properties(plant, scene_graph, robot.pad_geometries, config.contact, pad=True)
     _set_contact_properties(plant, scene_graph, workpiece_geometries, config.contact, pad=False)
     plant.Finalize()
@@ -167,8 +179,10 @@ def build_controller_plant(task, config):
     return plant, robot
 
 
-def build_scenario(config, meshcat=None, with_loggers=True):
-    """Build the closed-loop diagram of ``config``. See the module docstring."""
+def build_scenario(config, meshcat=None, with_loggers=True, sampled_plant_outputs=True, controller_sample_lead=True):
+    """Build the closed-loop diagram of ``config``. See the module docstring.
+
+    The last two arguments exist for ``analysis.linearize_discrete`` (see there)."""
     from drake_hybrid.tasks import get_task
 
     task = get_task(config.task)
@@ -185,12 +199,12 @@ def build_scenario(config, meshcat=None, with_loggers=True):
             "that the low-pass filter breaks")
 
     builder = DiagramBuilder()
-    plant, scene_graph, robot = build_plant(task, config, builder)
+    plant, scene_graph, robot = build_plant(task, config, builder, sampled_outputs=sampled_plant_outputs)
     controller_plant, _ = build_controller_plant(task, config)
     constraint_space = task.constraint_space(config)
     controller = builder.AddNamedSystem("controller", HybridController(
         controller_plant, robot.end_effector_frame, robot.end_effector_point, constraint_space,
-        gains=config.gains, mode=mode, control_period=control_period))
+        gains=config.gains, mode=mode, control_period=control_period, sample_lead=controller_sample_lead))
 
     robot_bodies = [plant.get_body(index) for instance in robot.model_instances
                     for index in plant.GetBodyIndices(instance)]
@@ -251,6 +265,11 @@ def build_scenario(config, meshcat=None, with_loggers=True):
 # Initial conditions
 # ------------------------------------------------------------------------------------------------
 
+# Plant steps taken (and undone) at the start so that a discrete plant's sampled outputs hold the
+# start's static contact or constraint wrench (see set_initial_conditions).
+PRIMING_STEPS = 20
+
+
 def set_initial_conditions(scenario, root_context):
     """Put the robot at the task's start, pressing with the desired force if ``start.in_contact``;
     set the controller's integrals and the filter's output to the first sensor reading."""
@@ -260,6 +279,9 @@ def set_initial_conditions(scenario, root_context):
     check_start(scenario, q0)
     plant.SetPositions(plant_context, scenario.robot.arm, q0)
     plant.SetVelocities(plant_context, scenario.robot.arm, np.zeros(len(q0)))
+    if hasattr(task, "set_environment_state"):
+        task.set_environment_state(scenario, plant_context)
+    environment = plant.GetPositionsAndVelocities(plant_context)
     controller = scenario.controller
     controller_context = controller.GetMyMutableContextFromRoot(root_context)
     xi_slice, e_p_slice = controller.integral_state_slices()
@@ -273,13 +295,14 @@ def set_initial_conditions(scenario, root_context):
     else:
         held = static_torque(scenario, q0)
         controller_context.SetDiscreteState(0, np.concatenate([integrals, held]))
-    if plant.time_step() > 0:
+    if plant.time_step() > 0 and plant.has_sampled_output_ports():
         # A discrete plant's contact results and reaction forces are sampled at its steps; before the
-        # first step they are empty. Take one step from the initial state (with the held start torque)
+        # first step they are empty. Take steps from the initial state (with the held static torque)
         # and put the state back, so the sensors read the start's contact wrench at t = 0.
-        plant.ExecuteForcedEvents(plant_context, publish=False)
-        plant.SetPositions(plant_context, scenario.robot.arm, q0)
-        plant.SetVelocities(plant_context, scenario.robot.arm, np.zeros(len(q0)))
+        # Several steps let compliant constraints (e.g. a SAP weld) build up the static force.
+        for _ in range(PRIMING_STEPS):
+            plant.ExecuteForcedEvents(plant_context, publish=False)
+        plant.SetPositionsAndVelocities(plant_context, environment)
     if scenario.wrench_filter is not None:
         filter_context = scenario.wrench_filter.GetMyMutableContextFromRoot(root_context)
         reading = scenario.sensor.get_output_port(0).Eval(scenario.sensor.GetMyContextFromRoot(root_context))

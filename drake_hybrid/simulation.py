@@ -104,8 +104,8 @@ def summarize(scenario, log, wall_time):
     controller = scenario.controller
     gains = controller.validated_gains()
     k, m = controller.velocity_size, controller.force_size
-    predicted = predicted_eigenvalues(gains, controller.mode)
-    tau = design_time_constant(gains, controller.mode)
+    predicted = predicted_eigenvalues(gains, controller.mode, controller.kinematic_rows)
+    tau = design_time_constant(gains, controller.mode, controller.kinematic_rows)
     t = log["t"]
     speed_scale = float(np.max(np.linalg.norm(log["desired_velocity"], axis=1)))
     force_scale = float(np.max(np.linalg.norm(log["desired_force"], axis=1)))
@@ -155,7 +155,7 @@ def predicted_tracking(scenario_or_controller, config, log):
     xi0 = np.asarray(config.start.force_integral, dtype=float) if config.start.force_integral else np.zeros(m)
     e_p0 = np.asarray(config.start.position_error, dtype=float) if config.start.position_error else None
     velocity_error, force_error, _ = predicted_errors(gains, controller.mode, log["t"], log["velocity_error"][0],
-                                                      xi0, e_p0)
+                                                      xi0, e_p0, controller.kinematic_rows)
     return log["desired_velocity"] + velocity_error, log["desired_force"] + force_error
 
 

@@ -8,6 +8,11 @@
     bullet; computable from measurements) and F_d(r).
 ``ProfileSource``
     time profiles r-dot_pd(t), r-ddot_pd(t) = d/dt r-dot_pd(t) and F_d(t).
+``PseudoVelocitySource``
+    the paper's desired pseudo-velocity (3.3-8), (3.3-16) for its orthogonal
+    E_p, built from a true-velocity command r-dot_td(t) (spec section 6), with
+    the unmeasurable Euler-acceleration term of r-ddot_pd dropped (the naive
+    implementation; Option A, E = [E_t; E_f], is exact and the default).
 
 ``Profile`` is the typed (YAML-loadable) description of a time profile.
 """
@@ -127,6 +132,99 @@ def ProfileSource_(T):
 ProfileSource = ProfileSource_[None]
 
 
+def _declare_task_input(system, T, plant, end_effector_frame, end_effector_point, chart):
+    """Common part of the state-dependent sources: the ``estimated_state`` input, a plant of
+    scalar type T, the end-effector kinematics and the per-context plant-context cache."""
+    frame = resolve_frame(plant, end_effector_frame)
+    plant_T = plant if T == float else plant.ToAutoDiffXd()
+    kinematics = EndEffectorKinematics(plant_T, plant_T.get_frame(frame.index()),
+                                       np.asarray(end_effector_point, dtype=float), chart)
+    state_port = system.DeclareVectorInputPort("estimated_state", 2 * plant.num_velocities())
+    cache = declare_plant_context_cache(system, plant_T, state_port)
+    return frame, kinematics, cache
+
+
+@TemplateSystem.define("PseudoVelocitySource_", T_list=[float, AutoDiffXd])
+def PseudoVelocitySource_(T):
+
+    class Impl(LeafSystem_[T]):
+        """The paper's desired pseudo-velocity for its E_p (spec section 6), naive form.
+
+        .. pydrake_system::
+
+            name: PseudoVelocitySource
+            input_ports:
+            - estimated_state
+            output_ports:
+            - desired_velocity
+            - desired_acceleration
+            - desired_force
+
+        With the paper's E_p and the true-velocity rows E_t, the task is
+        specified as r-dot_td(t) (``velocity_profile``) and the controller is fed
+
+            r-dot_pd  = r-dot_td + (E_p - E_t) r-dot                   (3.3-8), (3.3-16) corrected
+            r-ddot_pd = r-ddot_td + (E_p-dot - E_t-dot) r-dot          [+ (E_p - E_t) r-ddot: dropped]
+
+        so that e_p' = E_p r-dot - r-dot_pd = E_t r-dot - r-dot_td exactly. The
+        dropped term holds the actual Euler-angle accelerations (phi-ddot for
+        the crank), which are not measurable and depend on the torque itself;
+        resolving that implicit equation exactly gives Option A's torque
+        (``drake_hybrid.pseudo_velocity``). Dropping it (this source) is what a
+        direct implementation of the paper does; it does not realize the
+        designed loop.
+        """
+
+        def _construct(self, plant, end_effector_frame, end_effector_point, paper_projection, true_projection,
+                       velocity_profile, force_profile, force_size, converter=None):
+            LeafSystem_[T].__init__(self, converter)
+            k = paper_projection.size
+            if true_projection.size != k:
+                raise DimensionError(f"paper E_p has {k} rows but E_t has {true_projection.size}")
+            velocity_profile.validate(k, "velocity profile")
+            force_profile.validate(force_size, "force profile")
+            self._arguments = (plant, end_effector_frame, end_effector_point, paper_projection, true_projection,
+                               velocity_profile, force_profile, force_size)
+            self.paper_projection, self.true_projection = paper_projection, true_projection
+            self.velocity_profile, self.force_profile = velocity_profile, force_profile
+            _, self.kinematics, self._plant_context_cache = _declare_task_input(
+                self, T, plant, end_effector_frame, end_effector_point, paper_projection.chart)
+            prerequisites = {self._plant_context_cache.ticket(), self.time_ticket()}
+            self.DeclareVectorOutputPort("desired_velocity", k, self._calc_velocity, prerequisites_of_calc=prerequisites)
+            self.DeclareVectorOutputPort("desired_acceleration", k, self._calc_acceleration,
+                                         prerequisites_of_calc=prerequisites)
+            self.DeclareVectorOutputPort("desired_force", force_size, self._calc_force,
+                                         prerequisites_of_calc={self.time_ticket()})
+
+        def _construct_copy(self, other, converter=None):
+            Impl._construct(self, *other._arguments, converter=converter)
+
+        def _rows(self, context):
+            task = self.kinematics.evaluate(self._plant_context_cache.Eval(context))
+            x, nu = task.configuration, task.velocity
+            E_p, E_p_dot_nu = self.paper_projection.evaluate(x, nu)
+            E_t, E_t_dot_nu = self.true_projection.evaluate(x, nu)
+            return nu, E_p - E_t, E_p_dot_nu - E_t_dot_nu
+
+        def _calc_velocity(self, context, output):
+            nu, difference, _ = self._rows(context)
+            true_velocity = self.velocity_profile.evaluate(float(value(context.get_time())))[0]
+            output.SetFromVector(true_velocity + difference @ nu)                     # (3.3-8)
+
+        def _calc_acceleration(self, context, output):
+            _, _, difference_rate = self._rows(context)
+            true_acceleration = self.velocity_profile.evaluate(float(value(context.get_time())))[1]
+            output.SetFromVector(true_acceleration + difference_rate)                 # naive: no (E_p - E_t) r-ddot
+
+        def _calc_force(self, context, output):
+            output.SetFromVector(self.force_profile.evaluate(float(value(context.get_time())))[0])
+
+    return Impl
+
+
+PseudoVelocitySource = PseudoVelocitySource_[None]
+
+
 @TemplateSystem.define("DesiredFieldSource_", T_list=[float, AutoDiffXd])
 def DesiredFieldSource_(T):
 
@@ -159,7 +257,6 @@ def DesiredFieldSource_(T):
             LeafSystem_[T].__init__(self, converter)
             chart = constraint_space.chart
             self._float_plant = plant
-            self._float_frame = resolve_frame(plant, end_effector_frame)
             self._end_effector_point = np.asarray(end_effector_point, dtype=float)
             self.constraint_space = constraint_space
             self.velocity_field, self.force_field = velocity_field, force_field
@@ -174,11 +271,8 @@ def DesiredFieldSource_(T):
             self._velocity_field = CompiledFunction("Y_d", [symbols], Y, vector=True)
             self._velocity_field_jacobian = CompiledFunction("dY_d/dx", [symbols], Y.jacobian(list(symbols)))
             self._force_field = CompiledFunction("F_d", [symbols], F, vector=True)
-            self._plant = plant if T == float else plant.ToAutoDiffXd()
-            self.kinematics = EndEffectorKinematics(
-                self._plant, self._plant.get_frame(self._float_frame.index()), self._end_effector_point, chart)
-            self._state_port = self.DeclareVectorInputPort("estimated_state", 2 * plant.num_velocities())
-            self._plant_context_cache = declare_plant_context_cache(self, self._plant, self._state_port)
+            self._float_frame, self.kinematics, self._plant_context_cache = _declare_task_input(
+                self, T, plant, end_effector_frame, end_effector_point, chart)
             prerequisites = {self._plant_context_cache.ticket()}
             self.DeclareVectorOutputPort("desired_velocity", k, self._calc_velocity, prerequisites_of_calc=prerequisites)
             self.DeclareVectorOutputPort("desired_acceleration", k, self._calc_acceleration,

@@ -33,25 +33,14 @@ from drake_hybrid.gains import HybridGains
 from drake_hybrid.parsing import ConfigureParser, model_url
 from drake_hybrid.projections import ConstraintSpace, GivenVelocityProjection
 from drake_hybrid.sources import Profile, ProfileSource
+from drake_hybrid.tasks.robots import PAD_CENTER_IN_TOOL, PAD_RADIUS, add_pad_tool
 
-PAD_RADIUS = 0.02            # m, the pad sphere of models/pad_tool.sdf
-PAD_CENTER_IN_TOOL = 0.05    # m along the tool's +z axis
 ARMS = {3: ("planar_3r.sdf", (1.0, 0.8, 0.3)), 4: ("planar_4r.sdf", (0.8, 0.7, 0.5, 0.2))}
-
-
-def add_pad_tool(plant, parser, wrist_frame, X_wrist_flange):
-    """Parse the pad tool and weld its flange to ``wrist_frame``. Returns (instance, weld, pad geometries)."""
-    tool = parser.AddModelsFromUrl(model_url("pad_tool.sdf"))[0]
-    tool_frame = plant.GetFrameByName("tool", tool)
-    weld = plant.WeldFrames(wrist_frame, tool_frame, X_wrist_flange)
-    geometries = []
-    if plant.geometry_source_is_registered():
-        geometries = list(plant.GetCollisionGeometriesForBody(plant.GetBodyByName("tool", tool)))
-    return tool, weld, geometries
 
 
 class WindowWashing:
     name = "window-washing"
+    continuous_plant = True
     description = "planar 3R arm wiping along a window pane while pressing on it (Example 2.1)"
 
     def default_config(self):
