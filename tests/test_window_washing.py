@@ -129,12 +129,15 @@ def test_start_off_the_window_is_rejected():
         set_initial_conditions(scenario, scenario.diagram.CreateDefaultContext())
 
 
-def test_wrist_sensor_agrees_with_contact_sensor_once_tool_weight_is_compensated():
-    """Both sensors on one discrete plant pressing on the window at rest; one forced step, then compare."""
-    config = TASK.default_config()
+def sensor_readings_at_rest(task):
+    """Both sensors on one discrete plant pressing at the task's start at rest: one forced step
+    with the static torque, then (contact sensor, wrist sensor) readings."""
+    from drake_hybrid.scenarios import static_torque
+
+    config = task.default_config()
     scenario = build_scenario(config, with_loggers=False)
     builder = DiagramBuilder()
-    plant, _, robot = build_plant(TASK, config, builder)
+    plant, _, robot = build_plant(task, config, builder)
     bodies = [plant.get_body(i) for m in robot.model_instances for i in plant.GetBodyIndices(m)]
     contact = builder.AddSystem(ContactWrenchSensor(plant, bodies, robot.end_effector_frame, robot.end_effector_point))
     wrist = builder.AddSystem(WristForceTorqueSensor(plant, robot.tool_weld, robot.end_effector_frame,
@@ -146,20 +149,22 @@ def test_wrist_sensor_agrees_with_contact_sensor_once_tool_weight_is_compensated
     diagram = builder.Build()
     context = diagram.CreateDefaultContext()
     plant_context = plant.GetMyMutableContextFromRoot(context)
-    q = TASK.start_positions(scenario)
+    q = task.start_positions(scenario)
     plant.SetPositions(plant_context, robot.arm, q)
-    from drake_hybrid.scenarios import static_torque
-
     plant.get_actuation_input_port(robot.arm).FixValue(plant_context, static_torque(scenario, q))
     plant.ExecuteForcedEvents(plant_context, publish=False)
     plant.SetPositions(plant_context, robot.arm, q)
-    plant.SetVelocities(plant_context, robot.arm, np.zeros(3))
-    from_contact = contact.get_output_port(0).Eval(contact.GetMyContextFromRoot(context))
-    from_wrist = wrist.get_output_port(0).Eval(wrist.GetMyContextFromRoot(context))
+    plant.SetVelocities(plant_context, robot.arm, np.zeros(len(q)))
+    assert abs(wrist.tool_mass() * 9.81) > 1.0                               # the compensation matters
+    return (contact.get_output_port(0).Eval(contact.GetMyContextFromRoot(context)),
+            wrist.get_output_port(0).Eval(wrist.GetMyContextFromRoot(context)))
+
+
+def test_wrist_sensor_agrees_with_contact_sensor_once_tool_weight_is_compensated():
+    from_contact, from_wrist = sensor_readings_at_rest(TASK)
     assert from_contact[5] == pytest.approx(-10.0, rel=1e-3)                 # pressing up: -10 N on the robot
     # The residual is the tool's inertia (m a) during the one step: the arm accelerates by ~1e-5 m/s^2.
     np.testing.assert_allclose(from_wrist, from_contact, atol=1e-6 * 10.0)
-    assert abs(wrist.tool_mass() * 9.81) > 1.0                               # the compensation mattered
 
 
 @pytest.mark.parametrize("sensor", ["wrist"])
