@@ -175,10 +175,30 @@ def stage_table(robot_name, samples, rng):
                  "us": law - accounted})
     rows.append({"stage": "systems framework (tick minus law: ports, 2 cache entries, output)", "category": "framework",
                  "us": tick.median_us - law})
+    # The framework's pieces, timed directly (not part of the sum above).
+    state_port = controller.get_estimated_state_input_port()
+    context = parts.context
+    new_input = lambda: state_port.FixValue(context, robot.state + PERTURBATION * rng.standard_normal(robot.state.size))
+    plant_context_cache = controller._plant_context_cache
+    actuation = controller.GetOutputPort("actuation")
+
+    def new_input_and_solution():
+        new_input()
+        controller._solution_cache.Eval(context)
+
+    framework = {
+        "plant-context cache entry (Python calc: SetPositionsAndVelocities)":
+            median_us(lambda: plant_context_cache.Eval(context), samples, new_input),
+        "actuation output Eval with the solution already cached (Python calc, copy)":
+            median_us(lambda: actuation.Eval(context), samples, new_input_and_solution),
+        "solution cache entry Eval (law + its Python calc)": median_us(
+            lambda: controller._solution_cache.Eval(context), samples,
+            lambda: (new_input(), plant_context_cache.Eval(context))),
+    }
     return {"robot": robot_name, "joints": robot.joints, "force_rows": robot.force_rows,
             "tick_us": tick.median_us, "idc_tick_us": idc.median_us, "law_us": law,
             "plant_calls_us": plant_total, "compiled_functions_us": symbolic_total,
-            "compiled_functions_bare_us": bare_total, "stages": rows}
+            "compiled_functions_bare_us": bare_total, "stages": rows, "framework_direct_us": framework}
 
 
 def cprofile_categories(robot_name, calls, rng):
@@ -255,6 +275,8 @@ def markdown(result):
         for row in table["stages"]:
             lines.append(f"| {row['stage']} | {row['category']} | {row['us']:.1f} | "
                          f"{100 * row['us'] / table['tick_us']:.0f} |")
+        lines += ["", "Framework pieces timed directly:", "", "| piece | us |", "|---|---:|"]
+        lines += [f"| {k} | {v:.1f} |" for k, v in table["framework_direct_us"].items()]
         lines.append("")
     for profile in result["cprofile"]:
         lines += [f"### cProfile own time by category, {profile['robot']} (us per tick, profiler-inflated)", "",

@@ -53,15 +53,16 @@ def machine():
                 break
     except OSError:
         pass
+    import importlib.metadata
+
     import numpy
-    import pydrake
 
     try:
         load = os.getloadavg()
     except OSError:
         load = None
     return {"cpu": cpu, "cores": os.cpu_count(), "python": platform.python_version(),
-            "drake": getattr(pydrake, "__version__", "unknown"), "numpy": numpy.__version__,
+            "drake": importlib.metadata.version("drake"), "numpy": numpy.__version__,
             "platform": platform.platform(), "load_average_at_start": load}
 
 
