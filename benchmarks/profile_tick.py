@@ -101,9 +101,6 @@ def stage_table(robot_name, samples, rng):
         rows.append({"stage": label, "category": category, "us": median_us(function, samples, setup)})
 
     # Plant calls, in the law's order, each on a cold cache where the law has one.
-    def first(call):
-        return lambda: (parts.fresh_state(), None)[1], call
-
     stage("CalcRelativeTransform (+ forward kinematics)", "plant",
           lambda: plant.CalcRelativeTransform(plant_context, world, frame), parts.fresh_state)
     warm_position = lambda: (parts.fresh_state(), plant.CalcRelativeTransform(plant_context, world, frame))
@@ -155,7 +152,6 @@ def stage_table(robot_name, samples, rng):
         rows.append({"stage": "kernel E_p and E_p-dot (inv, cholesky, tril, ~25 small products)", "category": "numpy",
                      "us": kernel - margin})
     stage("E = vstack([E_p, E_f])", "numpy", lambda: np.vstack([values.velocity_projection, values.force_projection]))
-    generalized = chart.generalized_force(x, wrench)
     stage("wrench validity (np.all(np.isfinite(value(w))))", "numpy", lambda: bool(np.all(np.isfinite(wrench))))
     stage("chart.generalized_force + split_wrench (solve E^T)", "numpy",
           lambda: space.split_wrench(values, chart.generalized_force(x, wrench)))

@@ -241,7 +241,7 @@ def planar_controller(mode="velocity-force", joints=3, control_period=None):
     task_kinematics = controller.kinematics.evaluate(context)
     nu = np.array([0.1, 0.0, 0.0])                                      # 0.1 m/s along the pane
     v = np.linalg.lstsq(task_kinematics.jacobian, nu, rcond=None)[0]
-    k, m = controller.velocity_size, controller.force_size
+    k = controller.velocity_size
     inputs = {"estimated_state": np.concatenate([q, v]),
               # the pane pushes the pad down (world -z) with 10 N
               "measured_wrench": np.array([0, 0, 0, 0, 0, -10.0]),

@@ -122,7 +122,10 @@ def markdown(results):
                      f"{u['median_us']:.1f} | {i['median_us']:.1f} / {i['p95_us']:.1f} | "
                      f"{r['tick_ratio']['median']:.1f} / {r['tick_ratio']['p95']:.1f} |")
     lines += ["", "Robots: " + "; ".join(f"**{k}** {v['description']}" for k, v in results["robots"].items()) + ".",
-              "IDC: Drake's C++ `InverseDynamicsController` (with reference acceleration) on the same plant.", "",
+              "IDC: Drake's C++ `InverseDynamicsController` (with reference acceleration) on the same plant. "
+              "Sampled update: the 1 kHz controller's periodic discrete update (law + integrals), timed in its own "
+              "loop. On a loaded machine the 95th percentiles include preemption by other processes, which hits a "
+              "200 us call far more often than a 10 us one; the medians are the comparison.", "",
               "## Simulation speed (1 kHz closed loop vs the plant alone)", "",
               "| task | closed-loop RTF | plant alone, replayed torques | ratio | plant, static torque | plant, zero torque | replay drift (rad) |",
               "|---|---:|---:|---:|---:|---:|---:|"]

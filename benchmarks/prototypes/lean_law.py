@@ -45,7 +45,7 @@ from pydrake.multibody.tree import JacobianWrtVariable  # noqa: E402
 from drake_hybrid.charts import PlanarChart, PoseChart  # noqa: E402
 from drake_hybrid.controller import ControlSolution  # noqa: E402
 from drake_hybrid.errors import ConstraintRankError  # noqa: E402
-from drake_hybrid.linalg import rank_margin, solve  # noqa: E402
+from drake_hybrid.linalg import rank_margin  # noqa: E402
 from drake_hybrid.projections import KernelVelocityProjection  # noqa: E402
 from drake_hybrid.symbolic import CompiledFunction, time_derivative  # noqa: E402
 
@@ -94,6 +94,7 @@ class LeanLaw:
         else:
             E_p = self.projection._symbolic
             pieces += [("E_p", E_p), ("E_p_dot_nu", (E_p * nu).jacobian(x) * rate)]
+        self.pieces = pieces
         self.layout, start = {}, 0
         for name, matrix in pieces:
             self.layout[name] = (slice(start, start + len(matrix)), matrix.shape)
@@ -155,6 +156,12 @@ class LeanLaw:
             J = chart._selector @ J_spatial
             bias = chart._selector @ A_bias
         return x, J @ v, J, bias
+
+    def _chart_wrench(self, wrench):
+        """w = B^T F (chart.generalized_force) for the two charts, inlined."""
+        if isinstance(self.chart, PoseChart):
+            return wrench[self.chart._permutation]
+        return self.chart._selector @ wrench
 
     # -- the kernel E_p (KernelVelocityProjection._matrix_and_rate, float) -----------------------
     def _kernel(self, E_f, E_f_dot, nu):
@@ -231,7 +238,7 @@ class LeanLaw:
         wrench = c._wrench_port.Eval(context)
         wrench_valid = math.isfinite(wrench.sum())
         if wrench_valid:
-            w = wrench[self.chart._permutation] if isinstance(self.chart, PoseChart) else self.chart._selector @ wrench
+            w = self._chart_wrench(wrench)
             split = E_inverse.T @ w if self.on["raw-lapack"] else np.linalg.solve(E.T, w)
             tangential_force, force = split[:k], split[k:]
         else:
@@ -250,32 +257,39 @@ class LeanLaw:
         plant.CalcForceElementsContribution(plant_context, self.forces)
         joint_acceleration = self.solve(J, task_acceleration - bias)
         torque = plant.CalcInverseDynamics(plant_context, joint_acceleration, self.forces) + force_torque
-        solution = ControlSolution()
-        solution.actuation = c._actuation_from_torque @ torque
-        solution.velocity_error = velocity_error
-        solution.force_error = force_error
-        solution.constraint_value = s["C"]
-        solution.projected_velocity = projected_velocity
-        solution.force = force
-        solution.tangential_force = tangential_force
-        solution.position_error_rate = velocity_error
-        solution.wrench_valid = wrench_valid
-        return solution
+        return make_solution(c._actuation_from_torque @ torque, velocity_error, force_error, s["C"],
+                             projected_velocity, force, tangential_force, wrench_valid)
+
+
+def make_solution(actuation, velocity_error, force_error, constraint_value, projected_velocity, force,
+                  tangential_force, wrench_valid):
+    """The library's ControlSolution (what the controller's output ports read)."""
+    solution = ControlSolution()
+    solution.actuation = actuation
+    solution.velocity_error = velocity_error
+    solution.force_error = force_error
+    solution.constraint_value = constraint_value
+    solution.projected_velocity = projected_velocity
+    solution.force = force
+    solution.tangential_force = tangential_force
+    solution.position_error_rate = velocity_error
+    solution.wrench_valid = wrench_valid
+    return solution
 
 
 OUTPUTS = ("actuation", "velocity_error", "force_error", "constraint_value", "projected_velocity", "force",
            "tangential_force")
 
 
-def check_agreement(robot, without=()):
-    """Max |lean - library| over every output, at the robot's state and 20 perturbed ones."""
+def check_agreement(robot, make_law):
+    """Max |prototype - library| over every output port, at the robot's state and 20 perturbed
+    ones; ``make_law(controller)`` builds the prototype law swapped into a second controller."""
     from robots import make_robot
     from tick import fix_inputs
 
     reference = robot.controller
-    lean_robot = make_robot(robot.name, reference.mode.value)
-    lean = lean_robot.controller
-    lean._evaluate_law = LeanLaw(lean, without)
+    lean = make_robot(robot.name, reference.mode.value).controller
+    lean._evaluate_law = make_law(lean)
     worst = 0.0
     rng = np.random.default_rng(3)
     for i in range(21):
@@ -310,7 +324,7 @@ def main(argv=None):
             r = make_robot(name, args.mode)
             if without is not None:
                 r.controller._evaluate_law = LeanLaw(r.controller, without)
-                errors.append(check_agreement(robot, without))
+                errors.append(check_agreement(robot, lambda c, w=without: LeanLaw(c, w)))
             else:
                 errors.append(0.0)
             evaluations.append(hybrid_evaluation(r, rng))

@@ -25,13 +25,10 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 import numba  # noqa: E402
 
-from pydrake.multibody.tree import JacobianWrtVariable  # noqa: E402
 
-from drake_hybrid.charts import PoseChart  # noqa: E402
-from drake_hybrid.controller import ControlSolution  # noqa: E402
 from drake_hybrid.errors import ConstraintRankError  # noqa: E402
 from drake_hybrid.symbolic import _Printer  # noqa: E402
-from lean_law import OUTPUTS, LeanLaw, _column  # noqa: E402
+from lean_law import LeanLaw, _column, check_agreement, make_solution  # noqa: E402
 
 
 def compile_into_array(name, argument_symbols, column):
@@ -119,66 +116,22 @@ class NumbaLaw(LeanLaw):
     def _compile(self):
         super()._compile()
         chart = self.chart
-        pieces = [(name, self._symbolic_piece(name)) for name in self.layout]
-        column = _column(*[m for _, m in pieces])
+        column = _column(*[matrix for _, matrix in self.pieces])
         self.flat = np.empty(len(column))
         self.numba_symbolic = compile_into_array(
             "fused_symbolic", [chart.configuration_symbols, chart.velocity_symbols], column)
         if not self.kernel:
             self.half_lower = np.zeros((1, 1))
 
-    def _symbolic_piece(self, name):
-        # The same matrices LeanLaw._compile fused, rebuilt by name.
-        chart, constraint = self.chart, self.constraint
-        x = sympy.Matrix(chart.configuration_symbols)
-        nu = sympy.Matrix(chart.velocity_symbols)
-        rate = chart.configuration_rate
-        C = constraint.expressions
-        C_dot = C.jacobian(x) * rate
-        E_f = C_dot.jacobian(nu)
-        from drake_hybrid.symbolic import time_derivative
-
-        if name == "C":
-            return C
-        if name == "E_f":
-            return E_f
-        if name == "curvature":
-            return C_dot.jacobian(x) * rate
-        if name == "E_f_dot":
-            return time_derivative(E_f, chart.configuration_symbols, rate)
-        E_p = self.projection._symbolic
-        if name == "E_p":
-            return E_p
-        return (E_p * nu).jacobian(x) * rate
-
     def __call__(self, context, plant_context):
         c = self.controller
         m = self.m
         gains = self.gains
         state = c._state_port.Eval(context)
-        plant, frame, point, world = self.plant, self.frame, self.point, self.world
-        X = plant.CalcRelativeTransform(plant_context, world, frame).GetAsMatrix34()
-        R = X[:, :3]
-        p = X[:, 3] + R @ point
-        J_spatial = plant.CalcJacobianSpatialVelocity(plant_context, JacobianWrtVariable.kV, frame, point, world, world)
-        A_bias = plant.CalcBiasSpatialAcceleration(plant_context, JacobianWrtVariable.kV, frame, point, world,
-                                                   world).get_coeffs()
-        v = state[self.n:]
-        chart = self.chart
+        plant = self.plant
+        x, nu, J, bias = self._kinematics(plant_context, state)
         wrench = c._wrench_port.Eval(context)
-        if isinstance(chart, PoseChart):
-            x = np.concatenate([p, R.ravel()])
-            J = J_spatial[chart._permutation]
-            bias = A_bias[chart._permutation]
-            w = wrench[chart._permutation]
-        else:
-            rel = p - chart.origin
-            u = R @ chart._u_E
-            x = np.array([chart.axis_x @ rel, chart.axis_y @ rel, math.atan2(chart.axis_y @ u, chart.axis_x @ u)])
-            J = chart._selector @ J_spatial
-            bias = chart._selector @ A_bias
-            w = chart._selector @ wrench
-        nu = J @ v
+        w = self._chart_wrench(wrench)
         flat = self.flat
         self.numba_symbolic(x, nu, flat)
         layout = self.layout
@@ -207,37 +160,8 @@ class NumbaLaw(LeanLaw):
             raise ConstraintRankError("E singular")
         plant.CalcForceElementsContribution(plant_context, self.forces)
         torque = plant.CalcInverseDynamics(plant_context, joint_acceleration, self.forces) + force_torque
-        solution = ControlSolution()
-        solution.actuation = c._actuation_from_torque @ torque
-        solution.velocity_error = velocity_error
-        solution.force_error = force_error
-        solution.constraint_value = piece("C").copy()
-        solution.projected_velocity = projected_velocity
-        solution.force = force
-        solution.tangential_force = tangential_force
-        solution.position_error_rate = velocity_error
-        solution.wrench_valid = wrench_valid
-        return solution
-
-
-def check_agreement(robot):
-    from robots import make_robot
-    from tick import fix_inputs
-
-    reference = robot.controller
-    other = make_robot(robot.name, reference.mode.value).controller
-    other._evaluate_law = NumbaLaw(other)
-    worst = 0.0
-    rng = np.random.default_rng(3)
-    for i in range(21):
-        state = robot.state + (0 if i == 0 else 1e-2 * rng.standard_normal(robot.state.size))
-        values = []
-        for controller in (reference, other):
-            context = controller.CreateDefaultContext()
-            fix_inputs(controller, context, dict(robot.inputs, estimated_state=state))
-            values.append([controller.GetOutputPort(name).Eval(context) for name in OUTPUTS])
-        worst = max(worst, max(float(np.max(np.abs(a - b))) for a, b in zip(*values)))
-    return worst
+        return make_solution(c._actuation_from_torque @ torque, velocity_error, force_error, piece("C").copy(),
+                             projected_velocity, force, tangential_force, wrench_valid)
 
 
 def main(argv=None):
@@ -257,7 +181,7 @@ def main(argv=None):
         lean.controller._evaluate_law = LeanLaw(lean.controller)
         compiled = make_robot(name)
         compiled.controller._evaluate_law = NumbaLaw(compiled.controller)
-        error = check_agreement(library)
+        error = check_agreement(library, NumbaLaw)
         evaluations = [hybrid_evaluation(r, rng) for r in (library, lean, compiled)]
         evaluations.append(inverse_dynamics_evaluation(library, rng))
         timings = interleaved(evaluations, args.samples, args.samples // 10)
