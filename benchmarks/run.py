@@ -18,7 +18,7 @@ Targets (issue 7): tick <= 4x the InverseDynamicsController on the 6-DOF
 plant; closed-loop RTF >= 0.8x plant alone for every task; accuracy <= 1 %
 (planar), <= 2 % (6-DOF), eigenvalues within 5 %. The machine is shared and
 noisy: ratios are taken within one run, interleaved where possible.
-Takes 3-6 minutes on 2 cores (``--quick``: about one minute).
+Takes about 2 minutes on 2 loaded cores (``--quick``: about one minute).
 """
 
 import argparse
