@@ -139,7 +139,8 @@ def task_tick(config, samples, rng):
                            controller=controller, state=inputs["estimated_state"], inputs=inputs)
     ours, idc = interleaved([hybrid_evaluation(robot, rng), inverse_dynamics_evaluation(robot, rng)], samples,
                             samples // 10)
-    return {"joints": robot.joints, "force_rows": controller.force_size, "controller_tick_us": ours.median_us,
+    return {"joints": robot.joints, "task_size": controller.task_size, "force_rows": controller.force_size,
+            "controller_tick_us": ours.median_us,
             "controller_tick_p95_us": ours.p95_us, "idc_tick_us": idc.median_us,
             "tick_ratio": ours.median_us / idc.median_us}
 

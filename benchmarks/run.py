@@ -86,7 +86,8 @@ def targets(results):
     for name, task in results["tasks"].items():
         verdict[f"{name}: closed-loop RTF >= 0.8x plant alone"] = {
             "value": task["rtf_ratio"], "met": task["rtf_ratio"] >= TARGETS["rtf_ratio"]}
-        limit = TARGETS["accuracy_percent_planar"] if task["tick"]["joints"] <= 4 else TARGETS["accuracy_percent_6dof"]
+        planar = task["tick"].get("task_size", 6) == 3
+        limit = TARGETS["accuracy_percent_planar"] if planar else TARGETS["accuracy_percent_6dof"]
         for mode, entry in task["modes"].items():
             # The velocity and force errors after five design time constants (the final ones included).
             errors = [entry.get("max_velocity_error_percent_after_5_time_constants"),
