@@ -1,0 +1,85 @@
+"""Checks of the benchmark harness itself (not part of the package's suite):
+
+    pytest benchmarks/test_harness.py        # about 20 s; the UR5e case needs the bench extra
+
+They guard the claims the figures rest on: every timed tick really evaluates
+the law (no cached result), the plant-alone replay does the closed loop's
+plant work (it reproduces the closed loop's motion exactly), and the
+prototypes compute what the library computes.
+"""
+
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+HERE = Path(__file__).resolve().parent
+sys.path.insert(0, str(HERE))
+sys.path.insert(0, str(HERE / "prototypes"))
+
+from robots import make_robot  # noqa: E402
+from tick import hybrid_evaluation, inverse_dynamics_evaluation, sampled_update_evaluation  # noqa: E402
+
+
+def _count_law_calls(controller):
+    calls = []
+    law = controller._evaluate_law
+
+    def counted(*arguments):
+        calls.append(1)
+        return law(*arguments)
+
+    controller._evaluate_law = counted
+    return calls
+
+
+@pytest.mark.parametrize("control_period", [None, 1e-3])
+def test_every_timed_tick_evaluates_the_law_once(control_period):
+    robot = make_robot("planar-3r", control_period=control_period)
+    calls = _count_law_calls(robot.controller)
+    rng = np.random.default_rng(0)
+    evaluation = (hybrid_evaluation if control_period is None else sampled_update_evaluation)(robot, rng)
+    for _ in range(25):
+        evaluation()
+    assert len(calls) == 25
+
+
+def test_every_timed_idc_tick_sees_a_new_state():
+    robot = make_robot("planar-3r")
+    evaluation = inverse_dynamics_evaluation(robot, np.random.default_rng(0))
+    output_port = evaluation.evaluate.__self__            # the port whose Eval is timed
+    torques = []
+    for _ in range(5):
+        evaluation()
+        torques.append(output_port.Eval(evaluation.context).copy())
+    assert all(np.any(a != b) for a, b in zip(torques, torques[1:]))
+
+
+def test_torque_replay_reproduces_the_closed_loop_motion_exactly():
+    from closed_loop import plant_alone_rtf
+
+    from drake_hybrid.simulation import simulate
+    from drake_hybrid.tasks import get_task
+
+    config = get_task("window-washing").default_config()
+    config.duration = 0.3
+    run = simulate(config)
+    rtf, contacts, drift = plant_alone_rtf(config, "replay", run.log)
+    assert drift == 0.0
+    assert contacts >= 1 and rtf > 0
+
+
+@pytest.mark.parametrize("name", ["planar-3r", "ur5e"])
+def test_prototypes_agree_with_the_library(name):
+    if name == "ur5e":
+        pytest.importorskip("airo_models")
+    from lean_law import LeanLaw, check_agreement
+
+    robot = make_robot(name)
+    assert check_agreement(robot, LeanLaw) < 1e-9
+    try:
+        from numba_law import NumbaLaw
+    except ImportError:
+        return
+    assert check_agreement(robot, NumbaLaw) < 1e-9
