@@ -47,7 +47,10 @@ def command_simulate(args):
     if args.html:
         from pydrake.geometry import Meshcat
 
+        from drake_hybrid.animation import set_task_camera
+
         meshcat = Meshcat()
+        set_task_camera(meshcat, get_task(config.task))
     result = simulate(config, progress=not args.no_progress, meshcat=meshcat, record_html=bool(args.html))
     files = write_run(result, out, plots=not args.no_plots)
     if args.html:

@@ -94,6 +94,12 @@ def collect_log(scenario, context):
     return log
 
 
+def effort_limits(scenario):
+    """The effort limits of the arm's actuators (N m for revolute joints), in actuation order."""
+    plant = scenario.plant
+    return np.array([plant.get_joint_actuator(i).effort_limit() for i in plant.GetJointActuatorIndices(scenario.robot.arm)])
+
+
 def _percent(error, scale):
     return float(100.0 * error / scale) if scale > 0 else float("nan")
 
@@ -112,9 +118,7 @@ def summarize(scenario, log, wall_time):
     velocity_error = np.linalg.norm(log["velocity_error"], axis=1)
     force_error = np.linalg.norm(log["force_error"], axis=1)
     settled = t >= 5 * tau
-    effort_limits = np.array([scenario.plant.get_joint_actuator(i).effort_limit()
-                              for i in scenario.plant.GetJointActuatorIndices(scenario.robot.arm)])
-    torque_ratio = np.max(np.abs(log["torque"]) / effort_limits, axis=0)
+    torque_ratio = np.max(np.abs(log["torque"]) / effort_limits(scenario), axis=0)
     pairs = lambda values: [[float(np.real(v)), float(np.imag(v))] for v in values]
     summary = {
         "task": config.task,
