@@ -21,8 +21,9 @@ from pathlib import Path
 
 import numpy as np
 
-# Chromium in a container without a GPU or a network (see /work/.library/env machine notes):
-# software WebGL (SwiftShader) and no background connections.
+# Chromium in a container without a GPU or a network: software WebGL (SwiftShader; Chromium 156
+# renders Meshcat with or without --enable-unsafe-swiftshader) and no background connections, which
+# a closed network refuses.
 CHROMIUM_FLAGS = ("--no-sandbox", "--disable-gpu", "--enable-unsafe-swiftshader", "--disable-quic", "--no-first-run",
                   "--disable-background-networking", "--disable-component-update", "--disable-sync")
 
@@ -73,11 +74,16 @@ def image_statistics(png_path):
     return saturated, distinct
 
 
-def render_html(html_path, png_path=None, times=(1.5,), width=960, height=600, executable=None):
+# CSS that hides Meshcat's control panel (dat.gui), for figures.
+HIDE_MESHCAT_CONTROLS = ".dg.main { display: none !important; }"
+
+
+def render_html(html_path, png_path=None, times=(1.5,), width=960, height=600, executable=None, style=None):
     """Open ``html_path`` in headless Chromium and screenshot it ``times`` seconds after load.
 
     Only file:, data: and blob: URLs may load (the others are blocked and
-    reported, proving the page works offline). Returns a ``PageReport``;
+    reported, proving the page works offline). ``style``: CSS added to the
+    page (e.g. ``HIDE_MESHCAT_CONTROLS``). Returns a ``PageReport``;
     screenshots go to ``png_path`` (with ``_1``, ``_2`` ... for later times).
     """
     from playwright.sync_api import sync_playwright
@@ -113,6 +119,8 @@ def render_html(html_path, png_path=None, times=(1.5,), width=960, height=600, e
             page.route("**/*", route)
             page.goto(html_path.as_uri())
             page.wait_for_selector("canvas", timeout=30000)
+            if style:
+                page.add_style_tag(content=style)
             elapsed = 0.0
             for i, moment in enumerate(times):
                 page.wait_for_timeout(max(0.0, moment - elapsed) * 1000)

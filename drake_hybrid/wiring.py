@@ -152,11 +152,13 @@ class CustomTask:
             arms stay close to it).
         labels: plot labels ``{"velocity": [...], "velocity_units": ..., "force": [...],
             "force_units": ...}``.
+        camera: Meshcat view for animations, (camera position, target) in world (m).
     """
 
     def __init__(self, name, add_robot, add_workpiece, constraint_space, start_pose, joint_guess,
-                 labels=None, description="a user-defined task"):
+                 labels=None, camera=None, description="a user-defined task"):
         self.name = name
+        self.camera = camera
         self.description = description
         self._add_robot = add_robot
         self._add_workpiece = add_workpiece

@@ -31,7 +31,7 @@ def _chromium_or_skip():
 def animation(tmp_path_factory):
     out = tmp_path_factory.mktemp("animation")
     html = out / "window_washing.html"
-    assert main(["simulate", "window-washing", "--duration", "3.0", "--out", str(out / "run"), "--html", str(html),
+    assert main(["simulate", "window-washing", "--duration", "2.0", "--out", str(out / "run"), "--html", str(html),
                  "--no-progress", "--no-plots"]) == 0
     return html
 
@@ -42,13 +42,13 @@ def test_html_is_self_contained(animation):
     # Meshcat's viewer and the recording are inlined: no script or stylesheet is fetched from elsewhere.
     assert re.search(r"<script[^>]*\bsrc\s*=", text, re.IGNORECASE) is None
     assert re.search(r"<link[^>]*\bhref\s*=", text, re.IGNORECASE) is None
-    assert "animation" in text and 2e6 < len(text) < 4e6      # viewer (about 2.3 MB) plus 3 s of recording
+    assert "animation" in text and 2e6 < len(text) < 4e6      # viewer (about 2.3 MB) plus 2 s of recording
 
 
 @pytest.mark.browser
 def test_animation_renders_offline_in_headless_chromium(animation, tmp_path):
     executable = _chromium_or_skip()
-    report = render_html(animation, tmp_path / "frame.png", times=(0.5, 2.0), executable=executable)
+    report = render_html(animation, tmp_path / "frame.png", times=(0.4, 1.6), executable=executable)
     assert report.blocked_requests == [], "the page tried to load something that is not in the file"
     assert report.console_errors == [] and report.page_errors == [], (report.console_errors, report.page_errors)
     # Not blank: an empty Meshcat scene (background and grid) measures 0.04 % saturated pixels and 44

@@ -53,7 +53,7 @@ def add_pad_tool(plant, parser, wrist_frame, X_wrist_flange):
 class WindowWashing:
     name = "window-washing"
     description = "planar 3R arm wiping along a window pane while pressing on it (Example 2.1)"
-    camera = ((0.8, -2.2, 0.75), (0.75, 0.0, 0.55))   # Meshcat view (position, target; m): facing the arm's plane
+    camera = ((0.8, -1.9, 0.7), (0.7, 0.0, 0.5))   # Meshcat view (position, target; m): facing the arm's plane
 
     def default_config(self):
         from drake_hybrid.scenarios import ScenarioConfig, StartConfig
