@@ -2,7 +2,8 @@
 
 * ``tracking_figure``: velocity and force tracking against the designed
   (predicted) exponential response.
-* ``save_tracking_plots``: the two PNGs a run writes.
+* ``save_tracking_plots``: the tracking PNGs a run writes; ``save_run_plots``
+  adds the constraint residual and the torques.
 * ``eigenvalue_figure``: predicted against measured closed-loop eigenvalues
   (all of them, and a zoom on the designed ones).
 * ``eigenvalue_sweep_figure``: how the measured eigenvalues move with a
@@ -81,6 +82,20 @@ def save_tracking_plots(log, summary, predicted_velocity, predicted_force, out_d
                               units=labels.get(f"{what}_units", ""))
         path = out / f"{what}_tracking.png"
         fig.savefig(path, dpi=120)
+        plt.close(fig)
+        paths.append(path)
+    return paths
+
+
+def save_run_plots(log, effort_limits, out_dir, constraint_units="m", joint_names=None):
+    """Write constraint_residual.png and torques.png; returns their paths."""
+    plt = _pyplot()
+    out = Path(out_dir)
+    paths = []
+    for name, fig in (("constraint_residual", constraint_residual_figure(log, units=constraint_units)),
+                      ("torques", torque_figure(log, effort_limits, joint_names=joint_names))):
+        path = out / f"{name}.png"
+        fig.savefig(path, dpi=110)
         plt.close(fig)
         paths.append(path)
     return paths

@@ -164,7 +164,8 @@ def predicted_tracking(scenario_or_controller, config, log):
 
 
 def write_run(result, out_dir, plots=True):
-    """Write log.npz, summary.json, config.yaml and the tracking plots to ``out_dir``."""
+    """Write log.npz, summary.json, config.yaml and the plots (tracking, constraint residual,
+    torques) to ``out_dir``."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     np.savez_compressed(out / "log.npz", **result.log)
@@ -172,11 +173,14 @@ def write_run(result, out_dir, plots=True):
     (out / "config.yaml").write_text(dump_config(result.config))
     files = [out / "log.npz", out / "summary.json", out / "config.yaml"]
     if plots:
-        from drake_hybrid.plotting import save_tracking_plots
+        from drake_hybrid.plotting import save_run_plots, save_tracking_plots
 
         predicted_velocity, predicted_force = predicted_tracking(result.scenario, result.config, result.log)
+        labels = result.scenario.task.labels()
         files += save_tracking_plots(result.log, result.summary, predicted_velocity, predicted_force, out,
-                                     labels=result.scenario.task.labels())
+                                     labels=labels)
+        files += save_run_plots(result.log, effort_limits(result.scenario), out,
+                                constraint_units=labels.get("constraint_units", "units of C"))
     if result.html:
         (out / "animation.html").write_text(result.html)
         files.append(out / "animation.html")

@@ -56,9 +56,11 @@ def weld_joints(plant, joint_names, model_instance=None):
     """Replace each named joint by a weld at its zero position (before ``Finalize``).
 
     For parts the task does not move, such as gripper fingers: the hybrid law
-    needs one actuator per joint and nq == nv. Coupler constraints that a
-    parser made from URDF ``<mimic>`` tags on these joints are removed first.
-    Returns the new WeldJoints.
+    needs one actuator per joint and nq == nv. Drake's ``RemoveJoint`` refuses
+    while the plant has any constraint, and pydrake does not say which joints a
+    coupler constraint (what a parser makes of a URDF ``<mimic>``) couples, so
+    **every** constraint of the plant is removed first: call this before adding
+    constraints of your own. Returns the new WeldJoints.
     """
     joints = []
     for name in joint_names:
@@ -71,7 +73,6 @@ def weld_joints(plant, joint_names, model_instance=None):
                 raise ValueError(f"weld_joints: model instance {model_instance} has no joint '{name}'")
             joints.append(plant.GetJointByName(name, model_instance))
     for constraint_id in plant.GetConstraintIds():
-        # A URDF <mimic> becomes a coupler constraint between the two joints (the only kind a parser adds).
         plant.RemoveConstraint(constraint_id)
     welds = []
     for joint in joints:
@@ -178,8 +179,10 @@ class CustomTask:
         config = ScenarioConfig(
             task=self.name, mode=mode, duration=duration,
             gains=gains if gains is not None else HybridGains(),
-            desired_velocity=Profile(kind="constant", value=list(desired_velocity or [0.0] * k)),
-            desired_force=Profile(kind="constant", value=list(desired_force or [0.0] * m)),
+            desired_velocity=Profile(kind="constant", value=[0.0] * k if desired_velocity is None
+                                     else [float(v) for v in desired_velocity]),
+            desired_force=Profile(kind="constant", value=[0.0] * m if desired_force is None
+                                  else [float(f) for f in desired_force]),
             start=StartConfig(configuration=list(self.start_pose.translation())
                               + list(RollPitchYaw(self.start_pose.rotation()).vector()), in_contact=True))
         config.contact.model = "hydroelastic_with_fallback"

@@ -66,3 +66,15 @@ def test_eigenvalue_figures():
     sweep = plotting.eigenvalue_sweep_figure([1e6, 5e6], [linearization, _linearization(measured, [-10.0, -8.0, -10.0])],
                                              "pad modulus E", units="Pa")
     assert any(ax.get_ylabel() == "pad modulus E (Pa)" for ax in sweep.axes)        # the colour bar
+
+
+def test_the_cli_writes_every_figure(tmp_path):
+    from drake_hybrid.cli import main
+
+    out = tmp_path / "run"
+    assert main(["simulate", "window-washing", "--duration", "0.2", "--out", str(out), "--no-progress"]) == 0
+    for name in ("velocity_tracking", "force_tracking", "constraint_residual", "torques"):
+        assert (out / f"{name}.png").stat().st_size > 10_000, name
+    figure = tmp_path / "eigenvalues.png"
+    assert main(["analyze", "window-washing", "--plot", str(figure)]) == 0
+    assert figure.stat().st_size > 10_000
