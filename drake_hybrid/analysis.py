@@ -48,7 +48,7 @@ def velocity_loop_matrix(gains, mode):
     return -K_v
 
 
-def predicted_eigenvalues(gains, mode, kinematic_rows=0):
+def predicted_eigenvalues(gains, mode, kinematic_rows=0, redundancy=0):
     """The closed-loop eigenvalues the validated gains design (``ValidatedGains``).
 
     Besides the designed ones, a linearized closed loop has k = d - m zero
@@ -62,6 +62,9 @@ def predicted_eigenvalues(gains, mode, kinematic_rows=0):
     + 2 w_c^2 C = 0 and leaves its (frozen) force integral as another zero.
     The force loop's eigenvalues are then those of the force-controlled rows
     (``gains.force_rate`` restricted to them).
+
+    A redundant arm (``redundancy`` = n - d > 0) adds its self-motion: the
+    null-space damping q-ddot_0 = -K_n q-dot gives -K_n and a zero per extra joint.
     """
     mode = ControlMode.parse(mode)
     velocity = np.linalg.eigvals(velocity_loop_matrix(gains, mode))
@@ -70,8 +73,10 @@ def predicted_eigenvalues(gains, mode, kinematic_rows=0):
     physical = [i for i in range(m) if i not in kinematic]
     force = np.linalg.eigvals(-gains.force_rate[np.ix_(physical, physical)]) if physical else np.zeros(0)
     held = np.tile([-gains.constraint_frequency, -2.0 * gains.constraint_frequency], len(kinematic)).astype(complex)
-    return PredictedEigenvalues(velocity=np.sort_complex(velocity), force=np.sort_complex(np.concatenate([force, held])),
-                                marginal=gains.velocity.shape[0] + len(kinematic))
+    null_space = np.full(redundancy, -gains.null_space_damping, dtype=complex)
+    return PredictedEigenvalues(velocity=np.sort_complex(np.concatenate([velocity, null_space])),
+                                force=np.sort_complex(np.concatenate([force, held])),
+                                marginal=gains.velocity.shape[0] + len(kinematic) + redundancy)
 
 
 def predicted_errors(gains, mode, times, velocity_error0, force_integral0, position_error0=None, kinematic_rows=()):
@@ -99,6 +104,12 @@ def predicted_errors(gains, mode, times, velocity_error0, force_integral0, posit
     xi = np.array([expm(-G * t) @ np.asarray(force_integral0, dtype=float) for t in times])
     force = -(G @ xi.T).T                                             # e_f = xi-dot = -G xi
     return velocity, force, position
+
+
+def controller_prediction(controller):
+    """``predicted_eigenvalues`` for a HybridController (its gains, mode, kinematic rows, n - d)."""
+    return predicted_eigenvalues(controller.validated_gains(), controller.mode, controller.kinematic_rows,
+                                 controller.num_joints - controller.task_size)
 
 
 def design_time_constant(gains, mode, kinematic_rows=()):
@@ -231,8 +242,7 @@ def linearize_continuous(config, tolerance=0.05, bandwidth_hz=200.0):
     wall = time.perf_counter() - start
     A = np.asarray(linear.A())
     eigenvalues = np.linalg.eigvals(A)
-    controller = scenario.controller
-    predicted = predicted_eigenvalues(controller.validated_gains(), controller.mode, controller.kinematic_rows)
+    predicted = controller_prediction(scenario.controller)
     match = match_eigenvalues(predicted.designed, eigenvalues, tolerance=tolerance, marginal=predicted.marginal)
     return Linearization(A=A, eigenvalues=eigenvalues, equilibrium_residual=residual, predicted=predicted,
                          match=match, wall_time=wall)
@@ -321,8 +331,7 @@ def linearize_discrete(config, tolerance=0.05, epsilon=1e-6, settle_time=0.0):
     # Multipliers at 0 (pure delays, e.g. the held torque) have no continuous-time counterpart.
     keep = np.abs(multipliers) > 1e-9
     eigenvalues = np.log(multipliers[keep].astype(complex)) / h
-    controller = scenario.controller
-    predicted = predicted_eigenvalues(controller.validated_gains(), controller.mode, controller.kinematic_rows)
+    predicted = controller_prediction(scenario.controller)
     match = match_eigenvalues(predicted.designed, eigenvalues, tolerance=tolerance, marginal=predicted.marginal)
     return DiscreteLinearization(A=A, multipliers=multipliers, eigenvalues=eigenvalues, period=h,
                                  equilibrium_residual=residual, predicted=predicted, match=match, wall_time=wall)

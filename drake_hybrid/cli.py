@@ -1,7 +1,7 @@
 """Command line: ``drake-hybrid simulate|analyze|tasks``.
 
     drake-hybrid simulate window-washing [--duration S] [--out DIR] [--mode MODE] [--config FILE] [--html FILE]
-    drake-hybrid analyze window-washing [--mode MODE] [--json FILE] [--config FILE]
+    drake-hybrid analyze window-washing [--mode MODE] [--json FILE] [--plot FILE.png] [--config FILE]
     drake-hybrid tasks
 """
 
@@ -47,7 +47,10 @@ def command_simulate(args):
     if args.html:
         from pydrake.geometry import Meshcat
 
+        from drake_hybrid.animation import set_task_camera
+
         meshcat = Meshcat()
+        set_task_camera(meshcat, get_task(config.task))
     result = simulate(config, progress=not args.no_progress, meshcat=meshcat, record_html=bool(args.html))
     files = write_run(result, out, plots=not args.no_plots)
     if args.html:
@@ -91,6 +94,15 @@ def command_analyze(args):
           f"{_fmt(match.marginal_partners)}")
     print(f"  other modes (contact, filter, sampling, joint space): {_fmt(np.sort_complex(match.extra))}")
     print(f"  matched within {100 * args.tolerance:.0f} % and no other mode unstable: {match.matched}")
+    if args.plot:
+        from drake_hybrid.plotting import eigenvalue_figure
+
+        figure = eigenvalue_figure(match, title=f"{config.task}, {controller_mode.value}")
+        figure.savefig(args.plot, dpi=110)
+        import matplotlib.pyplot as plt
+
+        plt.close(figure)
+        print(f"  wrote {args.plot}")
     if args.json:
         payload = match.as_dict()
         payload.update({"gains": config.gains.as_lists(k, m, controller_mode), "mode": controller_mode.value,
@@ -128,6 +140,7 @@ def make_parser():
     analyze.add_argument("--mode", choices=modes)
     analyze.add_argument("--config", help="YAML scenario config")
     analyze.add_argument("--json", help="write the eigenvalues to this JSON file")
+    analyze.add_argument("--plot", help="write the eigenvalue figure (predicted vs. linearized) to this PNG")
     analyze.add_argument("--tolerance", type=float, default=0.05, help="relative tolerance of the match")
     analyze.set_defaults(func=command_analyze)
     tasks = sub.add_parser("tasks", help="list the tasks")

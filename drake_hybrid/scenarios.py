@@ -22,7 +22,7 @@ import numpy as np
 from scipy.optimize import brentq
 
 from pydrake.common.yaml import yaml_dump_typed, yaml_load_typed
-from pydrake.geometry import ProximityProperties, Role, RoleAssign
+from pydrake.geometry import CollisionFilterDeclaration, GeometrySet, ProximityProperties, Role, RoleAssign
 from pydrake.multibody.plant import AddMultibodyPlant, CoulombFriction, MultibodyPlant, MultibodyPlantConfig
 from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import LogVectorOutput
@@ -45,6 +45,10 @@ class ContactConfig:
     sap_near_rigid_threshold: float = 1.0        # SAP's beta: smaller = stiffer near-rigid constraints (Drake: 1.0)
     friction: float = 0.0                        # Coulomb mu (static = dynamic) of pad and workpiece
     pad_resolution: float = 0.003                # m, mesh resolution hint of the pad (see docs: tessellation torque)
+    # Discrete plants: "sap" models dissipation with its own linear law and ignores pad_dissipation;
+    # "similar" or "lagged" use Hunt-Crossley (pad_dissipation), like the continuous plant that
+    # analysis.linearize_continuous linearizes (docs/drake_notes.md).
+    discrete_approximation: str = "sap"
 
 
 @dataclass
@@ -109,6 +113,7 @@ class RobotModel:
     tool_weld: object = None                     # WeldJoint wrist -> tool (for the wrist sensor)
     pad_geometries: list = field(default_factory=list)
     passive_geometries: list = field(default_factory=list)   # collision geometries to drop (arm links)
+    only_pad_contact: bool = False               # filter every contact of the robot but the pad's
 
 
 @dataclass
@@ -158,7 +163,8 @@ def build_plant(task, config, builder, time_step=None, sampled_outputs=True):
     time_step = config.time_step if time_step is None else time_step
     plant, scene_graph = AddMultibodyPlant(
         MultibodyPlantConfig(time_step=time_step, contact_model=config.contact.model,
-                             discrete_contact_approximation="sap", use_sampled_output_ports=sampled_outputs,
+                             discrete_contact_approximation=config.contact.discrete_approximation,
+                             use_sampled_output_ports=sampled_outputs,
                              sap_near_rigid_threshold=config.contact.sap_near_rigid_threshold),
         builder)
     robot = task.add_robot(plant, config)
@@ -168,6 +174,17 @@ def build_plant(task, config, builder, time_step=None, sampled_outputs=True):
     _set_contact_properties(plant, scene_graph, robot.pad_geometries, config.contact, pad=True)
     _set_contact_properties(plant, scene_graph, workpiece_geometries, config.contact, pad=False)
     plant.Finalize()
+    if robot.only_pad_contact:
+        # Arm models made for motion planning (spheres and cylinders around the links) overlap
+        # between non-adjacent links, and AutoDiffXd point-contact queries (Linearize) reject most
+        # shape pairs even out of contact: let only the pad touch the workpiece.
+        arm_geometries = [geometry for instance in robot.model_instances for index in plant.GetBodyIndices(instance)
+                          for geometry in plant.GetCollisionGeometriesForBody(plant.get_body(index))
+                          if geometry not in robot.pad_geometries]
+        scene_graph.collision_filter_manager().Apply(
+            CollisionFilterDeclaration()
+            .ExcludeWithin(GeometrySet(arm_geometries + list(robot.pad_geometries)))
+            .ExcludeBetween(GeometrySet(arm_geometries), GeometrySet(workpiece_geometries)))
     return plant, scene_graph, robot
 
 

@@ -17,7 +17,7 @@ import numpy as np
 
 from pydrake.systems.analysis import Simulator
 
-from drake_hybrid.analysis import design_time_constant, predicted_eigenvalues, predicted_errors
+from drake_hybrid.analysis import controller_prediction, design_time_constant, predicted_errors
 from drake_hybrid.scenarios import build_scenario, dump_config, set_initial_conditions
 
 
@@ -94,6 +94,12 @@ def collect_log(scenario, context):
     return log
 
 
+def effort_limits(scenario):
+    """The effort limits of the arm's actuators (N m for revolute joints), in actuation order."""
+    plant = scenario.plant
+    return np.array([plant.get_joint_actuator(i).effort_limit() for i in plant.GetJointActuatorIndices(scenario.robot.arm)])
+
+
 def _percent(error, scale):
     return float(100.0 * error / scale) if scale > 0 else float("nan")
 
@@ -104,7 +110,7 @@ def summarize(scenario, log, wall_time):
     controller = scenario.controller
     gains = controller.validated_gains()
     k, m = controller.velocity_size, controller.force_size
-    predicted = predicted_eigenvalues(gains, controller.mode, controller.kinematic_rows)
+    predicted = controller_prediction(controller)
     tau = design_time_constant(gains, controller.mode, controller.kinematic_rows)
     t = log["t"]
     speed_scale = float(np.max(np.linalg.norm(log["desired_velocity"], axis=1)))
@@ -112,9 +118,7 @@ def summarize(scenario, log, wall_time):
     velocity_error = np.linalg.norm(log["velocity_error"], axis=1)
     force_error = np.linalg.norm(log["force_error"], axis=1)
     settled = t >= 5 * tau
-    effort_limits = np.array([scenario.plant.get_joint_actuator(i).effort_limit()
-                              for i in scenario.plant.GetJointActuatorIndices(scenario.robot.arm)])
-    torque_ratio = np.max(np.abs(log["torque"]) / effort_limits, axis=0)
+    torque_ratio = np.max(np.abs(log["torque"]) / effort_limits(scenario), axis=0)
     pairs = lambda values: [[float(np.real(v)), float(np.imag(v))] for v in values]
     summary = {
         "task": config.task,
@@ -160,7 +164,8 @@ def predicted_tracking(scenario_or_controller, config, log):
 
 
 def write_run(result, out_dir, plots=True):
-    """Write log.npz, summary.json, config.yaml and the tracking plots to ``out_dir``."""
+    """Write log.npz, summary.json, config.yaml and the plots (tracking, constraint residual,
+    torques) to ``out_dir``."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     np.savez_compressed(out / "log.npz", **result.log)
@@ -168,11 +173,14 @@ def write_run(result, out_dir, plots=True):
     (out / "config.yaml").write_text(dump_config(result.config))
     files = [out / "log.npz", out / "summary.json", out / "config.yaml"]
     if plots:
-        from drake_hybrid.plotting import save_tracking_plots
+        from drake_hybrid.plotting import save_run_plots, save_tracking_plots
 
         predicted_velocity, predicted_force = predicted_tracking(result.scenario, result.config, result.log)
+        labels = result.scenario.task.labels()
         files += save_tracking_plots(result.log, result.summary, predicted_velocity, predicted_force, out,
-                                     labels=result.scenario.task.labels())
+                                     labels=labels)
+        files += save_run_plots(result.log, effort_limits(result.scenario), out,
+                                constraint_units=labels.get("constraint_units", "units of C"))
     if result.html:
         (out / "animation.html").write_text(result.html)
         files.append(out / "animation.html")

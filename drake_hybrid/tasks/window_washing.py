@@ -42,6 +42,7 @@ class WindowWashing:
     name = "window-washing"
     continuous_plant = True
     description = "planar 3R arm wiping along a window pane while pressing on it (Example 2.1)"
+    camera = ((0.8, -1.9, 0.7), (0.7, 0.0, 0.5))   # Meshcat view (position, target; m): facing the arm's plane
 
     def default_config(self):
         from drake_hybrid.scenarios import ScenarioConfig, StartConfig
@@ -63,7 +64,7 @@ class WindowWashing:
     def labels(self):
         """Plot labels of the velocity-controlled and force-controlled coordinates."""
         return {"velocity": ["x-dot", "theta-dot"], "velocity_units": "m/s | rad/s",
-                "force": ["F (along E_f = [0 1 0])"], "force_units": "N"}
+                "force": ["F (along E_f = [0 1 0])"], "force_units": "N", "constraint_units": "m"}
 
     # -- models --------------------------------------------------------------------------------
     def _arm(self, config):

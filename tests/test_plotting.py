@@ -1,0 +1,80 @@
+"""Figures: every axis says its unit; the limits and the designed eigenvalues are drawn where they belong."""
+
+import numpy as np
+import pytest
+
+from drake_hybrid import plotting
+from drake_hybrid.analysis import Linearization, PredictedEigenvalues, match_eigenvalues
+
+
+@pytest.fixture
+def log():
+    t = np.linspace(0.0, 1.0, 101)
+    return {"t": t, "constraint": (1e-3 * np.exp(-t))[:, None],
+            "torque": np.column_stack([40 + 5 * t, -3 + t, 0.1 * np.sin(t)])}
+
+
+def _labels(fig):
+    return [label for ax in fig.axes for label in (ax.get_xlabel(), ax.get_ylabel()) if label]
+
+
+def test_constraint_residual_figure(log):
+    fig = plotting.constraint_residual_figure(log, units="m", labels=["C = y - h"])
+    ax = fig.axes[0]
+    assert ax.get_yscale() == "log" and ax.get_xlabel() == "time t (s)" and ax.get_ylabel() == "|C(r)| (m)"
+    assert np.allclose(ax.lines[0].get_ydata(), np.abs(log["constraint"][:, 0]), rtol=1e-9)
+
+
+def test_torque_figure_draws_the_limits(log):
+    limits = [150.0, 80.0, 30.0]
+    fig = plotting.torque_figure(log, limits, joint_names=["shoulder", "elbow", "wrist"])
+    panels = [ax for ax in fig.axes if ax.lines]
+    assert len(panels) == 3
+    for ax, limit, torque in zip(panels, limits, log["torque"].T):
+        levels = sorted(line.get_ydata()[0] for line in ax.lines[1:])
+        assert levels == [-limit, limit]
+        assert f"{100 * np.max(np.abs(torque)) / limit:.1f} %" in ax.get_title()
+        assert ax.get_ylabel() == "tau (N m)"
+    assert "time t (s)" in _labels(fig)
+    with pytest.raises(ValueError, match="3 actuators but 2 effort limits"):
+        plotting.torque_figure(log, [1.0, 2.0])
+
+
+def test_torque_figure_with_seven_joints_labels_both_columns(log):
+    seven = dict(log, torque=np.tile(log["torque"], (1, 3))[:, :7])
+    fig = plotting.torque_figure(seven, [87.0] * 4 + [12.0] * 3)
+    assert [ax.get_xlabel() for ax in fig.axes].count("time t (s)") == 2
+
+
+def _linearization(eigenvalues, designed):
+    predicted = PredictedEigenvalues(velocity=np.array(designed[:-1], complex), force=np.array(designed[-1:], complex))
+    match = match_eigenvalues(predicted.all, eigenvalues)
+    return Linearization(A=np.zeros((0, 0)), eigenvalues=np.asarray(eigenvalues, complex), equilibrium_residual=0.0,
+                         predicted=predicted, match=match, wall_time=0.0)
+
+
+def test_eigenvalue_figures():
+    measured = [-10.0, -8.03, -9.97, -1257.0, -19.3 + 111.7j, -19.3 - 111.7j]
+    linearization = _linearization(measured, [-10.0, -8.0, -10.0])
+    fig = plotting.eigenvalue_figure(linearization.match)
+    assert len(fig.axes) == 2
+    for ax in fig.axes:
+        assert ax.get_xlabel() == "Re(s) (1/s)" and ax.get_ylabel() == "Im(s) (rad/s)"
+    assert fig.axes[0].get_xscale() == "symlog"
+    (re_min, re_max), (im_min, im_max) = fig.axes[1].get_xlim(), fig.axes[1].get_ylim()
+    assert re_min < -10 < 0 < re_max and im_min < 0 < im_max
+    sweep = plotting.eigenvalue_sweep_figure([1e6, 5e6], [linearization, _linearization(measured, [-10.0, -8.0, -10.0])],
+                                             "pad modulus E", units="Pa")
+    assert any(ax.get_ylabel() == "pad modulus E (Pa)" for ax in sweep.axes)        # the colour bar
+
+
+def test_the_cli_writes_every_figure(tmp_path):
+    from drake_hybrid.cli import main
+
+    out = tmp_path / "run"
+    assert main(["simulate", "window-washing", "--duration", "0.2", "--out", str(out), "--no-progress"]) == 0
+    for name in ("velocity_tracking", "force_tracking", "constraint_residual", "torques"):
+        assert (out / f"{name}.png").stat().st_size > 10_000, name
+    figure = tmp_path / "eigenvalues.png"
+    assert main(["analyze", "window-washing", "--plot", str(figure)]) == 0
+    assert figure.stat().st_size > 10_000
