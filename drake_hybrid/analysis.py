@@ -180,12 +180,18 @@ def match_eigenvalues(designed, measured, tolerance=0.05, marginal=0, marginal_r
 def equilibrium_config(config, bandwidth_hz=200.0):
     """The continuous-time version of ``config`` at rest: continuous plant and controller, a
     low-pass on the wrench (to break the algebraic loop), zero desired velocity, zero start
-    integrals. Its start (in contact, pressing with F_d) is an equilibrium of the closed loop."""
+    integrals, and no friction. Its start (in contact, pressing with F_d) is an equilibrium of the
+    closed loop.
+
+    Friction is removed because at rest it sticks: the pad is then held in the tangent directions
+    by the contact, not by the designed loop, whose modes become marginal (DRAKE_NOTES); the
+    designed loop is the paper's frictionless one (section 3.1)."""
     import copy
 
     c = copy.deepcopy(config)
     c.time_step = 0.0
     c.control_period = 0.0
+    c.contact.friction = 0.0
     if not c.sensor.bandwidth_hz > 0:
         c.sensor.bandwidth_hz = bandwidth_hz
     _at_rest(c)
@@ -335,3 +341,48 @@ def linearize_discrete(config, tolerance=0.05, epsilon=1e-6, settle_time=0.0):
     match = match_eigenvalues(predicted.designed, eigenvalues, tolerance=tolerance, marginal=predicted.marginal)
     return DiscreteLinearization(A=A, multipliers=multipliers, eigenvalues=eigenvalues, period=h,
                                  equilibrium_residual=residual, predicted=predicted, match=match, wall_time=wall)
+
+
+def impedance_realization(scenario, log):
+    """How well a logged run realizes the impedance/force design (spec section 5).
+
+    Returns a dict of arrays over the log:
+
+    * ``impedance_residual``: e_p'' + K_v e_p' + K_p e_p - F_v (3.2-11, first line), with e_p''
+      from central differences of the logged e_p';
+    * ``tangential_force``: F_v;
+    * ``force_loop`` and ``force_loop_predicted``: g_f = (I + K_fp) e_f + K_fi xi on the
+      force-controlled rows (xi rebuilt from the logged e_f and xi(0)) and its prediction
+      -M_f^-1 M_fp F_v (3.2-11, second line), with the partition of HybridController (kinematic
+      rows count as motion rows, their measured force with F_v).
+    """
+    from drake_hybrid.controller import impedance_blocks
+
+    controller = scenario.controller
+    gains = controller.validated_gains()
+    t = log["t"]
+    e_p, e_p_dot, F_v = log["position_error"], log["velocity_error"], log["tangential_force"]
+    e_p_ddot = np.gradient(e_p_dot, t, axis=0)
+    residual = e_p_ddot + e_p_dot @ gains.velocity.T + e_p @ gains.position.T - F_v
+    m = controller.force_size
+    physical = [i for i in range(m) if i not in controller.kinematic_rows]
+    kinematic = list(controller.kinematic_rows)
+    start = scenario.config.start.force_integral
+    xi0 = np.asarray(start, dtype=float) if start else np.zeros(m)
+    period = np.diff(t, prepend=t[0])
+    xi = xi0 + np.cumsum(log["force_error"] * period[:, None], axis=0) - log["force_error"] * period[:, None]
+    g_f = log["force_error"] @ (np.eye(m) + gains.force_proportional).T + xi @ gains.force_integral.T
+    plant = scenario.controller_plant
+    context = plant.CreateDefaultContext()
+    predicted = []
+    for q, v, F_tangent, F in zip(log["q"], log["v"], F_v, log["force"]):
+        plant.SetPositions(context, q)
+        plant.SetVelocities(context, v)
+        task = controller.kinematics.evaluate(context)
+        values = scenario.constraint_space.evaluate(task.configuration, task.velocity)
+        mobility = task.jacobian @ np.linalg.solve(plant.CalcMassMatrix(context), task.jacobian.T)
+        M_f, M_fp, _ = impedance_blocks(values.velocity_projection, values.force_projection, mobility, kinematic)
+        motion_force = np.concatenate([F_tangent, F[kinematic]])
+        predicted.append(-np.linalg.solve(M_f, M_fp @ motion_force))
+    return {"impedance_residual": residual, "tangential_force": F_v, "force_loop": g_f[:, physical],
+            "force_loop_predicted": np.array(predicted)}

@@ -20,7 +20,8 @@ def _config(args):
     from drake_hybrid.scenarios import load_config
 
     task = get_task(args.task)
-    config = task.default_config()
+    options = dict(option.split("=", 1) for option in (getattr(args, "option", None) or []))
+    config = task.default_config(options) if options else task.default_config()
     if getattr(args, "config", None):
         config = load_config(path=args.config, defaults=config)
         if config.task != task.name:
@@ -131,6 +132,9 @@ def make_parser():
     simulate.add_argument("--out", help="output directory (default ./runs/<task>)")
     simulate.add_argument("--mode", choices=modes)
     simulate.add_argument("--config", help="YAML scenario config (on top of the task's defaults)")
+    simulate.add_argument("--option", action="append", metavar="KEY=VALUE",
+                          help="a task option, e.g. --option chart=euler --option path=pole (sphere-polishing), "
+                               "--option workpiece=sphere (grinding)")
     simulate.add_argument("--html", help="also write a self-contained Meshcat animation to this file")
     simulate.add_argument("--no-progress", action="store_true", help="no progress bar")
     simulate.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
@@ -139,6 +143,7 @@ def make_parser():
     analyze.add_argument("task", choices=sorted(TASKS))
     analyze.add_argument("--mode", choices=modes)
     analyze.add_argument("--config", help="YAML scenario config")
+    analyze.add_argument("--option", action="append", metavar="KEY=VALUE", help="a task option (see simulate)")
     analyze.add_argument("--json", help="write the eigenvalues to this JSON file")
     analyze.add_argument("--plot", help="write the eigenvalue figure (predicted vs. linearized) to this PNG")
     analyze.add_argument("--tolerance", type=float, default=0.05, help="relative tolerance of the match")

@@ -25,6 +25,35 @@ from drake_hybrid.kinematics import EndEffectorKinematics, declare_plant_context
 from drake_hybrid.linalg import inv, is_autodiff, solve, value
 
 
+def impedance_blocks(velocity_projection, force_projection, task_mobility, kinematic_rows=()):
+    """The blocks (3.2-8) of the impedance/force law on its partition of E's rows.
+
+    Motion rows: [E_p; E_f[kinematic_rows]]; force rows: the other rows of E_f. With the task
+    mobility L = J M^-1 J^T (= Lambda^-1, also for redundant arms), returns
+    (M_f, M_fp, M_p) = (F L F^T, F L P^T, P L P^T) for force rows F and motion rows P
+    (M_f and M_fp have no rows when every row of E_f is kinematic). Float or AutoDiffXd.
+    """
+    kinematic = list(kinematic_rows)
+    physical = [i for i in range(force_projection.shape[0]) if i not in kinematic]
+    motion_rows = np.vstack([velocity_projection, force_projection[kinematic]]) if kinematic else velocity_projection
+    force_rows = force_projection[physical]
+    return (force_rows @ task_mobility @ force_rows.T, force_rows @ task_mobility @ motion_rows.T,
+            motion_rows @ task_mobility @ motion_rows.T)
+
+
+def impedance_gain(velocity_projection, force_projection, task_mobility, kinematic_rows=()):
+    """K_0 = I + M_fp^T M_f^-1 M_fp - M_p of the impedance/force law (3.2-6), spec section 5.
+
+    K_0 = I - S with S = M_p - M_fp^T M_f^-1 M_fp, the Schur complement of M_f (the inverse of the
+    constrained task inertia in the motion-row coordinates); blocks from ``impedance_blocks``.
+    """
+    M_f, M_fp, M_p = impedance_blocks(velocity_projection, force_projection, task_mobility, kinematic_rows)
+    K_0 = np.eye(M_p.shape[0]) - M_p
+    if M_f.shape[0]:
+        K_0 = K_0 + M_fp.T @ solve(M_f, M_fp)
+    return K_0
+
+
 # A sampled controller ticks this fraction of a period before each multiple of the period (see
 # HybridController's docstring): late enough to read the plant's newest state, early enough for a
 # discrete plant stepping at the multiples of the period to apply the new torque at once.
@@ -95,6 +124,12 @@ def HybridController_(T):
 
         with K_0 = I + M_fp^T M_f^-1 M_fp - M_p recomputed every evaluation
         (spec section 5).
+
+        In impedance mode the kinematic rows count as motion-controlled rows:
+        K_0 is built on the partition [E_p; kinematic rows of E_f] / (force-
+        controlled rows of E_f), and the measured force along them is
+        compensated like F_v, so their closed loop is C-ddot + 3 w_c C-dot +
+        2 w_c^2 C = F (unit-mass impedance).
 
         Kinematic rows (``constraint.kinematic_rows``, e.g. the orientation rows
         of a point contact, which the environment does not enforce) are held by
@@ -311,14 +346,6 @@ def HybridController_(T):
                 M = plant.CalcMassMatrix(plant_context)
                 M_inverse = inv(M)
                 task_mobility = J @ M_inverse @ J.T                              # J M^-1 J^T = Lambda^-1
-            if self.mode is ControlMode.IMPEDANCE_FORCE:
-                E_f, E_p = values.force_projection, values.velocity_projection
-                M_f = E_f @ task_mobility @ E_f.T                                # (3.2-8)
-                M_fp = E_f @ task_mobility @ E_p.T
-                M_p = E_p @ task_mobility @ E_p.T
-                K_0 = np.eye(k) + M_fp.T @ solve(M_f, M_fp) - M_p                # spec section 5
-                acceleration = acceleration + K_0 @ tangential_force             # (3.2-6)
-
             constraint_acceleration = None
             if self.kinematic_rows:
                 # Kinematic rows are held by the controller: C-ddot = -3 w_c C-dot - 2 w_c^2 C.
@@ -326,6 +353,19 @@ def HybridController_(T):
                 C_dot = values.force_projection @ nu
                 held = (-3.0 * w_c * C_dot - 2.0 * w_c * w_c * values.constraint_value) * (1.0 - self._force_controlled)
                 constraint_acceleration = held
+            if self.mode is ControlMode.IMPEDANCE_FORCE:
+                # Motion-controlled rows: E_p and the kinematic rows; force-controlled rows: the rest of
+                # E_f. The measured force along the motion rows is F_v (and F on kinematic rows).
+                kinematic = list(self.kinematic_rows)
+                K_0 = impedance_gain(values.velocity_projection, values.force_projection, task_mobility, kinematic)
+                motion_force = np.concatenate([tangential_force, force[kinematic]]) if kinematic else tangential_force
+                compensation = K_0 @ motion_force                                # (3.2-6)
+                acceleration = acceleration + compensation[:k]
+                if kinematic:
+                    extra = np.zeros(m, dtype=compensation.dtype)
+                    extra[kinematic] = compensation[k:]
+                    constraint_acceleration = constraint_acceleration + extra
+
             task_acceleration = space.task_acceleration(values, acceleration, constraint_acceleration)  # (3.0-11)
             force_command = -desired_force + gains.force_proportional @ force_error + gains.force_integral @ xi
             force_torque = J.T @ (values.force_projection.T @ force_command)    # J^T E_f^T u_f

@@ -7,10 +7,11 @@ velocity projection, its default ScenarioConfig and its start configuration.
 """
 
 from drake_hybrid.tasks.crank_turning import CrankTurning
+from drake_hybrid.tasks.grinding import Grinding
 from drake_hybrid.tasks.sphere_polishing import SpherePolishing
 from drake_hybrid.tasks.window_washing import WindowWashing
 
-TASKS = {task.name: task for task in (WindowWashing(), CrankTurning(), SpherePolishing())}
+TASKS = {task.name: task for task in (WindowWashing(), CrankTurning(), SpherePolishing(), Grinding())}
 
 
 BUILT_IN_TASKS = frozenset(TASKS)

@@ -53,10 +53,11 @@ class CrankTurning:
     continuous_plant = False      # the SAP weld constraint needs a discrete plant
     description = "UR5e turning a crank whose handle it holds (weld constraint), pushing along its axis (Example 2.2)"
 
-    def default_config(self):
+    def default_config(self, options=None):
+        """The task's default ScenarioConfig; ``options`` update its task_options."""
         from drake_hybrid.scenarios import ScenarioConfig, SensorConfig, StartConfig
 
-        return ScenarioConfig(
+        config = ScenarioConfig(
             task=self.name,
             mode="velocity-force",
             duration=3.0,
@@ -75,6 +76,8 @@ class CrankTurning:
             task_parameters={"start_angle": math.pi - 0.6},
             task_options={"velocity_rows": "true"},
         )
+        config.task_options.update(options or {})
+        return config
 
     def labels(self):
         return {"velocity": ["psi-dot (spin)", "alpha-dot (crank)"], "velocity_units": "rad/s",

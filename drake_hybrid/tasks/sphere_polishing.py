@@ -64,10 +64,11 @@ class SpherePolishing:
     continuous_plant = True
     description = "UR5e polishing a sphere along a latitude arc or across the pole (Example 2.3)"
 
-    def default_config(self):
+    def default_config(self, options=None):
+        """The task's default ScenarioConfig; ``options`` update its task_options."""
         from drake_hybrid.scenarios import ContactConfig, ScenarioConfig, StartConfig
 
-        return ScenarioConfig(
+        config = ScenarioConfig(
             task=self.name,
             mode="velocity-force",
             duration=3.0,
@@ -81,6 +82,8 @@ class SpherePolishing:
             task_parameters={"speed": 0.05, "start_angle": 0.0},
             task_options={"chart": "pose", "path": "latitude", "velocity_rows": "true"},
         )
+        config.task_options.update(options or {})
+        return config
 
     def labels(self):
         return {"velocity": ["spin about a", "t_1 . p-dot", "t_2 . p-dot"], "velocity_units": "rad/s | m/s",

@@ -44,10 +44,11 @@ class WindowWashing:
     description = "planar 3R arm wiping along a window pane while pressing on it (Example 2.1)"
     camera = ((0.8, -1.9, 0.7), (0.7, 0.0, 0.5))   # Meshcat view (position, target; m): facing the arm's plane
 
-    def default_config(self):
+    def default_config(self, options=None):
+        """The task's default ScenarioConfig; ``options`` update its task_options."""
         from drake_hybrid.scenarios import ScenarioConfig, StartConfig
 
-        return ScenarioConfig(
+        config = ScenarioConfig(
             task=self.name,
             mode="velocity-force",
             duration=3.0,
@@ -60,6 +61,8 @@ class WindowWashing:
             start=StartConfig(configuration=[0.9, math.pi / 2], in_contact=True, force_integral=[0.2]),
             task_parameters={"window_height": 1.0},
         )
+        config.task_options.update(options or {})
+        return config
 
     def labels(self):
         """Plot labels of the velocity-controlled and force-controlled coordinates."""
