@@ -206,3 +206,129 @@ def linearize_continuous(config, tolerance=0.05, bandwidth_hz=200.0):
     match = match_eigenvalues(predicted.all, eigenvalues, tolerance=tolerance)
     return Linearization(A=A, eigenvalues=eigenvalues, equilibrium_residual=residual, predicted=predicted,
                          match=match, wall_time=wall)
+
+
+# ------------------------------------------------------------------------------------------------
+# The sampled closed loop: Jacobian of the one-period map
+# ------------------------------------------------------------------------------------------------
+
+def discrete_equilibrium_config(config):
+    """``config`` at rest with its sampling kept: the discrete plant and the sampled controller,
+    zero desired velocity, constant F_d(0), zero start integrals (the sampled twin of
+    ``equilibrium_config``)."""
+    import copy
+
+    from drake_hybrid.sources import Profile
+
+    c = copy.deepcopy(config)
+    size = len(c.desired_velocity.value)
+    c.desired_velocity = Profile(kind="constant", value=[0.0] * size)
+    c.desired_force = Profile(kind="constant", value=list(c.desired_force.evaluate(0.0)[0]))
+    c.start.force_integral = []
+    c.start.position_error = []
+    c.start.in_contact = True
+    return c
+
+
+@dataclass
+class DiscreteLinearization:
+    Phi: np.ndarray                    # d x_{k+1} / d x_k over one control period
+    multipliers: np.ndarray            # eig(Phi)
+    eigenvalues: np.ndarray            # log(multipliers) / h: the equivalent continuous eigenvalues (1/s)
+    period: float
+    equilibrium_residual: float        # max |x_{k+1} - x_k| at the linearization point
+    predicted: PredictedEigenvalues
+    match: EigenvalueMatch
+    wall_time: float
+
+
+def linearize_discrete(config, epsilon=1e-5, tolerance=0.05):
+    """Jacobian of the sampled closed loop's one-period map at its contact equilibrium.
+
+    The map Phi takes the vector state x_k (plant q, v; controller xi, e_p and
+    held torque) at t_k = k h - delta/2, between the controller's tick at
+    k h - delta and the plant's step at k h (docs/design.md, "Sampling"), to
+    x_{k+1} one control period h later, by simulating the full diagram. At that
+    instant the plant's sampled contact results (abstract state) are overwritten
+    by the step at k h before the next tick reads them, so x_k is the whole
+    state of the loop and Phi is a function of it alone. Its Jacobian is taken
+    by central differences (``epsilon``, absolute, per state; about 1e-5 with
+    SAP, smaller is noisy). Multipliers inside the unit circle mean a stable
+    sampled loop: this sees the sampling, the zero-order hold and the SAP step
+    that the continuous linearization cannot. ``eigenvalues`` are
+    log(multipliers) / h, matched against the designed continuous ones.
+
+    Needs a discrete plant, a sampled controller with a period that is a whole
+    number of plant steps, and no wrench filter (a filter would sample the
+    contact results at k h, where the stale abstract state would enter).
+    """
+    import time
+
+    from pydrake.systems.analysis import InitializeParams, Simulator
+
+    from drake_hybrid.controller import SAMPLE_LEAD
+    from drake_hybrid.scenarios import build_scenario, set_initial_conditions
+
+    h, time_step = float(config.control_period), float(config.time_step)
+    if not (time_step > 0 and h > 0):
+        raise ValueError("linearize_discrete needs a discrete plant (time_step > 0) and a sampled controller "
+                         f"(control_period > 0); got time_step = {time_step}, control_period = {h}")
+    steps = h / time_step
+    if abs(steps - round(steps)) > 1e-9 * steps:
+        raise ValueError(f"linearize_discrete needs control_period to be a whole number of plant steps; "
+                         f"got control_period = {h}, time_step = {time_step}")
+    if config.sensor.bandwidth_hz > 0:
+        raise ValueError("linearize_discrete needs sensor.bandwidth_hz = 0 (a sampled wrench filter reads the "
+                         "plant's sampled contact results at the plant's steps, outside the map's vector state)")
+    if not epsilon > 0:
+        raise ValueError(f"epsilon must be positive, got {epsilon}")
+
+    c = discrete_equilibrium_config(config)
+    scenario = build_scenario(c, with_loggers=False)
+    diagram = scenario.diagram
+    base = diagram.CreateDefaultContext()
+    set_initial_conditions(scenario, base)
+    t_k = h * (1.0 - 0.5 * SAMPLE_LEAD)
+    base.SetTime(t_k)
+    groups = base.num_discrete_state_groups()
+    sizes = [base.get_discrete_state(i).size() for i in range(groups)]
+    continuous_size = base.num_continuous_states()
+
+    def get_state(context):
+        parts = [context.get_discrete_state(i).CopyToVector() for i in range(groups)]
+        if continuous_size:
+            parts.append(context.get_continuous_state_vector().CopyToVector())
+        return np.concatenate(parts)
+
+    def one_period(x):
+        context = base.Clone()
+        offset = 0
+        for i, size in enumerate(sizes):
+            context.SetDiscreteState(i, x[offset:offset + size])
+            offset += size
+        if continuous_size:
+            context.SetContinuousState(x[offset:])
+        simulator = Simulator(diagram, context)
+        # No initialization events: they would recompute the held torque from the stale sensor reading.
+        simulator.Initialize(InitializeParams(suppress_initialization_events=True))
+        simulator.AdvanceTo(t_k + h)
+        return get_state(context)
+
+    start = time.perf_counter()
+    x0 = get_state(base)
+    residual = float(np.max(np.abs(one_period(x0) - x0)))
+    Phi = np.zeros((x0.size, x0.size))
+    for j in range(x0.size):
+        dx = np.zeros(x0.size)
+        dx[j] = epsilon
+        Phi[:, j] = (one_period(x0 + dx) - one_period(x0 - dx)) / (2 * epsilon)
+    wall = time.perf_counter() - start
+    multipliers = np.linalg.eigvals(Phi)
+    # Multipliers at 0 (the held torque is recomputed every tick) have no continuous counterpart:
+    # floor |mu| so that they map to a large negative real part instead of -inf.
+    magnitude = np.maximum(np.abs(multipliers), np.finfo(float).tiny)
+    eigenvalues = (np.log(magnitude) + 1j * np.angle(multipliers)) / h
+    predicted = predicted_eigenvalues(scenario.controller.validated_gains(), scenario.controller.mode)
+    match = match_eigenvalues(predicted.all, eigenvalues, tolerance=tolerance)
+    return DiscreteLinearization(Phi=Phi, multipliers=multipliers, eigenvalues=eigenvalues, period=h,
+                                 equilibrium_residual=residual, predicted=predicted, match=match, wall_time=wall)
