@@ -387,3 +387,54 @@ def run_sweep(task_name, spec, out_dir, scheduler=None, workers=2, resume=False,
         bar.close()
     return SweepRun(out_dir=out, results_path=results_path, points=len(points), evaluated=len(pending),
                     failures=failures, wall_time=time.perf_counter() - start, workers=where)
+
+
+# ------------------------------------------------------------------------------------------------
+# The theory's verdict (for the stability map's overlay)
+# ------------------------------------------------------------------------------------------------
+
+def rigid_contact_theory_stable(config, sizes=None):
+    """The paper's verdict on ``config``: with rigid contact, an exact model and a continuous
+    controller the errors obey (3.1-14), (3.1-15) (Remark 3, (3.2-11) in the other modes), so the
+    loop is stable iff the designed eigenvalues (-eig(K_v) or the roots of s^2 + K_v s + K_p, and
+    eig(-(I + K_fp)^-1 K_fi)) are in the open left half-plane. None when the gains are outside the
+    law's admissible set (GainError). The theory sees no contact stiffness and no sampling.
+    ``sizes``: (d - m, m) if known (saves building the task's constraint)."""
+    from drake_hybrid.analysis import predicted_eigenvalues
+    from drake_hybrid.errors import GainError
+    from drake_hybrid.gains import ControlMode
+
+    velocity_size, force_size = sizes or constraint_sizes(config)
+    mode = ControlMode.parse(config.mode)
+    try:
+        gains = config.gains.matrices(velocity_size, force_size, mode)
+    except GainError:
+        return None
+    return bool(np.all(predicted_eigenvalues(gains, mode).designed.real < 0))
+
+
+def constraint_sizes(config):
+    """(d - m, m): the velocity- and force-controlled dimensions of ``config``'s task."""
+    from drake_hybrid.tasks import get_task
+
+    space = get_task(config.task).constraint_space(config)
+    return space.velocity_size, space.force_size
+
+
+def theory_on_plane(base_config, x_path, y_path, x_values, y_values, fixed=None):
+    """``rigid_contact_theory_stable`` over the (x, y) plane (other fields from ``fixed`` and the base):
+    an array (len(y_values) x len(x_values)) of 1.0 (stable), 0.0 (unstable) and nan (not admissible)."""
+    import copy
+
+    from drake_hybrid.sweep_spec import set_config_value
+
+    sizes = constraint_sizes(base_config)
+    verdict = np.full((len(y_values), len(x_values)), np.nan)
+    for i, y in enumerate(y_values):
+        for j, x in enumerate(x_values):
+            config = copy.deepcopy(base_config)
+            for path, value in {**(fixed or {}), x_path: x, y_path: y}.items():
+                set_config_value(config, path, value)
+            stable = rigid_contact_theory_stable(config, sizes)
+            verdict[i, j] = np.nan if stable is None else float(stable)
+    return verdict
