@@ -310,20 +310,36 @@ def _prepare_out_dir(out, task_name, spec, base, points, resume):
     return results_path
 
 
-def _start_client(scheduler, workers):
+WORKER_MEMORY = "4GB"
+
+
+def _start_client(scheduler, workers, worker_memory=WORKER_MEMORY):
+    """A client of the cluster at ``scheduler``, or of a new LocalCluster of ``workers`` processes.
+
+    Drake 1.51 never frees a diagram that holds Python LeafSystems (drake#22515,
+    drake#23161): a worker grows by about 10 to 30 MB per point here. The local
+    cluster's nannies therefore restart a worker whose memory passes 95 % of
+    ``worker_memory`` (no spilling, no pausing: a paused worker would never
+    shrink); the point it was running is run again elsewhere."""
+    import copy
     import logging
 
+    import dask
     from distributed import Client, LocalCluster
 
     if scheduler:
         return Client(scheduler), None, scheduler
-    cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None,
-                           silence_logs=logging.ERROR)
+    memory = {"target": False, "spill": False, "pause": False, "terminate": 0.95}
+    # The nannies read the terminate threshold when they start; a restarted worker gets ``config``.
+    with dask.config.set({f"distributed.worker.memory.{key}": value for key, value in memory.items()}):
+        cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=":0",
+                               memory_limit=worker_memory, silence_logs=logging.ERROR,
+                               config=copy.deepcopy(dask.config.config))
     return Client(cluster), cluster, f"local:{workers}"
 
 
 def run_sweep(task_name, spec, out_dir, scheduler=None, workers=2, resume=False, retry_failed=False,
-              progress=True):
+              progress=True, worker_memory=WORKER_MEMORY):
     """Evaluate the points of ``spec`` missing from ``out_dir/results.csv`` and append them.
 
     ``workers``: worker processes of the local Dask cluster (0: this process,
@@ -331,7 +347,8 @@ def run_sweep(task_name, spec, out_dir, scheduler=None, workers=2, resume=False,
     ``resume``: continue a table from the same spec and task (checked by a
     digest of the points); ``retry_failed`` also re-runs points whose row
     has an error (the new row is appended; ``read_results`` keeps the last
-    row of a point)."""
+    row of a point). ``worker_memory``: memory limit of each local worker
+    (restarted past 95 %; see ``_start_client``)."""
     from tqdm import tqdm
 
     if not (isinstance(workers, int) and workers >= 0):
@@ -368,16 +385,17 @@ def run_sweep(task_name, spec, out_dir, scheduler=None, workers=2, resume=False,
         elif pending:
             from distributed import as_completed
 
-            client, cluster, where = _start_client(scheduler, workers)
+            client, cluster, where = _start_client(scheduler, workers, worker_memory)
             try:
                 futures = {client.submit(evaluate_point, config_yaml, pure=False, **options): (index, parameters)
                            for index, parameters, config_yaml in pending}
                 for future in as_completed(futures):
-                    index, parameters = futures[future]
+                    index, parameters = futures.pop(future)
                     try:
                         row = future.result()
                     except Exception as error:   # the worker died (e.g. a crash in C++): keep the point
                         row = {"error": _stage_error("worker", error)}
+                    future.release()             # the worker may drop the result (a restart will not redo it)
                     record(index, parameters, row)
             finally:
                 client.close()
