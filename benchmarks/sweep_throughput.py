@@ -9,6 +9,9 @@ and of 2 single-threaded worker processes. Each cluster is started and its
 workers import drake_hybrid before the clock starts (the start-up is reported
 separately), so the rate is the steady throughput. Prints points per minute,
 the 2-worker / 1-worker ratio, and writes sweep_throughput.json and .png.
+Each run also reports the CPU time over the wall time inside its points
+(1.0 when each worker had a core to itself) and the load average before it:
+on a shared 2-core machine the ratio falls short of 2 by that contention.
 """
 
 import argparse
@@ -67,14 +70,18 @@ def main():
     points = len(spec.points())
     results = {"points": points, "duration": args.duration, "cpu_count": os.cpu_count(), "runs": {}}
     for workers in (0, 1, 2):
+        load_before = os.getloadavg()[0]
         wall, startup, rows = timed_sweep(spec, workers)
         rate = 60.0 * points / wall
+        # CPU seconds per wall second inside the points: 1.0 when a worker had its core to itself.
+        cpu_share = sum(row["cpu_time"] for row in rows) / sum(row["wall_time"] for row in rows)
         label = "serial (no Dask)" if workers == 0 else f"{workers} worker{'s' if workers > 1 else ''}"
         errors = sum(1 for row in rows if row["error"])
         results["runs"][str(workers)] = {"wall_time": wall, "cluster_startup": startup, "points_per_minute": rate,
-                                         "errors": errors}
+                                         "errors": errors, "cpu_share": cpu_share, "load_before": load_before}
         print(f"{label:>18}: {points} points in {wall:6.1f} s = {rate:5.1f} points/min"
-              f"{f' (cluster start-up {startup:.1f} s, not counted)' if workers else ''}; {errors} errors")
+              f"{f' (cluster start-up {startup:.1f} s, not counted)' if workers else ''}; {errors} errors; "
+              f"CPU/wall in the points {cpu_share:.2f}; load average before {load_before:.1f}")
     ratio = results["runs"]["2"]["points_per_minute"] / results["runs"]["1"]["points_per_minute"]
     results["ratio_2_to_1"] = ratio
     print(f"2 workers / 1 worker: {ratio:.2f}x (ideal 2 on {os.cpu_count()} cores; the machine is shared)")

@@ -8,6 +8,9 @@
 * ``linearize_continuous``: Drake's ``Linearize`` of a continuous closed loop
   (continuous plant, continuous controller, low-pass on the wrench) at a
   contact equilibrium.
+* ``linearize_discrete``: the Jacobian of the sampled closed loop's
+  one-period map (discrete plant, sampled controller) by central
+  differences: multipliers that see the control period.
 * ``match_eigenvalues``: pairs every predicted eigenvalue with a distinct
   measured one (minimum total relative distance) and says which are within
   tolerance.
@@ -143,25 +146,31 @@ def match_eigenvalues(predicted, measured, tolerance=0.05, zero_floor=1.0, margi
 # Linearization of a scenario's closed loop
 # ------------------------------------------------------------------------------------------------
 
-def equilibrium_config(config, bandwidth_hz=200.0):
-    """The continuous-time version of ``config`` at rest: continuous plant and controller, a
-    low-pass on the wrench (to break the algebraic loop), zero desired velocity, zero start
-    integrals. Its start (in contact, pressing with F_d) is an equilibrium of the closed loop."""
-    from drake_hybrid.scenarios import ScenarioConfig  # noqa: F401  (type of config)
-    from drake_hybrid.sources import Profile
+def at_rest_config(config):
+    """``config`` at rest, its sampling kept: zero desired velocity, constant F_d(0), zero start
+    integrals, starting in contact. Its start is an equilibrium of the closed loop."""
     import copy
 
+    from drake_hybrid.sources import Profile
+
     c = copy.deepcopy(config)
-    c.time_step = 0.0
-    c.control_period = 0.0
-    if not c.sensor.bandwidth_hz > 0:
-        c.sensor.bandwidth_hz = bandwidth_hz
     size = len(c.desired_velocity.value)
     c.desired_velocity = Profile(kind="constant", value=[0.0] * size)
     c.desired_force = Profile(kind="constant", value=list(c.desired_force.evaluate(0.0)[0]))
     c.start.force_integral = []
     c.start.position_error = []
     c.start.in_contact = True
+    return c
+
+
+def equilibrium_config(config, bandwidth_hz=200.0):
+    """The continuous-time version of ``config`` at rest (``at_rest_config``): continuous plant and
+    controller, a low-pass on the wrench (to break the algebraic loop)."""
+    c = at_rest_config(config)
+    c.time_step = 0.0
+    c.control_period = 0.0
+    if not c.sensor.bandwidth_hz > 0:
+        c.sensor.bandwidth_hz = bandwidth_hz
     return c
 
 
@@ -211,24 +220,6 @@ def linearize_continuous(config, tolerance=0.05, bandwidth_hz=200.0):
 # ------------------------------------------------------------------------------------------------
 # The sampled closed loop: Jacobian of the one-period map
 # ------------------------------------------------------------------------------------------------
-
-def discrete_equilibrium_config(config):
-    """``config`` at rest with its sampling kept: the discrete plant and the sampled controller,
-    zero desired velocity, constant F_d(0), zero start integrals (the sampled twin of
-    ``equilibrium_config``)."""
-    import copy
-
-    from drake_hybrid.sources import Profile
-
-    c = copy.deepcopy(config)
-    size = len(c.desired_velocity.value)
-    c.desired_velocity = Profile(kind="constant", value=[0.0] * size)
-    c.desired_force = Profile(kind="constant", value=list(c.desired_force.evaluate(0.0)[0]))
-    c.start.force_integral = []
-    c.start.position_error = []
-    c.start.in_contact = True
-    return c
-
 
 @dataclass
 class DiscreteLinearization:
@@ -291,7 +282,7 @@ def linearize_discrete(config, epsilon=1e-5, tolerance=0.05, periods=1):
     if not epsilon > 0:
         raise ValueError(f"epsilon must be positive, got {epsilon}")
 
-    c = discrete_equilibrium_config(config)
+    c = at_rest_config(config)
     scenario = build_scenario(c, with_loggers=False)
     diagram = scenario.diagram
     base = diagram.CreateDefaultContext()

@@ -211,8 +211,11 @@ def monte_carlo_figure(rows, metrics=("steady_force_error", "steady_velocity_err
         for value in groups:
             data = np.array([row[metric] for row in rows if (group is None or row[group] == value)
                              and row.get(metric) is not None], dtype=float)
+            never = int(np.sum(np.isinf(data)))             # a settling time of inf: never settled
             data = data[np.isfinite(data)]
             label = f"{_label(group).split(' (')[0]} = {value:g} (n = {data.size})" if group else f"n = {data.size}"
+            if never:
+                label += f"; {never} never"
             ax.hist(data, bins=20, alpha=0.6, label=label)
         ax.set_xlabel(_label(metric), fontsize=8)
         ax.grid(alpha=0.3)

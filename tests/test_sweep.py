@@ -7,6 +7,7 @@ import math
 import numpy as np
 import pytest
 
+from drake_hybrid.analysis import linearize_discrete
 from drake_hybrid.cli import make_parser
 from drake_hybrid.scenarios import build_scenario, dump_config, load_config, set_initial_conditions
 from drake_hybrid.sweep import RESULT_COLUMNS, read_results, rigid_contact_theory_stable, run_sweep
@@ -99,6 +100,20 @@ def test_sweep_rejects_a_spec_for_another_task_and_bad_base_paths(tmp_path):
                   workers=0)
 
 
+@pytest.mark.parametrize("changes, message", [
+    ({"time_step": 0.0}, "needs a discrete plant"),
+    ({"control_period": 0.0}, "needs a discrete plant"),
+    ({"control_period": 0.0025}, "whole number of plant steps"),
+    ({"sensor.bandwidth_hz": 200.0}, "needs sensor.bandwidth_hz = 0"),
+])
+def test_discrete_linearization_names_what_it_cannot_handle(changes, message):
+    config = default_config()
+    for path, value in changes.items():
+        set_config_value(config, path, value)
+    with pytest.raises(ValueError, match=message):
+        linearize_discrete(config)
+
+
 # -- model error ---------------------------------------------------------------------------------
 
 def test_payload_error_scales_the_simulated_tool_only():
@@ -144,7 +159,7 @@ parameters:
   control_period: [0.001, 0.004]
 map: {x: contact.pad_modulus, y: gains.force_proportional, facet: control_period}
 """
-TIMING_COLUMNS = {"wall_time", "simulation_wall_time", "linearization_wall_time", "worker"}
+TIMING_COLUMNS = {"wall_time", "simulation_wall_time", "linearization_wall_time", "cpu_time", "worker"}
 
 
 @pytest.fixture(scope="module")
