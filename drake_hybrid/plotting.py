@@ -144,6 +144,7 @@ def stability_map_figure(rows, x, y, facet=None, color="worst_discrete_real", ve
     plt = _pyplot()
     facet_values = sorted({row[facet] for row in rows}) if facet else [None]
     fig, axes = plt.subplots(1, len(facet_values), figsize=(5.6 * len(facet_values) + 1.2, 4.8), squeeze=False)
+    fig.subplots_adjust(bottom=0.2, top=0.82 if title and facet else 0.86)   # room for the legend and title
     values = np.array([np.nan if row.get(color) is None else row[color] for row in rows], dtype=float)
     limit = np.nanmax(np.abs(values)) if np.isfinite(values).any() else 1.0
     norm = SymLogNorm(linthresh=1.0, vmin=-limit, vmax=limit, base=10)
@@ -181,21 +182,23 @@ def stability_map_figure(rows, x, y, facet=None, color="worst_discrete_real", ve
             else:
                 note = ("stable everywhere here" if finite.size and finite.min() == 1 else
                         "unstable everywhere here" if finite.size else "not defined here")
-                ax.text(0.02, 0.02, f"rigid-contact theory: {note};\nit has no boundary over "
+                if finite.size and finite.size < verdicts.size:
+                    note += " (where the gains are admissible)"
+                ax.text(0.5, 1.01, f"rigid-contact theory: {note};\nit has no boundary over "
                         f"{_label(x).split(' (')[0]} x {_label(y).split(' (')[0]}",
-                        transform=ax.transAxes, fontsize=7, va="bottom",
-                        bbox=dict(facecolor="white", alpha=0.8, edgecolor="none"))
+                        transform=ax.transAxes, fontsize=7, ha="center", va="bottom")
         ax.set_xlabel(_label(x))
         ax.set_ylabel(_label(y))
-        ax.set_title(f"{_label(facet).split(' (')[0]} = {facet_value:g}" if facet else (title or ""), fontsize=10)
+        ax.set_title(f"{_label(facet).split(' (')[0]} = {facet_value:g}" if facet else (title or ""), fontsize=10,
+                     pad=24)
     colorbar = fig.colorbar(image, ax=axes[0].tolist(), shrink=0.9)
     colorbar.set_label(_label(color))
     handles = [plt.Line2D([], [], ls="", marker="o", mfc="none", mec="k", label="simulation: settles"),
                plt.Line2D([], [], ls="", marker="x", color="k", label="simulation: does not settle"),
                plt.Line2D([], [], ls="", marker="s", mfc="0.5", mec="k", label="failed (error recorded)")]
-    fig.legend(handles=handles, loc="upper center", ncol=3, fontsize=8, frameon=False)
+    fig.legend(handles=handles, loc="lower center", ncol=3, fontsize=8, frameon=False, bbox_to_anchor=(0.45, -0.01))
     if title and facet:
-        fig.suptitle(title, y=0.995, fontsize=10)
+        fig.suptitle(title, fontsize=10)
     return fig
 
 

@@ -378,7 +378,7 @@ def run_sweep(task_name, spec, out_dir, scheduler=None, workers=2, resume=False,
         bar.update(1)
         bar.set_postfix(failures=failures)
 
-    where = "serial"
+    where = "serial" if pending else "nothing to run"
     try:
         if workers == 0 and not scheduler:
             for index, parameters, config_yaml in pending:
