@@ -8,6 +8,9 @@
 * ``linearize_continuous``: Drake's ``Linearize`` of a continuous closed loop
   (continuous plant, continuous controller, low-pass on the wrench) at a
   contact equilibrium.
+* ``linearize_discrete``: the Jacobian of the sampled closed loop's
+  one-period map (discrete plant, sampled controller) by central
+  differences: multipliers that see the control period.
 * ``match_eigenvalues``: pairs every predicted eigenvalue with a distinct
   measured one (minimum total relative distance) and says which are within
   tolerance.
@@ -177,38 +180,38 @@ def match_eigenvalues(designed, measured, tolerance=0.05, marginal=0, marginal_r
 # Linearization of a scenario's closed loop
 # ------------------------------------------------------------------------------------------------
 
+def at_rest_config(config):
+    """A copy of ``config`` at rest, its sampling kept: zero desired velocity, constant F_d(0), zero
+    start integrals, starting in contact. Its start is an equilibrium of the closed loop."""
+    import copy
+
+    from drake_hybrid.sources import Profile
+    from drake_hybrid.tasks import get_task
+
+    c = copy.deepcopy(config)
+    size = get_task(c.task).constraint_space(c).velocity_size
+    c.desired_velocity = Profile(kind="constant", value=[0.0] * size)
+    c.desired_force = Profile(kind="constant", value=list(c.desired_force.evaluate(0.0)[0]))
+    c.start.force_integral = []
+    c.start.position_error = []
+    c.start.in_contact = True
+    return c
+
+
 def equilibrium_config(config, bandwidth_hz=200.0):
-    """The continuous-time version of ``config`` at rest: continuous plant and controller, a
-    low-pass on the wrench (to break the algebraic loop), zero desired velocity, zero start
-    integrals, and no friction. Its start (in contact, pressing with F_d) is an equilibrium of the
-    closed loop.
+    """The continuous-time version of ``at_rest_config(config)``: continuous plant and controller,
+    a low-pass on the wrench (to break the algebraic loop), and no friction.
 
     Friction is removed because at rest it sticks: the pad is then held in the tangent directions
     by the contact, not by the designed loop, whose modes become marginal (DRAKE_NOTES); the
     designed loop is the paper's frictionless one (section 3.1)."""
-    import copy
-
-    c = copy.deepcopy(config)
+    c = at_rest_config(config)
     c.time_step = 0.0
     c.control_period = 0.0
     c.contact.friction = 0.0
     if not c.sensor.bandwidth_hz > 0:
         c.sensor.bandwidth_hz = bandwidth_hz
-    _at_rest(c)
-    c.start.in_contact = True
     return c
-
-
-def _at_rest(config):
-    """Zero desired velocity, constant desired force F_d(0), zero start integrals (in place)."""
-    from drake_hybrid.sources import Profile
-    from drake_hybrid.tasks import get_task
-
-    size = get_task(config.task).constraint_space(config).velocity_size
-    config.desired_velocity = Profile(kind="constant", value=[0.0] * size)
-    config.desired_force = Profile(kind="constant", value=list(config.desired_force.evaluate(0.0)[0]))
-    config.start.force_integral = []
-    config.start.position_error = []
 
 
 @dataclass
@@ -254,9 +257,13 @@ def linearize_continuous(config, tolerance=0.05, bandwidth_hz=200.0):
                          match=match, wall_time=wall)
 
 
+# ------------------------------------------------------------------------------------------------
+# Discrete closed loops: Jacobian of the one-period map
+# ------------------------------------------------------------------------------------------------
+
 @dataclass
 class DiscreteLinearization:
-    A: np.ndarray                    # Jacobian of the one-period map x+ = f(x)
+    A: np.ndarray                    # Jacobian of the one-period map x_{k+1} = f(x_k)
     multipliers: np.ndarray          # eig(A)
     eigenvalues: np.ndarray          # log(multipliers) / period: the equivalent continuous eigenvalues
     period: float
@@ -281,20 +288,19 @@ def linearize_discrete(config, tolerance=0.05, epsilon=1e-6, settle_time=0.0):
     ``settle_time`` (s): first simulate the rebuilt loop at rest for this long, so that the
     compliant constraint forces settle onto the equilibrium.
     """
-    import copy
+
     import time
 
     from pydrake.systems.analysis import Simulator
 
     from drake_hybrid.scenarios import build_scenario, set_initial_conditions
 
-    c = copy.deepcopy(config)
+    c = at_rest_config(config)
     if not c.time_step > 0:
         raise ValueError("linearize_discrete needs a discrete plant (time_step > 0)")
     c.control_period = c.time_step
     c.log_period = c.time_step
     c.sensor.bandwidth_hz = 0.0
-    _at_rest(c)
     scenario = build_scenario(c, with_loggers=False, sampled_plant_outputs=False, controller_sample_lead=False)
     simulator = Simulator(scenario.diagram)
     context = simulator.get_mutable_context()
@@ -386,3 +392,109 @@ def impedance_realization(scenario, log):
         predicted.append(-np.linalg.solve(M_f, M_fp @ motion_force))
     return {"impedance_residual": residual, "tangential_force": F_v, "force_loop": g_f[:, physical],
             "force_loop_predicted": np.array(predicted)}
+
+
+def linearize_sampled_loop(config, epsilon=1e-5, tolerance=0.05, periods=1):
+    """Jacobian of the simulated sampled closed loop's one-period map at its contact equilibrium.
+
+    Unlike ``linearize_discrete`` (which rebuilds the loop with one period of actuation delay so
+    that Drake evaluates its map directly), this differentiates the loop exactly as ``simulate``
+    runs it, zero-delay hold and sampled sensors included, by simulating one period from perturbed
+    states: slower, and only piecewise smooth with hydroelastic contact (below), but it is the
+    loop whose stability a sweep over control periods asks about.
+
+    The map takes the vector state x_k (plant q, v; controller xi, e_p and
+    held torque) at t_k = k h - delta/2, between the controller's tick at
+    k h - delta and the plant's step at k h (docs/design.md, "Sampling"), to
+    x_{k+1} one control period h later, by simulating the full diagram. At that
+    instant the plant's sampled contact results (abstract state) are overwritten
+    by the step at k h before the next tick reads them, so x_k is the whole
+    state of the loop and the map is a function of it alone. Its Jacobian is taken
+    by central differences (``epsilon``, absolute, per state; about 1e-5 with
+    SAP, smaller is noisy). Multipliers inside the unit circle mean a stable
+    sampled loop: this sees the sampling, the zero-order hold and the SAP step
+    that the continuous linearization cannot. ``eigenvalues`` are
+    log(multipliers) / (periods h), matched against the designed continuous
+    ones; ``periods`` > 1 differentiates the map over that many periods.
+
+    Accuracy (window task, 5 MPa pad, 1 ms): the SAP solve and the tessellated
+    contact surface make the map only piecewise smooth, so the slow rates
+    (multipliers near 1) move by a few 1/s with ``epsilon`` (1e-4, 1e-5,
+    1e-6: the velocity-loop rates between -3.6 and -10.7 1/s against the
+    designed -10, -8; a -5.0 1/s mode in all). Multipliers far outside the
+    unit circle (the stiff-contact force loop: |mu| 1.1 to 1.9) are robust.
+
+    Needs a discrete plant, a sampled controller with a period that is a whole
+    number of plant steps, and no wrench filter (a filter would sample the
+    contact results at k h, where the stale abstract state would enter).
+    """
+    import time
+
+    from pydrake.systems.analysis import InitializeParams, Simulator
+
+    from drake_hybrid.controller import SAMPLE_LEAD
+    from drake_hybrid.scenarios import build_scenario, set_initial_conditions
+
+    h, time_step = float(config.control_period), float(config.time_step)
+    if not (time_step > 0 and h > 0):
+        raise ValueError("linearize_discrete needs a discrete plant (time_step > 0) and a sampled controller "
+                         f"(control_period > 0); got time_step = {time_step}, control_period = {h}")
+    steps = h / time_step
+    if abs(steps - round(steps)) > 1e-9 * steps:
+        raise ValueError(f"linearize_discrete needs control_period to be a whole number of plant steps; "
+                         f"got control_period = {h}, time_step = {time_step}")
+    if config.sensor.bandwidth_hz > 0:
+        raise ValueError("linearize_discrete needs sensor.bandwidth_hz = 0 (a sampled wrench filter reads the "
+                         "plant's sampled contact results at the plant's steps, outside the map's vector state)")
+    if not epsilon > 0:
+        raise ValueError(f"epsilon must be positive, got {epsilon}")
+
+    c = at_rest_config(config)
+    scenario = build_scenario(c, with_loggers=False)
+    diagram = scenario.diagram
+    base = diagram.CreateDefaultContext()
+    set_initial_conditions(scenario, base)
+    t_k = h * (1.0 - 0.5 * SAMPLE_LEAD)
+    base.SetTime(t_k)
+    groups = base.num_discrete_state_groups()
+    sizes = [base.get_discrete_state(i).size() for i in range(groups)]
+    continuous_size = base.num_continuous_states()
+
+    def get_state(context):
+        parts = [context.get_discrete_state(i).CopyToVector() for i in range(groups)]
+        if continuous_size:
+            parts.append(context.get_continuous_state_vector().CopyToVector())
+        return np.concatenate(parts)
+
+    def one_period(x):
+        context = base.Clone()
+        offset = 0
+        for i, size in enumerate(sizes):
+            context.SetDiscreteState(i, x[offset:offset + size])
+            offset += size
+        if continuous_size:
+            context.SetContinuousState(x[offset:])
+        simulator = Simulator(diagram, context)
+        # No initialization events: they would recompute the held torque from the stale sensor reading.
+        simulator.Initialize(InitializeParams(suppress_initialization_events=True))
+        simulator.AdvanceTo(t_k + periods * h)
+        return get_state(context)
+
+    start = time.perf_counter()
+    x0 = get_state(base)
+    residual = float(np.max(np.abs(one_period(x0) - x0)))
+    A = np.zeros((x0.size, x0.size))
+    for j in range(x0.size):
+        dx = np.zeros(x0.size)
+        dx[j] = epsilon
+        A[:, j] = (one_period(x0 + dx) - one_period(x0 - dx)) / (2 * epsilon)
+    wall = time.perf_counter() - start
+    multipliers = np.linalg.eigvals(A)
+    # Multipliers at 0 (the held torque is recomputed every tick) have no continuous counterpart:
+    # floor |mu| so that they map to a large negative real part instead of -inf.
+    magnitude = np.maximum(np.abs(multipliers), np.finfo(float).tiny)
+    eigenvalues = (np.log(magnitude) + 1j * np.angle(multipliers)) / (periods * h)
+    predicted = controller_prediction(scenario.controller)
+    match = match_eigenvalues(predicted.designed, eigenvalues, tolerance=tolerance, marginal=predicted.marginal)
+    return DiscreteLinearization(A=A, multipliers=multipliers, eigenvalues=eigenvalues, period=h,
+                                 equilibrium_residual=residual, predicted=predicted, match=match, wall_time=wall)

@@ -2,6 +2,7 @@
 
     drake-hybrid simulate window-washing [--duration S] [--out DIR] [--mode MODE] [--config FILE] [--html FILE]
     drake-hybrid analyze window-washing [--mode MODE] [--json FILE] [--plot FILE.png] [--config FILE]
+    drake-hybrid sweep window-washing --grid SPEC.yaml [--out DIR] [--scheduler ADDRESS] [--workers N] [--resume]
     drake-hybrid tasks
 """
 
@@ -115,6 +116,30 @@ def command_analyze(args):
     return 0 if match.matched else 1
 
 
+def command_sweep(args):
+    from drake_hybrid.sweep import read_results, run_sweep
+    from drake_hybrid.sweep_spec import SweepSpecError, load_spec
+
+    out = Path(args.out) if args.out else Path("runs") / f"sweep-{args.task}"
+    try:
+        spec = load_spec(path=args.grid)
+        run = run_sweep(args.task, spec, out, scheduler=args.scheduler, workers=args.workers, resume=args.resume,
+                        retry_failed=args.retry_failed, progress=not args.no_progress)
+    except (SweepSpecError, ValueError) as error:
+        raise SystemExit(f"drake-hybrid sweep: {error}") from None
+    rows = read_results(run.results_path)
+    stable = sum(1 for row in rows if row.get("stable"))
+    print(f"{args.task}: {run.evaluated} of {run.points} points evaluated in {run.wall_time:.1f} s on {run.workers}; "
+          f"{len(rows)} in the table, {stable} stable, {run.failures} with errors")
+    print(f"  wrote {run.results_path}")
+    if args.plot:
+        from drake_hybrid.plotting import save_sweep_plots
+
+        for path in save_sweep_plots(rows, spec, out):
+            print(f"  wrote {path}")
+    return 0
+
+
 def command_tasks(args):
     for name, task in TASKS.items():
         print(f"{name:18s} {task.description}")
@@ -148,6 +173,18 @@ def make_parser():
     analyze.add_argument("--plot", help="write the eigenvalue figure (predicted vs. linearized) to this PNG")
     analyze.add_argument("--tolerance", type=float, default=0.05, help="relative tolerance of the match")
     analyze.set_defaults(func=command_analyze)
+    sweep = sub.add_parser("sweep", help="stability map / Monte Carlo sweep over config fields (Dask)")
+    sweep.add_argument("task", choices=sorted(TASKS))
+    sweep.add_argument("--grid", required=True, help="sweep spec YAML (see drake_hybrid/sweep_spec.py)")
+    sweep.add_argument("--out", help="output directory (default ./runs/sweep-<task>)")
+    sweep.add_argument("--scheduler", help="address of an existing Dask scheduler (e.g. tcp://host:8786)")
+    sweep.add_argument("--workers", type=int, default=2,
+                       help="worker processes of the local Dask cluster (default 2; 0 = serial, no Dask)")
+    sweep.add_argument("--resume", action="store_true", help="continue the table in --out: run only missing points")
+    sweep.add_argument("--retry-failed", action="store_true", help="with --resume, also re-run points with errors")
+    sweep.add_argument("--plot", action="store_true", help="write the stability map / histograms (spec's map:)")
+    sweep.add_argument("--no-progress", action="store_true", help="no progress bar")
+    sweep.set_defaults(func=command_sweep)
     tasks = sub.add_parser("tasks", help="list the tasks")
     tasks.set_defaults(func=command_tasks)
     return parser

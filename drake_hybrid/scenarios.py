@@ -69,6 +69,21 @@ class StartConfig:
 
 
 @dataclass
+class ModelErrorConfig:
+    """How the simulated robot differs from the controller's model (defaults: no error).
+
+    The scales multiply masses and rotational inertias (same shape, same centre
+    of mass) of the SIMULATION plant only; the controller keeps the nominal
+    model. Drake stores masses as context parameters, so ``apply_model_error``
+    sets them in a plant context; ``set_initial_conditions`` does it for every
+    run and linearization.
+    """
+
+    payload_mass_scale: float = 1.0              # the tool: bodies of the robot's non-arm model instances
+    link_inertia_scale: float = 1.0              # the arm's links
+
+
+@dataclass
 class ScenarioConfig:
     """Everything that defines a run. Loads from YAML (``load_config``)."""
 
@@ -86,6 +101,7 @@ class ScenarioConfig:
     start: StartConfig = field(default_factory=StartConfig)
     task_parameters: Dict[str, float] = field(default_factory=dict)
     task_options: Dict[str, str] = field(default_factory=dict)
+    model_error: ModelErrorConfig = field(default_factory=ModelErrorConfig)
 
     def replace(self, **changes):
         """A copy with some top-level fields changed."""
@@ -289,9 +305,11 @@ PRIMING_STEPS = 20
 
 def set_initial_conditions(scenario, root_context):
     """Put the robot at the task's start, pressing with the desired force if ``start.in_contact``;
-    set the controller's integrals and the filter's output to the first sensor reading."""
+    set the controller's integrals and the filter's output to the first sensor reading. The
+    simulated plant's masses get ``config.model_error`` (the controller's model stays nominal)."""
     config, task, plant = scenario.config, scenario.task, scenario.plant
     plant_context = scenario.plant_context(root_context)
+    apply_model_error(plant, plant_context, scenario.robot, config.model_error)
     q0 = task.start_positions(scenario)
     check_start(scenario, q0)
     plant.SetPositions(plant_context, scenario.robot.arm, q0)
@@ -324,6 +342,25 @@ def set_initial_conditions(scenario, root_context):
         filter_context = scenario.wrench_filter.GetMyMutableContextFromRoot(root_context)
         reading = scenario.sensor.get_output_port(0).Eval(scenario.sensor.GetMyContextFromRoot(root_context))
         scenario.wrench_filter.set_initial_output(filter_context, reading)
+
+
+def apply_model_error(plant, plant_context, robot, model_error):
+    """Scale the simulated payload's and links' inertias in ``plant_context`` (see ModelErrorConfig)."""
+    from pydrake.multibody.tree import SpatialInertia
+
+    for name in ("payload_mass_scale", "link_inertia_scale"):
+        scale = getattr(model_error, name)
+        if not (np.isfinite(scale) and scale > 0):
+            raise ValueError(f"model_error.{name} must be a positive number, got {scale}")
+    for instance in robot.model_instances:
+        scale = model_error.link_inertia_scale if instance == robot.arm else model_error.payload_mass_scale
+        if scale == 1.0:
+            continue
+        for index in plant.GetBodyIndices(instance):
+            body = plant.get_body(index)
+            M_BBo_B = body.default_spatial_inertia()         # nominal (the model's), so applying twice is safe
+            body.SetSpatialInertiaInBodyFrame(plant_context, SpatialInertia(
+                scale * M_BBo_B.get_mass(), M_BBo_B.get_com(), M_BBo_B.get_unit_inertia()))
 
 
 def check_start(scenario, q):

@@ -1,0 +1,246 @@
+"""Sweeps: the spec, dotted config paths, model error, the results table, and a small sweep on
+a local Dask cluster checked against the same points run serially."""
+
+import csv
+import math
+
+import numpy as np
+import pytest
+
+from drake_hybrid.analysis import linearize_sampled_loop
+from drake_hybrid.cli import make_parser
+from drake_hybrid.scenarios import build_scenario, dump_config, load_config, set_initial_conditions
+from drake_hybrid.sweep import RESULT_COLUMNS, read_results, rigid_contact_theory_stable, run_sweep
+from drake_hybrid.sweep_spec import SweepSpecError, apply_parameters, load_spec, parse_spec, set_config_value
+from drake_hybrid.tasks import get_task
+
+WINDOW = "window-washing"
+
+
+def default_config():
+    return get_task(WINDOW).default_config()
+
+
+# -- spec ------------------------------------------------------------------------------------------
+
+def test_grid_points_are_the_cartesian_product_in_order():
+    spec = load_spec(text="""
+parameters:
+  contact.pad_modulus: {logspace: [1e5, 1e9, 3]}     # YAML 1.1 reads 1e5 as a string: accepted
+  gains.force_proportional: [0.5, 2]
+""")
+    points = spec.points()
+    assert [p["contact.pad_modulus"] for p in points] == pytest.approx([1e5, 1e5, 1e7, 1e7, 1e9, 1e9])
+    assert [p["gains.force_proportional"] for p in points] == [0.5, 2.0] * 3
+
+
+def test_random_points_are_reproducible_and_within_bounds():
+    text = """
+parameters:
+  control_period: {values: [0.001, 0.004]}
+  model_error.payload_mass_scale: {uniform: [0.8, 1.2]}
+  contact.pad_modulus: {loguniform: [1e6, 1e8]}
+samples: 25
+seed: 11
+"""
+    points = load_spec(text=text).points()
+    assert len(points) == 50 and points == load_spec(text=text).points()
+    scales = np.array([p["model_error.payload_mass_scale"] for p in points])
+    moduli = np.array([p["contact.pad_modulus"] for p in points])
+    assert np.all((0.8 <= scales) & (scales <= 1.2)) and np.all((1e6 <= moduli) & (moduli <= 1e8))
+    assert [p["control_period"] for p in points[:25]] == [0.001] * 25
+    other_seed = load_spec(text=text.replace("seed: 11", "seed: 12")).points()
+    assert other_seed[0]["model_error.payload_mass_scale"] != points[0]["model_error.payload_mass_scale"]
+
+
+@pytest.mark.parametrize("text, message", [
+    ("parameters: {}", "needs 'parameters'"),
+    ("parameters: {time_step: {gaussian: [1, 2]}}", "unknown kind 'gaussian'"),
+    ("parameters: {time_step: {linspace: [1, 2]}}", "expected 3 numbers"),
+    ("parameters: {time_step: {logspace: [0, 1, 3]}}", "bounds must be positive"),
+    ("parameters: {time_step: {uniform: [2, 1]}}", "lower bound 2 exceeds upper 1"),
+    ("parameters: {time_step: [0.001]}\nsamples: 3", "no parameter has a distribution"),
+    ("parameters: {time_step: [0.001]}\nmap: {x: duration}", "map.x = 'duration' is not one of the parameters"),
+    ("parameters: {time_step: [0.001]}\ngrid: 3", r"unknown key\(s\) \['grid'\]"),
+    ("parameters: {time_step: [0.001]}\nstability: {steady_window: 2}", "steady_window must be in"),
+])
+def test_bad_specs_raise_naming_the_problem(text, message):
+    with pytest.raises(SweepSpecError, match=message):
+        load_spec(text=text)
+
+
+def test_dotted_paths_set_nested_list_and_dict_fields():
+    config = default_config()
+    set_config_value(config, "contact.pad_modulus", 2e7)
+    set_config_value(config, "gains.force_proportional", 1.5)          # a scalar gain becomes [1.5]
+    set_config_value(config, "desired_velocity.value[0]", 0.2)
+    set_config_value(config, "task_parameters.window_height", 0.95)
+    assert config.contact.pad_modulus == 2e7 and config.gains.force_proportional == [1.5]
+    assert config.desired_velocity.value[0] == 0.2 and config.task_parameters["window_height"] == 0.95
+    with pytest.raises(ValueError, match="contact has no field 'stiffness'; its fields are"):
+        set_config_value(config, "contact.stiffness", 1.0)
+    with pytest.raises(ValueError, match=r"has 2 entries, no \[5\]"):
+        set_config_value(config, "desired_velocity.value[5]", 1.0)
+    with pytest.raises(ValueError, match="is a value, not a section"):
+        set_config_value(config, "duration.seconds", 1.0)
+
+
+def test_applied_parameters_round_trip_through_yaml_and_type_errors_are_named():
+    point = apply_parameters(default_config(), {"control_period": 0.004, "model_error.payload_mass_scale": 1.2})
+    assert load_config(data=dump_config(point)) == point and point.control_period == 0.004
+    with pytest.raises(ValueError, match="do not give a valid scenario config"):
+        apply_parameters(default_config(), {"duration": "long"})
+
+
+def test_sweep_rejects_a_spec_for_another_task_and_bad_base_paths(tmp_path):
+    with pytest.raises(SweepSpecError, match="for task 'crank'"):
+        run_sweep(WINDOW, parse_spec({"task": "crank", "parameters": {"time_step": [0.001]}}), tmp_path, workers=0)
+    with pytest.raises(SweepSpecError, match="base: .*has no field 'horizon'"):
+        run_sweep(WINDOW, parse_spec({"base": {"horizon": 1}, "parameters": {"time_step": [0.001]}}), tmp_path,
+                  workers=0)
+
+
+@pytest.mark.parametrize("changes, message", [
+    ({"time_step": 0.0}, "needs a discrete plant"),
+    ({"control_period": 0.0}, "needs a discrete plant"),
+    ({"control_period": 0.0025}, "whole number of plant steps"),
+    ({"sensor.bandwidth_hz": 200.0}, "needs sensor.bandwidth_hz = 0"),
+])
+def test_discrete_linearization_names_what_it_cannot_handle(changes, message):
+    config = default_config()
+    for path, value in changes.items():
+        set_config_value(config, path, value)
+    with pytest.raises(ValueError, match=message):
+        linearize_sampled_loop(config)
+
+
+# -- model error ---------------------------------------------------------------------------------
+
+def test_payload_error_scales_the_simulated_tool_only():
+    config = default_config()
+    config.model_error.payload_mass_scale = 1.2
+    config.model_error.link_inertia_scale = 0.9
+    scenario = build_scenario(config, with_loggers=False)
+    context = scenario.diagram.CreateDefaultContext()
+    set_initial_conditions(scenario, context)
+    set_initial_conditions(scenario, context)           # applying twice does not compound
+    plant, plant_context = scenario.plant, scenario.plant_context(context)
+    tool = plant.GetBodyByName("tool")
+    link = plant.GetBodyByName("link2")
+    assert tool.get_mass(plant_context) == pytest.approx(1.2 * 0.2, rel=1e-14)
+    assert link.get_mass(plant_context) == pytest.approx(0.9 * 1.5, rel=1e-14)
+    nominal = tool.default_rotational_inertia().get_moments()
+    scaled = tool.CalcSpatialInertiaInBodyFrame(plant_context).CalcRotationalInertia().get_moments()
+    assert scaled == pytest.approx(1.2 * nominal, rel=1e-12)
+    controller_plant = scenario.controller_plant
+    assert controller_plant.GetBodyByName("tool").get_mass(controller_plant.CreateDefaultContext()) == 0.2
+    config.model_error.payload_mass_scale = -1.0
+    scenario = build_scenario(config, with_loggers=False)
+    with pytest.raises(ValueError, match="payload_mass_scale must be a positive number"):
+        set_initial_conditions(scenario, scenario.diagram.CreateDefaultContext())
+
+
+def test_rigid_contact_theory_is_the_force_rate_sign():
+    config = default_config()
+    assert rigid_contact_theory_stable(config) is True
+    config.gains.force_proportional = [-0.5]           # outside the admissible set (K_fp must be PSD)
+    assert rigid_contact_theory_stable(config) is None
+
+
+# -- the sweep ------------------------------------------------------------------------------------
+
+SMALL_SWEEP = """
+task: window-washing
+base:
+  duration: 0.15
+parameters:
+  contact.pad_modulus: {values: [1e5, 5e6, 1e9]}     # 1e5 Pa: the start is not found (recorded, not dropped)
+  gains.force_proportional: [0.5, 2.0]
+  control_period: [0.001, 0.004]
+map: {x: contact.pad_modulus, y: gains.force_proportional, facet: control_period}
+"""
+TIMING_COLUMNS = {"wall_time", "simulation_wall_time", "linearization_wall_time", "cpu_time", "worker"}
+
+
+@pytest.fixture(scope="module")
+def serial_sweep(tmp_path_factory):
+    out = tmp_path_factory.mktemp("serial")
+    run = run_sweep(WINDOW, load_spec(text=SMALL_SWEEP), out, workers=0, progress=False)
+    return run, read_results(out)
+
+
+def test_small_sweep_on_a_local_dask_cluster_matches_serial(serial_sweep, tmp_path):
+    serial_run, serial = serial_sweep
+    run = run_sweep(WINDOW, load_spec(text=SMALL_SWEEP), tmp_path, workers=2, progress=False)
+    parallel = read_results(tmp_path)
+    assert run.workers == "local:2" and run.evaluated == 12 and len(parallel) == len(serial) == 12
+    assert len({row["worker"] for row in parallel}) == 2          # both worker processes took points
+    for a, b in zip(serial, parallel):
+        for name in a:
+            if name not in TIMING_COLUMNS:
+                assert a[name] == b[name], (a["point"], name)     # the same numbers, bit for bit
+    # Every point is in the table: the four 1e5 Pa points are recorded with the start's error.
+    failed = [row for row in serial if row["error"]]
+    assert [row["contact.pad_modulus"] for row in failed] == [1e5] * 4
+    assert all("OffConstraintError" in row["error"] and row["stable"] is None for row in failed)
+    assert serial_run.failures == run.failures == 4
+
+
+def test_sweep_verdicts_agree_with_the_physics(serial_sweep):
+    """K_fp = 2 on a stiff pad: the sampled force loop diverges (multiplier outside the unit circle,
+    the simulation's force error does not settle); K_fp = 0.5 is stable at both rates."""
+    _, rows = serial_sweep
+    by_key = {(r["contact.pad_modulus"], r["gains.force_proportional"], r["control_period"]): r for r in rows}
+    for period in (0.001, 0.004):
+        stiff_high_gain = by_key[(1e9, 2.0, period)]
+        assert stiff_high_gain["stable_discrete"] is False and stiff_high_gain["spectral_radius"] > 1.5
+        assert stiff_high_gain["stable_simulation"] is False and stiff_high_gain["steady_force_error"] > 5.0
+        nominal = by_key[(5e6, 0.5, period)]
+        assert nominal["stable_discrete"] is True and nominal["spectral_radius"] < 1.01
+        assert nominal["peak_force"] == pytest.approx(12.0, abs=1.5)   # |F_d| = 10 N plus the designed 2 N transient
+        assert nominal["steady_force_error"] < 1.0
+        assert rigid_contact_theory_stable(apply_parameters(default_config(), {"gains.force_proportional": 2.0}))
+
+
+def test_resume_runs_only_the_missing_points(serial_sweep, tmp_path):
+    serial_run, serial = serial_sweep
+    source = serial_run.results_path
+    with source.open(newline="") as f:
+        lines = list(csv.reader(f))
+    spec = load_spec(text=SMALL_SWEEP)
+    # An interrupted sweep: the same out dir with only some rows written.
+    for name in ("manifest.json", "spec.yaml", "base_config.yaml"):
+        (tmp_path / name).write_text((source.parent / name).read_text())
+    kept = [lines[0]] + [line for line in lines[1:] if line[0] not in ("6", "9")]
+    with (tmp_path / "results.csv").open("w", newline="") as f:
+        csv.writer(f).writerows(kept)
+    with pytest.raises(SweepSpecError, match="exists: pass resume=True"):
+        run_sweep(WINDOW, spec, tmp_path, workers=0, progress=False)
+    run = run_sweep(WINDOW, spec, tmp_path, workers=0, resume=True, progress=False)
+    assert run.evaluated == 2
+    resumed = read_results(tmp_path)
+    assert [row["point"] for row in resumed] == list(range(12))
+    for a, b in zip(serial, resumed):
+        assert {k: v for k, v in a.items() if k not in TIMING_COLUMNS} == \
+               {k: v for k, v in b.items() if k not in TIMING_COLUMNS}
+    other = load_spec(text=SMALL_SWEEP.replace("[0.5, 2.0]", "[0.5, 3.0]"))
+    with pytest.raises(SweepSpecError, match="holds a different sweep"):
+        run_sweep(WINDOW, other, tmp_path, workers=0, resume=True, progress=False)
+
+
+def test_results_table_has_every_column_and_the_map_plots(serial_sweep, tmp_path):
+    from drake_hybrid.plotting import save_sweep_plots
+
+    serial_run, rows = serial_sweep
+    assert set(RESULT_COLUMNS) <= set(rows[0])
+    paths = save_sweep_plots(rows, load_spec(text=SMALL_SWEEP), tmp_path,
+                             base_config=load_config(path=serial_run.out_dir / "base_config.yaml"))
+    assert [p.name for p in paths] == ["stability_map.png"] and paths[0].stat().st_size > 10_000
+
+
+def test_cli_parses_the_sweep_command():
+    args = make_parser().parse_args(["sweep", WINDOW, "--grid", "spec.yaml", "--workers", "3", "--resume",
+                                     "--scheduler", "tcp://127.0.0.1:8786"])
+    assert (args.grid, args.workers, args.resume, args.scheduler) == ("spec.yaml", 3, True, "tcp://127.0.0.1:8786")
+    with pytest.raises(SystemExit):
+        make_parser().parse_args(["sweep", WINDOW])            # --grid is required
