@@ -217,8 +217,9 @@ def test_outward_facing_starts_are_rejected():
         plant = scenario.controller_plant
         context = plant.CreateDefaultContext()
         kinematics = EndEffectorKinematics(plant, "pad_center", np.zeros(3), PoseChart())
+        seed = crank_turning.CRANK_SEED if task is CRANK else UR5E_SEED
         if task is CRANK:
-            X = CRANK.handle_pose(math.pi)
+            X = CRANK.handle_pose(crank_turning.START_ANGLE)
             from pydrake.math import RigidTransform, RotationMatrix
             # Same point on the circle, approach vector pointing away from the axis.
             X = RigidTransform(X.rotation().multiply(RotationMatrix.MakeXRotation(math.pi)), X.translation())
@@ -229,7 +230,7 @@ def test_outward_facing_starts_are_rejected():
             p = X0.translation()
             # The mirror point through the centre with the same orientation: a points away from it.
             X = RigidTransform(X0.rotation(), 2 * center - p)
-        q = inverse_kinematics(kinematics, context, X, UR5E_SEED)
+        q = inverse_kinematics(kinematics, context, X, seed)
         with pytest.raises(BranchError, match="wrong branch"):
             check_start(scenario, q)
 
