@@ -15,7 +15,7 @@ force on the robot is downward and F_d < 0 (spec section 0: "push up with
 10 N" is F_d = -10).
 
 Start (``start.configuration``): [x, theta] of the pad centre on the window.
-Task parameters: ``window_height`` (m); ``joints``: 3 (default, the paper's
+Task parameters: ``window_height`` (m); ``joints`` (also a task option): 3 (default, the paper's
 square case n = d) or 4 (``models/planar_4r.sdf``, a redundant arm n > d,
 controlled with the dynamically consistent law and null-space damping).
 """
@@ -71,7 +71,7 @@ class WindowWashing:
 
     # -- models --------------------------------------------------------------------------------
     def _arm(self, config):
-        joints = int(config.task_parameters.get("joints", 3))
+        joints = int(config.task_options.get("joints", config.task_parameters.get("joints", 3)))
         if joints not in ARMS:
             raise ValueError(f"window-washing: task_parameters.joints must be 3 or 4, got {joints}")
         return joints, ARMS[joints]
