@@ -261,6 +261,17 @@ def linearize_continuous(config, tolerance=0.05, bandwidth_hz=200.0):
 # Discrete closed loops: Jacobian of the one-period map
 # ------------------------------------------------------------------------------------------------
 
+def _one_period_jacobian(step, x0, epsilon):
+    """Central-difference Jacobian of a one-period map ``step`` at x0, and max |step(x0) - x0|."""
+    residual = float(np.max(np.abs(step(x0) - x0)))
+    A = np.zeros((x0.size, x0.size))
+    for j in range(x0.size):
+        dx = np.zeros(x0.size)
+        dx[j] = epsilon
+        A[:, j] = (step(x0 + dx) - step(x0 - dx)) / (2 * epsilon)
+    return A, residual
+
+
 @dataclass
 class DiscreteLinearization:
     A: np.ndarray                    # Jacobian of the one-period map x_{k+1} = f(x_k)
@@ -329,14 +340,8 @@ def linearize_discrete(config, tolerance=0.05, epsilon=1e-6, settle_time=0.0):
         update = diagram.EvalUniquePeriodicDiscreteUpdate(work)
         return np.concatenate([update.get_vector(i).CopyToVector() for i in range(update.num_groups())])
 
-    x0 = state_vector(context)
     start = time.perf_counter()
-    residual = float(np.max(np.abs(step(x0) - x0)))
-    A = np.zeros((x0.size, x0.size))
-    for j in range(x0.size):
-        dx = np.zeros(x0.size)
-        dx[j] = epsilon
-        A[:, j] = (step(x0 + dx) - step(x0 - dx)) / (2 * epsilon)
+    A, residual = _one_period_jacobian(step, state_vector(context), epsilon)
     wall = time.perf_counter() - start
     multipliers = np.linalg.eigvals(A)
     h = c.time_step
@@ -481,13 +486,7 @@ def linearize_sampled_loop(config, epsilon=1e-5, tolerance=0.05, periods=1):
         return get_state(context)
 
     start = time.perf_counter()
-    x0 = get_state(base)
-    residual = float(np.max(np.abs(one_period(x0) - x0)))
-    A = np.zeros((x0.size, x0.size))
-    for j in range(x0.size):
-        dx = np.zeros(x0.size)
-        dx[j] = epsilon
-        A[:, j] = (one_period(x0 + dx) - one_period(x0 - dx)) / (2 * epsilon)
+    A, residual = _one_period_jacobian(one_period, get_state(base), epsilon)
     wall = time.perf_counter() - start
     multipliers = np.linalg.eigvals(A)
     # Multipliers at 0 (the held torque is recomputed every tick) have no continuous counterpart:
