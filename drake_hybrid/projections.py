@@ -23,7 +23,7 @@ import numpy as np
 import sympy
 
 from drake_hybrid.errors import ChartSingularityError, ConstraintRankError, DimensionError
-from drake_hybrid.linalg import inv, is_autodiff, rank_margin, solve, value
+from drake_hybrid.linalg import LUFactorization, cholesky, inv, rank_margin_from_cholesky, value
 from drake_hybrid.symbolic import CompiledFunction, time_derivative, to_sympy_matrix
 
 
@@ -71,22 +71,6 @@ class GivenVelocityProjection:
         return self._rate_matrix(x, nu)
 
 
-def _cholesky(S):
-    """Lower-triangular L with L L^T = S, for float or AutoDiffXd S (small)."""
-    if not is_autodiff(S):
-        return np.linalg.cholesky(S)
-    from pydrake.math import sqrt
-
-    k = S.shape[0]
-    L = np.zeros((k, k), dtype=object)
-    for j in range(k):
-        diagonal = S[j, j] - sum(L[j, i] * L[j, i] for i in range(j))
-        L[j, j] = sqrt(diagonal)
-        for row in range(j + 1, k):
-            L[row, j] = (S[row, j] - sum(L[row, i] * L[j, i] for i in range(j))) / L[j, j]
-    return L
-
-
 class KernelVelocityProjection:
     """Automatic E_p: a smooth orthonormal basis of ker E_f(x).
 
@@ -113,6 +97,10 @@ class KernelVelocityProjection:
         rows = E_f0.shape[0]
         self.basis = np.linalg.svd(E_f0)[2][rows:]              # G: (d - m) x d
         self.size = self.basis.shape[0]
+        d = self.basis.shape[1]
+        self._identity = np.eye(d)
+        # Phi -> its lower triangle with the diagonal halved, as a product with a constant mask.
+        self._half_lower = np.tril(np.ones((self.size, self.size))) - 0.5 * np.eye(self.size)
 
     def __repr__(self):
         return f"KernelVelocityProjection('{self.name}', rows={self.size})"
@@ -134,27 +122,31 @@ class KernelVelocityProjection:
         E_f_dot = (self.constraint.force_projection_rate(x, nu) if force_projection_rate is None
                    else force_projection_rate)
         G = self.basis
-        d = G.shape[1]
         A_inverse = inv(E_f @ E_f.T)
         pseudo_inverse = E_f.T @ A_inverse                       # E_f^+
-        P_N = np.eye(d) - pseudo_inverse @ E_f
-        A_dot = E_f_dot @ E_f.T + E_f @ E_f_dot.T
-        P_N_dot = -(E_f_dot.T @ A_inverse @ E_f + pseudo_inverse @ E_f_dot
-                    - pseudo_inverse @ A_dot @ A_inverse @ E_f)
+        P_N = self._identity - pseudo_inverse @ E_f
+        # P_N-dot = E_f^+ A-dot E_f^+T - B - B^T, with A-dot = E_f-dot E_f^T + E_f E_f-dot^T, B = E_f^+ E_f-dot
+        B = pseudo_inverse @ E_f_dot
+        A_dot = E_f_dot @ E_f.T
+        A_dot = A_dot + A_dot.T
+        P_N_dot = pseudo_inverse @ A_dot @ pseudo_inverse.T - B - B.T
         Y = G @ P_N
         Y_dot = G @ P_N_dot
         S = Y @ Y.T
-        margin = rank_margin(Y)
+        try:
+            L = cholesky(S)
+            margin = rank_margin_from_cholesky(L, S.diagonal())   # = rank_margin(Y): det S = prod(diag L)^2
+        except np.linalg.LinAlgError:
+            margin = 0.0
         if margin < self.rank_tolerance:
             raise ConstraintRankError(
                 f"automatic velocity projection of '{self.constraint.name}' lost rank (margin {margin:.3g}) "
                 "far from its anchor: ker E_f has turned too far; re-anchor the KernelVelocityProjection")
-        L = _cholesky(S)
         L_inverse = inv(L)
         E_p = L_inverse @ Y
-        S_dot = Y_dot @ Y.T + Y @ Y_dot.T
-        Phi = L_inverse @ S_dot @ L_inverse.T
-        Phi = np.tril(Phi) - 0.5 * np.diag(np.diag(Phi))        # lower triangle, half diagonal
+        S_dot = Y_dot @ Y.T
+        S_dot = S_dot + S_dot.T
+        Phi = (L_inverse @ S_dot @ L_inverse.T) * self._half_lower  # lower triangle, half diagonal
         L_dot = L @ Phi
         E_p_dot = L_inverse @ (Y_dot - L_dot @ E_p)
         return E_p, E_p_dot
@@ -170,6 +162,7 @@ class ConstraintSpaceValues:
     force_curvature: np.ndarray      # E_f-dot nu             (m)
     velocity_curvature: np.ndarray   # E_p-dot nu             (d-m)
     matrix: np.ndarray               # E = [E_p; E_f]         (d x d)
+    factorization: LUFactorization   # E factored once for E^-1 and E^-T
 
 
 class ConstraintSpace:
@@ -212,8 +205,9 @@ class ConstraintSpace:
             E_f_dot = constraint.force_projection_rate(x, nu)
         E_p, E_p_dot_nu = self.velocity_projection.evaluate(x, nu, E_f, E_f_dot)
         E = np.vstack([E_p, E_f])
+        factorization = LUFactorization(E)
         if check:
-            margin = rank_margin(E)
+            margin = factorization.rank_margin()
             if margin < self.invertibility_tolerance and self.chart.singularity_margin(x) < 0.1:
                 raise ChartSingularityError(
                     f"E = [E_p; E_f] is singular (rank margin {margin:.3g}) because the {self.chart.name} chart is "
@@ -232,6 +226,7 @@ class ConstraintSpace:
             force_curvature=constraint.curvature(x, nu),
             velocity_curvature=E_p_dot_nu,
             matrix=E,
+            factorization=factorization,
         )
 
     def task_acceleration(self, values, velocity_acceleration, constraint_acceleration=None):
@@ -245,7 +240,7 @@ class ConstraintSpace:
         if constraint_acceleration is not None:
             force_rows = force_rows + constraint_acceleration
         rhs = np.concatenate([velocity_acceleration - values.velocity_curvature, force_rows])
-        return solve(values.matrix, rhs)
+        return values.factorization.solve(rhs)
 
     def split_wrench(self, values, generalized_force):
         """(F_v, F) with w = E_p^T F_v + E_f^T F, i.e. [F_v; F] = E^-T w.
@@ -254,7 +249,7 @@ class ConstraintSpace:
         robot by the environment (sign convention of spec section 0). F is in
         the coordinates of this E_f: rescaling a row of C rescales F inversely.
         """
-        split = solve(values.matrix.T, generalized_force)
+        split = values.factorization.solve_transpose(generalized_force)
         k = self.velocity_size
         return split[:k], split[k:]
 
