@@ -1,12 +1,14 @@
 """Regenerate the figures in docs/figures (used by README.md and the docs).
 
     python docs/make_figures.py                 # all of them
-    python docs/make_figures.py eigenvalues     # some: window-washing, eigenvalues, diagram, animations
+    python docs/make_figures.py eigenvalues     # some: window-washing, eigenvalues, diagram, animations, tutorials
 
 Every figure comes from a run made here; the numbers quoted in the captions
 are printed by the same runs. ``diagram`` needs Graphviz's ``dot``
 (``apt-get install graphviz``); ``animations`` needs Chromium (``apt-get
 install chromium``) and, for the Panda, the test extra (``example-robot-data``).
+``tutorials`` runs tutorials 2 and 3 at full length and keeps the figures they
+save and frames of their animations (Chromium and the test extra, for nbclient).
 """
 
 import copy
@@ -111,19 +113,43 @@ def animations():
         html.write_text(result.html)
         _screenshot(html, FIGURES / "window_washing_3d.png", at=2.0)
 
-        import nbformat
-        from nbclient import NotebookClient
-
-        notebook = nbformat.read(TUTORIALS / "06_your_own_robot.ipynb", as_version=4)
-        os.environ.pop("DRAKE_HYBRID_NOTEBOOK_TEST", None)
-        NotebookClient(notebook, timeout=600, kernel_name="python3", resources={"metadata": {"path": tmp}}).execute()
+        _run_tutorial("06_your_own_robot.ipynb", tmp)
         _screenshot(Path(tmp) / "panda_drum.html", FIGURES / "panda_drum_3d.png", at=1.5)
+
+
+def _run_tutorial(name, workdir):
+    """Execute a tutorial at full length (not the shortened test runs) with ``workdir`` as its folder,
+    and print what it printed (the numbers the captions quote)."""
+    import nbformat
+    from nbclient import NotebookClient
+
+    notebook = nbformat.read(TUTORIALS / name, as_version=4)
+    os.environ.pop("DRAKE_HYBRID_NOTEBOOK_TEST", None)
+    NotebookClient(notebook, timeout=900, kernel_name="python3", resources={"metadata": {"path": workdir}}).execute()
+    print(f"ran tutorials/{name}:")
+    for cell in notebook.cells:
+        for output in cell.get("outputs", []):
+            if output.get("output_type") == "stream" and output.get("name") == "stdout":
+                print("   ", output["text"].rstrip().replace("\n", "\n    "))
+
+
+def tutorials():
+    """The crank's and the sphere's figures, as tutorials 2 and 3 draw them from their own runs: the
+    naive pseudo-velocity against Option A, the pole crossing, and a frame of each animation."""
+    with tempfile.TemporaryDirectory() as tmp:
+        _run_tutorial("02_crank_turning.ipynb", tmp)
+        _run_tutorial("03_sphere_polishing.ipynb", tmp)
+        for name in ("crank_pseudo_velocity.png", "sphere_pole_crossing.png"):
+            shutil.copy(Path(tmp) / name, FIGURES / name)
+            print(f"wrote {FIGURES / name}")
+        _screenshot(Path(tmp) / "crank_turning.html", FIGURES / "crank_turning_3d.png", at=0.8)
+        _screenshot(Path(tmp) / "sphere_pole_crossing.html", FIGURES / "sphere_pole_crossing_3d.png", at=0.7)
 
 
 def main(names):
     FIGURES.mkdir(parents=True, exist_ok=True)
     makers = {"window-washing": window_washing, "eigenvalues": eigenvalues, "diagram": diagram,
-              "animations": animations}
+              "animations": animations, "tutorials": tutorials}
     unknown = sorted(set(names) - set(makers))
     if unknown:
         raise SystemExit(f"unknown figures {unknown}; choose from {sorted(makers)}")

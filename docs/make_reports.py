@@ -79,8 +79,9 @@ def write_tasks():
               "  checks that corrected value within 2 %. Its plant steps at 0.5 ms (1 ms steps let the stiff closed",
               "  chain ring at 18 and 31 Hz, `docs/drake_notes.md`).",
               "* sphere-polishing: the orientation rows are kinematic rows held by the controller (eigenvalues",
-              "  -w_c, -2 w_c). The velocity error on the latitude is mostly a drag from SAP's 1 ms step on the",
-              "  curved surface (proportional to force x speed x time step: 1.4e-3 m/s at 1 ms, 3e-5 at 0.25 ms).",
+              "  -w_c, -2 w_c). The velocity error on the latitude (about 1 %) is a drag of about 2 mN from SAP's",
+              "  contact model on the curved surface, not its time step: a 4 times smaller step keeps 0.86 of it,",
+              "  Hunt-Crossley contact (`similar`) removes it (`docs/drake_notes.md`, tutorial 3).",
               "* The contact mode of the window (-19 +- 112j 1/s) belongs to the continuous plant's Hunt-Crossley",
               "  contact; SAP simulations damp it differently (`docs/drake_notes.md`)."]
     (DOCS / "tasks.md").write_text("\n".join(lines) + "\n")

@@ -170,7 +170,8 @@ def PseudoVelocitySource_(T):
         dropped term holds the actual Euler-angle accelerations (phi-ddot for
         the crank), which are not measurable and depend on the torque itself;
         resolving that implicit equation exactly gives Option A's torque
-        (``drake_hybrid.pseudo_velocity``). Dropping it (this source) is what a
+        (the true-velocity rows, ``projections.crank_true_velocity_projection``
+        and ``sphere_true_velocity_projection``). Dropping it (this source) is what a
         direct implementation of the paper does; it does not realize the
         designed loop.
         """

@@ -56,6 +56,7 @@ class CrankTurning:
     name = "crank-turning"
     continuous_plant = False      # the SAP weld constraint needs a discrete plant
     description = "UR5e turning a crank whose handle it holds (weld constraint), pushing along its axis (Example 2.2)"
+    camera = ((0.8, -0.6, 0.55), (0.3, 0.0, 0.22))     # Meshcat view (position, target; m): the arm and the crank
 
     def default_config(self, options=None):
         """The task's default ScenarioConfig; ``options`` update its task_options."""
@@ -86,7 +87,7 @@ class CrankTurning:
     def labels(self):
         return {"velocity": ["psi-dot (spin)", "alpha-dot (crank)"], "velocity_units": "rad/s",
                 "force": ["radial (row 1)", "vertical", "tilt torque", "tangential/yaw (row 4)"],
-                "force_units": "E_f coordinates (N, N/m, N m)"}
+                "force_units": "E_f coordinates (N, N/m, N m)", "constraint_units": "m^2 | m | 1 | m"}
 
     def _rows(self, config):
         rows = config.task_options.get("velocity_rows", "true")

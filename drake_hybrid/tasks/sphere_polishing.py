@@ -12,7 +12,7 @@ and the first row scaled so that its force is the normal force in newtons
 (force on the robot, outward: pressing with 10 N is F_d = (10, 0, 0)). Rows 2
 and 3 fix the orientation (a along -P); a point contact does not enforce them
 (it only pushes along the normal, through the pad's centre), so they are
-kinematic rows: the controller holds them (C-ddot + 2 w_c C-dot + w_c^2 C = 0),
+kinematic rows: the controller holds them (C-ddot + 3 w_c C-dot + 2 w_c^2 C = 0),
 with no force loop on them. The velocity-controlled coordinates are the
 true-velocity rows of spec section 6 (Option A): the spin about a and the pad
 centre's velocity along t_1 = e x P-hat and t_2 = t_1 x P-hat.
@@ -63,6 +63,7 @@ class SpherePolishing:
     name = "sphere-polishing"
     continuous_plant = True
     description = "UR5e polishing a sphere along a latitude arc or across the pole (Example 2.3)"
+    camera = ((0.75, -0.55, 0.5), (0.3, 0.0, 0.25))   # Meshcat view (position, target; m): the arm and the sphere
 
     def default_config(self, options=None):
         """The task's default ScenarioConfig; ``options`` update its task_options."""
@@ -87,7 +88,8 @@ class SpherePolishing:
 
     def labels(self):
         return {"velocity": ["spin about a", "t_1 . p-dot", "t_2 . p-dot"], "velocity_units": "rad/s | m/s",
-                "force": ["normal force", "orientation row 1", "orientation row 2"], "force_units": "N | -"}
+                "force": ["normal force", "orientation row 1", "orientation row 2"], "force_units": "N | -",
+                "constraint_units": "m"}
 
     # -- options ----------------------------------------------------------------------------------
     def _option(self, config, name, allowed, default):
