@@ -180,7 +180,8 @@ def match_eigenvalues(designed, measured, tolerance=0.05, marginal=0, marginal_r
 def equilibrium_config(config, bandwidth_hz=200.0):
     """The continuous-time version of ``config`` at rest: continuous plant and controller, a
     low-pass on the wrench (to break the algebraic loop), zero desired velocity, zero start
-    integrals. Its start (in contact, pressing with F_d) is an equilibrium of the closed loop."""
+    integrals, no sensor faults or contact supervision. Its start (in contact, pressing with
+    F_d) is an equilibrium of the closed loop."""
     import copy
 
     c = copy.deepcopy(config)
@@ -190,6 +191,11 @@ def equilibrium_config(config, bandwidth_hz=200.0):
         c.sensor.bandwidth_hz = bandwidth_hz
     _at_rest(c)
     c.start.in_contact = True
+    # The supervisor, the fault injector and the conditioner are sampled systems: not part of the
+    # continuous loop (the model error is kept).
+    c.supervision.enabled = False
+    c.sensor_faults = type(c.sensor_faults)()
+    c.sensor.condition = False
     return c
 
 
