@@ -350,7 +350,7 @@ def HybridController_(T):
             return ContactPhase(int(code))
 
         def _check_finite_inputs(self, context):
-            for port in (self._state_port, self._velocity_port, self._acceleration_port, self._force_port):
+            for port in (self._velocity_port, self._acceleration_port, self._force_port):   # (the state: in the cache)
                 if not all_finite(port.Eval(context)):
                     raise ValueError(f"HybridController: input '{port.get_name()}' has non-finite entries "
                                      f"{value(port.Eval(context)).tolist()}")

@@ -32,6 +32,8 @@ from typing import List
 
 import numpy as np
 
+from pydrake.autodiffutils import AutoDiffXd
+
 from drake_hybrid.errors import DimensionError
 from drake_hybrid.linalg import inv, singular_values, solve, value
 
@@ -112,7 +114,8 @@ def saturate(actuation, base_actuation, limits):
         saturated = np.array(saturated, copy=True)
         for i, (v, limit) in enumerate(zip(saturated_values, limits)):
             if abs(v) > limit:
-                saturated[i] = np.sign(v) * limit       # a constant: zero derivative beyond the limit
+                bound = float(np.sign(v) * limit)        # a constant: zero derivative beyond the limit
+                saturated[i] = AutoDiffXd(bound) if saturated.dtype == object else bound
     return saturated, scale, clipped
 
 

@@ -490,6 +490,13 @@ def set_initial_conditions(scenario, root_context):
         scenario.wrench_filter.set_initial_output(filter_context, reading)
     if scenario.conditioner is not None:
         scenario.conditioner.set_initial_output(scenario.conditioner.GetMyMutableContextFromRoot(root_context), reading)
+    if scenario.supervisor is not None:
+        supervisor = scenario.supervisor
+        controller_plant_context = scenario.controller_plant.CreateDefaultContext()
+        scenario.controller_plant.SetPositions(controller_plant_context, q0)
+        start = controller.kinematics.evaluate(controller_plant_context).configuration
+        supervisor.set_initial_state(supervisor.GetMyMutableContextFromRoot(root_context), supervisor.initial_phase,
+                                     scenario.constraint_space.constraint.value(start))
 
 
 def apply_model_error(scenario, plant_context):

@@ -37,6 +37,7 @@ from pydrake.multibody.plant import ContactResults_
 from pydrake.systems.framework import LeafSystem_
 from pydrake.systems.scalar_conversion import TemplateSystem
 
+from drake_hybrid.errors import DimensionError
 from drake_hybrid.kinematics import resolve_frame
 from drake_hybrid.linalg import value
 from drake_hybrid.safety import ContactPhase
@@ -52,6 +53,13 @@ def _robot_geometry_ids(plant, robot_bodies):
 def _point_in_world(body_poses, body_index, point_in_body):
     X_WB = body_poses[int(body_index)]
     return X_WB.translation() + X_WB.rotation().matrix() @ point_in_body
+
+
+def _point(point, owner):
+    point = np.asarray(point, dtype=float)
+    if point.shape != (3,):
+        raise DimensionError(f"{owner}: end_effector_point must be a 3-vector, got shape {point.shape}")
+    return point
 
 
 def _shift(F_coefficients, p_from_to_W):
@@ -91,11 +99,15 @@ def ContactWrenchSensor_(T):
             LeafSystem_[T].__init__(self, converter)
             self._plant = plant
             self._robot_bodies = list(robot_bodies)
+            if not self._robot_bodies:
+                raise ValueError("ContactWrenchSensor: robot_bodies is empty; give the bodies of the arm and tool")
+            if not plant.geometry_source_is_registered():
+                raise ValueError("ContactWrenchSensor: the plant has no SceneGraph (no contact results)")
             self._robot_body_indices = {int(b.index()) for b in self._robot_bodies}
             self._robot_geometries = _robot_geometry_ids(plant, self._robot_bodies)
             frame = resolve_frame(plant, end_effector_frame)
             self._frame = frame
-            self._end_effector_point = np.asarray(end_effector_point, dtype=float)
+            self._end_effector_point = _point(end_effector_point, "ContactWrenchSensor")
             self._body_index = frame.body().index()
             self._point_in_body = frame.GetFixedPoseInBodyFrame().multiply(self._end_effector_point)
             self.DeclareAbstractInputPort("contact_results", AbstractValue.Make(ContactResults_[T]()))
@@ -173,6 +185,9 @@ def WristForceTorqueSensor_(T):
 
         def _construct(self, plant, weld_joint, end_effector_frame, end_effector_point, converter=None):
             LeafSystem_[T].__init__(self, converter)
+            if type(weld_joint).__name__ != "WeldJoint" or weld_joint.GetParentPlant() is not plant:
+                raise ValueError(f"WristForceTorqueSensor: weld_joint must be a WeldJoint of the plant, got "
+                                 f"{type(weld_joint).__name__}")
             self._plant = plant
             self._weld_joint = weld_joint
             self._joint_index = int(weld_joint.index())
@@ -185,7 +200,7 @@ def WristForceTorqueSensor_(T):
             self._gravity = plant.gravity_field().gravity_vector()
             frame = resolve_frame(plant, end_effector_frame)
             self._frame = frame
-            self._end_effector_point = np.asarray(end_effector_point, dtype=float)
+            self._end_effector_point = _point(end_effector_point, "WristForceTorqueSensor")
             self._body_index = frame.body().index()
             self._point_in_body = frame.GetFixedPoseInBodyFrame().multiply(self._end_effector_point)
             self.DeclareAbstractInputPort("reaction_forces", Value[List[SpatialForce_[T]]]([]))
@@ -252,6 +267,8 @@ def LowPassFilter_(T):
             LeafSystem_[T].__init__(self, converter)
             if not bandwidth_hz > 0:
                 raise ValueError(f"LowPassFilter: bandwidth_hz must be positive, got {bandwidth_hz}")
+            if int(size) != size or size < 1:
+                raise ValueError(f"LowPassFilter: size must be a positive integer, got {size}")
             if period is not None and not period > 0:
                 raise ValueError(f"LowPassFilter: period must be positive or None, got {period}")
             self._size, self.bandwidth_hz, self.period = size, float(bandwidth_hz), period

@@ -157,11 +157,14 @@ def ContactSupervisor_(T):
         def get_contact_phase_output_port(self):
             return self.GetOutputPort("contact_phase")
 
-        def set_phase(self, context, phase):
-            """Set the phase in ``context`` (timers reset); e.g. after moving the arm off the surface."""
-            state = context.get_discrete_state(0).CopyToVector()
-            state[0], state[1] = float(ContactPhase(phase)), 0.0
-            context.SetDiscreteState(0, state)
+        def set_initial_state(self, context, phase, constraint_value):
+            """Start in ``phase`` with C_entry = ``constraint_value`` (C at the start: the travel of a
+            first APPROACH counts from there), timers and count reset."""
+            constraint_value = np.asarray(value(constraint_value), dtype=float)
+            if constraint_value.shape != (self.force_size,):
+                raise ValueError(f"ContactSupervisor: constraint_value must have {self.force_size} entries, got "
+                                 f"{constraint_value.shape}")
+            context.SetDiscreteState(0, np.concatenate([[float(ContactPhase(phase)), 0.0, 0.0], constraint_value]))
 
         def _calc_phase(self, context, output):
             output.SetFromVector(context.get_discrete_state(0).CopyToVector()[:1])
