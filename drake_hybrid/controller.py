@@ -27,7 +27,7 @@ from drake_hybrid.errors import DimensionError
 from drake_hybrid.gains import ControlMode, HybridGains
 from drake_hybrid.kinematics import EndEffectorKinematics, declare_plant_context_cache, resolve_frame
 from drake_hybrid.linalg import inv, solve, value
-from drake_hybrid.safety import (ContactPhase, SafetyConfig, all_finite, damped_solve, damped_task_inertia, saturate,
+from drake_hybrid.safety import (ContactPhase, SafetyConfig, all_finite, bounded_solve, bounded_task_inertia, saturate,
                                  warn_singularity)
 
 
@@ -145,8 +145,10 @@ def HybridController_(T):
         * effort limits: the actuation is saturated gracefully (the task part of
           tau = (h + g) + tau_task scaled by the largest s <= 1 within the limits)
           and, with ``anti_windup``, xi and e_p are frozen while saturated;
-        * kinematic singularities: where sigma_min(J) < epsilon the inverse of J
-          (n = d) or of J M^-1 J^T (n > d) is damped, with a
+        * kinematic singularities: where sigma_min(J) < ``singularity_threshold``
+          and the task part would command a joint acceleration beyond
+          ``max_joint_acceleration``, the inverse of J (n = d) or of J M^-1 J^T
+          (n > d) is damped just enough to meet the bound, with a
           ``KinematicSingularityWarning`` the first time;
         * contact not there (``guarded_move`` given): with ``contact_phase`` not
           CONTACT the force-controlled rows of [a_p; a_f] become the guarded move
@@ -171,8 +173,8 @@ def HybridController_(T):
                 the period (zero-delay hold, default) or exactly at them (every
                 torque one period late; all discrete updates then share one
                 timing, which the discrete-time linearization needs).
-            safety: a SafetyConfig (effort limits, anti-windup, singularity
-                damping); None = defaults (the plant's effort limits).
+            safety: a SafetyConfig (effort limits, anti-windup, the joint
+                acceleration bound); None = defaults (the plant's effort limits).
             guarded_move: None, or an object with ``approach_speed`` (units of C
                 per second, >= 0) and ``approach_gain`` (K_a, 1/s), e.g. a
                 ``supervision.SupervisionConfig``: declares the ``contact_phase``
@@ -221,7 +223,7 @@ def HybridController_(T):
             self.safety = safety if safety is not None else SafetyConfig()
             plant_limits = [plant.get_joint_actuator(i).effort_limit() for i in plant.GetJointActuatorIndices()]
             (self.effort_limits, self._anti_windup, self._singularity_threshold,
-             self._singularity_damping) = self.safety.validated(n, plant_limits)
+             self._max_joint_acceleration) = self.safety.validated(n, plant_limits)
             self.guarded_move = guarded_move
             if guarded_move is not None:
                 speed, gain = float(guarded_move.approach_speed), float(guarded_move.approach_gain)
@@ -430,17 +432,18 @@ def HybridController_(T):
             force_torque = J.T @ (values.force_projection.T @ force_command)    # J^T E_f^T u_f
 
             self._plant.CalcForceElementsContribution(plant_context, self._forces)
-            threshold, damping = self._singularity_threshold, self._singularity_damping
+            threshold, bound = self._singularity_threshold, self._max_joint_acceleration
             base_torque = None                                                  # h + g, for the saturation
             if n == d:
-                # J^-1 (r-ddot* - J-dot q-dot), damped where sigma_min(J) < epsilon (safety.py).
-                joint_acceleration, sigma_min, lambda_squared = damped_solve(J, task_acceleration - bias, threshold,
-                                                                             damping)
+                # J^-1 (r-ddot* - J-dot q-dot), damped where it would exceed the bound (safety.py).
+                joint_acceleration, sigma_min, lambda_squared = bounded_solve(J, task_acceleration - bias, threshold,
+                                                                              bound)
                 torque = plant.CalcInverseDynamics(plant_context, joint_acceleration, self._forces) + force_torque
             else:
                 # Dynamically consistent generalization (spec section 8a).
                 v = plant.GetVelocities(plant_context)
-                Lambda, sigma_min, lambda_squared = damped_task_inertia(J, task_mobility, threshold, damping)
+                Lambda, sigma_min, lambda_squared = bounded_task_inertia(J, M_inverse, task_mobility,
+                                                                         task_acceleration - bias, threshold, bound)
                 J_bar = M_inverse @ J.T @ Lambda
                 null_space_transpose = np.eye(n) - J.T @ J_bar.T
                 base_torque = plant.CalcInverseDynamics(plant_context, self._zero_acceleration, self._forces)
@@ -448,7 +451,7 @@ def HybridController_(T):
                           + J.T @ (Lambda @ (task_acceleration - bias)) + force_torque
                           - null_space_transpose @ (M @ (gains.null_space_damping * v)))
             if lambda_squared > 0:
-                warn_singularity(self, sigma_min, threshold)
+                warn_singularity(self, sigma_min, bound)
 
             def base_actuation():
                 torque_0 = base_torque if base_torque is not None else plant.CalcInverseDynamics(

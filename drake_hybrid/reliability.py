@@ -188,12 +188,15 @@ def case_surface_moves_away(quick=False):
     bound = supervision.loss_dwell + lift / supervision.approach_speed + 3.0 / supervision.approach_gain + 0.002
     peak = peak_pressing_force(result, after=recontact) / 10.0
     magnitude = "5 mm in 10 ms"
+    trace = {"t": result.log["t"], "force": true_force(result)[:, 0], "phase": result.log["contact_phase"][:, 0],
+             "constraint": result.log["constraint"][:, 0]}
     return [
         _figure("loss", "surface moves away", magnitude, "loss detected after (s)", lost - at,
                 supervision.loss_dwell + 0.005, "s", f"<= loss_dwell + 5 ms = {supervision.loss_dwell + 0.005:.3f} s"),
         _figure("loss", "surface moves away", magnitude, "re-contact after (s)", recontact - at, bound, "s",
                 f"<= dwell + lift / s + 3 / K_a = {bound:.3f} s", details={"phases": phase_changes(result.log)}),
-        _figure("loss", "impact at re-contact", magnitude, "peak force / |F_d|", peak, 3.0, "", "<= 3"),
+        _figure("loss", "impact at re-contact", magnitude, "peak force / |F_d|", peak, 3.0, "", "<= 3",
+                details={"trace": trace}),
     ]
 
 
@@ -397,31 +400,46 @@ def case_saturation(quick=False):
 # ------------------------------------------------------------------------------------------------
 
 def case_singularity(quick=False):
-    """Wash toward the end of the arm's reach: the arm straightens (q2 -> 0, J singular)."""
+    """Wash toward the end of the arm's reach: the arm straightens (q2 -> 0, J singular), with the
+    bounded inverse and (reference) without it."""
     from drake_hybrid.linalg import singular_values
 
-    config = window_config(2.0)
-    config.start.configuration = [1.55, math.pi / 2]
-    with warnings.catch_warnings(record=True) as caught:
-        warnings.simplefilter("always")
-        result = simulate(config)
-    warned = any(issubclass(w.category, KinematicSingularityWarning) for w in caught)
-    log, scenario = result.log, result.scenario
-    plant = scenario.controller_plant
-    context = plant.CreateDefaultContext()
-    sigma = []
-    for q in log["q"]:
-        plant.SetPositions(context, q)
-        sigma.append(singular_values(scenario.controller.kinematics.evaluate(context).jacobian)[-1])
-    torque = log["torque"]
-    finite = bool(np.all(np.isfinite(torque)) and np.all(np.isfinite(log["q"])))
-    within = bool(np.all(np.abs(torque) <= effort_limits(scenario) + 1e-9))
-    residual = float(np.max(np.abs(log["constraint"])))
-    ok = finite and within and warned
-    return [_figure("singularity", "kinematic singularity (arm straightens)", "from x = 1.55 m at 0.1 m/s",
+    figures = []
+    for bounded in (True,) if quick else (True, False):
+        config = window_config(2.0)
+        config.start.configuration = [1.55, math.pi / 2]
+        if not bounded:
+            config.safety.max_joint_acceleration = 1e12
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            result = simulate(config)
+        warned = any(issubclass(w.category, KinematicSingularityWarning) for w in caught)
+        log, scenario = result.log, result.scenario
+        plant = scenario.controller_plant
+        context = plant.CreateDefaultContext()
+        sigma = []
+        for q in log["q"]:
+            plant.SetPositions(context, q)
+            sigma.append(singular_values(scenario.controller.kinematics.evaluate(context).jacobian)[-1])
+        torque = log["torque"]
+        finite = bool(np.all(np.isfinite(torque)) and np.all(np.isfinite(log["q"])))
+        within = bool(np.all(np.abs(torque) <= effort_limits(scenario) + 1e-9))
+        residual = float(np.max(np.abs(log["constraint"])))
+        acceleration = np.linalg.norm(np.diff(log["v"], axis=0) / np.diff(log["t"])[:, None], axis=1)
+        name = "bounded inverse" if bounded else "no bound (exact inverse)"
+        magnitude = "from x = 1.55 m at 0.1 m/s"
+        details = {"min_singular_value": float(min(sigma)), "warned": warned, "finite": finite,
+                   "peak_joint_acceleration": float(acceleration.max())}
+        figures += [
+            _figure("singularity", f"kinematic singularity (arm straightens), {name}", magnitude,
                     "max |C| (mm), on the window throughout", residual * 1e3, 2.0, "mm",
-                    f"<= 2 mm; no NaN, torques within limits, warned (min sigma(J) = {min(sigma):.2g})", also=ok,
-                    details={"min_singular_value": float(min(sigma)), "warned": warned, "finite": finite})]
+                    f"<= 2 mm; no NaN, torques within limits, warned (min sigma(J) = {min(sigma):.2g})",
+                    also=finite and within and warned, reference=not bounded, details=details),
+            _figure("singularity", f"kinematic singularity (arm straightens), {name}", magnitude,
+                    "peak joint acceleration (rad/s^2)", float(acceleration.max()),
+                    2 * config.safety.max_joint_acceleration, "rad/s^2", "<= 2 x the bound (50 rad/s^2)",
+                    reference=not bounded, details=details)]
+    return figures
 
 
 # ------------------------------------------------------------------------------------------------

@@ -20,8 +20,8 @@ from drake_hybrid.controller import HybridController
 from drake_hybrid.faults import SensorFaultConfig, SensorFaultInjector
 from drake_hybrid.gains import HybridGains
 from drake_hybrid.linalg import value
-from drake_hybrid.safety import (ContactPhase, KinematicSingularityWarning, SafetyConfig, damped_solve, saturate,
-                                 saturation_scale)
+from drake_hybrid.safety import (ContactPhase, KinematicSingularityWarning, SafetyConfig, bounded_solve,
+                                 bounded_task_inertia, saturate, saturation_scale)
 from drake_hybrid.scenarios import build_controller_plant, build_scenario, set_initial_conditions
 from drake_hybrid.sensors import WrenchConditioner
 from drake_hybrid.supervision import ContactSupervisor, SupervisionConfig
@@ -303,39 +303,48 @@ def test_saturation_helpers():
     assert saturated[1].derivatives().tolist() == [0.0, 0.0]                    # base + 0 (task): base's
 
 
-def test_damped_inverse_is_exact_above_the_threshold_and_bounded_at_a_singularity():
-    J = np.diag([1.0, 0.5, 0.03])
+def test_bounded_inverse_is_exact_within_the_bound_and_the_trust_region_solution_beyond():
     rhs = np.array([1.0, 1.0, 1.0])
-    exact, sigma, damping = damped_solve(J, rhs, threshold=0.02, damping=0.05)
-    assert damping == 0.0 and np.array_equal(exact, np.linalg.solve(J, rhs))
-    singular = np.diag([1.0, 0.5, 0.0])
-    solution, sigma, damping = damped_solve(singular, rhs, threshold=0.02, damping=0.05)
-    assert sigma == 0.0 and damping == pytest.approx(0.05 ** 2)
-    assert np.all(np.isfinite(solution)) and solution[2] == 0.0
-    # Continuous at the threshold: the damping vanishes there.
-    at_threshold = damped_solve(np.diag([1.0, 0.5, 0.02]), rhs, 0.02, 0.05)
-    assert at_threshold[2] == 0.0
+    near = np.diag([1.0, 0.5, 0.03])                                      # |J^-1 rhs| = 33.4
+    far = bounded_solve(near, rhs, threshold=0.01, max_norm=10.0)         # not "near": exact beyond the bound
+    assert far[2] == 0.0 and np.array_equal(far[0], np.linalg.solve(near, rhs))
+    exact, sigma, damping = bounded_solve(near, rhs, threshold=0.05, max_norm=50.0)
+    assert damping == 0.0 and np.array_equal(exact, np.linalg.solve(near, rhs))
+    bounded, sigma, damping = bounded_solve(near, rhs, threshold=0.05, max_norm=10.0)
+    assert damping > 0 and np.linalg.norm(bounded) == pytest.approx(10.0, rel=1e-9)
+    # It is the least-squares solution damped by lambda^2: (J^T J + lambda^2 I) x = J^T rhs.
+    np.testing.assert_allclose((near.T @ near + damping * np.eye(3)) @ bounded, near.T @ rhs, atol=1e-9)
+    singular = np.diag([1.0, 0.5, 0.0])                                   # no exact solution at all
+    solution, sigma, damping = bounded_solve(singular, rhs, threshold=0.05, max_norm=10.0)
+    assert sigma == 0.0 and np.all(np.isfinite(solution)) and solution[2] == 0.0
+    np.testing.assert_allclose(solution[:2], [1.0, 2.0], rtol=1e-6)       # the reachable part, nearly exact
+    # The redundant version bounds M^-1 J^T Lambda rhs the same way.
+    J = np.array([[1.0, 0.0, 0.3], [0.0, 0.02, 0.0]])
+    M_inverse = np.diag([1.0, 2.0, 4.0])
+    mobility = J @ M_inverse @ J.T
+    Lambda, sigma, mu = bounded_task_inertia(J, M_inverse, mobility, np.array([0.0, 1.0]), 0.05, max_norm=10.0)
+    assert mu > 0 and np.linalg.norm(M_inverse @ J.T @ Lambda @ [0.0, 1.0]) == pytest.approx(10.0, rel=1e-6)
+    Lambda, sigma, mu = bounded_task_inertia(J, M_inverse, mobility, np.array([0.0, 1.0]), 0.05, max_norm=100.0)
+    assert mu == 0.0 and np.allclose(Lambda, np.linalg.inv(mobility))
 
 
 def test_controller_at_an_exact_singularity_warns_and_stays_finite(window_parts):
-    """The 3R arm stretched (q2 = 0): J loses rank. Undamped (threshold 0) the torque is huge; damped it
-    is bounded and the controller warns."""
-    stretched = np.array([0.3, 0.0, 1.2])
+    """The 3R arm stretched (q2 = 0): J loses rank, and a command along the lost direction cannot be
+    produced. Without a bound the torque is huge (or the solve fails); bounded it is finite and the
+    controller warns. (Effort limits lifted so that saturation does not hide the difference.)"""
+    stretched = np.array([0.3, 1e-7, 1.2])
     torques = {}
-    for threshold in (0.0, 0.02):
-        dut = controller(window_parts, safety=SafetyConfig(effort_limits=[1e12] * 3, singularity_threshold=threshold))
+    for bound in (1e12, 50.0):
+        dut = controller(window_parts, safety=SafetyConfig(effort_limits=[1e12] * 3, max_joint_acceleration=bound))
         context = dut.CreateDefaultContext()
         fix(dut, context, stretched, np.array([0.1, -0.1, 0.0]), wrench=np.array([0, 0, 0, 0, 0, -10.0]))
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
-            try:
-                torques[threshold] = dut.EvalUniquePeriodicDiscreteUpdate(context).get_vector(0).value()[1:]
-            except np.linalg.LinAlgError:
-                torques[threshold] = np.full(3, np.inf)
+            torques[bound] = dut.EvalUniquePeriodicDiscreteUpdate(context).get_vector(0).value()[1:]
         warned = [w for w in caught if issubclass(w.category, KinematicSingularityWarning)]
-        assert bool(warned) == (threshold > 0)
-    assert np.max(np.abs(torques[0.0])) > 1e6
-    assert np.max(np.abs(torques[0.02])) < 200.0
+        assert bool(warned) == (bound == 50.0)
+    assert np.max(np.abs(torques[1e12])) > 1e4
+    assert np.all(np.isfinite(torques[50.0])) and np.max(np.abs(torques[50.0])) < 200.0
 
 
 def test_non_finite_state_raises_and_autodiff_instance_matches(window_parts):
