@@ -26,7 +26,7 @@ from pydrake.systems.framework import LeafSystem_
 from pydrake.systems.scalar_conversion import TemplateSystem
 
 from drake_hybrid.controller import SAMPLE_LEAD
-from drake_hybrid.errors import DimensionError
+from drake_hybrid.errors import DimensionError, check_fields
 from drake_hybrid.linalg import value
 
 DROPOUT_KINDS = ("nan", "stale")
@@ -63,9 +63,7 @@ class SensorFaultConfig:
 
     def validate(self):
         """ValueError (or DimensionError) naming the first bad field."""
-        for name in ("noise_std", "torque_noise_std", "dropout_duration"):
-            if not float(getattr(self, name)) >= 0:
-                raise ValueError(f"sensor_faults.{name} must be >= 0, got {getattr(self, name)}")
+        check_fields(self, "sensor_faults.", nonnegative=("noise_std", "torque_noise_std", "dropout_duration"))
         if self.bias and len(self.bias) != 6:
             raise DimensionError(f"sensor_faults.bias must have 6 entries [n; f] or none, got {len(self.bias)}")
         if not 0 <= float(self.dropout_probability) <= 1:

@@ -35,7 +35,7 @@ from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import LogVectorOutput
 
 from drake_hybrid.controller import HybridController
-from drake_hybrid.errors import DimensionError, OffConstraintError
+from drake_hybrid.errors import DimensionError, OffConstraintError, check_fields
 from drake_hybrid.faults import JointFriction, SensorFaultConfig, SensorFaultInjector
 from drake_hybrid.gains import ControlMode, HybridGains
 from drake_hybrid.kinematics import EndEffectorKinematics
@@ -89,13 +89,9 @@ class ModelErrorConfig:
     friction_speed: float = 0.05
 
     def validate(self):
-        for name in ("payload_mass_scale", "link_inertia_scale", "friction_speed"):
-            if not float(getattr(self, name)) > 0:
-                raise ValueError(f"model_error.{name} must be positive, got {getattr(self, name)}")
-        for name in ("joint_damping", "joint_friction"):
-            if not float(getattr(self, name)) >= 0:
-                raise ValueError(f"model_error.{name} must be >= 0, got {getattr(self, name)}")
-        return self
+        return check_fields(self, "model_error.", positive=("payload_mass_scale", "link_inertia_scale",
+                                                            "friction_speed"),
+                            nonnegative=("joint_damping", "joint_friction"))
 
 
 @dataclass
@@ -165,28 +161,17 @@ def validate_config(config):
         raise TypeError(f"expected a ScenarioConfig, got {type(config).__name__}")
     if config.time_step < 0 or config.control_period < 0:
         raise ValueError("time_step and control_period must be >= 0 (0 means continuous)")
-    for name in ("duration", "log_period"):
-        if not float(getattr(config, name)) > 0:
-            raise ValueError(f"{name} must be positive, got {getattr(config, name)}")
+    check_fields(config, "", positive=("duration", "log_period"))
     contact = config.contact
     if contact.model not in CONTACT_MODELS:
         raise ValueError(f"contact.model must be one of {CONTACT_MODELS}, got '{contact.model}'")
     if contact.discrete_approximation not in DISCRETE_APPROXIMATIONS:
         raise ValueError(f"contact.discrete_approximation must be one of {DISCRETE_APPROXIMATIONS}, "
                          f"got '{contact.discrete_approximation}'")
-    for name in ("pad_modulus", "pad_resolution", "sap_near_rigid_threshold"):
-        if not float(getattr(contact, name)) > 0:
-            raise ValueError(f"contact.{name} must be positive, got {getattr(contact, name)}")
-    for name in ("pad_dissipation", "friction"):
-        if not float(getattr(contact, name)) >= 0:
-            raise ValueError(f"contact.{name} must be >= 0, got {getattr(contact, name)}")
-    for name in ("bandwidth_hz", "max_hold_time"):
-        if not float(getattr(config.sensor, name)) >= 0:
-            raise ValueError(f"sensor.{name} must be >= 0, got {getattr(config.sensor, name)}")
-    if not float(config.start.tolerance) > 0:
-        raise ValueError(f"start.tolerance must be positive, got {config.start.tolerance}")
-    if not float(config.start.gap) > 0:
-        raise ValueError(f"start.gap must be positive, got {config.start.gap}")
+    check_fields(contact, "contact.", positive=("pad_modulus", "pad_resolution", "sap_near_rigid_threshold"),
+                 nonnegative=("pad_dissipation", "friction"))
+    check_fields(config.sensor, "sensor.", nonnegative=("bandwidth_hz", "max_hold_time"))
+    check_fields(config.start, "start.", positive=("tolerance", "gap"))
     config.model_error.validate()
     config.sensor_faults.validate()
     config.supervision.validate()

@@ -5,15 +5,14 @@ starts in free space, or whose surface moves away, needs a supervisor that decid
 hybrid law applies. ``ContactSupervisor`` is that state machine; the controller reads its phase
 (``HybridController(..., guarded_move=...)``) and runs the guarded move off the surface::
 
-                         t >= tare_time
-        TARE ───────────────────────────────► APPROACH ◄───────────────────────┐
-   (hold still; the wrench            │  guarded move at s along n_C      │ p < loss_threshold |F_d|
-    conditioner tares the sensor)     │                                   │ for loss_dwell
-                                      │ p >= contact_threshold |F_d|      │
-                                      ├──────────────────────────────► CONTACT (the hybrid law)
-                                      │ travel > max_travel                ▲
-                                      ▼                                    │ p >= contact_threshold |F_d|
-                                    HOLD (hold still, wait) ───────────────┘
+    TARE ──(t >= tare_time)──► APPROACH ──(p >= contact_threshold |F_d|)──► CONTACT
+    hold still; the            guarded move at s along n_C                  the hybrid law
+    conditioner tares            │     ▲                                      │
+                                 │     └──(p < loss_threshold |F_d| for loss_dwell)──┘
+                                 │ travel > max_travel
+                                 ▼
+                               HOLD ──(p >= contact_threshold |F_d|)──► CONTACT
+                               hold still, wait
 
 p = F . F_d / |F_d| is the measured force along the commanded one (|F_d| when the force loop
 has converged), over the force-controlled rows of C; travel = n_C . (C - C_entry), with
@@ -38,6 +37,7 @@ from pydrake.systems.framework import LeafSystem_
 from pydrake.systems.scalar_conversion import TemplateSystem
 
 from drake_hybrid.controller import SAMPLE_LEAD
+from drake_hybrid.errors import check_fields
 from drake_hybrid.linalg import value
 from drake_hybrid.safety import ContactPhase, all_finite
 
@@ -69,14 +69,8 @@ class SupervisionConfig:
 
     def validate(self):
         """ValueError naming the first bad field."""
-        positive = {"approach_gain": self.approach_gain, "loss_dwell": self.loss_dwell,
-                    "max_travel": self.max_travel}
-        for name, number in positive.items():
-            if not float(number) > 0:
-                raise ValueError(f"supervision.{name} must be positive, got {number}")
-        for name in ("approach_speed", "tare_time"):
-            if not float(getattr(self, name)) >= 0:
-                raise ValueError(f"supervision.{name} must be >= 0, got {getattr(self, name)}")
+        check_fields(self, "supervision.", positive=("approach_gain", "loss_dwell", "max_travel"),
+                     nonnegative=("approach_speed", "tare_time"))
         if not 0 < float(self.loss_threshold) < float(self.contact_threshold) <= 1:
             raise ValueError("supervision thresholds must satisfy 0 < loss_threshold < contact_threshold <= 1 "
                              f"(fractions of |F_d|), got loss_threshold = {self.loss_threshold}, contact_threshold = "
