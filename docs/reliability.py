@@ -6,7 +6,8 @@
 Writes ``docs/reliability.md`` (the table, what each fault is, how each criterion was chosen,
 the details), ``docs/reliability.json`` (the figures), ``docs/figures/reliability_contact_loss.png``
 (the force through a contact loss and its re-acquisition) and replaces the table between the
-``reliability-table`` markers in ``README.md``. Every number in those files comes from this run.
+``reliability-table`` markers in ``README.md`` (the rows with a pass/fail; the reference rows are in
+the report). Every number in those files comes from this run.
 """
 
 import argparse
@@ -90,7 +91,7 @@ list is `reliability.BAD_CONFIGURATIONS` (each entry with its error type and mes
 
 def markdown_table(figures):
     rows = [HEADER, ["---"] * len(HEADER)] + [figure.row() for figure in figures]
-    return "\n".join("| " + " | ".join(str(cell).replace("|", "/") for cell in row) + " |" for row in rows)
+    return "\n".join("| " + " | ".join(str(cell).replace("|", "\\|") for cell in row) + " |" for row in rows)
 
 
 def plot_contact_loss(figures, path):
@@ -145,6 +146,7 @@ def main(argv=None):
     wall = time.perf_counter() - start
     failed = [figure for figure in figures if figure.passed is False]
     table = markdown_table(figures)
+    readme_table = markdown_table([figure for figure in figures if figure.passed is not None])
     plot_contact_loss(figures, DOCS / "figures" / "reliability_contact_loss.png")
     stamp = datetime.now(timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
     environment = f"Python {platform.python_version()}, {platform.machine()}, {stamp}"
@@ -187,7 +189,7 @@ def main(argv=None):
         indent=1, default=lambda o: o.name if hasattr(o, "name") else (o.tolist() if isinstance(o, np.ndarray)
                                                                         else str(o))))
     if not arguments.no_readme:
-        update_readme(table)
+        update_readme(readme_table)
     print(f"{len(figures)} figures, {len(failed)} failed, {wall:.0f} s")
     return 1 if failed else 0
 

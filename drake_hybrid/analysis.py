@@ -190,13 +190,19 @@ def equilibrium_config(config, bandwidth_hz=200.0):
     if not c.sensor.bandwidth_hz > 0:
         c.sensor.bandwidth_hz = bandwidth_hz
     _at_rest(c)
-    c.start.in_contact = True
-    # The supervisor, the fault injector and the conditioner are sampled systems: not part of the
-    # continuous loop (the model error is kept).
-    c.supervision.enabled = False
-    c.sensor_faults = type(c.sensor_faults)()
-    c.sensor.condition = False
+    _without_fault_handling(c)
     return c
+
+
+def _without_fault_handling(config):
+    """In place: start in contact, no contact supervisor, no sensor faults, no wrench conditioner
+    (sampled systems outside the law, with their own timing); the model error is kept."""
+    from drake_hybrid.faults import SensorFaultConfig
+
+    config.start.in_contact = True
+    config.supervision.enabled = False
+    config.sensor_faults = SensorFaultConfig()
+    config.sensor.condition = False
 
 
 def _at_rest(config):
@@ -295,6 +301,7 @@ def linearize_discrete(config, tolerance=0.05, epsilon=1e-6, settle_time=0.0):
     c.log_period = c.time_step
     c.sensor.bandwidth_hz = 0.0
     _at_rest(c)
+    _without_fault_handling(c)
     scenario = build_scenario(c, with_loggers=False, sampled_plant_outputs=False, controller_sample_lead=False)
     simulator = Simulator(scenario.diagram)
     context = simulator.get_mutable_context()

@@ -319,8 +319,9 @@ def HybridController_(T):
 
         def diagnostics(self, context):
             """What the protections did in the evaluation at ``context``: a dict with the contact
-            phase, the saturation scale s, whether an actuator was clipped, sigma_min(J), the
-            damping lambda^2 and whether the wrench was valid."""
+            phase, the saturation scale s, whether an actuator was clipped, sigma_min(J) (None
+            when the exact inverse was within its bound and no SVD was needed), the damping
+            lambda^2 and whether the wrench was valid."""
             solution = self._solution(context)
             return {"contact_phase": ContactPhase(solution.contact_phase),
                     "saturation_scale": solution.saturation_scale, "actuator_clipped": solution.actuator_clipped,
@@ -351,11 +352,12 @@ def HybridController_(T):
                                  f"({', '.join(p.name for p in ContactPhase)}), got {code}")
             return ContactPhase(int(code))
 
-        def _check_finite_inputs(self, context):
-            for port in (self._velocity_port, self._acceleration_port, self._force_port):   # (the state: in the cache)
-                if not all_finite(port.Eval(context)):
+        def _check_finite_commands(self, *commands):
+            """ValueError naming the first non-finite command (the state is checked by the plant-context cache)."""
+            for port, command in zip((self._velocity_port, self._acceleration_port, self._force_port), commands):
+                if not all_finite(command):
                     raise ValueError(f"HybridController: input '{port.get_name()}' has non-finite entries "
-                                     f"{value(port.Eval(context)).tolist()}")
+                                     f"{value(command).tolist()}")
 
         def _guarded_acceleration(self, values, nu, desired_force, phase):
             """The guarded move on the force-controlled rows: a_f = -K_a (C-dot - s n_C) (0 on kinematic rows)."""
@@ -371,7 +373,6 @@ def HybridController_(T):
             gains = self._gains
             m, k = self.force_size, self.velocity_size
             plant = self._plant
-            self._check_finite_inputs(context)
             phase = self._contact_phase(context)
             in_contact = phase is ContactPhase.CONTACT
             kin = self.kinematics.evaluate(plant_context)
@@ -385,6 +386,7 @@ def HybridController_(T):
             desired_acceleration = self._acceleration_port.Eval(context)
             desired_force = self._force_port.Eval(context)
             wrench = self._wrench_port.Eval(context)
+            self._check_finite_commands(desired_velocity, desired_acceleration, desired_force)
 
             # Force decomposition [F_v; F] = E^-T w (spec section 0); a dropout is ignored.
             wrench_valid = bool(np.all(np.isfinite(value(wrench))))

@@ -39,6 +39,11 @@ class BranchError(DrakeHybridError):
     pointing away from the workpiece instead of toward it)."""
 
 
+class KinematicSingularityWarning(UserWarning):
+    """The arm is near a kinematic singularity: the controller bounds the joint acceleration with a
+    damped inverse of J there, so the commanded task acceleration is only approximately produced."""
+
+
 class OffConstraintError(DrakeHybridError):
     """A configuration that should satisfy C(r) = 0 does not (e.g. a start
     configuration off the constraint)."""

@@ -11,7 +11,8 @@
 
 Both act on the simulation only; the controller's model knows nothing of them. The noise and
 the random dropouts are functions of the seed and the sample index only, so a run is
-reproducible and a sample reads the same whenever it is evaluated.
+reproducible and a sample reads the same whenever it is evaluated. Their AutoDiffXd instances
+compute on values (an injected fault has no derivative); ``JointFriction`` differentiates.
 """
 
 import math

@@ -42,13 +42,8 @@ import numpy as np
 
 from pydrake.autodiffutils import AutoDiffXd
 
-from drake_hybrid.errors import DimensionError
+from drake_hybrid.errors import DimensionError, KinematicSingularityWarning
 from drake_hybrid.linalg import inv, solve, value
-
-
-class KinematicSingularityWarning(UserWarning):
-    """The arm is near a kinematic singularity: the controller uses a damped inverse of J there,
-    so the commanded task acceleration is only approximately produced."""
 
 
 @dataclass
@@ -114,8 +109,8 @@ def saturate(actuation, base_actuation, limits):
     the scale of the task part and ``clipped`` says whether the base itself had to be clipped.
     Works for float and AutoDiffXd arrays (s is computed from the values and held constant).
     """
-    values = value(actuation)
-    if np.all(np.abs(values) <= limits):
+    values = value(actuation) if actuation.dtype == object else actuation
+    if (np.abs(values) <= limits).all():
         return actuation, 1.0, False
     base = base_actuation()
     base_values = value(base)
@@ -157,18 +152,23 @@ def bounded_solve(J, rhs, threshold, max_norm):
     That is the trust-region solution of min |J x - rhs| subject to |x| <= max_norm: exact
     whenever the exact solution is within the bound (however close J is to singular), bounded
     and continuous where it is not, and defined at an exact singularity. Returns (x, sigma_min,
-    lambda^2); lambda^2 = 0 means exact. Float or AutoDiffXd J and rhs (lambda^2 from the values).
+    lambda^2); lambda^2 = 0 means exact, and sigma_min is None when the exact solution is within
+    the bound (the common case, which then costs no SVD). Float or AutoDiffXd J and rhs (lambda^2
+    from the values).
     """
+    try:
+        exact = solve(J, rhs)
+        exact_value = value(exact) if exact.dtype == object else exact
+        if exact_value @ exact_value <= max_norm * max_norm:   # (False for NaN)
+            return exact, None, 0.0
+    except np.linalg.LinAlgError:                              # J exactly singular
+        exact = None
     J_value, rhs_value = value(J), value(rhs)
-    sigma = np.linalg.svd(J_value, compute_uv=False)
+    U, sigma, _ = np.linalg.svd(J_value)
     sigma_min = float(sigma[-1])
-    if sigma_min >= threshold and sigma_min > 0:
-        return solve(J, rhs), sigma_min, 0.0
-    U = np.linalg.svd(J_value)[0]
+    if exact is not None and sigma_min >= threshold:
+        return exact, sigma_min, 0.0                           # a large command, but far from a singularity
     coefficients = U.T @ rhs_value                              # rhs in the left singular basis
-    if sigma_min > 1e-12 * max(sigma[0], 1e-300):
-        if np.linalg.norm(coefficients / sigma) <= max_norm:
-            return solve(J, rhs), sigma_min, 0.0
     norm_at = lambda l2: np.linalg.norm(sigma * coefficients / (sigma * sigma + l2))   # |x(lambda)|
     lambda_squared = _damping_for_norm(norm_at, max_norm, float(sigma[0] ** 2))
     d = J.shape[0]
@@ -179,23 +179,23 @@ def bounded_task_inertia(J, M_inverse, task_mobility, rhs, threshold, max_norm):
     """Lambda = (J M^-1 J^T)^-1, unless sigma_min(J) < threshold and the joint acceleration
     M^-1 J^T Lambda rhs exceeds max_norm: then (J M^-1 J^T + mu I)^-1 with the smallest mu that
     brings it to max_norm (the redundant arm's version of ``bounded_solve``).
-    Returns (Lambda, sigma_min(J), mu)."""
+    Returns (Lambda, sigma_min(J) or None, mu)."""
     J_value, M_inverse_value, mobility_value, rhs_value = value(J), value(M_inverse), value(task_mobility), value(rhs)
-    sigma_min = float(np.linalg.svd(J_value, compute_uv=False)[-1])
-    if sigma_min >= threshold and sigma_min > 0:
-        return inv(task_mobility), sigma_min, 0.0
     d = J.shape[0]
 
     def norm_at(mu):
         return np.linalg.norm(M_inverse_value @ J_value.T @ np.linalg.solve(mobility_value + mu * np.eye(d), rhs_value))
 
-    scale = float(np.trace(mobility_value)) / d
     try:
-        if np.linalg.cond(mobility_value) < 1e12 and norm_at(0.0) <= max_norm:
-            return inv(task_mobility), sigma_min, 0.0
+        exact_norm = norm_at(0.0)
+        if np.isfinite(exact_norm) and exact_norm <= max_norm:
+            return inv(task_mobility), None, 0.0
     except np.linalg.LinAlgError:
-        pass
-    mu = _damping_for_norm(norm_at, max_norm, scale)
+        exact_norm = np.inf
+    sigma_min = float(np.linalg.svd(J_value, compute_uv=False)[-1])
+    if sigma_min >= threshold and np.isfinite(exact_norm):
+        return inv(task_mobility), sigma_min, 0.0
+    mu = _damping_for_norm(norm_at, max_norm, float(np.trace(mobility_value)) / d)
     return inv(task_mobility + mu * np.eye(d)), sigma_min, mu
 
 
@@ -212,8 +212,12 @@ def warn_singularity(owner, sigma_min, max_norm):
 
 
 def all_finite(array):
-    """True if every entry (float or AutoDiffXd value) is finite."""
-    return bool(np.all(np.isfinite(value(np.asarray(array)))))
+    """True if every entry (float or AutoDiffXd value) is finite. For floats one reduction: NaN and
+    inf propagate through the sum (which overflows only for entries near 1e308)."""
+    array = np.asarray(array)
+    if array.dtype == object:
+        return bool(np.all(np.isfinite(value(array))))
+    return math.isfinite(array.sum())
 
 
 # ------------------------------------------------------------------------------------------------

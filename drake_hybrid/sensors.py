@@ -344,6 +344,8 @@ def WrenchConditioner_(T):
         delay); the state [y (6), b (6), tare samples, age (samples since the last fresh one),
         last sequence] advances at each tick.
 
+        The AutoDiffXd instance computes on values (no derivatives through the conditioner).
+
         Args:
             period: the sampling period h (s), normally the control period.
             bandwidth_hz: f_c of the low-pass (0: none).

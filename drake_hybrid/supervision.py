@@ -109,6 +109,9 @@ def ContactSupervisor_(T):
         the controller's tick (k h - SAMPLE_LEAD h), from the controller's outputs at that tick:
         a transition takes effect at the next tick (one period of latency).
 
+        The AutoDiffXd instance decides on the values (a phase has no derivative); it exists so
+        that a diagram containing the supervisor converts.
+
         Args:
             config: SupervisionConfig.
             force_size: m.

@@ -20,8 +20,9 @@ from drake_hybrid.controller import HybridController
 from drake_hybrid.faults import SensorFaultConfig, SensorFaultInjector
 from drake_hybrid.gains import HybridGains
 from drake_hybrid.linalg import value
-from drake_hybrid.safety import (ContactPhase, KinematicSingularityWarning, SafetyConfig, bounded_solve,
-                                 bounded_task_inertia, saturate, saturation_scale)
+from drake_hybrid.errors import KinematicSingularityWarning
+from drake_hybrid.safety import (ContactPhase, SafetyConfig, bounded_solve, bounded_task_inertia, saturate,
+                                 saturation_scale)
 from drake_hybrid.scenarios import build_controller_plant, build_scenario, set_initial_conditions
 from drake_hybrid.sensors import WrenchConditioner
 from drake_hybrid.supervision import ContactSupervisor, SupervisionConfig
