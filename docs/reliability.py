@@ -1,7 +1,7 @@
 """Run every fault case of drake_hybrid.reliability and write the reliability report.
 
-    python docs/reliability.py            # all cases, full horizons (about 3 minutes on 2 cores)
-    python docs/reliability.py --quick    # the test horizons, no reference runs (about 1 minute)
+    python docs/reliability.py            # all cases, full horizons (about 1.5 minutes on 2 cores)
+    python docs/reliability.py --quick    # the test horizons, no reference runs (under a minute)
 
 Writes ``docs/reliability.md`` (the table, what each fault is, how each criterion was chosen,
 the details), ``docs/reliability.json`` (the figures), ``docs/figures/reliability_contact_loss.png``

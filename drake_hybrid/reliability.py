@@ -24,7 +24,7 @@ from drake_hybrid.gains import HybridGains
 from drake_hybrid.errors import KinematicSingularityWarning
 from drake_hybrid.safety import ContactPhase, SafetyConfig
 from drake_hybrid.scenarios import ModelErrorConfig
-from drake_hybrid.sensors import low_pass_coefficient
+from drake_hybrid.sensors import LowPassFilter, low_pass_coefficient
 from drake_hybrid.simulation import effort_limits, settling_time, simulate
 from drake_hybrid.sources import Profile
 from drake_hybrid.supervision import ContactSupervisor, SupervisionConfig
@@ -583,7 +583,19 @@ def _friction(coulomb):
     return JointFriction(plant, robot.arm, coulomb)
 
 
-def _contact_sensor(bodies=(), point=np.zeros(3)):
+def _wrist_sensor_on_a_revolute_joint():
+    from pydrake.systems.framework import DiagramBuilder
+
+    from drake_hybrid.scenarios import build_plant
+    from drake_hybrid.sensors import WristForceTorqueSensor
+
+    task = get_task("window-washing")
+    plant, _, robot = build_plant(task, task.default_config(), DiagramBuilder())
+    elbow = plant.get_joint(plant.GetJointIndices(robot.arm)[1])
+    return WristForceTorqueSensor(plant, elbow, robot.end_effector_frame, robot.end_effector_point)
+
+
+def _contact_sensor(with_bodies, point):
     from pydrake.systems.framework import DiagramBuilder
 
     from drake_hybrid.scenarios import build_plant
@@ -591,7 +603,8 @@ def _contact_sensor(bodies=(), point=np.zeros(3)):
 
     task = get_task("window-washing")
     plant, _, robot = build_plant(task, task.default_config(), DiagramBuilder())
-    return ContactWrenchSensor(plant, list(bodies), robot.end_effector_frame, point)
+    bodies = [plant.get_body(index) for index in plant.GetBodyIndices(robot.arm)] if with_bodies else []
+    return ContactWrenchSensor(plant, bodies, robot.end_effector_frame, point)
 
 
 BAD_CONFIGURATIONS = [
@@ -624,8 +637,13 @@ BAD_CONFIGURATIONS = [
              lambda: _controller(guarded_move=SupervisionConfig(approach_speed=-0.1)), ValueError,
              "approach_speed must be >= 0"),
     # Sensors, faults, supervisor
-    BadInput("contact sensor: no robot bodies", lambda: _contact_sensor(), ValueError,
+    BadInput("contact sensor: no robot bodies", lambda: _contact_sensor(False, np.zeros(3)), ValueError,
              "ContactWrenchSensor: robot_bodies is empty"),
+    BadInput("contact sensor: end-effector point of size 2", lambda: _contact_sensor(True, np.zeros(2)), ValueError,
+             "ContactWrenchSensor: end_effector_point must be a 3-vector"),
+    BadInput("wrist sensor: a revolute joint instead of the tool weld", _wrist_sensor_on_a_revolute_joint, ValueError,
+             "weld_joint must be a WeldJoint of the plant, got RevoluteJoint"),
+    BadInput("low-pass filter: size 0", lambda: LowPassFilter(0, 50.0), ValueError, "size must be a positive integer"),
     BadInput("conditioner: zero period", lambda: _conditioner(period=0.0), ValueError,
              "WrenchConditioner: period must be positive"),
     BadInput("conditioner: negative hold time", lambda: _conditioner(period=1e-3, max_hold_time=-1.0), ValueError,
