@@ -24,6 +24,7 @@ from drake_hybrid.errors import (
     DimensionError,
     DrakeHybridError,
     GainError,
+    KinematicSingularityWarning,
     OffConstraintError,
     UnknownVariableError,
 )

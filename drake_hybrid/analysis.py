@@ -182,9 +182,12 @@ def match_eigenvalues(designed, measured, tolerance=0.05, marginal=0, marginal_r
 
 def at_rest_config(config):
     """A copy of ``config`` at rest, its sampling kept: zero desired velocity, constant F_d(0), zero
-    start integrals, starting in contact. Its start is an equilibrium of the closed loop."""
+    start integrals, starting in contact, no contact supervisor, sensor faults or wrench conditioner
+    (sampled systems outside the law, with their own timing); the model error is kept. Its start is
+    an equilibrium of the closed loop."""
     import copy
 
+    from drake_hybrid.faults import SensorFaultConfig
     from drake_hybrid.sources import Profile
     from drake_hybrid.tasks import get_task
 
@@ -195,6 +198,9 @@ def at_rest_config(config):
     c.start.force_integral = []
     c.start.position_error = []
     c.start.in_contact = True
+    c.supervision.enabled = False
+    c.sensor_faults = SensorFaultConfig()
+    c.sensor.condition = False
     return c
 
 

@@ -8,7 +8,11 @@ Implements, in the implementable form of spec section 4 (general E^-1 block),
 
 for square arms (n = d, as in the paper) and redundant arms (n > d, with the
 dynamically consistent generalization and null-space damping of spec section
-8a). See ``HybridController`` for ports, law and closed loop.
+8a), protected against what the paper assumes away (``safety``): effort limits
+(graceful saturation, anti-windup), kinematic singularities (damped inverse),
+non-finite inputs, and contact that is not there yet or is lost (the guarded
+move of ``supervision.ContactSupervisor``). See ``HybridController`` for ports,
+law and closed loop.
 """
 
 import numpy as np
@@ -22,7 +26,9 @@ from pydrake.systems.scalar_conversion import TemplateSystem
 from drake_hybrid.errors import DimensionError
 from drake_hybrid.gains import ControlMode, HybridGains
 from drake_hybrid.kinematics import EndEffectorKinematics, declare_plant_context_cache, resolve_frame
-from drake_hybrid.linalg import inv, is_autodiff, solve, value
+from drake_hybrid.linalg import inv, solve, value
+from drake_hybrid.safety import (ContactPhase, SafetyConfig, all_finite, bounded_solve, bounded_task_inertia, saturate,
+                                 warn_singularity)
 
 
 def impedance_blocks(velocity_projection, force_projection, task_mobility, kinematic_rows=()):
@@ -64,7 +70,8 @@ class ControlSolution:
     """Everything one evaluation of the law computes (held in a cache entry)."""
 
     __slots__ = ("actuation", "velocity_error", "force_error", "constraint_value", "projected_velocity", "force",
-                 "tangential_force", "position_error_rate", "wrench_valid")
+                 "tangential_force", "position_error_rate", "force_integral_rate", "wrench_valid", "contact_phase",
+                 "saturation_scale", "actuator_clipped", "smallest_singular_value", "singularity_damping")
 
 
 @TemplateSystem.define("HybridController_", T_list=[float, AutoDiffXd])
@@ -82,6 +89,7 @@ def HybridController_(T):
             - desired_velocity
             - desired_acceleration
             - desired_force
+            - contact_phase (only with guarded_move)
             output_ports:
             - actuation
             - velocity_error
@@ -101,6 +109,7 @@ def HybridController_(T):
         desired_velocity      k     r-dot_pd
         desired_acceleration  k     r-ddot_pd (its derivative along the trajectory)
         desired_force         m     F_d, in the coordinates of the constraint's E_f
+        contact_phase         1     safety.ContactPhase (only with ``guarded_move``)
         actuation             n_u   joint torques mapped to the actuators
         velocity_error        k     e_p' = E_p r-dot - r-dot_pd
         force_error           m     e_f = F - F_d
@@ -163,7 +172,25 @@ def HybridController_(T):
 
         A measured wrench with a NaN or inf entry (sensor dropout) is ignored
         for that evaluation: the force error is taken as zero and the
-        integrals hold, so the torque stays finite.
+        integrals hold, so the torque stays finite. A non-finite state or
+        command raises ValueError naming the port.
+
+        Protections (``safety``; none changes the law where it is not active):
+
+        * effort limits: the actuation is saturated gracefully (the task part of
+          tau = (h + g) + tau_task scaled by the largest s <= 1 within the limits)
+          and, with ``anti_windup``, xi and e_p are frozen while saturated;
+        * kinematic singularities: where sigma_min(J) < ``singularity_threshold``
+          and the task part would command a joint acceleration beyond
+          ``max_joint_acceleration``, the inverse of J (n = d) or of J M^-1 J^T
+          (n > d) is damped just enough to meet the bound, with a
+          ``KinematicSingularityWarning`` the first time;
+        * contact not there (``guarded_move`` given): with ``contact_phase`` not
+          CONTACT the force-controlled rows of [a_p; a_f] become the guarded move
+          a_f = -K_a (C-dot - s n_C) (n_C = -F_d / |F_d|, the pressing direction;
+          s = approach_speed in APPROACH, 0 in TARE and HOLD), u_f = 0 on them and
+          xi is frozen (anti-windup while off the surface). The velocity rows keep
+          their law.
 
         Preconditions: the plant is finalized, has nq = nv = n >= d and one
         actuator per joint; J has full row rank along the task; the chart and
@@ -181,13 +208,25 @@ def HybridController_(T):
                 the period (zero-delay hold, default) or exactly at them (every
                 torque one period late; all discrete updates then share one
                 timing, which the discrete-time linearization needs).
+            safety: a SafetyConfig (effort limits, anti-windup, the joint
+                acceleration bound); None = defaults (the plant's effort limits).
+            guarded_move: None, or an object with ``approach_speed`` (units of C
+                per second, >= 0) and ``approach_gain`` (K_a, 1/s), e.g. a
+                ``supervision.SupervisionConfig``: declares the ``contact_phase``
+                input and the guarded move off the surface.
         """
 
         def _construct(self, plant, end_effector_frame, end_effector_point, constraint_space, gains=None,
-                       mode=ControlMode.VELOCITY_FORCE, control_period=None, sample_lead=True, converter=None):
+                       mode=ControlMode.VELOCITY_FORCE, control_period=None, sample_lead=True, safety=None,
+                       guarded_move=None, converter=None):
             LeafSystem_[T].__init__(self, converter)
+            if not hasattr(plant, "is_finalized") or not hasattr(plant, "MakeActuationMatrix"):
+                raise TypeError(f"HybridController: plant must be a MultibodyPlant, got {type(plant).__name__}")
             if plant.is_finalized() is False:
                 raise ValueError("HybridController: the plant must be finalized")
+            if not all(hasattr(constraint_space, name) for name in ("chart", "force_size", "velocity_size", "evaluate")):
+                raise TypeError("HybridController: constraint_space must be a ConstraintSpace (a constraint with its "
+                                f"velocity projection), got {type(constraint_space).__name__}")
             self._float_plant = plant
             self._float_frame = resolve_frame(plant, end_effector_frame)
             self._end_effector_point = np.asarray(end_effector_point, dtype=float)
@@ -216,6 +255,18 @@ def HybridController_(T):
                     f"HybridController needs one actuator per joint; the plant has {plant.num_actuators()} actuators "
                     f"for {n} joints")
             self._actuation_from_torque = np.linalg.inv(actuation_matrix)  # u = B^-1 tau (a permutation here)
+            self.safety = safety if safety is not None else SafetyConfig()
+            plant_limits = [plant.get_joint_actuator(i).effort_limit() for i in plant.GetJointActuatorIndices()]
+            (self.effort_limits, self._anti_windup, self._singularity_threshold,
+             self._max_joint_acceleration) = self.safety.validated(n, plant_limits)
+            self.guarded_move = guarded_move
+            if guarded_move is not None:
+                speed, gain = float(guarded_move.approach_speed), float(guarded_move.approach_gain)
+                if not speed >= 0:
+                    raise ValueError(f"HybridController: approach_speed must be >= 0, got {speed}")
+                if not gain > 0:
+                    raise ValueError(f"HybridController: approach_gain must be positive, got {gain}")
+                self._approach_speed, self._approach_gain = speed, gain
 
             # The controller's own plant, of this system's scalar type.
             self._plant = plant if T == float else plant.ToAutoDiffXd()
@@ -230,6 +281,9 @@ def HybridController_(T):
             self._velocity_port = self.DeclareVectorInputPort("desired_velocity", k)
             self._acceleration_port = self.DeclareVectorInputPort("desired_acceleration", k)
             self._force_port = self.DeclareVectorInputPort("desired_force", m)
+            self._phase_port = None
+            if guarded_move is not None:
+                self._phase_port = self.DeclareVectorInputPort("contact_phase", 1)
 
             integrated = m + (k if self.mode.integrates_position else 0)
             self._integrated_size = integrated
@@ -268,7 +322,7 @@ def HybridController_(T):
         def _construct_copy(self, other, converter=None):
             Impl._construct(self, other._float_plant, other._float_frame, other._end_effector_point,
                             other.constraint_space, other.gains, other.mode, other.control_period,
-                            other.sample_lead, converter=converter)
+                            other.sample_lead, other.safety, other.guarded_move, converter=converter)
 
         # -- public helpers ---------------------------------------------------------------
         def plant(self):
@@ -294,6 +348,21 @@ def HybridController_(T):
         def get_desired_force_input_port(self):
             return self._force_port
 
+        def get_contact_phase_input_port(self):
+            """The ``contact_phase`` input (only with ``guarded_move``; else None)."""
+            return self._phase_port
+
+        def diagnostics(self, context):
+            """What the protections did in the evaluation at ``context``: a dict with the contact
+            phase, the saturation scale s, whether an actuator was clipped, sigma_min(J) (None
+            when the exact inverse was within its bound and no SVD was needed), the damping
+            lambda^2 and whether the wrench was valid."""
+            solution = self._solution(context)
+            return {"contact_phase": ContactPhase(solution.contact_phase),
+                    "saturation_scale": solution.saturation_scale, "actuator_clipped": solution.actuator_clipped,
+                    "smallest_singular_value": solution.smallest_singular_value,
+                    "singularity_damping": solution.singularity_damping, "wrench_valid": solution.wrench_valid}
+
         def integral_state_slices(self):
             """Slices of (xi, e_p) in the continuous or discrete state vector."""
             m, k = self.force_size, self.velocity_size
@@ -309,11 +378,38 @@ def HybridController_(T):
             plant_context = self._plant_context_cache.Eval(context)
             abstract_value.set_value(self._evaluate_law(context, plant_context))
 
+        def _contact_phase(self, context):
+            if self._phase_port is None:
+                return ContactPhase.CONTACT
+            code = float(value(self._phase_port.Eval(context))[0])
+            if code not in (0.0, 1.0, 2.0, 3.0):
+                raise ValueError(f"HybridController: contact_phase must be one of {[int(p) for p in ContactPhase]} "
+                                 f"({', '.join(p.name for p in ContactPhase)}), got {code}")
+            return ContactPhase(int(code))
+
+        def _check_finite_commands(self, *commands):
+            """ValueError naming the first non-finite command (the state is checked by the plant-context cache)."""
+            for port, command in zip((self._velocity_port, self._acceleration_port, self._force_port), commands):
+                if not all_finite(command):
+                    raise ValueError(f"HybridController: input '{port.get_name()}' has non-finite entries "
+                                     f"{value(command).tolist()}")
+
+        def _guarded_acceleration(self, values, nu, desired_force, phase):
+            """The guarded move on the force-controlled rows: a_f = -K_a (C-dot - s n_C) (0 on kinematic rows)."""
+            pressing = -value(desired_force) * self._force_controlled       # -F_d: the way the robot pushes
+            norm = np.linalg.norm(pressing)
+            direction = pressing / norm if norm > 0 else pressing           # n_C
+            speed = self._approach_speed if phase is ContactPhase.APPROACH else 0.0
+            C_dot = values.force_projection @ nu                             # C-dot = E_f r-dot
+            return -self._approach_gain * (C_dot - speed * direction) * self._force_controlled
+
         def _evaluate_law(self, context, plant_context):
             space = self.constraint_space
             gains = self._gains
             m, k = self.force_size, self.velocity_size
             plant = self._plant
+            phase = self._contact_phase(context)
+            in_contact = phase is ContactPhase.CONTACT
             kin = self.kinematics.evaluate(plant_context)
             x, nu = kin.configuration, kin.velocity
             values = space.evaluate(x, nu)                                   # E_p, E_f, E-dot r-dot, C
@@ -325,6 +421,7 @@ def HybridController_(T):
             desired_acceleration = self._acceleration_port.Eval(context)
             desired_force = self._force_port.Eval(context)
             wrench = self._wrench_port.Eval(context)
+            self._check_finite_commands(desired_velocity, desired_acceleration, desired_force)
 
             # Force decomposition [F_v; F] = E^-T w (spec section 0); a dropout is ignored.
             wrench_valid = bool(np.all(np.isfinite(value(wrench))))
@@ -366,34 +463,66 @@ def HybridController_(T):
                     extra[kinematic] = compensation[k:]
                     constraint_acceleration = constraint_acceleration + extra
 
+            if not in_contact:
+                # Off the surface: the guarded move on the force rows instead of a_f = 0.
+                guarded = self._guarded_acceleration(values, nu, desired_force, phase)
+                constraint_acceleration = guarded if constraint_acceleration is None else constraint_acceleration + guarded
             task_acceleration = space.task_acceleration(values, acceleration, constraint_acceleration)  # (3.0-11)
             force_command = -desired_force + gains.force_proportional @ force_error + gains.force_integral @ xi
+            if not in_contact:
+                force_command = force_command * (1.0 - self._force_controlled)   # no force loop off the surface
             force_torque = J.T @ (values.force_projection.T @ force_command)    # J^T E_f^T u_f
 
             self._plant.CalcForceElementsContribution(plant_context, self._forces)
+            threshold, bound = self._singularity_threshold, self._max_joint_acceleration
+            base_torque = None                                                  # h + g, for the saturation
             if n == d:
-                joint_acceleration = solve(J, task_acceleration - bias)         # J^-1 (r-ddot* - J-dot q-dot)
+                # J^-1 (r-ddot* - J-dot q-dot), damped where it would exceed the bound (safety.py).
+                joint_acceleration, sigma_min, lambda_squared = bounded_solve(J, task_acceleration - bias, threshold,
+                                                                              bound)
                 torque = plant.CalcInverseDynamics(plant_context, joint_acceleration, self._forces) + force_torque
             else:
                 # Dynamically consistent generalization (spec section 8a).
                 v = plant.GetVelocities(plant_context)
-                Lambda = inv(task_mobility)
+                Lambda, sigma_min, lambda_squared = bounded_task_inertia(J, M_inverse, task_mobility,
+                                                                         task_acceleration - bias, threshold, bound)
                 J_bar = M_inverse @ J.T @ Lambda
                 null_space_transpose = np.eye(n) - J.T @ J_bar.T
-                torque = (plant.CalcInverseDynamics(plant_context, self._zero_acceleration, self._forces)
+                base_torque = plant.CalcInverseDynamics(plant_context, self._zero_acceleration, self._forces)
+                torque = (base_torque
                           + J.T @ (Lambda @ (task_acceleration - bias)) + force_torque
                           - null_space_transpose @ (M @ (gains.null_space_damping * v)))
+            if lambda_squared > 0:
+                warn_singularity(self, sigma_min, bound)
+
+            def base_actuation():
+                torque_0 = base_torque if base_torque is not None else plant.CalcInverseDynamics(
+                    plant_context, self._zero_acceleration, self._forces)
+                return self._actuation_from_torque @ torque_0
+
+            actuation, scale, clipped = saturate(self._actuation_from_torque @ torque, base_actuation,
+                                                 self.effort_limits)
+            if not all_finite(actuation):
+                raise FloatingPointError(f"HybridController: non-finite actuation {value(actuation).tolist()} at "
+                                         f"q = {value(plant.GetPositions(plant_context)).tolist()}")
+            frozen = self._anti_windup and (scale < 1.0 or clipped)            # conditional integration
 
             solution = ControlSolution()
-            solution.actuation = self._actuation_from_torque @ torque
+            solution.actuation = actuation
             solution.velocity_error = velocity_error
             solution.force_error = force_error
             solution.constraint_value = values.constraint_value
             solution.projected_velocity = projected_velocity
             solution.force = force
             solution.tangential_force = tangential_force
-            solution.position_error_rate = velocity_error
+            solution.position_error_rate = velocity_error * 0.0 if frozen else velocity_error
+            solution.force_integral_rate = force_error * 0.0 if (frozen or not in_contact) else force_error
             solution.wrench_valid = wrench_valid
+            solution.contact_phase = int(phase)
+            solution.saturation_scale = scale
+            solution.actuator_clipped = clipped
+            solution.smallest_singular_value = sigma_min
+            solution.singularity_damping = lambda_squared
             return solution
 
         def _solution(self, context):
@@ -421,7 +550,7 @@ def HybridController_(T):
             if self.control_period is not None or self._integrated_size == 0:
                 return
             solution = self._solution(context)
-            rates = [solution.force_error]
+            rates = [solution.force_integral_rate]
             if self.mode.integrates_position:
                 rates.append(solution.position_error_rate)
             derivatives.get_mutable_vector().SetFromVector(np.concatenate(rates))
@@ -430,7 +559,7 @@ def HybridController_(T):
             solution = self._solution(context)
             h = float(self.control_period)
             integrals = self._integrals(context)
-            rates = [solution.force_error]
+            rates = [solution.force_integral_rate]
             if self.mode.integrates_position:
                 rates.append(solution.position_error_rate)
             new_integrals = integrals + h * np.concatenate(rates)

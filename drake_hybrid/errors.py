@@ -39,6 +39,22 @@ class BranchError(DrakeHybridError):
     pointing away from the workpiece instead of toward it)."""
 
 
+class KinematicSingularityWarning(UserWarning):
+    """The arm is near a kinematic singularity: the controller bounds the joint acceleration with a
+    damped inverse of J there, so the commanded task acceleration is only approximately produced."""
+
+
 class OffConstraintError(DrakeHybridError):
     """A configuration that should satisfy C(r) = 0 does not (e.g. a start
     configuration off the constraint)."""
+
+
+def check_fields(owner, prefix, positive=(), nonnegative=()):
+    """Raise ValueError naming ``prefix.field`` if a field of ``owner`` (a config dataclass) listed in
+    ``positive`` is not > 0 or one in ``nonnegative`` is not >= 0 (NaN fails both)."""
+    for names, test, words in ((positive, lambda x: x > 0, "positive"), (nonnegative, lambda x: x >= 0, ">= 0")):
+        for name in names:
+            number = getattr(owner, name)
+            if not test(float(number)):
+                raise ValueError(f"{prefix}{name} must be {words}, got {number}")
+    return owner

@@ -17,6 +17,7 @@ from pydrake.multibody.tree import FrameIndex, JacobianWrtVariable
 from pydrake.systems.framework import ValueProducer
 
 from drake_hybrid.errors import DimensionError
+from drake_hybrid.linalg import value
 
 
 @dataclass
@@ -121,7 +122,12 @@ def declare_plant_context_cache(system, plant, state_port):
     """
 
     def calc(context, abstract_value):
-        plant.SetPositionsAndVelocities(abstract_value.get_mutable_value(), state_port.Eval(context))
+        state = state_port.Eval(context)
+        if not np.all(np.isfinite(value(state))):
+            # Drake's SetPositionsAndVelocities aborts on a non-finite state; say which input it was.
+            raise ValueError(f"{system.get_name() or type(system).__name__}: input '{state_port.get_name()}' has "
+                             f"non-finite entries {value(state).tolist()}")
+        plant.SetPositionsAndVelocities(abstract_value.get_mutable_value(), state)
 
     return system.DeclareCacheEntry(
         description="plant context",

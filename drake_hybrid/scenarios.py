@@ -2,13 +2,20 @@
 
 A ``ScenarioConfig`` (a dataclass that loads from and dumps to YAML with
 Drake's ``yaml_load_typed``) describes a run: task, mode, gains, contact,
-sensor, desired profiles, start. ``build_scenario(config)`` returns a
+sensor, desired profiles, start, and the faults and protections (model error,
+sensor faults, contact supervision, safety). ``build_scenario(config)`` returns a
 ``Scenario`` whose ``diagram`` is::
 
     ProfileSource / DesiredFieldSource ──desired_*──────────────┐
     plant ──state──────────────────────────────────────────────►├─► HybridController ──actuation──► plant
     plant ──contact_results / reaction_forces─► sensor ─► filter ┘
     loggers ◄── every named output
+
+and, when the config asks for them (parts in brackets are optional)::
+
+    sensor ─► [SensorFaultInjector] ─faulty_wrench, sequence─► [WrenchConditioner] ─► controller
+    controller ─force, constraint_value─► [ContactSupervisor] ─contact_phase─► controller, conditioner
+    plant ─state─► [JointFriction] ─generalized_force─► plant (model error, simulation only)
 
 with named handles to every part. The same config builds the same diagram in
 a test, a notebook, the CLI or a worker process.
@@ -28,10 +35,14 @@ from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import LogVectorOutput
 
 from drake_hybrid.controller import HybridController
+from drake_hybrid.errors import DimensionError, OffConstraintError, check_fields
+from drake_hybrid.faults import JointFriction, SensorFaultConfig, SensorFaultInjector
 from drake_hybrid.gains import ControlMode, HybridGains
 from drake_hybrid.kinematics import EndEffectorKinematics
-from drake_hybrid.sensors import ContactWrenchSensor, LowPassFilter, WristForceTorqueSensor
+from drake_hybrid.safety import ContactPhase, SafetyConfig
+from drake_hybrid.sensors import ContactWrenchSensor, LowPassFilter, WrenchConditioner, WristForceTorqueSensor
 from drake_hybrid.sources import Profile, ProfileSource
+from drake_hybrid.supervision import ContactSupervisor, SupervisionConfig
 
 
 @dataclass
@@ -55,6 +66,8 @@ class ContactConfig:
 class SensorConfig:
     kind: str = "contact"                        # "contact" (ideal) or "wrist" (F/T sensor at the tool weld)
     bandwidth_hz: float = 0.0                    # first-order low-pass; 0 = none (a continuous plant needs one)
+    condition: bool = False                      # a WrenchConditioner (dropout rejection, tare, the low-pass)
+    max_hold_time: float = 0.01                  # s, how long the conditioner bridges a dropout by holding
 
 
 @dataclass
@@ -62,7 +75,8 @@ class StartConfig:
     """Start of the run: where on the constraint, and the controller's initial integrals."""
 
     configuration: List[float] = field(default_factory=list)   # task-specific start (see the task's docs)
-    in_contact: bool = True                      # start pressing with the desired force
+    in_contact: bool = True                      # start pressing with the desired force; else approach (supervision)
+    gap: float = 0.01                            # m from the surface along the pressing direction when not in contact
     tolerance: float = 5.0e-3                    # max |C(r)| allowed at the start (units of C's rows)
     force_integral: List[float] = field(default_factory=list)  # xi(0); empty = zeros
     position_error: List[float] = field(default_factory=list)  # e_p(0); empty = zeros
@@ -77,10 +91,29 @@ class ModelErrorConfig:
     model. Drake stores masses as context parameters, so ``apply_model_error``
     sets them in a plant context; ``set_initial_conditions`` does it for every
     run and linearization.
+
+    payload_mass_scale: the tool (the bodies of the robot's non-arm model instances): mass and
+        rotational inertia together.
+    link_mass_scale: the arm's links, mass and rotational inertia together (a uniformly denser
+        link: gravity changes too).
+    link_inertia_scale: the rotational inertia about the centre of mass of every arm link only
+        (masses and centres of mass kept: gravity stays exact).
+    joint_damping: viscous friction (N m s/rad) added to every arm joint (set when the plant is built).
+    joint_friction: Coulomb friction tau_c (N m) in every arm joint (``faults.JointFriction``),
+        regularized over ``friction_speed`` (rad/s).
     """
 
-    payload_mass_scale: float = 1.0              # the tool: bodies of the robot's non-arm model instances
-    link_inertia_scale: float = 1.0              # the arm's links
+    payload_mass_scale: float = 1.0
+    link_mass_scale: float = 1.0
+    link_inertia_scale: float = 1.0
+    joint_damping: float = 0.0
+    joint_friction: float = 0.0
+    friction_speed: float = 0.05
+
+    def validate(self):
+        return check_fields(self, "model_error.", positive=("payload_mass_scale", "link_mass_scale",
+                                                            "link_inertia_scale", "friction_speed"),
+                            nonnegative=("joint_damping", "joint_friction"))
 
 
 @dataclass
@@ -102,10 +135,18 @@ class ScenarioConfig:
     task_parameters: Dict[str, float] = field(default_factory=dict)
     task_options: Dict[str, str] = field(default_factory=dict)
     model_error: ModelErrorConfig = field(default_factory=ModelErrorConfig)
+    sensor_faults: SensorFaultConfig = field(default_factory=SensorFaultConfig)
+    supervision: SupervisionConfig = field(default_factory=SupervisionConfig)
+    safety: SafetyConfig = field(default_factory=SafetyConfig)
 
     def replace(self, **changes):
         """A copy with some top-level fields changed."""
         return dataclasses.replace(self, **changes)
+
+    @property
+    def supervised(self):
+        """True if the run has a contact supervisor: asked for, or needed by a start off the surface."""
+        return bool(self.supervision.enabled or not self.start.in_contact)
 
 
 def load_config(path=None, data=None, defaults=None):
@@ -116,6 +157,50 @@ def load_config(path=None, data=None, defaults=None):
 
 def dump_config(config):
     return yaml_dump_typed(config)
+
+
+CONTACT_MODELS = ("hydroelastic", "hydroelastic_with_fallback", "point")
+DISCRETE_APPROXIMATIONS = ("sap", "tamsi", "similar", "lagged")
+
+
+def validate_config(config):
+    """Check the fields of ``config`` that no constructor checks; ValueError (or DimensionError)
+    naming the field. The gains, profiles and safety limits are checked by the systems that use
+    them, the start by ``check_start``."""
+    if not isinstance(config, ScenarioConfig):
+        raise TypeError(f"expected a ScenarioConfig, got {type(config).__name__}")
+    if config.time_step < 0 or config.control_period < 0:
+        raise ValueError("time_step and control_period must be >= 0 (0 means continuous)")
+    check_fields(config, "", positive=("duration", "log_period"))
+    contact = config.contact
+    if contact.model not in CONTACT_MODELS:
+        raise ValueError(f"contact.model must be one of {CONTACT_MODELS}, got '{contact.model}'")
+    if contact.discrete_approximation not in DISCRETE_APPROXIMATIONS:
+        raise ValueError(f"contact.discrete_approximation must be one of {DISCRETE_APPROXIMATIONS}, "
+                         f"got '{contact.discrete_approximation}'")
+    check_fields(contact, "contact.", positive=("pad_modulus", "pad_resolution", "sap_near_rigid_threshold"),
+                 nonnegative=("pad_dissipation", "friction"))
+    check_fields(config.sensor, "sensor.", nonnegative=("bandwidth_hz", "max_hold_time"))
+    check_fields(config.start, "start.", positive=("tolerance", "gap"))
+    config.model_error.validate()
+    config.sensor_faults.validate()
+    config.supervision.validate()
+    sampled_parts = [name for name, used in (("supervision (or a start off the surface)", config.supervised),
+                                             ("sensor_faults", config.sensor_faults.active()),
+                                             ("sensor.condition", config.sensor.condition)) if used]
+    if sampled_parts and not config.control_period > 0:
+        raise ValueError(f"{', '.join(sampled_parts)} need a sampled controller: set control_period > 0")
+    if config.supervision.tare_time > 0 and not config.start.in_contact and not config.sensor.condition:
+        raise ValueError("supervision.tare_time > 0 tares the sensor in the wrench conditioner: set sensor.condition")
+
+
+def _check_start_sizes(config, controller):
+    xi_slice, e_p_slice = controller.integral_state_slices()
+    m, k = xi_slice.stop, e_p_slice.stop - e_p_slice.start
+    if config.start.force_integral and len(config.start.force_integral) != m:
+        raise DimensionError(f"start.force_integral must have m = {m} entries, got {len(config.start.force_integral)}")
+    if config.start.position_error and k and len(config.start.position_error) != k:
+        raise DimensionError(f"start.position_error must have k = {k} entries, got {len(config.start.position_error)}")
 
 
 @dataclass
@@ -151,6 +236,9 @@ class Scenario:
     kinematics: EndEffectorKinematics            # on the simulation plant
     loggers: Dict[str, object] = field(default_factory=dict)
     meshcat: Optional[object] = None
+    fault_injector: Optional[object] = None      # SensorFaultInjector
+    conditioner: Optional[object] = None         # WrenchConditioner
+    supervisor: Optional[object] = None          # ContactSupervisor
 
     def plant_context(self, root_context):
         return self.plant.GetMyMutableContextFromRoot(root_context)
@@ -184,6 +272,11 @@ def build_plant(task, config, builder, time_step=None, sampled_outputs=True):
                              sap_near_rigid_threshold=config.contact.sap_near_rigid_threshold),
         builder)
     robot = task.add_robot(plant, config)
+    if config.model_error.joint_damping > 0:
+        for index in plant.GetJointIndices(robot.arm):
+            joint = plant.get_joint(index)
+            if joint.num_velocities() == 1:          # viscous friction of the simulated joints only
+                joint.set_default_damping(joint.default_damping() + float(config.model_error.joint_damping))
     workpiece_geometries = task.add_workpiece(plant, config)
     for geometry_id in robot.passive_geometries:
         scene_graph.RemoveRole(plant.get_source_id(), geometry_id, Role.kProximity)
@@ -220,8 +313,7 @@ def build_scenario(config, meshcat=None, with_loggers=True, sampled_plant_output
 
     task = get_task(config.task)
     mode = ControlMode.parse(config.mode)
-    if config.time_step < 0 or config.control_period < 0:
-        raise ValueError("time_step and control_period must be >= 0 (0 means continuous)")
+    validate_config(config)
     continuous_plant = config.time_step == 0
     control_period = config.control_period if config.control_period > 0 else None
     bandwidth = config.sensor.bandwidth_hz
@@ -235,9 +327,12 @@ def build_scenario(config, meshcat=None, with_loggers=True, sampled_plant_output
     plant, scene_graph, robot = build_plant(task, config, builder, sampled_outputs=sampled_plant_outputs)
     controller_plant, _ = build_controller_plant(task, config)
     constraint_space = task.constraint_space(config)
+    supervised = config.supervised
     controller = builder.AddNamedSystem("controller", HybridController(
         controller_plant, robot.end_effector_frame, robot.end_effector_point, constraint_space,
-        gains=config.gains, mode=mode, control_period=control_period, sample_lead=controller_sample_lead))
+        gains=config.gains, mode=mode, control_period=control_period, sample_lead=controller_sample_lead,
+        safety=config.safety, guarded_move=config.supervision if supervised else None))
+    _check_start_sizes(config, controller)
 
     robot_bodies = [plant.get_body(index) for instance in robot.model_instances
                     for index in plant.GetBodyIndices(instance)]
@@ -255,12 +350,32 @@ def build_scenario(config, meshcat=None, with_loggers=True, sampled_plant_output
         raise ValueError(f"unknown sensor kind '{config.sensor.kind}' (use 'contact' or 'wrist')")
     builder.Connect(plant.get_body_poses_output_port(), sensor.get_input_port(1))
     wrench_output = sensor.get_output_port(0)
-    wrench_filter = None
-    if bandwidth > 0:
+    true_wrench = wrench_output
+    injector = conditioner = wrench_filter = supervisor = None
+    if config.sensor_faults.active():
+        injector = builder.AddNamedSystem("sensor_faults", SensorFaultInjector(config.sensor_faults, control_period))
+        builder.Connect(wrench_output, injector.GetInputPort("wrench"))
+        wrench_output = injector.GetOutputPort("faulty_wrench")
+    tare = supervised and config.supervision.tare_time > 0 and not config.start.in_contact
+    if config.sensor.condition:
+        conditioner = builder.AddNamedSystem("wrench_conditioner", WrenchConditioner(
+            control_period, bandwidth, config.sensor.max_hold_time, use_sequence=injector is not None, tare=tare))
+        builder.Connect(wrench_output, conditioner.GetInputPort("raw_wrench"))
+        if injector is not None:
+            builder.Connect(injector.GetOutputPort("sequence"), conditioner.GetInputPort("sequence"))
+        wrench_output = conditioner.GetOutputPort("wrench")
+    elif bandwidth > 0:
         wrench_filter = builder.AddNamedSystem("wrench_filter", LowPassFilter(6, bandwidth, control_period))
         builder.Connect(wrench_output, wrench_filter.get_input_port(0))
         wrench_output = wrench_filter.get_output_port(0)
     builder.Connect(wrench_output, controller.get_measured_wrench_input_port())
+    if config.model_error.joint_friction > 0:
+        friction = builder.AddNamedSystem("joint_friction", JointFriction(
+            plant, robot.arm, config.model_error.joint_friction, config.model_error.friction_speed))
+        builder.Connect(plant.get_state_output_port(robot.arm), friction.get_input_port(0))
+        builder.Connect(friction.get_output_port(0), plant.get_applied_generalized_force_input_port())
+    if hasattr(task, "connect_environment"):
+        task.connect_environment(builder, plant, config)
     builder.Connect(plant.get_state_output_port(robot.arm), controller.get_estimated_state_input_port())
     builder.Connect(controller.GetOutputPort("actuation"), plant.get_actuation_input_port(robot.arm))
 
@@ -269,6 +384,21 @@ def build_scenario(config, meshcat=None, with_loggers=True, sampled_plant_output
         builder.Connect(plant.get_state_output_port(robot.arm), source.get_input_port(0))
     for name in ("desired_velocity", "desired_acceleration", "desired_force"):
         builder.Connect(source.GetOutputPort(name), controller.GetInputPort(name))
+    if supervised:
+        if config.start.in_contact:
+            initial_phase = ContactPhase.CONTACT
+        else:
+            initial_phase = ContactPhase.TARE if tare else ContactPhase.APPROACH
+        supervisor = builder.AddNamedSystem("contact_supervisor", ContactSupervisor(
+            config.supervision, constraint_space.force_size, controller.kinematic_rows, control_period,
+            initial_phase))
+        for name in ("force", "constraint_value"):
+            builder.Connect(controller.GetOutputPort(name), supervisor.GetInputPort(name))
+        builder.Connect(source.GetOutputPort("desired_force"), supervisor.GetInputPort("desired_force"))
+        builder.Connect(wrench_output, supervisor.GetInputPort("measured_wrench"))
+        builder.Connect(supervisor.GetOutputPort("contact_phase"), controller.get_contact_phase_input_port())
+        if tare:
+            builder.Connect(supervisor.GetOutputPort("contact_phase"), conditioner.GetInputPort("contact_phase"))
 
     loggers = {}
     if with_loggers:
@@ -280,6 +410,10 @@ def build_scenario(config, meshcat=None, with_loggers=True, sampled_plant_output
             loggers[name] = LogVectorOutput(source.GetOutputPort(name), builder, period)
         loggers["state"] = LogVectorOutput(plant.get_state_output_port(robot.arm), builder, period)
         loggers["wrench"] = LogVectorOutput(wrench_output, builder, period)
+        if true_wrench is not wrench_output:
+            loggers["true_wrench"] = LogVectorOutput(true_wrench, builder, period)
+        if supervisor is not None:
+            loggers["contact_phase"] = LogVectorOutput(supervisor.GetOutputPort("contact_phase"), builder, period)
     if meshcat is not None:
         from pydrake.geometry import MeshcatVisualizer
 
@@ -291,7 +425,8 @@ def build_scenario(config, meshcat=None, with_loggers=True, sampled_plant_output
     return Scenario(config=config, task=task, diagram=diagram, plant=plant, scene_graph=scene_graph, robot=robot,
                     controller_plant=controller_plant, controller=controller, sensor=sensor,
                     wrench_filter=wrench_filter, source=source, constraint_space=constraint_space,
-                    kinematics=kinematics, loggers=loggers, meshcat=meshcat)
+                    kinematics=kinematics, loggers=loggers, meshcat=meshcat, fault_injector=injector,
+                    conditioner=conditioner, supervisor=supervisor)
 
 
 # ------------------------------------------------------------------------------------------------
@@ -304,9 +439,10 @@ PRIMING_STEPS = 20
 
 
 def set_initial_conditions(scenario, root_context):
-    """Put the robot at the task's start, pressing with the desired force if ``start.in_contact``;
-    set the controller's integrals and the filter's output to the first sensor reading. The
-    simulated plant's masses get ``config.model_error`` (the controller's model stays nominal)."""
+    """Put the robot at the task's start, pressing with the desired force if ``start.in_contact``
+    (else ``start.gap`` away, for the supervisor's approach); apply the model error to the
+    simulated plant; set the controller's integrals and the filter's (or conditioner's) output
+    to the first sensor reading."""
     config, task, plant = scenario.config, scenario.task, scenario.plant
     plant_context = scenario.plant_context(root_context)
     apply_model_error(plant, plant_context, scenario.robot, config.model_error)
@@ -328,7 +464,7 @@ def set_initial_conditions(scenario, root_context):
     if controller.control_period is None:
         controller_context.SetContinuousState(integrals)
     else:
-        held = static_torque(scenario, q0)
+        held = static_torque(scenario, q0, pressing=config.start.in_contact)
         controller_context.SetDiscreteState(0, np.concatenate([integrals, held]))
     if plant.time_step() > 0 and plant.has_sampled_output_ports():
         # A discrete plant's contact results and reaction forces are sampled at its steps; before the
@@ -338,29 +474,50 @@ def set_initial_conditions(scenario, root_context):
         for _ in range(PRIMING_STEPS):
             plant.ExecuteForcedEvents(plant_context, publish=False)
         plant.SetPositionsAndVelocities(plant_context, environment)
+    reading = scenario.sensor.get_output_port(0).Eval(scenario.sensor.GetMyContextFromRoot(root_context))
+    if scenario.fault_injector is not None:
+        injector = scenario.fault_injector
+        injector.set_initial_sample(injector.GetMyMutableContextFromRoot(root_context), reading)
+        faulty = injector.GetOutputPort("faulty_wrench").Eval(injector.GetMyContextFromRoot(root_context))
+        reading = faulty if np.all(np.isfinite(faulty)) else reading
     if scenario.wrench_filter is not None:
         filter_context = scenario.wrench_filter.GetMyMutableContextFromRoot(root_context)
-        reading = scenario.sensor.get_output_port(0).Eval(scenario.sensor.GetMyContextFromRoot(root_context))
         scenario.wrench_filter.set_initial_output(filter_context, reading)
+    if scenario.conditioner is not None:
+        scenario.conditioner.set_initial_output(scenario.conditioner.GetMyMutableContextFromRoot(root_context), reading)
+    if scenario.supervisor is not None:
+        supervisor = scenario.supervisor
+        controller_plant_context = scenario.controller_plant.CreateDefaultContext()
+        scenario.controller_plant.SetPositions(controller_plant_context, q0)
+        start = controller.kinematics.evaluate(controller_plant_context).configuration
+        supervisor.set_initial_state(supervisor.GetMyMutableContextFromRoot(root_context), supervisor.initial_phase,
+                                     scenario.constraint_space.constraint.value(start))
 
 
 def apply_model_error(plant, plant_context, robot, model_error):
     """Scale the simulated payload's and links' inertias in ``plant_context`` (see ModelErrorConfig)."""
     from pydrake.multibody.tree import SpatialInertia
 
-    for name in ("payload_mass_scale", "link_inertia_scale"):
+    for name in ("payload_mass_scale", "link_mass_scale", "link_inertia_scale"):
         scale = getattr(model_error, name)
         if not (np.isfinite(scale) and scale > 0):
             raise ValueError(f"model_error.{name} must be a positive number, got {scale}")
     for instance in robot.model_instances:
-        scale = model_error.link_inertia_scale if instance == robot.arm else model_error.payload_mass_scale
-        if scale == 1.0:
+        on_arm = instance == robot.arm
+        mass_scale = model_error.link_mass_scale if on_arm else model_error.payload_mass_scale
+        inertia_scale = model_error.link_inertia_scale if on_arm else 1.0
+        if mass_scale == 1.0 and inertia_scale == 1.0:
             continue
         for index in plant.GetBodyIndices(instance):
             body = plant.get_body(index)
             M_BBo_B = body.default_spatial_inertia()         # nominal (the model's), so applying twice is safe
-            body.SetSpatialInertiaInBodyFrame(plant_context, SpatialInertia(
-                scale * M_BBo_B.get_mass(), M_BBo_B.get_com(), M_BBo_B.get_unit_inertia()))
+            mass, com = M_BBo_B.get_mass(), M_BBo_B.get_com()
+            if mass == 0:
+                continue
+            # Rotational inertia about the centre of mass: scaled with the mass, and by inertia_scale.
+            central = M_BBo_B.Shift(com).CalcRotationalInertia() * (mass_scale * inertia_scale)
+            body.SetSpatialInertiaInBodyFrame(plant_context,
+                                              SpatialInertia.MakeFromCentralInertia(mass_scale * mass, com, central))
 
 
 def check_start(scenario, q):
@@ -374,12 +531,18 @@ def check_start(scenario, q):
     x = task.configuration
     scenario.constraint_space.evaluate(x, task.velocity)
     constraint = scenario.constraint_space.constraint
-    constraint.check_satisfied(x, scenario.config.start.tolerance)
+    if scenario.config.start.in_contact:
+        try:
+            constraint.check_satisfied(x, scenario.config.start.tolerance)
+        except OffConstraintError as error:
+            raise OffConstraintError(f"{error}; to start off the surface and approach it, set start.in_contact: "
+                                     "false (the contact supervisor's guarded move)") from None
     constraint.check_branch(x)
 
 
-def static_torque(scenario, q):
-    """tau = g(q) - J^T E_f^T F_d: the actuation that holds the robot at rest pressing with F_d."""
+def static_torque(scenario, q, pressing=True):
+    """tau = g(q) - J^T E_f^T F_d: the actuation that holds the robot at rest pressing with F_d
+    (``pressing=False``: g(q) only, in free space)."""
     controller = scenario.controller
     plant = scenario.controller_plant
     context = plant.CreateDefaultContext()
@@ -387,7 +550,7 @@ def static_torque(scenario, q):
     kinematics = controller.kinematics
     task = kinematics.evaluate(context)
     values = scenario.constraint_space.evaluate(task.configuration, task.velocity)
-    desired_force = np.asarray(scenario.config.desired_force.evaluate(0.0)[0])
+    desired_force = np.asarray(scenario.config.desired_force.evaluate(0.0)[0]) * (1.0 if pressing else 0.0)
     gravity = -plant.CalcGravityGeneralizedForces(context)
     torque = gravity - task.jacobian.T @ (values.force_projection.T @ desired_force)
     return np.linalg.solve(plant.MakeActuationMatrix(), torque)

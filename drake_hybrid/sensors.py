@@ -16,6 +16,10 @@ frame: the sign convention of spec section 0.
     continuous plant, the contact results are direct feedthrough of the
     actuation, so plant -> sensor -> controller -> plant is an algebraic loop;
     a filter breaks it (see docs/drake_notes.md).
+``WrenchConditioner``
+    what a real sensor needs before the controller: dropout (NaN) and
+    stale-sample rejection with a bounded hold, a tare against a constant bias,
+    and the same low-pass, sampled at the control period.
 
 All are TemplateSystems (float and AutoDiffXd) so closed loops linearize.
 """
@@ -33,7 +37,10 @@ from pydrake.multibody.plant import ContactResults_
 from pydrake.systems.framework import LeafSystem_
 from pydrake.systems.scalar_conversion import TemplateSystem
 
+from drake_hybrid.errors import DimensionError
 from drake_hybrid.kinematics import resolve_frame
+from drake_hybrid.linalg import value
+from drake_hybrid.safety import ContactPhase
 
 
 def _robot_geometry_ids(plant, robot_bodies):
@@ -46,6 +53,13 @@ def _robot_geometry_ids(plant, robot_bodies):
 def _point_in_world(body_poses, body_index, point_in_body):
     X_WB = body_poses[int(body_index)]
     return X_WB.translation() + X_WB.rotation().matrix() @ point_in_body
+
+
+def _point(point, owner):
+    point = np.asarray(point, dtype=float)
+    if point.shape != (3,):
+        raise DimensionError(f"{owner}: end_effector_point must be a 3-vector, got shape {point.shape}")
+    return point
 
 
 def _shift(F_coefficients, p_from_to_W):
@@ -89,11 +103,15 @@ def ContactWrenchSensor_(T):
             LeafSystem_[T].__init__(self, converter)
             self._plant = plant
             self._robot_bodies = list(robot_bodies)
+            if not self._robot_bodies:
+                raise ValueError("ContactWrenchSensor: robot_bodies is empty; give the bodies of the arm and tool")
+            if not plant.geometry_source_is_registered():
+                raise ValueError("ContactWrenchSensor: the plant has no SceneGraph (no contact results)")
             self._robot_body_indices = {int(b.index()) for b in self._robot_bodies}
             self._robot_geometries = _robot_geometry_ids(plant, self._robot_bodies)
             frame = resolve_frame(plant, end_effector_frame)
             self._frame = frame
-            self._end_effector_point = np.asarray(end_effector_point, dtype=float)
+            self._end_effector_point = _point(end_effector_point, "ContactWrenchSensor")
             self._body_index = frame.body().index()
             self._point_in_body = frame.GetFixedPoseInBodyFrame().multiply(self._end_effector_point)
             self.DeclareAbstractInputPort("contact_results", AbstractValue.Make(ContactResults_[T]()))
@@ -171,6 +189,9 @@ def WristForceTorqueSensor_(T):
 
         def _construct(self, plant, weld_joint, end_effector_frame, end_effector_point, converter=None):
             LeafSystem_[T].__init__(self, converter)
+            if type(weld_joint).__name__ != "WeldJoint" or weld_joint.GetParentPlant() is not plant:
+                raise ValueError(f"WristForceTorqueSensor: weld_joint must be a WeldJoint of the plant, got "
+                                 f"{type(weld_joint).__name__}")
             self._plant = plant
             self._weld_joint = weld_joint
             self._joint_index = int(weld_joint.index())
@@ -183,7 +204,7 @@ def WristForceTorqueSensor_(T):
             self._gravity = plant.gravity_field().gravity_vector()
             frame = resolve_frame(plant, end_effector_frame)
             self._frame = frame
-            self._end_effector_point = np.asarray(end_effector_point, dtype=float)
+            self._end_effector_point = _point(end_effector_point, "WristForceTorqueSensor")
             self._body_index = frame.body().index()
             self._point_in_body = frame.GetFixedPoseInBodyFrame().multiply(self._end_effector_point)
             self.DeclareAbstractInputPort("reaction_forces", Value[List[SpatialForce_[T]]]([]))
@@ -218,6 +239,14 @@ def WristForceTorqueSensor_(T):
 WristForceTorqueSensor = WristForceTorqueSensor_[None]
 
 
+def low_pass_coefficient(bandwidth_hz, period):
+    """alpha = 1 - exp(-2 pi f_c h): the exact discretization of y-dot = 2 pi f_c (u - y) for a held
+    input (1 when bandwidth_hz is 0: no filtering)."""
+    if not bandwidth_hz > 0:
+        return 1.0
+    return 1.0 - math.exp(-2 * math.pi * bandwidth_hz * period)
+
+
 @TemplateSystem.define("LowPassFilter_", T_list=[float, AutoDiffXd])
 def LowPassFilter_(T):
 
@@ -242,6 +271,8 @@ def LowPassFilter_(T):
             LeafSystem_[T].__init__(self, converter)
             if not bandwidth_hz > 0:
                 raise ValueError(f"LowPassFilter: bandwidth_hz must be positive, got {bandwidth_hz}")
+            if int(size) != size or size < 1:
+                raise ValueError(f"LowPassFilter: size must be a positive integer, got {size}")
             if period is not None and not period > 0:
                 raise ValueError(f"LowPassFilter: period must be positive or None, got {period}")
             self._size, self.bandwidth_hz, self.period = size, float(bandwidth_hz), period
@@ -251,7 +282,7 @@ def LowPassFilter_(T):
                 state = self.DeclareContinuousState(size)
                 self.DeclareStateOutputPort("y", state)
             else:
-                self._alpha = 1.0 - math.exp(-self._rate * period)
+                self._alpha = low_pass_coefficient(self.bandwidth_hz, period)
                 state = self.DeclareDiscreteState(size)
                 self.DeclarePeriodicDiscreteUpdateEvent(period, 0.0, self._update)
                 self.DeclareStateOutputPort("y", state)
@@ -280,3 +311,114 @@ def LowPassFilter_(T):
 
 
 LowPassFilter = LowPassFilter_[None]
+
+
+
+@TemplateSystem.define("WrenchConditioner_", T_list=[float, AutoDiffXd])
+def WrenchConditioner_(T):
+
+    class Impl(LeafSystem_[T]):
+        """Between a wrench sensor and the controller: rejects dropouts, tares, low-pass filters.
+
+        .. pydrake_system::
+
+            name: WrenchConditioner
+            input_ports:
+            - raw_wrench
+            - sequence (only with use_sequence)
+            - contact_phase (only with tare)
+            output_ports:
+            - wrench
+
+        Every ``period`` (at the controller's tick) a raw sample u_k is *fresh* when it is finite
+        and, with ``use_sequence``, its sequence number (the sensor's packet counter, as on an
+        F/T sensor's streaming interface) differs from the last one: a stale sample, repeated
+        by a stalled sensor, is not fresh. Then
+
+            y_k = y_{k-1} + alpha (u_k - y_{k-1}),   alpha = 1 - exp(-2 pi f_c h)   (alpha = 1: no filter)
+
+        and otherwise y_k = y_{k-1} (the last good value is held). The output is y_k - b (b: the
+        tare) while the last fresh sample is at most ``max_hold_time`` old, and NaN after: the
+        controller then ignores the wrench (no force feedback, integrals held) and the contact
+        supervisor makes no decision, instead of acting on a value that no longer describes the
+        contact. With ``tare``, b is the mean of the fresh samples taken while ``contact_phase``
+        is TARE (the arm held still in free space): a constant sensor bias is removed.
+
+        The output is direct feedthrough of the inputs (y_k from u_k at the same tick: no added
+        delay); the state [y (6), b (6), tare samples, age (samples since the last fresh one),
+        last sequence] advances at each tick.
+
+        The AutoDiffXd instance computes on values (no derivatives through the conditioner).
+
+        Args:
+            period: the sampling period h (s), normally the control period.
+            bandwidth_hz: f_c of the low-pass (0: none).
+            max_hold_time: how long a dropout is bridged by holding (s, >= 0).
+            use_sequence: declare the ``sequence`` input (stale-sample detection).
+            tare: declare the ``contact_phase`` input and tare during TARE.
+        """
+
+        def _construct(self, period, bandwidth_hz=0.0, max_hold_time=0.01, use_sequence=False, tare=False,
+                       converter=None):
+            LeafSystem_[T].__init__(self, converter)
+            if not (period is not None and float(period) > 0):
+                raise ValueError(f"WrenchConditioner: period must be positive, got {period}")
+            if not float(bandwidth_hz) >= 0:
+                raise ValueError(f"WrenchConditioner: bandwidth_hz must be >= 0, got {bandwidth_hz}")
+            if not float(max_hold_time) >= 0:
+                raise ValueError(f"WrenchConditioner: max_hold_time must be >= 0, got {max_hold_time}")
+            from drake_hybrid.controller import SAMPLE_LEAD
+
+            self.period, self.bandwidth_hz, self.max_hold_time = float(period), float(bandwidth_hz), float(max_hold_time)
+            self.use_sequence, self.tare = bool(use_sequence), bool(tare)
+            self._alpha = low_pass_coefficient(self.bandwidth_hz, self.period)
+            self._max_age = int(math.floor(self.max_hold_time / self.period + 1e-9))
+            self._raw_port = self.DeclareVectorInputPort("raw_wrench", 6)
+            self._sequence_port = self.DeclareVectorInputPort("sequence", 1) if self.use_sequence else None
+            self._phase_port = self.DeclareVectorInputPort("contact_phase", 1) if self.tare else None
+            self.DeclareDiscreteState(15)
+            self.DeclarePeriodicDiscreteUpdateEvent(self.period, self.period * (1.0 - SAMPLE_LEAD), self._update)
+            self.DeclareVectorOutputPort("wrench", 6, self._calc_wrench)
+
+        def _construct_copy(self, other, converter=None):
+            Impl._construct(self, other.period, other.bandwidth_hz, other.max_hold_time, other.use_sequence,
+                            other.tare, converter=converter)
+
+        def set_initial_output(self, context, y0, sequence=0.0):
+            """Start from the reading y0 (no tare, fresh)."""
+            state = np.zeros(15)
+            state[:6] = value(np.asarray(y0))
+            state[14] = float(sequence)
+            context.get_mutable_discrete_state(0).SetFromVector(state)
+
+        def _step(self, context):
+            """(new state, output) of the tick at ``context``'s time (floats)."""
+            state = value(context.get_discrete_state(0).CopyToVector())
+            y, tare, samples, age, last_sequence = state[:6], state[6:12], state[12], state[13], state[14]
+            raw = value(self._raw_port.Eval(context))
+            fresh = bool(np.all(np.isfinite(raw)))
+            sequence = last_sequence
+            if self._sequence_port is not None:
+                sequence = float(value(self._sequence_port.Eval(context))[0])
+                fresh = fresh and sequence != last_sequence
+            if fresh:
+                y = y + self._alpha * (raw - y)
+                age = 0.0
+                if self._phase_port is not None and int(value(self._phase_port.Eval(context))[0]) == ContactPhase.TARE:
+                    tare = (tare * samples + raw) / (samples + 1.0)
+                    samples += 1.0
+            else:
+                age += 1.0
+            output = y - tare if age <= self._max_age else np.full(6, np.nan)
+            return np.concatenate([y, tare, [samples, age, sequence]]), output
+
+        def _calc_wrench(self, context, output):
+            output.SetFromVector(self._step(context)[1])
+
+        def _update(self, context, discrete_state):
+            discrete_state.get_mutable_vector(0).SetFromVector(self._step(context)[0])
+
+    return Impl
+
+
+WrenchConditioner = WrenchConditioner_[None]

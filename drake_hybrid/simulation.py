@@ -91,6 +91,9 @@ def collect_log(scenario, context):
     state = _logged(scenario, context, "state")[1]
     n = state.shape[1] // 2
     log["q"], log["v"] = state[:, :n], state[:, n:]
+    for optional in ("true_wrench", "contact_phase"):        # sensor faults or conditioning; supervision
+        if optional in scenario.loggers:
+            log[optional] = _logged(scenario, context, optional)[1]
     return log
 
 

@@ -246,5 +246,5 @@ class CustomTask:
             return inverse_kinematics(kinematics, context, X_target, self.joint_guess)
 
         if not config.start.in_contact:
-            return positions_at_depth(-0.01)
+            return positions_at_depth(-config.start.gap)
         return pressing_positions(scenario, positions_at_depth)

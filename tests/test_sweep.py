@@ -119,7 +119,8 @@ def test_discrete_linearization_names_what_it_cannot_handle(changes, message):
 def test_payload_error_scales_the_simulated_tool_only():
     config = default_config()
     config.model_error.payload_mass_scale = 1.2
-    config.model_error.link_inertia_scale = 0.9
+    config.model_error.link_mass_scale = 0.9
+    config.model_error.link_inertia_scale = 1.1
     scenario = build_scenario(config, with_loggers=False)
     context = scenario.diagram.CreateDefaultContext()
     set_initial_conditions(scenario, context)
@@ -132,12 +133,18 @@ def test_payload_error_scales_the_simulated_tool_only():
     nominal = tool.default_rotational_inertia().get_moments()
     scaled = tool.CalcSpatialInertiaInBodyFrame(plant_context).CalcRotationalInertia().get_moments()
     assert scaled == pytest.approx(1.2 * nominal, rel=1e-12)
+    # The link: centre of mass kept, central inertia scaled by mass x inertia scale.
+    nominal_link = link.default_spatial_inertia()
+    simulated_link = link.CalcSpatialInertiaInBodyFrame(plant_context)
+    np.testing.assert_allclose(simulated_link.get_com(), nominal_link.get_com(), atol=1e-15)
+    central = simulated_link.Shift(simulated_link.get_com()).CalcRotationalInertia().get_moments()
+    nominal_central = nominal_link.Shift(nominal_link.get_com()).CalcRotationalInertia().get_moments()
+    np.testing.assert_allclose(central, 0.9 * 1.1 * nominal_central, rtol=1e-12)
     controller_plant = scenario.controller_plant
     assert controller_plant.GetBodyByName("tool").get_mass(controller_plant.CreateDefaultContext()) == 0.2
     config.model_error.payload_mass_scale = -1.0
-    scenario = build_scenario(config, with_loggers=False)
-    with pytest.raises(ValueError, match="payload_mass_scale must be a positive number"):
-        set_initial_conditions(scenario, scenario.diagram.CreateDefaultContext())
+    with pytest.raises(ValueError, match="model_error.payload_mass_scale must be positive"):
+        build_scenario(config, with_loggers=False)
 
 
 def test_rigid_contact_theory_is_the_force_rate_sign():

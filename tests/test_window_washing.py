@@ -123,11 +123,16 @@ def test_config_round_trips_through_yaml():
 
 
 def test_start_off_the_window_is_rejected():
+    """A start that should press on the window but is 10 mm off it is rejected; the message says how to
+    ask for an approach instead (start.in_contact: false, see tests/test_reliability.py)."""
+    from drake_hybrid.scenarios import check_start
+
     config = TASK.default_config()
-    config.start.in_contact = False
     scenario = build_scenario(config, with_loggers=False)
-    with pytest.raises(ValueError, match=r"not on constraint 'window': C = \[-0.01\] exceeds tolerance"):
-        set_initial_conditions(scenario, scenario.diagram.CreateDefaultContext())
+    q_off = TASK.inverse_kinematics(config, 0.9, 0.97, np.pi / 2)
+    with pytest.raises(ValueError, match=r"not on constraint 'window': C = \[-0.01\] exceeds tolerance.*"
+                                         r"set start.in_contact: false"):
+        check_start(scenario, q_off)
 
 
 def sensor_readings_at_rest(task):

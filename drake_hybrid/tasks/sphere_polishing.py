@@ -180,5 +180,5 @@ class SpherePolishing:
             return seed[0]
 
         if not config.start.in_contact:
-            return positions_at_depth(-0.01)
+            return positions_at_depth(-config.start.gap)
         return pressing_positions(scenario, positions_at_depth)

@@ -17,7 +17,13 @@ force on the robot is downward and F_d < 0 (spec section 0: "push up with
 Start (``start.configuration``): [x, theta] of the pad centre on the window.
 Task parameters: ``window_height`` (m); ``joints`` (also a task option): 3 (default, the paper's
 square case n = d) or 4 (``models/planar_4r.sdf``, a redundant arm n > d,
-controlled with the dynamically consistent law and null-space damping).
+controlled with the dynamically consistent law and null-space damping);
+``window_lift`` (m, default 0): the pane moves up by this much, starting at
+``window_lift_time`` (s) over ``window_lift_duration`` (s), a cubic step with
+zero end velocities (a surface that moves away: the contact is lost and must be
+re-acquired; discrete plants only, the pane rides a prismatic joint driven by
+a stiff PD actuator that SAP integrates implicitly). The controller's
+constraint keeps the nominal height.
 """
 
 import math
@@ -26,6 +32,9 @@ import numpy as np
 
 from pydrake.math import RigidTransform, RotationMatrix
 from pydrake.multibody.parsing import Parser
+from pydrake.multibody.tree import FixedOffsetFrame, PdControllerGains, PrismaticJoint
+from pydrake.systems.primitives import TrajectorySource
+from pydrake.trajectories import PiecewisePolynomial
 
 from drake_hybrid.charts import PlanarChart
 from drake_hybrid.constraints import window_constraint
@@ -36,6 +45,9 @@ from drake_hybrid.sources import Profile, ProfileSource
 from drake_hybrid.tasks.robots import PAD_CENTER_IN_TOOL, PAD_RADIUS, add_pad_tool
 
 ARMS = {3: ("planar_3r.sdf", (1.0, 0.8, 0.3)), 4: ("planar_4r.sdf", (0.8, 0.7, 0.5, 0.2))}
+# PD gains of the moving pane's actuator (N/m, N s/m): with the pane's 1 kg, a 1 kHz natural frequency
+# well damped, so the pane follows its lift profile to micrometres under a 10 N push.
+LIFT_GAINS = (4.0e7, 1.2e4)
 
 
 class WindowWashing:
@@ -96,8 +108,42 @@ class WindowWashing:
         ConfigureParser(parser)
         window = parser.AddModelsFromUrl(model_url("window.sdf"))[0]
         height = self._height(config)
-        plant.WeldFrames(plant.world_frame(), plant.GetFrameByName("pane", window), RigidTransform([1.0, 0, height]))
+        X_W_mount = RigidTransform([1.0, 0, height])
+        pane_frame = plant.GetFrameByName("pane", window)
+        if self._lift(config)[0] == 0:
+            plant.WeldFrames(plant.world_frame(), pane_frame, X_W_mount)
+        else:
+            mount = plant.AddFrame(FixedOffsetFrame("window_mount", plant.world_frame(), X_W_mount))
+            joint = plant.AddJoint(PrismaticJoint("window_lift", mount, pane_frame, [0.0, 0.0, 1.0]))
+            actuator = plant.AddJointActuator("window_lift", joint, effort_limit=1.0e5)
+            if plant.time_step() > 0:
+                actuator.set_controller_gains(PdControllerGains(p=LIFT_GAINS[0], d=LIFT_GAINS[1]))
         return list(plant.GetCollisionGeometriesForBody(plant.GetBodyByName("pane", window)))
+
+    def _lift(self, config):
+        """(lift, start time, duration) of the pane's motion."""
+        parameters = config.task_parameters
+        lift = float(parameters.get("window_lift", 0.0))
+        start, duration = float(parameters.get("window_lift_time", 0.5)), float(parameters.get("window_lift_duration",
+                                                                                                0.01))
+        if lift != 0 and not (start > 0 and duration > 0):
+            raise ValueError(f"window-washing: window_lift_time and window_lift_duration must be positive, got "
+                             f"{start}, {duration}")
+        return lift, start, duration
+
+    def connect_environment(self, builder, plant, config):
+        """Drive the moving pane (``window_lift``) along its lift profile."""
+        lift, start, duration = self._lift(config)
+        if lift == 0:
+            return
+        if plant.time_step() == 0:
+            raise ValueError("window-washing: window_lift needs a discrete plant (time_step > 0): the pane is "
+                             "driven by a PD actuator that only SAP integrates")
+        profile = PiecewisePolynomial.CubicHermite([0.0, start, start + duration], [[0.0, 0.0, lift]],
+                                                   [[0.0, 0.0, 0.0]])
+        motion = builder.AddNamedSystem("window_motion", TrajectorySource(profile, output_derivative_order=1))
+        builder.Connect(motion.get_output_port(),
+                        plant.get_desired_state_input_port(plant.GetModelInstanceByName("window")))
 
     # -- task geometry -------------------------------------------------------------------------
     def _height(self, config):
@@ -150,5 +196,5 @@ class WindowWashing:
             return self.inverse_kinematics(config, x0, touching + depth, theta0)
 
         if not config.start.in_contact:
-            return positions_at_depth(-0.01)
+            return positions_at_depth(-config.start.gap)
         return pressing_positions(scenario, positions_at_depth)
