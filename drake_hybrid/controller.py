@@ -214,11 +214,21 @@ def HybridController_(T):
                 per second, >= 0) and ``approach_gain`` (K_a, 1/s), e.g. a
                 ``supervision.SupervisionConfig``: declares the ``contact_phase``
                 input and the guarded move off the surface.
+            sampled_diagnostics: with a control period, also store the
+                diagnostics (velocity_error, force_error, constraint_value,
+                projected_velocity, force, tangential_force) computed at each
+                tick in discrete state and output them, concatenated, on a
+                ``diagnostics`` port (layout: ``diagnostic_slices()``). Loggers
+                then read what the tick computed, as Drake's sampled output
+                ports do, instead of re-evaluating the law after the tick has
+                changed the integrals (which runs the law twice per period).
+                Off by default: the stored copy adds states with zero
+                multipliers to a discrete-time linearization.
         """
 
         def _construct(self, plant, end_effector_frame, end_effector_point, constraint_space, gains=None,
                        mode=ControlMode.VELOCITY_FORCE, control_period=None, sample_lead=True, safety=None,
-                       guarded_move=None, converter=None):
+                       guarded_move=None, sampled_diagnostics=False, converter=None):
             LeafSystem_[T].__init__(self, converter)
             if not hasattr(plant, "is_finalized") or not hasattr(plant, "MakeActuationMatrix"):
                 raise TypeError(f"HybridController: plant must be a MultibodyPlant, got {type(plant).__name__}")
@@ -245,6 +255,9 @@ def HybridController_(T):
                     f"only n = {n} joints; the law needs n >= d")
             if control_period is not None and not float(control_period) > 0:
                 raise ValueError(f"HybridController: control_period must be positive or None, got {control_period}")
+            self.sampled_diagnostics = bool(sampled_diagnostics)
+            if self.sampled_diagnostics and control_period is None:
+                raise ValueError("HybridController: sampled_diagnostics needs a control_period (a sampled controller)")
             self._gains = self.gains.matrices(k, m, self.mode)
             self.kinematic_rows = tuple(constraint_space.constraint.kinematic_rows)
             self._force_controlled = np.ones(m)
@@ -310,19 +323,26 @@ def HybridController_(T):
             else:
                 self.DeclareVectorOutputPort("actuation", n, self._calc_held_actuation,
                                              prerequisites_of_calc={self.xd_ticket()})
-            for name, size, field in [("velocity_error", k, "velocity_error"), ("force_error", m, "force_error"),
-                                      ("constraint_value", m, "constraint_value"),
-                                      ("projected_velocity", k, "projected_velocity"), ("force", m, "force"),
-                                      ("tangential_force", k, "tangential_force")]:
-                self.DeclareVectorOutputPort(name, size, self._make_solution_output(field),
+            self._diagnostic_slices, start = {}, 0
+            for name, size in [("velocity_error", k), ("force_error", m), ("constraint_value", m),
+                               ("projected_velocity", k), ("force", m), ("tangential_force", k)]:
+                self.DeclareVectorOutputPort(name, size, self._make_solution_output(name),
                                              prerequisites_of_calc=solution_ticket)
+                self._diagnostic_slices[name] = slice(start, start + size)
+                start += size
+            if self.sampled_diagnostics:
+                # Discrete state group 1: the diagnostics of the last tick.
+                self.DeclareDiscreteState(start)
+                self.DeclareVectorOutputPort("diagnostics", start, self._calc_sampled_diagnostics,
+                                             prerequisites_of_calc={self.xd_ticket()})
             self.DeclareVectorOutputPort("position_error", k, self._calc_position_error,
                                          prerequisites_of_calc={state_ticket})
 
         def _construct_copy(self, other, converter=None):
             Impl._construct(self, other._float_plant, other._float_frame, other._end_effector_point,
                             other.constraint_space, other.gains, other.mode, other.control_period,
-                            other.sample_lead, other.safety, other.guarded_move, converter=converter)
+                            other.sample_lead, other.safety, other.guarded_move, other.sampled_diagnostics,
+                            converter=converter)
 
         # -- public helpers ---------------------------------------------------------------
         def plant(self):
@@ -362,6 +382,10 @@ def HybridController_(T):
                     "saturation_scale": solution.saturation_scale, "actuator_clipped": solution.actuator_clipped,
                     "smallest_singular_value": solution.smallest_singular_value,
                     "singularity_damping": solution.singularity_damping, "wrench_valid": solution.wrench_valid}
+
+        def diagnostic_slices(self):
+            """{name: slice} of each diagnostic in the ``diagnostics`` output (``sampled_diagnostics``)."""
+            return dict(self._diagnostic_slices)
 
         def integral_state_slices(self):
             """Slices of (xi, e_p) in the continuous or discrete state vector."""
@@ -539,6 +563,14 @@ def HybridController_(T):
         def _calc_held_actuation(self, context, output):
             output.SetFromVector(context.get_discrete_state(0).CopyToVector()[self._integrated_size:])
 
+        def _calc_sampled_diagnostics(self, context, output):
+            output.SetFromVector(context.get_discrete_state(1).CopyToVector())
+
+        def _store_diagnostics(self, solution, discrete_state):
+            if self.sampled_diagnostics:
+                discrete_state.get_mutable_vector(1).SetFromVector(np.concatenate(
+                    [getattr(solution, name) for name in self._diagnostic_slices]))
+
         def _calc_position_error(self, context, output):
             m, k = self.force_size, self.velocity_size
             if self.mode.integrates_position:
@@ -564,11 +596,13 @@ def HybridController_(T):
                 rates.append(solution.position_error_rate)
             new_integrals = integrals + h * np.concatenate(rates)
             discrete_state.get_mutable_vector(0).SetFromVector(np.concatenate([new_integrals, solution.actuation]))
+            self._store_diagnostics(solution, discrete_state)
 
         def _initialize_actuation(self, context, discrete_state):
             solution = self._solution(context)
             discrete_state.get_mutable_vector(0).SetFromVector(
                 np.concatenate([self._integrals(context), solution.actuation]))
+            self._store_diagnostics(solution, discrete_state)
 
     return Impl
 

@@ -234,7 +234,7 @@ class Scenario:
     source: object
     constraint_space: object
     kinematics: EndEffectorKinematics            # on the simulation plant
-    loggers: Dict[str, object] = field(default_factory=dict)
+    loggers: Dict[str, object] = field(default_factory=dict)   # name -> VectorLogSink or (sink, columns)
     meshcat: Optional[object] = None
     fault_injector: Optional[object] = None      # SensorFaultInjector
     conditioner: Optional[object] = None         # WrenchConditioner
@@ -331,7 +331,8 @@ def build_scenario(config, meshcat=None, with_loggers=True, sampled_plant_output
     controller = builder.AddNamedSystem("controller", HybridController(
         controller_plant, robot.end_effector_frame, robot.end_effector_point, constraint_space,
         gains=config.gains, mode=mode, control_period=control_period, sample_lead=controller_sample_lead,
-        safety=config.safety, guarded_move=config.supervision if supervised else None))
+        safety=config.safety, guarded_move=config.supervision if supervised else None,
+        sampled_diagnostics=with_loggers and control_period is not None))
     _check_start_sizes(config, controller)
 
     robot_bodies = [plant.get_body(index) for instance in robot.model_instances
@@ -403,8 +404,15 @@ def build_scenario(config, meshcat=None, with_loggers=True, sampled_plant_output
     loggers = {}
     if with_loggers:
         period = config.log_period
-        for name in ("velocity_error", "force_error", "constraint_value", "projected_velocity", "force",
-                     "tangential_force", "position_error", "actuation"):
+        if controller.sampled_diagnostics:
+            # What each tick computed (one logger; no re-evaluation of the law after the tick).
+            diagnostics = LogVectorOutput(controller.GetOutputPort("diagnostics"), builder, period)
+            for name, columns in controller.diagnostic_slices().items():
+                loggers[name] = (diagnostics, columns)
+        else:
+            for name in controller.diagnostic_slices():
+                loggers[name] = LogVectorOutput(controller.GetOutputPort(name), builder, period)
+        for name in ("position_error", "actuation"):
             loggers[name] = LogVectorOutput(controller.GetOutputPort(name), builder, period)
         for name in ("desired_velocity", "desired_force"):
             loggers[name] = LogVectorOutput(source.GetOutputPort(name), builder, period)

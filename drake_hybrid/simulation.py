@@ -32,8 +32,12 @@ class SimulationResult:
 
 
 def _logged(scenario, context, name):
-    log = scenario.loggers[name].FindLog(context)
-    return log.sample_times(), log.data().T
+    """(times, samples x size) of logger ``name``; a (logger, columns) entry is a slice of a shared logger."""
+    logger, columns = scenario.loggers[name], slice(None)
+    if isinstance(logger, tuple):
+        logger, columns = logger
+    log = logger.FindLog(context)
+    return log.sample_times(), log.data().T[:, columns]
 
 
 def settling_time(times, error_norm, bound):

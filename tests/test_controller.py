@@ -245,6 +245,8 @@ def test_bad_inputs_raise_clear_errors():
         HybridController(plant, "tip", np.zeros(3), space, mode="force")
     with pytest.raises(ValueError, match="control_period must be positive or None"):
         HybridController(plant, "tip", np.zeros(3), space, control_period=-1e-3)
+    with pytest.raises(ValueError, match="sampled_diagnostics needs a control_period"):
+        HybridController(plant, "tip", np.zeros(3), space, sampled_diagnostics=True)
     with pytest.raises(ValueError, match="point_in_frame must be a 3-vector"):
         HybridController(plant, "tip", np.zeros(2), space)
     from drake_hybrid import EulerZXZChart, crank_constraint, KernelVelocityProjection, ConstraintSpace

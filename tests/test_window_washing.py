@@ -203,3 +203,44 @@ def test_redundant_four_joint_arm_tracks_and_damps_its_null_space():
     assert summary["max_velocity_error_percent_after_5_time_constants"] < 1.0
     assert summary["max_force_error_percent_after_5_time_constants"] < 1.0
     assert design_time_constant(result.scenario.controller.validated_gains(), "velocity-force") == pytest.approx(0.125)
+
+
+def test_loggers_read_the_tick_and_do_not_rerun_the_law(monkeypatch):
+    """With a sampled controller the scenario logs the diagnostics stored at each tick
+    (``sampled_diagnostics``): the same numbers as logging the live ports, one law per tick."""
+    from pydrake.systems.analysis import Simulator
+
+    import drake_hybrid.scenarios as scenarios
+
+    config = get_task("window-washing").default_config()
+    config.duration = 0.1
+    original = scenarios.HybridController
+    logs, evaluations = {}, {}
+    for sampled in (True, False):
+        if not sampled:      # the same diagram with the live output ports logged instead
+            monkeypatch.setattr(scenarios, "HybridController",
+                                lambda *a, **kw: original(*a, **{**kw, "sampled_diagnostics": False}))
+        scenario = build_scenario(config)
+        assert scenario.controller.sampled_diagnostics is sampled
+        count = [0]
+        law = scenario.controller._evaluate_law
+
+        def counted(*args, law=law, count=count):
+            count[0] += 1
+            return law(*args)
+
+        scenario.controller._evaluate_law = counted
+        simulator = Simulator(scenario.diagram)
+        context = simulator.get_mutable_context()
+        set_initial_conditions(scenario, context)
+        simulator.Initialize()
+        count[0] = 0
+        simulator.AdvanceTo(config.duration)
+        evaluations[sampled] = count[0]
+        logs[sampled] = {name: (logger[0] if isinstance(logger, tuple) else logger).FindLog(context).data()
+                         for name, logger in scenario.loggers.items()}
+    ticks = round(config.duration / config.control_period)
+    assert evaluations[True] == pytest.approx(ticks, abs=1)
+    assert evaluations[False] == pytest.approx(2 * ticks, abs=2)
+    for name, columns in scenario.controller.diagnostic_slices().items():
+        np.testing.assert_array_equal(logs[True][name][columns], logs[False][name])
