@@ -116,7 +116,9 @@ def ContactWrenchSensor_(T):
             self._point_in_body = frame.GetFixedPoseInBodyFrame().multiply(self._end_effector_point)
             self.DeclareAbstractInputPort("contact_results", AbstractValue.Make(ContactResults_[T]()))
             self.DeclareAbstractInputPort("body_poses", Value[List[RigidTransform_[T]]]([]))
-            self.DeclareVectorOutputPort("wrench", 6, self._calc_wrench)
+            # A function of the inputs only (not of time): a logger at the next instant reuses the value.
+            self.DeclareVectorOutputPort("wrench", 6, self._calc_wrench,
+                                         prerequisites_of_calc={self.all_input_ports_ticket()})
 
         def _construct_copy(self, other, converter=None):
             Impl._construct(self, other._plant, other._robot_bodies, other._frame, other._end_effector_point,
@@ -209,7 +211,9 @@ def WristForceTorqueSensor_(T):
             self._point_in_body = frame.GetFixedPoseInBodyFrame().multiply(self._end_effector_point)
             self.DeclareAbstractInputPort("reaction_forces", Value[List[SpatialForce_[T]]]([]))
             self.DeclareAbstractInputPort("body_poses", Value[List[RigidTransform_[T]]]([]))
-            self.DeclareVectorOutputPort("wrench", 6, self._calc_wrench)
+            # A function of the inputs only (not of time): a logger at the next instant reuses the value.
+            self.DeclareVectorOutputPort("wrench", 6, self._calc_wrench,
+                                         prerequisites_of_calc={self.all_input_ports_ticket()})
 
         def _construct_copy(self, other, converter=None):
             Impl._construct(self, other._plant, other._weld_joint, other._frame, other._end_effector_point,
