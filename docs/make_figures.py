@@ -88,9 +88,10 @@ def diagram():
 
 
 def _screenshot(html, png, at):
+    """A frame of the recorded animation at simulation time ``at`` (s)."""
     from drake_hybrid.animation import HIDE_MESHCAT_CONTROLS, render_html
 
-    report = render_html(html, png, times=(at,), width=900, height=520, style=HIDE_MESHCAT_CONTROLS)
+    report = render_html(html, png, times=(at,), width=900, height=520, style=HIDE_MESHCAT_CONTROLS, seek=True)
     if not report.clean:
         raise SystemExit(f"{html} did not render cleanly: {report.console_errors} {report.page_errors} "
                          f"{report.blocked_requests}")

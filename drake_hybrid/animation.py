@@ -78,8 +78,13 @@ def image_statistics(png_path):
 HIDE_MESHCAT_CONTROLS = ".dg.main { display: none !important; }"
 
 
-def render_html(html_path, png_path=None, times=(1.5,), width=960, height=600, executable=None, style=None):
-    """Open ``html_path`` in headless Chromium and screenshot it ``times`` seconds after load.
+SEEK_RENDER_WAIT_MS = 500     # after a seek, time for the viewer's render loop to draw the new frame
+
+
+def render_html(html_path, png_path=None, times=(1.5,), width=960, height=600, executable=None, style=None,
+                seek=False):
+    """Open ``html_path`` in headless Chromium and screenshot it ``times`` seconds after load
+    (or, with ``seek``, at those times of the recorded animation: it is paused and moved there).
 
     Only file:, data: and blob: URLs may load (the others are blocked and
     reported, proving the page works offline). ``style``: CSS added to the
@@ -123,8 +128,13 @@ def render_html(html_path, png_path=None, times=(1.5,), width=960, height=600, e
                 page.add_style_tag(content=style)
             elapsed = 0.0
             for i, moment in enumerate(times):
-                page.wait_for_timeout(max(0.0, moment - elapsed) * 1000)
-                elapsed = moment
+                if seek:
+                    # Meshcat's Animator (the page's global ``viewer``): pause, then move every action to t.
+                    page.evaluate(f"viewer.animator.pause(); viewer.animator.seek({float(moment)});")
+                    page.wait_for_timeout(SEEK_RENDER_WAIT_MS)
+                else:
+                    page.wait_for_timeout(max(0.0, moment - elapsed) * 1000)
+                    elapsed = moment
                 path = png_path if i == 0 else png_path.with_name(f"{png_path.stem}_{i}{png_path.suffix}")
                 page.screenshot(path=str(path))
                 report.screenshots.append(path)

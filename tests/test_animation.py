@@ -63,6 +63,23 @@ def test_animation_renders_offline_in_headless_chromium(animation, tmp_path):
     assert changed > 1e-3, f"only {changed:.2%} of the pixels changed: the animation does not play"
 
 
+def test_seek_shows_the_recording_at_the_asked_time(animation, tmp_path):
+    """With ``seek`` the screenshots are frames of the recording at those simulation times: the
+    same time twice gives the same picture, the start and the end of the 2 s wipe differ."""
+    executable = _chromium_or_skip()
+    report = render_html(animation, tmp_path / "seek.png", times=(0.0, 2.0, 0.0), executable=executable, seek=True)
+    assert report.console_errors == [] and report.page_errors == [], (report.console_errors, report.page_errors)
+    from matplotlib.image import imread
+
+    start, end, start_again = (imread(str(path))[..., :3] for path in report.screenshots)
+
+    def changed(a, b):
+        return np.mean(np.abs(a - b).max(axis=2) > 0.05)
+
+    assert changed(start, end) > 1e-3, "seeking to the end shows the same picture as the start"
+    assert changed(start, start_again) < 1e-4, "seeking back to t = 0 does not show the start again"
+
+
 def test_task_camera():
     class FakeMeshcat:
         calls = []
