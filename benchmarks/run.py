@@ -42,6 +42,10 @@ SCALING_JOINTS = ("planar-3r", "planar-4r", "ur5e", "panda")
 SCALING_ROWS = (1, 2, 3, 4, 5)
 TARGETS = {"tick_ratio_6dof": 4.0, "rtf_ratio": 0.8, "accuracy_percent_planar": 1.0,
            "accuracy_percent_6dof": 2.0, "eigenvalue_deviation_percent": 5.0}
+# Tasks whose tracking errors are the point of the task, not a defect: friction makes velocity/force
+# stall and impedance/force yield by its impedance (issue 5; docs/impedance.md measures them).
+ACCURACY_NOT_APPLICABLE = {"grinding": "friction task: velocity/force stalls, impedance/force yields by design "
+                                       "(docs/impedance.md)"}
 
 
 def machine():
@@ -93,7 +97,10 @@ def targets(results):
             errors = [entry.get("max_velocity_error_percent_after_5_time_constants"),
                       entry.get("max_force_error_percent_after_5_time_constants")]
             label = f"{name} {mode}: errors after 5 tau <= {limit:g} %"
-            if None in errors or "simulation_error" in entry:
+            if name in ACCURACY_NOT_APPLICABLE:
+                verdict[label] = {"value": max(errors) if None not in errors else None, "met": "n/a",
+                                  "why": ACCURACY_NOT_APPLICABLE[name]}
+            elif None in errors or "simulation_error" in entry:
                 verdict[label] = {"value": None, "met": False}
             else:
                 worst = max(errors)
@@ -158,7 +165,14 @@ def markdown(results):
     lines += ["", "Errors in % of the command's size (|r-dot_pd|, |F_d|). C is in the constraint's units (m for "
               "the window): its residual is mostly the compliant pad's penetration at the commanded force. "
               "Eigenvalue deviation: the largest |measured - designed| / |designed| over the designed "
-              "eigenvalues of the continuous closed loop (`analysis.linearize_continuous`).", "",
+              "eigenvalues of the continuous closed loop (`analysis.linearize_continuous`), or for the crank, "
+              "whose SAP weld exists only in discrete time, of the sampled loop's one-period map "
+              "(`analysis.linearize_discrete`; its spin row is moved by the handle's inertia, which the "
+              "paper's massless constraint leaves out, and in impedance mode also by the tool's inertia that the "
+              "wrist sensor reports: both predicted within 2 % in tests/test_six_dof.py, docs/drake_notes.md). The crank's plant-alone replay "
+              "drifts (the open-loop replay does not reproduce the closed loop's motion; not investigated), but "
+              "its plant costs the same with replayed, static or zero torque (about 7x real time), so the RTF "
+              "ratio stands.", "",
               "## Scaling", "", "Tick against the number of joints n (velocity-force mode):", "",
               "| robot | n | d | m | controller us | IDC us | ratio |", "|---|---:|---:|---:|---:|---:|---:|"]
     for name, r in results["scaling"]["joints"].items():
@@ -178,7 +192,8 @@ def markdown(results):
                      f"{k['idc_tick_us']:.1f} | {k['tick_ratio']:.1f} |")
     lines += ["", "## Targets (issue 7)", "", "| target | this run | met |", "|---|---:|---|"]
     for name, v in results["targets"].items():
-        lines.append(f"| {name} | {_fmt(v['value'])} | {_fmt(v['met'])} |")
+        met = v["met"] if v["met"] != "n/a" else f"n/a: {v['why']}"
+        lines.append(f"| {name} | {_fmt(v['value'])} | {_fmt(met)} |")
     lines += ["", "Where the time goes and what to change: `benchmarks/PROFILE.md`.", ""]
     return "\n".join(lines)
 
