@@ -243,13 +243,17 @@ class LeanLaw:
             tangential_force, force = split[:k], split[k:]
         else:
             tangential_force, force = np.zeros(k), desired_force
-        force_error = force - desired_force
+        force_error = (force - desired_force) * c._force_controlled     # 0 on kinematic rows
         projected_velocity = E_p @ nu
         velocity_error = projected_velocity - desired_velocity
         acceleration = desired_acceleration - gains.velocity @ velocity_error
         if c.mode.integrates_position:
             acceleration = acceleration - gains.position @ e_p
-        rhs = np.concatenate([acceleration - E_p_dot_nu, -s["curvature"]])
+        force_rows = -s["curvature"]
+        if c.kinematic_rows:      # held by the controller: C-ddot = -3 w_c C-dot - 2 w_c^2 C
+            w_c = gains.constraint_frequency
+            force_rows = force_rows + (-3.0 * w_c * (E_f @ nu) - 2.0 * w_c * w_c * s["C"]) * (1.0 - c._force_controlled)
+        rhs = np.concatenate([acceleration - E_p_dot_nu, force_rows])
         task_acceleration = E_inverse @ rhs if self.on["raw-lapack"] else np.linalg.solve(E, rhs)
         force_command = gains.force_integral @ xi + gains.force_proportional @ force_error - desired_force
         force_torque = J.T @ (E_f.T @ force_command)

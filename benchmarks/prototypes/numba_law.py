@@ -78,8 +78,10 @@ def kernel_projection(E_f, E_f_dot, G, half_lower, nu):
 
 @numba.njit(cache=False)
 def hybrid_law(E_p, E_p_dot_nu, E_f, curvature, J, bias, nu, w, desired_velocity, desired_acceleration,
-               desired_force, xi, e_p, K_v, K_p, K_fp, K_fi, integrates_position, wrench_valid):
-    """(joint acceleration, J^T E_f^T u_f, e_p', e_f, r-dot_p, F, F_v, margin of E) of (3.1-12) / Remark 3."""
+               desired_force, xi, e_p, K_v, K_p, K_fp, K_fi, integrates_position, wrench_valid, force_controlled,
+               held_acceleration):
+    """(joint acceleration, J^T E_f^T u_f, e_p', e_f, r-dot_p, F, F_v, margin of E) of (3.1-12) / Remark 3.
+    ``force_controlled``: 1 on force rows, 0 on kinematic rows, whose C-ddot is ``held_acceleration``."""
     k = E_p.shape[0]
     d = E_p.shape[1]
     E = np.empty((d, d))
@@ -95,7 +97,7 @@ def hybrid_law(E_p, E_p_dot_nu, E_f, curvature, J, bias, nu, w, desired_velocity
     else:
         tangential_force = np.zeros(k)
         force = desired_force.copy()
-    force_error = force - desired_force
+    force_error = (force - desired_force) * force_controlled
     projected_velocity = E_p @ nu
     velocity_error = projected_velocity - desired_velocity
     acceleration = desired_acceleration - K_v @ velocity_error
@@ -103,7 +105,7 @@ def hybrid_law(E_p, E_p_dot_nu, E_f, curvature, J, bias, nu, w, desired_velocity
         acceleration = acceleration - K_p @ e_p
     rhs = np.empty(d)
     rhs[:k] = acceleration - E_p_dot_nu
-    rhs[k:] = -curvature
+    rhs[k:] = -curvature + held_acceleration
     task_acceleration = E_inverse @ rhs
     force_command = K_fi @ xi + K_fp @ force_error - desired_force
     force_torque = J.T @ (E_f.T @ force_command)
@@ -150,12 +152,16 @@ class NumbaLaw(LeanLaw):
             raise ConstraintRankError("E_f lost rank")
         integrals = c._integrals(context)
         wrench_valid = math.isfinite(wrench.sum())
+        held = np.zeros(m)
+        if c.kinematic_rows:      # held by the controller: C-ddot = -3 w_c C-dot - 2 w_c^2 C
+            w_c = gains.constraint_frequency
+            held = (-3.0 * w_c * (E_f @ nu) - 2.0 * w_c * w_c * piece("C")) * (1.0 - c._force_controlled)
         (joint_acceleration, force_torque, velocity_error, force_error, projected_velocity, force, tangential_force,
          margin_E) = hybrid_law(E_p, E_p_dot_nu, E_f, piece("curvature"), J, bias, nu, w,
                                 c._velocity_port.Eval(context), c._acceleration_port.Eval(context),
                                 c._force_port.Eval(context), integrals[:m], integrals[m:], gains.velocity,
                                 gains.position, gains.force_proportional, gains.force_integral,
-                                c.mode.integrates_position, wrench_valid)
+                                c.mode.integrates_position, wrench_valid, c._force_controlled, held)
         if margin_E < self.space.invertibility_tolerance:
             raise ConstraintRankError("E singular")
         plant.CalcForceElementsContribution(plant_context, self.forces)
