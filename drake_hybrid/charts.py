@@ -118,6 +118,11 @@ class Chart:
         """Distance-like measure to the chart's singular set (1: far; 0: singular)."""
         return 1.0
 
+    def singularity_explanation(self, x):
+        """Why a matrix built in this chart's coordinates may be singular at x (None: not the chart's
+        doing). ConstraintSpace adds it to its error when E loses rank."""
+        return None
+
     def task_velocity(self, x, V_WE):
         """nu from the spatial velocity V_WE = [omega; v] (6-vector)."""
         raise NotImplementedError
@@ -250,6 +255,8 @@ class EulerZXZChart(Chart):
     """
 
     name = "euler_zxz"
+    # Below this |sin(theta)| a singular E = [E_p; E_f] is blamed on the chart (singularity_explanation).
+    NEAR_SINGULARITY = 0.1
 
     def __init__(self, singularity_tolerance=1e-2):
         if not singularity_tolerance > 0:
@@ -268,17 +275,25 @@ class EulerZXZChart(Chart):
         self.rate_matrix_bias = CompiledFunction("T-dot eta-dot", [eta, velocity[3:]], T_dot_eta_dot, vector=True)
 
     def check(self, x):
-        sin_theta = math.sin(float(value(x[4])))
-        if abs(sin_theta) < self.singularity_tolerance:
+        margin = self.singularity_margin(x)
+        if margin < self.singularity_tolerance:
             raise ChartSingularityError(
                 f"z-x-z Euler chart is singular at theta = {float(value(x[4])):.6g} rad "
-                f"(|sin(theta)| = {abs(sin_theta):.3g} < tolerance {self.singularity_tolerance:g}): the approach "
+                f"(|sin(theta)| = {margin:.3g} < tolerance {self.singularity_tolerance:g}): the approach "
                 "vector is along +-z, where phi and psi rotate about the same axis. Use PoseChart "
                 "(singularity-free) or orient the task away from +-z."
             )
 
     def singularity_margin(self, x):
         return abs(math.sin(float(value(x[4]))))
+
+    def singularity_explanation(self, x):
+        margin = self.singularity_margin(x)
+        if margin >= self.NEAR_SINGULARITY:
+            return None
+        return (f"the {self.name} chart is near its singularity (margin {margin:.3g}): with z-x-z Euler angles "
+                "phi and psi turn about the same axis when the approach vector is along +-z. Use PoseChart "
+                "(singularity-free) for tasks that pass there.")
 
     def configuration(self, R_WE, p_WE):
         R, p = R_WE, p_WE

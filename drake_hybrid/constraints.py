@@ -34,7 +34,7 @@ import sympy
 from drake_hybrid.charts import EulerZXZChart, PlanarChart
 from drake_hybrid.errors import BranchError, ConstraintRankError, DimensionError, OffConstraintError
 from drake_hybrid.linalg import rank_margin, value
-from drake_hybrid.symbolic import CompiledFunction, time_derivative, to_sympy_matrix
+from drake_hybrid.symbolic import CompiledFunction, compiled_time_derivative, to_sympy_matrix
 
 
 def _format_configuration(chart, x):
@@ -122,10 +122,8 @@ class Constraint:
     def force_projection_rate(self, x, nu):
         """The matrix E_f-dot = sum_i dE_f/dx_i x-dot_i (m x d)."""
         if self._force_projection_rate is None:
-            chart = self.chart
-            rate = time_derivative(self._E_f_symbolic, chart.configuration_symbols, chart.configuration_rate)
-            self._force_projection_rate = CompiledFunction(
-                f"E_f-dot[{self.name}]", [chart.configuration_symbols, chart.velocity_symbols], rate)
+            self._force_projection_rate = compiled_time_derivative(f"E_f-dot[{self.name}]", self._E_f_symbolic,
+                                                                   self.chart)
         return self._force_projection_rate(x, nu)
 
     # -- checks -----------------------------------------------------------------

@@ -25,9 +25,9 @@ from pydrake.systems.scalar_conversion import TemplateSystem
 
 from drake_hybrid.errors import DimensionError
 from drake_hybrid.gains import ControlMode, HybridGains
-from drake_hybrid.kinematics import EndEffectorKinematics, declare_plant_context_cache, resolve_frame
-from drake_hybrid.linalg import inv, solve, value
-from drake_hybrid.safety import (ContactPhase, SafetyConfig, all_finite, bounded_solve, bounded_task_inertia, saturate,
+from drake_hybrid.kinematics import declare_task_input, resolve_frame
+from drake_hybrid.linalg import all_finite, inv, solve, value
+from drake_hybrid.safety import (ContactPhase, SafetyConfig, bounded_solve, bounded_task_inertia, saturate,
                                  warn_singularity)
 
 
@@ -281,15 +281,13 @@ def HybridController_(T):
                     raise ValueError(f"HybridController: approach_gain must be positive, got {gain}")
                 self._approach_speed, self._approach_gain = speed, gain
 
-            # The controller's own plant, of this system's scalar type.
-            self._plant = plant if T == float else plant.ToAutoDiffXd()
-            self.kinematics = EndEffectorKinematics(
-                self._plant, self._plant.get_frame(self._float_frame.index()), self._end_effector_point, chart)
+            # -- ports ------------------------------------------------------------------
+            # estimated_state, the controller's own plant of this system's scalar type, its kinematics.
+            _, self.kinematics, self._state_port, self._plant_context_cache = declare_task_input(
+                self, T, plant, self._float_frame, self._end_effector_point, chart)
+            self._plant = self.kinematics.plant
             self._forces = MultibodyForces_[T](self._plant)
             self._zero_acceleration = np.zeros(n) if T == float else np.array([AutoDiffXd(0.0)] * n, dtype=object)
-
-            # -- ports ------------------------------------------------------------------
-            self._state_port = self.DeclareVectorInputPort("estimated_state", 2 * n)
             self._wrench_port = self.DeclareVectorInputPort("measured_wrench", 6)
             self._velocity_port = self.DeclareVectorInputPort("desired_velocity", k)
             self._acceleration_port = self.DeclareVectorInputPort("desired_acceleration", k)
@@ -300,7 +298,6 @@ def HybridController_(T):
 
             integrated = m + (k if self.mode.integrates_position else 0)
             self._integrated_size = integrated
-            self._plant_context_cache = declare_plant_context_cache(self, self._plant, self._state_port)
             if control_period is None:
                 self.DeclareContinuousState(integrated)
                 state_ticket = self.xc_ticket()
@@ -448,7 +445,7 @@ def HybridController_(T):
             self._check_finite_commands(desired_velocity, desired_acceleration, desired_force)
 
             # Force decomposition [F_v; F] = E^-T w (spec section 0); a dropout is ignored.
-            wrench_valid = bool(np.all(np.isfinite(value(wrench))))
+            wrench_valid = all_finite(wrench)
             if wrench_valid:
                 tangential_force, force = space.split_wrench(values, self.kinematics.chart.generalized_force(x, wrench))
             else:

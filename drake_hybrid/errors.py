@@ -49,12 +49,12 @@ class OffConstraintError(DrakeHybridError):
     configuration off the constraint)."""
 
 
-def check_fields(owner, prefix, positive=(), nonnegative=()):
-    """Raise ValueError naming ``prefix.field`` if a field of ``owner`` (a config dataclass) listed in
-    ``positive`` is not > 0 or one in ``nonnegative`` is not >= 0 (NaN fails both)."""
+def check_fields(owner, prefix, positive=(), nonnegative=(), error=ValueError):
+    """Raise ``error`` (ValueError) naming ``prefix.field`` if a field of ``owner`` (a config dataclass)
+    listed in ``positive`` is not > 0 or one in ``nonnegative`` is not >= 0 (NaN fails both)."""
     for names, test, words in ((positive, lambda x: x > 0, "positive"), (nonnegative, lambda x: x >= 0, ">= 0")):
         for name in names:
             number = getattr(owner, name)
             if not test(float(number)):
-                raise ValueError(f"{prefix}{name} must be {words}, got {number}")
+                raise error(f"{prefix}{name} must be {words}, got {number}")
     return owner

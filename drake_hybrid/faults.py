@@ -28,7 +28,7 @@ from pydrake.systems.scalar_conversion import TemplateSystem
 
 from drake_hybrid.controller import SAMPLE_LEAD
 from drake_hybrid.errors import DimensionError, check_fields
-from drake_hybrid.linalg import value
+from drake_hybrid.linalg import all_finite, value
 
 DROPOUT_KINDS = ("nan", "stale")
 _BLOCK = 4096          # samples of noise drawn at once (per seed and block index)
@@ -172,7 +172,7 @@ def SensorFaultInjector_(T):
         def _update(self, context, discrete_state):
             sample, sequence = self._sample(context)
             state = value(context.get_discrete_state(0).CopyToVector())
-            last = sample if np.all(np.isfinite(sample)) else state[:6]
+            last = sample if all_finite(sample) else state[:6]
             discrete_state.get_mutable_vector(0).SetFromVector(np.concatenate([last, [sequence]]))
 
         def set_initial_sample(self, context, wrench):

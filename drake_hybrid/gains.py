@@ -26,7 +26,7 @@ from typing import List
 
 import numpy as np
 
-from drake_hybrid.errors import GainError
+from drake_hybrid.errors import GainError, check_fields
 
 
 class ControlMode(enum.Enum):
@@ -120,10 +120,8 @@ class HybridGains:
                else np.zeros((velocity_size, velocity_size)))
         K_fp = gain_matrix(self.force_proportional, force_size, "force_proportional (K_fp)", semidefinite=True)
         K_fi = gain_matrix(self.force_integral, force_size, "force_integral (K_fi)")
-        if not float(self.null_space_damping) >= 0:
-            raise GainError(f"gain null_space_damping must be >= 0, got {self.null_space_damping}")
-        if not float(self.constraint_frequency) > 0:
-            raise GainError(f"gain constraint_frequency must be positive, got {self.constraint_frequency}")
+        check_fields(self, "gain ", positive=("constraint_frequency",), nonnegative=("null_space_damping",),
+                     error=GainError)
         return ValidatedGains(K_v, K_p, K_fp, K_fi, float(self.null_space_damping), float(self.constraint_frequency))
 
     def as_lists(self, velocity_size, force_size, mode):
@@ -139,8 +137,8 @@ class ValidatedGains:
     position: np.ndarray
     force_proportional: np.ndarray
     force_integral: np.ndarray
-    null_space_damping: float = 0.0
-    constraint_frequency: float = 20.0
+    null_space_damping: float
+    constraint_frequency: float
     force_rate: np.ndarray = field(init=False)
 
     def __post_init__(self):

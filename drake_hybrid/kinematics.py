@@ -17,7 +17,7 @@ from pydrake.multibody.tree import FrameIndex, JacobianWrtVariable
 from pydrake.systems.framework import ValueProducer
 
 from drake_hybrid.errors import DimensionError
-from drake_hybrid.linalg import value
+from drake_hybrid.linalg import all_finite, value
 
 
 @dataclass
@@ -123,7 +123,7 @@ def declare_plant_context_cache(system, plant, state_port):
 
     def calc(context, abstract_value):
         state = state_port.Eval(context)
-        if not np.all(np.isfinite(value(state))):
+        if not all_finite(state):
             # Drake's SetPositionsAndVelocities aborts on a non-finite state; say which input it was.
             raise ValueError(f"{system.get_name() or type(system).__name__}: input '{state_port.get_name()}' has "
                              f"non-finite entries {value(state).tolist()}")
@@ -133,6 +133,30 @@ def declare_plant_context_cache(system, plant, state_port):
         description="plant context",
         value_producer=ValueProducer(allocate=lambda: AbstractValue.Make(plant.CreateDefaultContext()), calc=calc),
         prerequisites_of_calc={state_port.ticket()})
+
+
+def declare_cached_value(system, description, compute, prerequisites):
+    """Declare, on ``system``, a cache entry holding the Python object ``compute(context)``,
+    recomputed only when one of ``prerequisites`` (cache tickets) changes. Returns the CacheEntry."""
+    return system.DeclareCacheEntry(
+        description=description,
+        value_producer=ValueProducer(allocate=lambda: AbstractValue.Make(object()),
+                                     calc=lambda context, abstract_value: abstract_value.set_value(compute(context))),
+        prerequisites_of_calc=set(prerequisites))
+
+
+def declare_task_input(system, T, plant, end_effector_frame, end_effector_point, chart):
+    """The end-effector input of a system that reads the robot's state: declares the
+    ``estimated_state`` input ([q; v]) and the per-context plant-context cache on ``system``.
+
+    Returns (frame, kinematics, state_port, plant_context_cache): ``frame`` resolved on the float
+    ``plant``, ``kinematics`` an EndEffectorKinematics on the plant of scalar type T.
+    """
+    frame = resolve_frame(plant, end_effector_frame)
+    plant_T = plant if T == float else plant.ToAutoDiffXd()
+    kinematics = EndEffectorKinematics(plant_T, plant_T.get_frame(frame.index()), end_effector_point, chart)
+    state_port = system.DeclareVectorInputPort("estimated_state", 2 * plant.num_velocities())
+    return frame, kinematics, state_port, declare_plant_context_cache(system, plant_T, state_port)
 
 
 def inverse_kinematics(kinematics, plant_context, X_target, q_guess, tolerance=1e-12, max_iterations=200):

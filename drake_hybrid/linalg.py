@@ -44,6 +44,15 @@ def value(array):
     return array
 
 
+def all_finite(array):
+    """True if every entry (float or AutoDiffXd value) is finite. For floats one reduction: NaN and
+    inf propagate through the sum (which overflows only for entries near 1e308)."""
+    array = np.asarray(array)
+    if array.dtype == object:
+        return bool(np.all(np.isfinite(value(array))))
+    return math.isfinite(array.sum())
+
+
 def _as_autodiff(matrix):
     matrix = np.asarray(matrix, dtype=object)
     return np.vectorize(lambda a: a if isinstance(a, AutoDiffXd) else AutoDiffXd(float(a)), otypes=[object])(matrix)
@@ -178,11 +187,9 @@ def rank_margin(matrix):
     norms_squared = row_norms_squared(A)
     if not norms_squared.min() > 0.0:          # also catches NaN
         return 0.0
-    if A.shape[0] == A.shape[1]:               # det(A A^T) = det(A)^2
-        lu = _getrf(A)[0]
-        ratio = float(lu.diagonal().prod()) ** 2 / float(norms_squared.prod())
-    else:
-        ratio = _gram_determinant(A @ A.T) / float(norms_squared.prod())
+    if A.shape[0] == A.shape[1]:               # det(A A^T) = det(A)^2: from the LU factors
+        return LUFactorization(A).rank_margin()
+    ratio = _gram_determinant(A @ A.T) / float(norms_squared.prod())
     return math.sqrt(max(ratio, 0.0)) if math.isfinite(ratio) else 0.0
 
 

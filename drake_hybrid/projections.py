@@ -24,7 +24,7 @@ import sympy
 
 from drake_hybrid.errors import ChartSingularityError, ConstraintRankError, DimensionError
 from drake_hybrid.linalg import LUFactorization, cholesky, inv, rank_margin_from_cholesky, value
-from drake_hybrid.symbolic import CompiledFunction, time_derivative, to_sympy_matrix
+from drake_hybrid.symbolic import CompiledFunction, compiled_time_derivative, to_sympy_matrix
 
 
 class GivenVelocityProjection:
@@ -61,14 +61,11 @@ class GivenVelocityProjection:
         """(E_p, E_p-dot nu) at (x, nu)."""
         return self._matrix(x), self._rate(x, nu)
 
-    def rate_matrix(self, x, nu, force_projection=None, force_projection_rate=None):
-        """The matrix E_p-dot = sum_i dE_p/dx_i x-dot_i at (x, nu)."""
+    def matrix_and_rate(self, x, nu):
+        """(E_p, E_p-dot) at (x, nu), E_p-dot = sum_i dE_p/dx_i x-dot_i the matrix."""
         if self._rate_matrix is None:
-            chart = self.chart
-            rate = time_derivative(self._symbolic, chart.configuration_symbols, chart.configuration_rate)
-            self._rate_matrix = CompiledFunction(
-                f"E_p-dot[{self.name}]", [chart.configuration_symbols, chart.velocity_symbols], rate)
-        return self._rate_matrix(x, nu)
+            self._rate_matrix = compiled_time_derivative(f"E_p-dot[{self.name}]", self._symbolic, self.chart)
+        return self._matrix(x), self._rate_matrix(x, nu)
 
 
 class KernelVelocityProjection:
@@ -110,14 +107,11 @@ class KernelVelocityProjection:
 
     def evaluate(self, x, nu, force_projection=None, force_projection_rate=None):
         """(E_p, E_p-dot nu) at (x, nu)."""
-        E_p, E_p_dot = self._matrix_and_rate(x, nu, force_projection, force_projection_rate)
+        E_p, E_p_dot = self.matrix_and_rate(x, nu, force_projection, force_projection_rate)
         return E_p, E_p_dot @ nu
 
-    def rate_matrix(self, x, nu, force_projection=None, force_projection_rate=None):
-        """The matrix E_p-dot at (x, nu)."""
-        return self._matrix_and_rate(x, nu, force_projection, force_projection_rate)[1]
-
-    def _matrix_and_rate(self, x, nu, force_projection, force_projection_rate):
+    def matrix_and_rate(self, x, nu, force_projection=None, force_projection_rate=None):
+        """(E_p, E_p-dot) at (x, nu); E_f and E_f-dot may be passed in when already evaluated."""
         E_f = self.constraint.force_projection(x) if force_projection is None else force_projection
         E_f_dot = (self.constraint.force_projection_rate(x, nu) if force_projection_rate is None
                    else force_projection_rate)
@@ -208,12 +202,10 @@ class ConstraintSpace:
         factorization = LUFactorization(E)
         if check:
             margin = factorization.rank_margin()
-            if margin < self.invertibility_tolerance and self.chart.singularity_margin(x) < 0.1:
+            explanation = self.chart.singularity_explanation(x) if margin < self.invertibility_tolerance else None
+            if explanation is not None:
                 raise ChartSingularityError(
-                    f"E = [E_p; E_f] is singular (rank margin {margin:.3g}) because the {self.chart.name} chart is "
-                    f"near its singularity (margin {self.chart.singularity_margin(x):.3g}): with z-x-z Euler angles "
-                    "phi and psi turn about the same axis when the approach vector is along +-z. Use PoseChart "
-                    "(singularity-free) for tasks that pass there.")
+                    f"E = [E_p; E_f] is singular (rank margin {margin:.3g}) because {explanation}")
             if margin < self.invertibility_tolerance:
                 raise ConstraintRankError(
                     f"E = [E_p; E_f] is singular (rank margin {margin:.3g}) for constraint '{constraint.name}' and "

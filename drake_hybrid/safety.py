@@ -211,15 +211,6 @@ def warn_singularity(owner, sigma_min, max_norm):
         stacklevel=3)
 
 
-def all_finite(array):
-    """True if every entry (float or AutoDiffXd value) is finite. For floats one reduction: NaN and
-    inf propagate through the sum (which overflows only for entries near 1e308)."""
-    array = np.asarray(array)
-    if array.dtype == object:
-        return bool(np.all(np.isfinite(value(array))))
-    return math.isfinite(array.sum())
-
-
 # ------------------------------------------------------------------------------------------------
 # Contact phases (the contact supervisor's state; the controller's law depends on it)
 # ------------------------------------------------------------------------------------------------

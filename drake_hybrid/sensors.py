@@ -39,7 +39,7 @@ from pydrake.systems.scalar_conversion import TemplateSystem
 
 from drake_hybrid.errors import DimensionError
 from drake_hybrid.kinematics import resolve_frame
-from drake_hybrid.linalg import value
+from drake_hybrid.linalg import all_finite, value
 from drake_hybrid.safety import ContactPhase
 
 
@@ -400,7 +400,7 @@ def WrenchConditioner_(T):
             state = value(context.get_discrete_state(0).CopyToVector())
             y, tare, samples, age, last_sequence = state[:6], state[6:12], state[12], state[13], state[14]
             raw = value(self._raw_port.Eval(context))
-            fresh = bool(np.all(np.isfinite(raw)))
+            fresh = all_finite(raw)
             sequence = last_sequence
             if self._sequence_port is not None:
                 sequence = float(value(self._sequence_port.Eval(context))[0])

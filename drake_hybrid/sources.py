@@ -28,8 +28,9 @@ from pydrake.systems.framework import LeafSystem_
 from pydrake.systems.scalar_conversion import TemplateSystem
 
 from drake_hybrid.errors import DimensionError
-from drake_hybrid.kinematics import EndEffectorKinematics, declare_plant_context_cache, resolve_frame
+from drake_hybrid.kinematics import declare_cached_value, declare_task_input
 from drake_hybrid.linalg import value
+from drake_hybrid.projections import pseudo_desired_velocity
 from drake_hybrid.symbolic import CompiledFunction, to_sympy_matrix
 
 
@@ -132,18 +133,6 @@ def ProfileSource_(T):
 ProfileSource = ProfileSource_[None]
 
 
-def _declare_task_input(system, T, plant, end_effector_frame, end_effector_point, chart):
-    """Common part of the state-dependent sources: the ``estimated_state`` input, a plant of
-    scalar type T, the end-effector kinematics and the per-context plant-context cache."""
-    frame = resolve_frame(plant, end_effector_frame)
-    plant_T = plant if T == float else plant.ToAutoDiffXd()
-    kinematics = EndEffectorKinematics(plant_T, plant_T.get_frame(frame.index()),
-                                       np.asarray(end_effector_point, dtype=float), chart)
-    state_port = system.DeclareVectorInputPort("estimated_state", 2 * plant.num_velocities())
-    cache = declare_plant_context_cache(system, plant_T, state_port)
-    return frame, kinematics, cache
-
-
 @TemplateSystem.define("PseudoVelocitySource_", T_list=[float, AutoDiffXd])
 def PseudoVelocitySource_(T):
 
@@ -188,9 +177,12 @@ def PseudoVelocitySource_(T):
                                velocity_profile, force_profile, force_size)
             self.paper_projection, self.true_projection = paper_projection, true_projection
             self.velocity_profile, self.force_profile = velocity_profile, force_profile
-            _, self.kinematics, self._plant_context_cache = _declare_task_input(
+            _, self.kinematics, _, self._plant_context_cache = declare_task_input(
                 self, T, plant, end_effector_frame, end_effector_point, paper_projection.chart)
-            prerequisites = {self._plant_context_cache.ticket(), self.time_ticket()}
+            # Both projections at the measured state, once per state (read by two outputs).
+            self._rows = declare_cached_value(self, "E_p and E_t", lambda context: self._calc_rows(
+                self._plant_context_cache.Eval(context)), {self._plant_context_cache.ticket()})
+            prerequisites = {self._rows.ticket(), self.time_ticket()}
             self.DeclareVectorOutputPort("desired_velocity", k, self._calc_velocity, prerequisites_of_calc=prerequisites)
             self.DeclareVectorOutputPort("desired_acceleration", k, self._calc_acceleration,
                                          prerequisites_of_calc=prerequisites)
@@ -200,20 +192,20 @@ def PseudoVelocitySource_(T):
         def _construct_copy(self, other, converter=None):
             Impl._construct(self, *other._arguments, converter=converter)
 
-        def _rows(self, context):
-            task = self.kinematics.evaluate(self._plant_context_cache.Eval(context))
+        def _calc_rows(self, plant_context):
+            task = self.kinematics.evaluate(plant_context)
             x, nu = task.configuration, task.velocity
             E_p, E_p_dot_nu = self.paper_projection.evaluate(x, nu)
             E_t, E_t_dot_nu = self.true_projection.evaluate(x, nu)
-            return nu, E_p - E_t, E_p_dot_nu - E_t_dot_nu
+            return nu, E_p, E_t, E_p_dot_nu - E_t_dot_nu
 
         def _calc_velocity(self, context, output):
-            nu, difference, _ = self._rows(context)
+            nu, E_p, E_t, _ = self._rows.Eval(context)
             true_velocity = self.velocity_profile.evaluate(float(value(context.get_time())))[0]
-            output.SetFromVector(true_velocity + difference @ nu)                     # (3.3-8)
+            output.SetFromVector(pseudo_desired_velocity(E_p, E_t, true_velocity, nu))   # (3.3-8)
 
         def _calc_acceleration(self, context, output):
-            _, _, difference_rate = self._rows(context)
+            difference_rate = self._rows.Eval(context)[3]
             true_acceleration = self.velocity_profile.evaluate(float(value(context.get_time())))[1]
             output.SetFromVector(true_acceleration + difference_rate)                 # naive: no (E_p - E_t) r-ddot
 
@@ -272,9 +264,12 @@ def DesiredFieldSource_(T):
             self._velocity_field = CompiledFunction("Y_d", [symbols], Y, vector=True)
             self._velocity_field_jacobian = CompiledFunction("dY_d/dx", [symbols], Y.jacobian(list(symbols)))
             self._force_field = CompiledFunction("F_d", [symbols], F, vector=True)
-            self._float_frame, self.kinematics, self._plant_context_cache = _declare_task_input(
+            self._float_frame, self.kinematics, _, self._plant_context_cache = declare_task_input(
                 self, T, plant, end_effector_frame, end_effector_point, chart)
-            prerequisites = {self._plant_context_cache.ticket()}
+            # x, nu, E_p and E_p-dot at the measured state, once per state (read by three outputs).
+            self._task = declare_cached_value(self, "x, nu, E_p, E_p-dot", lambda context: self._calc_task(
+                self._plant_context_cache.Eval(context)), {self._plant_context_cache.ticket()})
+            prerequisites = {self._task.ticket()}
             self.DeclareVectorOutputPort("desired_velocity", k, self._calc_velocity, prerequisites_of_calc=prerequisites)
             self.DeclareVectorOutputPort("desired_acceleration", k, self._calc_acceleration,
                                          prerequisites_of_calc=prerequisites)
@@ -284,27 +279,23 @@ def DesiredFieldSource_(T):
             Impl._construct(self, other._float_plant, other._float_frame, other._end_effector_point,
                             other.constraint_space, other.velocity_field, other.force_field, converter=converter)
 
-        def _task(self, context):
-            return self.kinematics.evaluate(self._plant_context_cache.Eval(context))
+        def _calc_task(self, plant_context):
+            task = self.kinematics.evaluate(plant_context)
+            x, nu = task.configuration, task.velocity
+            return (x, nu) + tuple(self.constraint_space.velocity_projection.matrix_and_rate(x, nu))
 
         def _calc_velocity(self, context, output):
-            task = self._task(context)
-            x = task.configuration
-            E_p = self.constraint_space.velocity_projection.matrix(x)
+            x, _, E_p, _ = self._task.Eval(context)
             output.SetFromVector(E_p @ self._velocity_field(x))
 
         def _calc_acceleration(self, context, output):
-            task = self._task(context)
-            x, nu = task.configuration, task.velocity
-            projection = self.constraint_space.velocity_projection
-            E_p = projection.matrix(x)
-            E_p_dot = projection.rate_matrix(x, nu)
+            x, nu, E_p, E_p_dot = self._task.Eval(context)
             x_dot = self.constraint_space.chart.configuration_rate_at(x, nu)
             Y = self._velocity_field(x)
             output.SetFromVector(E_p_dot @ Y + E_p @ (self._velocity_field_jacobian(x) @ x_dot))
 
         def _calc_force(self, context, output):
-            output.SetFromVector(self._force_field(self._task(context).configuration))
+            output.SetFromVector(self._force_field(self._task.Eval(context)[0]))
 
     return Impl
 

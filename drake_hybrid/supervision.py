@@ -38,8 +38,8 @@ from pydrake.systems.scalar_conversion import TemplateSystem
 
 from drake_hybrid.controller import SAMPLE_LEAD
 from drake_hybrid.errors import check_fields
-from drake_hybrid.linalg import value
-from drake_hybrid.safety import ContactPhase, all_finite
+from drake_hybrid.linalg import all_finite, value
+from drake_hybrid.safety import ContactPhase
 
 
 @dataclass
@@ -202,7 +202,7 @@ def ContactSupervisor_(T):
         def _update(self, context, discrete_state):
             state = value(context.get_discrete_state(0).CopyToVector())
             force = value(self._force_port.Eval(context))
-            wrench_valid = all_finite(self._wrench_port.Eval(context)) and bool(np.all(np.isfinite(force)))
+            wrench_valid = all_finite(self._wrench_port.Eval(context)) and all_finite(force)
             new_state = self.next_state(state, force, value(self._desired_force_port.Eval(context)),
                                         value(self._constraint_port.Eval(context)), wrench_valid)
             discrete_state.get_mutable_vector(0).SetFromVector(new_state)

@@ -158,3 +158,9 @@ def time_derivative(matrix, configuration_symbols, configuration_rate):
         if symbol_rate != 0:
             rate += matrix.diff(symbol) * symbol_rate
     return rate
+
+
+def compiled_time_derivative(name, matrix, chart):
+    """The CompiledFunction (x, nu) -> d/dt ``matrix``(x) along x-dot = L(x) nu of ``chart``."""
+    rate = time_derivative(matrix, chart.configuration_symbols, chart.configuration_rate)
+    return CompiledFunction(name, [chart.configuration_symbols, chart.velocity_symbols], rate)

@@ -163,7 +163,7 @@ class LeanLaw:
             return wrench[self.chart._permutation]
         return self.chart._selector @ wrench
 
-    # -- the kernel E_p (KernelVelocityProjection._matrix_and_rate, float) -----------------------
+    # -- the kernel E_p (KernelVelocityProjection.matrix_and_rate, float) -----------------------
     def _kernel(self, E_f, E_f_dot, nu):
         G = self.projection.basis
         A = E_f @ E_f.T
