@@ -1,11 +1,11 @@
 """Per task: simulation speed, accuracy per mode, linearization time, and the task's own controller tick.
 
-Every task in ``drake_hybrid.tasks.TASKS`` is measured, so tasks added later
+Every task in ``drake_hybrid.scenario.tasks.TASKS`` is measured, so tasks added later
 are included without touching this file.
 
 * **Simulation speed.** ``rtf`` is the real-time factor (simulated / wall
   seconds of ``Simulator.AdvanceTo``, after ``Initialize``) of the task's 1 kHz
-  closed loop as users run it: ``drake_hybrid.simulation.simulate`` with the
+  closed loop as users run it: ``drake_hybrid.experiments.simulation.simulate`` with the
   task's default config (discrete SAP plant with hydroelastic contact, sampled
   controller, wrench sensor, desired-motion source, loggers). ``plant_rtf`` is
   the same plant and contact (``scenarios.build_plant`` with the same config)
@@ -39,21 +39,22 @@ import statistics
 import time
 
 import numpy as np
-
-from pydrake.systems.analysis import Simulator
-from pydrake.systems.primitives import TrajectorySource
-from pydrake.trajectories import PiecewisePolynomial
-from pydrake.systems.framework import DiagramBuilder
-
-from drake_hybrid.analysis import linearize_continuous, linearize_discrete
-from drake_hybrid.controller import HybridController
-from drake_hybrid.gains import ControlMode
-from drake_hybrid.scenarios import build_plant, build_scenario, set_initial_conditions, static_torque
-from drake_hybrid.simulation import simulate
-from drake_hybrid.tasks import TASKS, get_task
-
 from robots import BenchmarkRobot
 from tick import hybrid_evaluation, interleaved, inverse_dynamics_evaluation
+
+from pydrake.systems.analysis import Simulator
+from pydrake.systems.framework import DiagramBuilder
+from pydrake.systems.primitives import TrajectorySource
+from pydrake.trajectories import PiecewisePolynomial
+
+from drake_hybrid.analysis.linearization import linearize_continuous, linearize_discrete
+from drake_hybrid.control.controller import HybridController
+from drake_hybrid.control.gains import ControlMode
+from drake_hybrid.experiments.simulation import simulate
+from drake_hybrid.scenario.builder import build_scenario
+from drake_hybrid.scenario.plant import build_plant
+from drake_hybrid.scenario.start import set_initial_conditions, static_torque
+from drake_hybrid.scenario.tasks import TASKS, get_task
 
 MODES = [mode.value for mode in ControlMode]
 

@@ -30,12 +30,13 @@ from numpy.linalg import _umath_linalg
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from pydrake.multibody.tree import JacobianWrtVariable  # noqa: E402
-
-from drake_hybrid.linalg import rank_margin, solve  # noqa: E402
-from drake_hybrid.projections import KernelVelocityProjection  # noqa: E402
 from robots import make_robot  # noqa: E402
 from tick import fix_inputs, hybrid_evaluation, interleaved, inverse_dynamics_evaluation  # noqa: E402
+
+from pydrake.multibody.tree import JacobianWrtVariable  # noqa: E402
+
+from drake_hybrid.core.linalg import rank_margin, solve  # noqa: E402
+from drake_hybrid.core.projections import KernelVelocityProjection  # noqa: E402
 
 PERTURBATION = 1e-7
 
@@ -212,7 +213,7 @@ def cprofile_categories(robot_name, calls, rng):
     categories = {}
     top = []
     for (file_name, line, function), (_, total_calls, own, cumulative, _) in stats.items():
-        if file_name.startswith("<drake_hybrid.symbolic"):
+        if file_name.startswith("<drake_hybrid.core.symbolic"):
             category = "compiled symbolic functions"
         elif "numpy" in file_name or function.startswith(("<method 'reduce' of 'numpy", "<built-in method numpy")):
             category = "numpy (wrappers and kernels)"

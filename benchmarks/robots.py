@@ -39,18 +39,12 @@ from pydrake.multibody.plant import MultibodyPlant
 from pydrake.multibody.tree import JointIndex, RevoluteJoint
 from pydrake.systems.controllers import InverseDynamicsController
 
-from drake_hybrid import (
-    Constraint,
-    ConstraintSpace,
-    KernelVelocityProjection,
-    PoseChart,
-    surface_constraint,
-)
-from drake_hybrid.controller import HybridController
-from drake_hybrid.gains import HybridGains
-from drake_hybrid.kinematics import EndEffectorKinematics, inverse_kinematics
-from drake_hybrid.scenarios import build_controller_plant
-from drake_hybrid.tasks import get_task
+from drake_hybrid import Constraint, ConstraintSpace, KernelVelocityProjection, PoseChart, surface_constraint
+from drake_hybrid.control.controller import HybridController
+from drake_hybrid.control.gains import HybridGains
+from drake_hybrid.core.kinematics import EndEffectorKinematics, inverse_kinematics
+from drake_hybrid.scenario.plant import build_controller_plant
+from drake_hybrid.scenario.tasks import get_task
 
 SPHERE_CENTER = np.array([0.45, 0.10, 0.10])     # m, in the arm's base (world) frame
 SPHERE_RADIUS = 0.20                             # m
@@ -232,7 +226,7 @@ def planar_controller(mode="velocity-force", joints=3, control_period=None):
     space = task.constraint_space(config)
     controller = HybridController(plant, robot.end_effector_frame, robot.end_effector_point, space,
                                   gains=config.gains, mode=mode, control_period=control_period)
-    from drake_hybrid.tasks.window_washing import PAD_RADIUS
+    from drake_hybrid.scenario.tasks.window_washing import PAD_RADIUS
 
     x_start, theta_start = config.start.configuration
     q = task.inverse_kinematics(config, x_start, config.task_parameters["window_height"] - PAD_RADIUS, theta_start)

@@ -8,7 +8,7 @@ to this file (or in ``--out``):
 1. controller tick per robot (planar 3R, UR5e, Franka Panda): median and 95th
    percentile of one fresh float evaluation of the HybridController's torque,
    against Drake's C++ InverseDynamicsController on the same plant (tick.py);
-2. per task in ``drake_hybrid.tasks.TASKS``: the 1 kHz closed loop's
+2. per task in ``drake_hybrid.scenario.tasks.TASKS``: the 1 kHz closed loop's
    real-time factor against the plant alone; accuracy per mode; linearization
    wall time; the task's own controller tick (closed_loop.py);
 3. scaling: tick against the number of joints (3, 4, 6, 7) and constraint rows
@@ -35,7 +35,8 @@ sys.path.insert(0, str(HERE))
 
 import closed_loop  # noqa: E402
 import tick  # noqa: E402
-from drake_hybrid.tasks import TASKS  # noqa: E402
+
+from drake_hybrid.scenario.tasks import TASKS  # noqa: E402
 
 ROBOTS = ("planar-3r", "ur5e", "panda")
 SCALING_JOINTS = ("planar-3r", "planar-4r", "ur5e", "panda")
@@ -141,7 +142,7 @@ def markdown(results):
         lines.append(f"| {name} | {t['rtf']:.3g} | {t['plant_rtf']:.3g} | {t['rtf_ratio']:.2f} | "
                      f"{t['plant_rtf_static_torque']:.3g} | {t['plant_rtf_zero_torque']:.3g} | "
                      f"{_fmt(t['replay_drift'])} |")
-    lines += ["", "RTF = simulated / wall seconds of `AdvanceTo`. Closed loop: `drake_hybrid.simulation.simulate` "
+    lines += ["", "RTF = simulated / wall seconds of `AdvanceTo`. Closed loop: `drake_hybrid.experiments.simulation.simulate` "
               "(plant, sampled controller, wrench sensor, source, loggers). Plant alone: the same plant and contact "
               "replaying the closed loop's logged torques (same motion, same contact; see closed_loop.py). "
               "Medians of the repeats.", "",

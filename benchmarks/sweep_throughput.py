@@ -22,13 +22,13 @@ import tempfile
 import time
 from pathlib import Path
 
-from drake_hybrid.sweep import read_results, run_sweep
-from drake_hybrid.sweep_spec import parse_spec
+from drake_hybrid.experiments.sweep import read_results, run_sweep
+from drake_hybrid.experiments.sweep_spec import parse_spec
 
 
 def warm_up():
-    import drake_hybrid.sweep  # noqa: F401
-    import drake_hybrid.simulation  # noqa: F401
+    import drake_hybrid.experiments.simulation  # noqa: F401
+    import drake_hybrid.experiments.sweep  # noqa: F401
 
     return os.getpid()
 
@@ -88,7 +88,7 @@ def main():
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     (out / "sweep_throughput.json").write_text(json.dumps(results, indent=2))
-    from drake_hybrid.plotting import _pyplot
+    from drake_hybrid.viz.plotting import _pyplot
 
     plt = _pyplot()
     fig, ax = plt.subplots(figsize=(5, 3.2))

@@ -59,8 +59,8 @@ def test_every_timed_idc_tick_sees_a_new_state():
 def test_torque_replay_reproduces_the_closed_loop_motion_exactly():
     from closed_loop import plant_alone_rtf
 
-    from drake_hybrid.simulation import simulate
-    from drake_hybrid.tasks import get_task
+    from drake_hybrid.experiments.simulation import simulate
+    from drake_hybrid.scenario.tasks import get_task
 
     config = get_task("window-washing").default_config()
     config.duration = 0.3

@@ -21,7 +21,6 @@ import time
 from dataclasses import asdict, dataclass
 
 import numpy as np
-
 from robots import make_inverse_dynamics_controller, make_robot
 
 PERTURBATION = 1e-7

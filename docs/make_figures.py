@@ -19,8 +19,9 @@ import sys
 import tempfile
 from pathlib import Path
 
-from drake_hybrid.simulation import simulate, write_run
-from drake_hybrid.tasks import get_task
+from drake_hybrid.experiments.simulation import simulate
+from drake_hybrid.scenario.tasks import get_task
+from drake_hybrid.viz.outputs import write_run
 
 FIGURES = Path(__file__).resolve().parent / "figures"
 TUTORIALS = Path(__file__).resolve().parents[1] / "tutorials"
@@ -45,9 +46,9 @@ def eigenvalues():
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from drake_hybrid import plotting
-    from drake_hybrid.analysis import linearize_continuous
-    from drake_hybrid.gains import HybridGains
+    from drake_hybrid.analysis.linearization import linearize_continuous
+    from drake_hybrid.control.gains import HybridGains
+    from drake_hybrid.viz import plotting
 
     base = get_task("window-washing").default_config()
     linearization = linearize_continuous(base)
@@ -76,7 +77,7 @@ def eigenvalues():
 
 def diagram():
     """Drake's own picture of the closed loop (GetGraphvizString), rendered by Graphviz."""
-    from drake_hybrid.scenarios import build_scenario
+    from drake_hybrid.scenario.builder import build_scenario
 
     dot = shutil.which("dot")
     if dot is None:
@@ -89,7 +90,7 @@ def diagram():
 
 def _screenshot(html, png, at):
     """A frame of the recorded animation at simulation time ``at`` (s)."""
-    from drake_hybrid.animation import HIDE_MESHCAT_CONTROLS, render_html
+    from drake_hybrid.viz.animation import HIDE_MESHCAT_CONTROLS, render_html
 
     report = render_html(html, png, times=(at,), width=900, height=520, style=HIDE_MESHCAT_CONTROLS, seek=True)
     if not report.clean:
@@ -103,7 +104,7 @@ def animations():
     notebook is run here, so the picture is the tutorial's own run)."""
     from pydrake.geometry import Meshcat
 
-    from drake_hybrid.animation import set_task_camera
+    from drake_hybrid.viz.animation import set_task_camera
 
     task = get_task("window-washing")
     meshcat = Meshcat()

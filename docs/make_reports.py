@@ -14,10 +14,10 @@ from pathlib import Path
 
 import numpy as np
 
-from drake_hybrid.analysis import impedance_realization, linearize_continuous, linearize_discrete
-from drake_hybrid.simulation import simulate
-from drake_hybrid.tasks import get_task
-from drake_hybrid.tasks.robots import worst_condition_number
+from drake_hybrid.analysis.linearization import impedance_realization, linearize_continuous, linearize_discrete
+from drake_hybrid.experiments.simulation import simulate
+from drake_hybrid.scenario.tasks import get_task
+from drake_hybrid.scenario.tasks.robots import worst_condition_number
 
 DOCS = Path(__file__).resolve().parent
 

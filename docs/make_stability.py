@@ -14,10 +14,10 @@ from pathlib import Path
 
 import numpy as np
 
-from drake_hybrid.plotting import monte_carlo_figure, stability_map_figure
-from drake_hybrid.sweep import column, read_results, run_sweep, theory_on_plane
-from drake_hybrid.scenarios import load_config
-from drake_hybrid.sweep_spec import load_spec
+from drake_hybrid.experiments.sweep import column, read_results, run_sweep, theory_on_plane
+from drake_hybrid.experiments.sweep_spec import load_spec
+from drake_hybrid.scenario.config import load_config
+from drake_hybrid.viz.plotting import monte_carlo_figure, stability_map_figure
 
 DOCS = Path(__file__).resolve().parent
 FIGURES = DOCS / "figures"

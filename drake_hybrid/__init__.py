@@ -8,35 +8,15 @@ Layers (each imports only the ones above it):
 * ``kinematics``   chart quantities (r, r-dot, J, J-dot q-dot) from a MultibodyPlant
 """
 
-from drake_hybrid.charts import EulerZXZChart, PlanarChart, PoseChart
-from drake_hybrid.constraints import (
-    Constraint,
-    SelectingConstraint,
-    crank_constraint,
-    sphere_constraint,
-    surface_constraint,
-    window_constraint,
-)
-from drake_hybrid.errors import (
-    BranchError,
-    ChartSingularityError,
-    ConstraintRankError,
-    DimensionError,
-    DrakeHybridError,
-    GainError,
-    KinematicSingularityWarning,
-    OffConstraintError,
-    UnknownVariableError,
-)
-from drake_hybrid.kinematics import EndEffectorKinematics, TaskKinematics
-from drake_hybrid.projections import (
-    ConstraintSpace,
-    GivenVelocityProjection,
-    KernelVelocityProjection,
-    crank_paper_projection,
-    crank_true_velocity_projection,
-    sphere_paper_projection,
-    sphere_true_velocity_projection,
-)
+from drake_hybrid.core.charts import EulerZXZChart, PlanarChart, PoseChart
+from drake_hybrid.core.constraints import (Constraint, SelectingConstraint, crank_constraint, sphere_constraint,
+                                           surface_constraint, window_constraint)
+from drake_hybrid.core.errors import (BranchError, ChartSingularityError, ConstraintRankError, DimensionError,
+                                      DrakeHybridError, GainError, KinematicSingularityWarning, OffConstraintError,
+                                      UnknownVariableError)
+from drake_hybrid.core.kinematics import EndEffectorKinematics, TaskKinematics
+from drake_hybrid.core.projections import (ConstraintSpace, GivenVelocityProjection, KernelVelocityProjection,
+                                           crank_paper_projection, crank_true_velocity_projection,
+                                           sphere_paper_projection, sphere_true_velocity_projection)
 
 __version__ = "0.1.0"

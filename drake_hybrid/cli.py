@@ -11,15 +11,24 @@ import json
 import sys
 from pathlib import Path
 
+import matplotlib.pyplot as plt
 import numpy as np
 
-from drake_hybrid.gains import ControlMode
-from drake_hybrid.tasks import TASKS, get_task
+from pydrake.geometry import Meshcat
+
+from drake_hybrid.analysis.linearization import linearize_continuous, linearize_discrete
+from drake_hybrid.control.gains import ControlMode
+from drake_hybrid.experiments.simulation import simulate
+from drake_hybrid.experiments.sweep import read_results, run_sweep
+from drake_hybrid.experiments.sweep_spec import SweepSpecError, load_spec
+from drake_hybrid.scenario.config import load_config
+from drake_hybrid.scenario.tasks import TASKS, get_task
+from drake_hybrid.viz.animation import set_task_camera
+from drake_hybrid.viz.outputs import write_run
+from drake_hybrid.viz.plotting import eigenvalue_figure, save_sweep_plots
 
 
 def _config(args):
-    from drake_hybrid.scenarios import load_config
-
     task = get_task(args.task)
     options = dict(option.split("=", 1) for option in (getattr(args, "option", None) or []))
     config = task.default_config(options) if options else task.default_config()
@@ -41,15 +50,11 @@ def _fmt(values):
 
 
 def command_simulate(args):
-    from drake_hybrid.simulation import simulate, write_run
-
     config = _config(args)
     out = Path(args.out) if args.out else Path("runs") / config.task
     meshcat = None
     if args.html:
-        from pydrake.geometry import Meshcat
 
-        from drake_hybrid.animation import set_task_camera
 
         meshcat = Meshcat()
         set_task_camera(meshcat, get_task(config.task))
@@ -72,8 +77,6 @@ def command_simulate(args):
 
 
 def command_analyze(args):
-    from drake_hybrid.analysis import linearize_continuous, linearize_discrete
-
     config = _config(args)
     task = get_task(config.task)
     if getattr(task, "continuous_plant", True):
@@ -97,12 +100,8 @@ def command_analyze(args):
     print(f"  other modes (contact, filter, sampling, joint space): {_fmt(np.sort_complex(match.extra))}")
     print(f"  matched within {100 * args.tolerance:.0f} % and no other mode unstable: {match.matched}")
     if args.plot:
-        from drake_hybrid.plotting import eigenvalue_figure
-
         figure = eigenvalue_figure(match, title=f"{config.task}, {controller_mode.value}")
         figure.savefig(args.plot, dpi=110)
-        import matplotlib.pyplot as plt
-
         plt.close(figure)
         print(f"  wrote {args.plot}")
     if args.json:
@@ -117,9 +116,6 @@ def command_analyze(args):
 
 
 def command_sweep(args):
-    from drake_hybrid.sweep import read_results, run_sweep
-    from drake_hybrid.sweep_spec import SweepSpecError, load_spec
-
     out = Path(args.out) if args.out else Path("runs") / f"sweep-{args.task}"
     try:
         spec = load_spec(path=args.grid)
@@ -133,8 +129,6 @@ def command_sweep(args):
           f"{len(rows)} in the table, {stable} stable, {run.failures} with errors")
     print(f"  wrote {run.results_path}")
     if args.plot:
-        from drake_hybrid.plotting import save_sweep_plots
-
         for path in save_sweep_plots(rows, spec, out):
             print(f"  wrote {path}")
     return 0

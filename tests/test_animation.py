@@ -13,9 +13,9 @@ import re
 import numpy as np
 import pytest
 
-from drake_hybrid.animation import chromium_executable, image_statistics, render_html, set_task_camera
 from drake_hybrid.cli import main
-from drake_hybrid.tasks import get_task
+from drake_hybrid.scenario.tasks import get_task
+from drake_hybrid.viz.animation import chromium_executable, image_statistics, render_html, set_task_camera
 
 
 def _chromium_or_skip():

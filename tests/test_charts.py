@@ -7,7 +7,7 @@ from pydrake.autodiffutils import InitializeAutoDiff
 from pydrake.math import RigidTransform, RotationMatrix
 
 from drake_hybrid import ChartSingularityError, EulerZXZChart, PlanarChart, PoseChart
-from drake_hybrid.linalg import value
+from drake_hybrid.core.linalg import value
 
 EPS = 1e-6
 

@@ -7,23 +7,10 @@ import sympy
 import pydrake.symbolic as drake_symbolic
 from pydrake.autodiffutils import InitializeAutoDiff
 
-from drake_hybrid import (
-    BranchError,
-    ChartSingularityError,
-    Constraint,
-    ConstraintRankError,
-    DimensionError,
-    EulerZXZChart,
-    OffConstraintError,
-    PlanarChart,
-    PoseChart,
-    UnknownVariableError,
-    crank_constraint,
-    sphere_constraint,
-    surface_constraint,
-    window_constraint,
-)
-from drake_hybrid.linalg import value
+from drake_hybrid import (BranchError, ChartSingularityError, Constraint, ConstraintRankError, DimensionError,
+                          EulerZXZChart, OffConstraintError, PlanarChart, PoseChart, UnknownVariableError,
+                          crank_constraint, sphere_constraint, surface_constraint, window_constraint)
+from drake_hybrid.core.linalg import value
 
 EPS = 1e-6
 sin, cos = np.sin, np.cos
@@ -249,7 +236,7 @@ def constraints_for_derivative_tests():
 def test_derivatives_match_finite_differences(constraint, rng):
     """E_f = d/dt C / nu, E_f-dot nu and E_f-dot along x(t) with x-dot = L(x) nu."""
     chart = constraint.chart
-    x_rate = __import__("drake_hybrid.symbolic", fromlist=["CompiledFunction"]).CompiledFunction(
+    x_rate = __import__("drake_hybrid.core.symbolic", fromlist=["CompiledFunction"]).CompiledFunction(
         "L nu", [chart.configuration_symbols, chart.velocity_symbols], chart.configuration_rate, vector=True)
     for _ in range(5):
         x = trajectory_points(chart, rng)

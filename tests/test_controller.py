@@ -12,11 +12,11 @@ from pydrake.autodiffutils import AutoDiffXd
 from pydrake.systems.framework import InputPortIndex, OutputPortIndex
 
 from drake_hybrid import GainError
-from drake_hybrid.controller import HybridController, HybridController_
-from drake_hybrid.gains import HybridGains
-from drake_hybrid.linalg import value
-from drake_hybrid.scenarios import build_controller_plant
-from drake_hybrid.tasks import get_task
+from drake_hybrid.control.controller import HybridController, HybridController_
+from drake_hybrid.control.gains import HybridGains
+from drake_hybrid.core.linalg import value
+from drake_hybrid.scenario.plant import build_controller_plant
+from drake_hybrid.scenario.tasks import get_task
 
 MODES = ["velocity-force", "position-force", "impedance-force"]
 INPUTS = ["estimated_state", "measured_wrench", "desired_velocity", "desired_acceleration", "desired_force"]
@@ -249,7 +249,7 @@ def test_bad_inputs_raise_clear_errors():
         HybridController(plant, "tip", np.zeros(3), space, sampled_diagnostics=True)
     with pytest.raises(ValueError, match="point_in_frame must be a 3-vector"):
         HybridController(plant, "tip", np.zeros(2), space)
-    from drake_hybrid import EulerZXZChart, crank_constraint, KernelVelocityProjection, ConstraintSpace
+    from drake_hybrid import ConstraintSpace, EulerZXZChart, KernelVelocityProjection, crank_constraint
     chart = EulerZXZChart()
     crank = crank_constraint(chart, radius=1.0)
     r0 = np.array([-np.sin(0.3), np.cos(0.3), 0.3, 0.3, np.pi / 2, 0.0])

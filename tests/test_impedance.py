@@ -3,19 +3,19 @@
 import numpy as np
 import pytest
 
-from drake_hybrid.analysis import impedance_realization, linearize_continuous
-from drake_hybrid.controller import HybridController, impedance_blocks, impedance_gain
-from drake_hybrid.linalg import null_space_basis
-from drake_hybrid.scenarios import build_controller_plant
-from drake_hybrid.simulation import simulate
-from drake_hybrid.tasks import get_task
+from drake_hybrid.analysis.linearization import impedance_realization, linearize_continuous
+from drake_hybrid.control.controller import HybridController, impedance_blocks, impedance_gain
+from drake_hybrid.core.linalg import null_space_basis
+from drake_hybrid.experiments.simulation import simulate
+from drake_hybrid.scenario.plant import build_controller_plant
+from drake_hybrid.scenario.tasks import get_task
 
 GRINDING = get_task("grinding")
 
 
 def random_state(task, config, plant, rng):
     """A random arm state near the task's start."""
-    from drake_hybrid.scenarios import build_scenario
+    from drake_hybrid.scenario.builder import build_scenario
 
     scenario = build_scenario(config, with_loggers=False)
     q = task.start_positions(scenario) + 0.05 * rng.normal(size=plant.num_positions())

@@ -6,7 +6,7 @@ import pytest
 from pydrake.autodiffutils import AutoDiffXd
 
 from drake_hybrid import EndEffectorKinematics, EulerZXZChart, PlanarChart, PoseChart
-from drake_hybrid.linalg import value
+from drake_hybrid.core.linalg import value
 
 EPS = 1e-6
 POINT = np.array([0.03, -0.02, 0.12])

@@ -1,4 +1,4 @@
-"""The float fast path of drake_hybrid.linalg against numpy, and its AutoDiffXd path."""
+"""The float fast path of drake_hybrid.core.linalg against numpy, and its AutoDiffXd path."""
 
 import math
 
@@ -7,14 +7,7 @@ import pytest
 
 from pydrake.autodiffutils import AutoDiffXd, ExtractGradient, ExtractValue, InitializeAutoDiff
 
-from drake_hybrid.linalg import (
-    LUFactorization,
-    cholesky,
-    inv,
-    rank_margin,
-    rank_margin_from_cholesky,
-    solve,
-)
+from drake_hybrid.core.linalg import LUFactorization, cholesky, inv, rank_margin, rank_margin_from_cholesky, solve
 
 
 def svd_rank_margin(A):

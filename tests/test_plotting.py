@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
-from drake_hybrid import plotting
-from drake_hybrid.analysis import Linearization, PredictedEigenvalues, match_eigenvalues
+from drake_hybrid.analysis.linearization import Linearization, PredictedEigenvalues, match_eigenvalues
+from drake_hybrid.viz import plotting
 
 
 @pytest.fixture

@@ -3,28 +3,15 @@
 import numpy as np
 import pytest
 import sympy
+from test_constraints import crank_point, random_sphere_points, sphere_paper_E_p, sphere_point
 
 from pydrake.autodiffutils import InitializeAutoDiff
 
-from drake_hybrid import (
-    ConstraintRankError,
-    crank_paper_projection,
-    crank_true_velocity_projection,
-    sphere_paper_projection,
-    sphere_true_velocity_projection,
-    ConstraintSpace,
-    DimensionError,
-    EulerZXZChart,
-    GivenVelocityProjection,
-    KernelVelocityProjection,
-    PlanarChart,
-    PoseChart,
-    crank_constraint,
-    sphere_constraint,
-    window_constraint,
-)
-from drake_hybrid.linalg import null_space_basis, value
-from test_constraints import crank_point, random_sphere_points, sphere_paper_E_p, sphere_point
+from drake_hybrid import (ConstraintRankError, ConstraintSpace, DimensionError, EulerZXZChart, GivenVelocityProjection,
+                          KernelVelocityProjection, PlanarChart, PoseChart, crank_constraint, crank_paper_projection,
+                          crank_true_velocity_projection, sphere_constraint, sphere_paper_projection,
+                          sphere_true_velocity_projection, window_constraint)
+from drake_hybrid.core.linalg import null_space_basis, value
 
 EPS = 1e-6
 
@@ -97,7 +84,7 @@ def test_sphere_paper_projection_is_3_3_11_with_the_corrected_3_3_13(rng):
 
 def test_pseudo_velocity_error_equals_the_true_velocity_error(rng):
     """Spec section 6: E_p r-dot - r-dot_pd^pseudo == E_t r-dot - r-dot_td for every r-dot (crank and sphere)."""
-    from drake_hybrid.projections import pseudo_desired_velocity
+    from drake_hybrid.core.projections import pseudo_desired_velocity
 
     chart = EulerZXZChart()
     cases = [(crank_paper_projection(chart), crank_true_velocity_projection(chart), crank_point(0.3, 0.2)),

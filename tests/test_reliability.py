@@ -12,21 +12,24 @@ import warnings
 
 import numpy as np
 import pytest
+import reliability_cases as reliability
 
 from pydrake.autodiffutils import AutoDiffXd
 
-from drake_hybrid import ChartSingularityError, reliability
-from drake_hybrid.controller import HybridController
-from drake_hybrid.faults import SensorFaultConfig, SensorFaultInjector
-from drake_hybrid.gains import HybridGains
-from drake_hybrid.linalg import value
-from drake_hybrid.errors import KinematicSingularityWarning
-from drake_hybrid.safety import (ContactPhase, SafetyConfig, bounded_solve, bounded_task_inertia, saturate,
-                                 saturation_scale)
-from drake_hybrid.scenarios import build_controller_plant, build_scenario, set_initial_conditions
-from drake_hybrid.sensors import WrenchConditioner
-from drake_hybrid.supervision import ContactSupervisor, SupervisionConfig
-from drake_hybrid.tasks import get_task
+from drake_hybrid import ChartSingularityError
+from drake_hybrid.control.controller import HybridController
+from drake_hybrid.control.gains import HybridGains
+from drake_hybrid.control.phases import ContactPhase
+from drake_hybrid.control.safety import SafetyConfig, bounded_solve, bounded_task_inertia, saturate, saturation_scale
+from drake_hybrid.control.supervision import ContactSupervisor, SupervisionConfig
+from drake_hybrid.core.errors import KinematicSingularityWarning
+from drake_hybrid.core.linalg import value
+from drake_hybrid.scenario.builder import build_scenario
+from drake_hybrid.scenario.plant import build_controller_plant
+from drake_hybrid.scenario.start import set_initial_conditions
+from drake_hybrid.scenario.tasks import get_task
+from drake_hybrid.systems.faults import SensorFaultConfig, SensorFaultInjector
+from drake_hybrid.systems.sensors import WrenchConditioner
 
 WINDOW = get_task("window-washing")
 

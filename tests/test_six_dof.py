@@ -5,22 +5,18 @@ import math
 import numpy as np
 import pytest
 
-from drake_hybrid import (
-    BranchError,
-    ChartSingularityError,
-    EulerZXZChart,
-    PoseChart,
-    crank_true_velocity_projection,
-    sphere_constraint,
-    sphere_paper_projection,
-)
-from drake_hybrid.analysis import linearize_continuous, linearize_discrete
-from drake_hybrid.kinematics import EndEffectorKinematics, inverse_kinematics
-from drake_hybrid.projections import ConstraintSpace
-from drake_hybrid.scenarios import build_controller_plant, build_scenario, check_start, set_initial_conditions
-from drake_hybrid.simulation import simulate
-from drake_hybrid.tasks import crank_turning, get_task, sphere_polishing
-from drake_hybrid.tasks.robots import UR5E_SEED, worst_condition_number
+from drake_hybrid import (BranchError, ChartSingularityError, EulerZXZChart, PoseChart, crank_true_velocity_projection,
+                          sphere_constraint, sphere_paper_projection)
+from drake_hybrid.analysis.linearization import linearize_continuous, linearize_discrete
+from drake_hybrid.core.kinematics import EndEffectorKinematics, inverse_kinematics
+from drake_hybrid.core.projections import ConstraintSpace
+from drake_hybrid.experiments.simulation import simulate
+from drake_hybrid.scenario.builder import build_scenario
+from drake_hybrid.scenario.config import WristSensorConfig
+from drake_hybrid.scenario.plant import build_controller_plant
+from drake_hybrid.scenario.start import check_start, set_initial_conditions
+from drake_hybrid.scenario.tasks import crank_turning, get_task, sphere_polishing
+from drake_hybrid.scenario.tasks.robots import UR5E_SEED, worst_condition_number
 
 CRANK = get_task("crank-turning")
 SPHERE = get_task("sphere-polishing")
@@ -129,7 +125,7 @@ def test_crank_spin_pair_is_moved_by_the_handles_and_the_tools_inertia(mode):
     the controller's model: a = a_imp + (1 - M_p) F_meas + M_p F with F = -I_h a and
     F_meas = -(I_h + I_t) a gives (1 + I_h + I_t - M_p I_t) s^2 + K_v s + K_p, an 18 % lighter row."""
     config = CRANK.default_config().replace(mode=mode)
-    assert config.sensor.kind == "wrist"
+    assert isinstance(config.sensor, WristSensorConfig)
     scenario = build_scenario(config, with_loggers=False)
     plant_context = scenario.controller_plant.CreateDefaultContext()
     scenario.controller_plant.SetPositions(plant_context, CRANK.start_positions(scenario))
@@ -186,7 +182,7 @@ def test_wrist_sensor_reads_the_crank_constraint_wrench_at_rest():
     J_g^T W = -(tau + tau_g), and compare the wrist sensor's reading (tool weight removed) with it."""
     from pydrake.systems.analysis import Simulator
 
-    from drake_hybrid.sources import Profile
+    from drake_hybrid.systems.sources import Profile
 
     config = CRANK.default_config()
     config.desired_velocity = Profile(kind="constant", value=[0.0, 0.0])
@@ -255,6 +251,7 @@ def test_outward_facing_starts_are_rejected():
         if task is CRANK:
             X = CRANK.handle_pose(crank_turning.START_ANGLE)
             from pydrake.math import RigidTransform, RotationMatrix
+
             # Same point on the circle, approach vector pointing away from the axis.
             X = RigidTransform(X.rotation().multiply(RotationMatrix.MakeXRotation(math.pi)), X.translation())
         else:

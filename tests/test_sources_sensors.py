@@ -9,12 +9,14 @@ import sympy
 from pydrake.autodiffutils import AutoDiffXd
 
 from drake_hybrid import ConstraintSpace, KernelVelocityProjection
-from drake_hybrid.errors import DimensionError, UnknownVariableError
-from drake_hybrid.linalg import value
-from drake_hybrid.scenarios import build_controller_plant, build_scenario, set_initial_conditions
-from drake_hybrid.sensors import LowPassFilter
-from drake_hybrid.sources import DesiredFieldSource, Profile, ProfileSource
-from drake_hybrid.tasks import get_task
+from drake_hybrid.core.errors import DimensionError, UnknownVariableError
+from drake_hybrid.core.linalg import value
+from drake_hybrid.scenario.builder import build_scenario
+from drake_hybrid.scenario.plant import build_controller_plant
+from drake_hybrid.scenario.start import set_initial_conditions
+from drake_hybrid.scenario.tasks import get_task
+from drake_hybrid.systems.sensors import LowPassFilter
+from drake_hybrid.systems.sources import DesiredFieldSource, Profile, ProfileSource
 
 EPS = 1e-6
 

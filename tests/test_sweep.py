@@ -7,12 +7,15 @@ import math
 import numpy as np
 import pytest
 
-from drake_hybrid.analysis import linearize_sampled_loop
+from drake_hybrid.analysis.linearization import linearize_sampled_loop
 from drake_hybrid.cli import make_parser
-from drake_hybrid.scenarios import build_scenario, dump_config, load_config, set_initial_conditions
-from drake_hybrid.sweep import RESULT_COLUMNS, read_results, rigid_contact_theory_stable, run_sweep
-from drake_hybrid.sweep_spec import SweepSpecError, apply_parameters, load_spec, parse_spec, set_config_value
-from drake_hybrid.tasks import get_task
+from drake_hybrid.experiments.sweep import RESULT_COLUMNS, read_results, rigid_contact_theory_stable, run_sweep
+from drake_hybrid.experiments.sweep_spec import (SweepSpecError, apply_parameters, load_spec, parse_spec,
+                                                 set_config_value)
+from drake_hybrid.scenario.builder import build_scenario
+from drake_hybrid.scenario.config import dump_config, load_config
+from drake_hybrid.scenario.start import set_initial_conditions
+from drake_hybrid.scenario.tasks import get_task
 
 WINDOW = "window-washing"
 
@@ -55,14 +58,14 @@ seed: 11
 
 @pytest.mark.parametrize("text, message", [
     ("parameters: {}", "needs 'parameters'"),
-    ("parameters: {time_step: {gaussian: [1, 2]}}", "unknown kind 'gaussian'"),
-    ("parameters: {time_step: {linspace: [1, 2]}}", "expected 3 numbers"),
-    ("parameters: {time_step: {logspace: [0, 1, 3]}}", "bounds must be positive"),
-    ("parameters: {time_step: {uniform: [2, 1]}}", "lower bound 2 exceeds upper 1"),
-    ("parameters: {time_step: [0.001]}\nsamples: 3", "no parameter has a distribution"),
-    ("parameters: {time_step: [0.001]}\nmap: {x: duration}", "map.x = 'duration' is not one of the parameters"),
-    ("parameters: {time_step: [0.001]}\ngrid: 3", r"unknown key\(s\) \['grid'\]"),
-    ("parameters: {time_step: [0.001]}\nstability: {steady_window: 2}", "steady_window must be in"),
+    ("parameters: {plant.time_step: {gaussian: [1, 2]}}", "unknown kind 'gaussian'"),
+    ("parameters: {plant.time_step: {linspace: [1, 2]}}", "expected 3 numbers"),
+    ("parameters: {plant.time_step: {logspace: [0, 1, 3]}}", "bounds must be positive"),
+    ("parameters: {plant.time_step: {uniform: [2, 1]}}", "lower bound 2 exceeds upper 1"),
+    ("parameters: {plant.time_step: [0.001]}\nsamples: 3", "no parameter has a distribution"),
+    ("parameters: {plant.time_step: [0.001]}\nmap: {x: duration}", "map.x = 'duration' is not one of the parameters"),
+    ("parameters: {plant.time_step: [0.001]}\ngrid: 3", r"unknown key\(s\) \['grid'\]"),
+    ("parameters: {plant.time_step: [0.001]}\nstability: {steady_window: 2}", "steady_window must be in"),
 ])
 def test_bad_specs_raise_naming_the_problem(text, message):
     with pytest.raises(SweepSpecError, match=message):
@@ -87,21 +90,21 @@ def test_dotted_paths_set_nested_list_and_dict_fields():
 
 def test_applied_parameters_round_trip_through_yaml_and_type_errors_are_named():
     point = apply_parameters(default_config(), {"control_period": 0.004, "model_error.payload_mass_scale": 1.2})
-    assert load_config(data=dump_config(point)) == point and point.control_period == 0.004
+    assert dump_config(load_config(data=dump_config(point))) == dump_config(point) and point.control_period == 0.004
     with pytest.raises(ValueError, match="do not give a valid scenario config"):
         apply_parameters(default_config(), {"duration": "long"})
 
 
 def test_sweep_rejects_a_spec_for_another_task_and_bad_base_paths(tmp_path):
     with pytest.raises(SweepSpecError, match="for task 'crank'"):
-        run_sweep(WINDOW, parse_spec({"task": "crank", "parameters": {"time_step": [0.001]}}), tmp_path, workers=0)
+        run_sweep(WINDOW, parse_spec({"task": "crank", "parameters": {"plant.time_step": [0.001]}}), tmp_path, workers=0)
     with pytest.raises(SweepSpecError, match="base: .*has no field 'horizon'"):
-        run_sweep(WINDOW, parse_spec({"base": {"horizon": 1}, "parameters": {"time_step": [0.001]}}), tmp_path,
+        run_sweep(WINDOW, parse_spec({"base": {"horizon": 1}, "parameters": {"plant.time_step": [0.001]}}), tmp_path,
                   workers=0)
 
 
 @pytest.mark.parametrize("changes, message", [
-    ({"time_step": 0.0}, "needs a discrete plant"),
+    ({"plant.time_step": 0.0}, "needs a discrete plant"),
     ({"control_period": 0.0}, "needs a discrete plant"),
     ({"control_period": 0.0025}, "whole number of plant steps"),
     ({"sensor.bandwidth_hz": 200.0}, "needs sensor.bandwidth_hz = 0"),
@@ -236,7 +239,7 @@ def test_resume_runs_only_the_missing_points(serial_sweep, tmp_path):
 
 
 def test_results_table_has_every_column_and_the_map_plots(serial_sweep, tmp_path):
-    from drake_hybrid.plotting import save_sweep_plots
+    from drake_hybrid.viz.plotting import save_sweep_plots
 
     serial_run, rows = serial_sweep
     assert set(RESULT_COLUMNS) <= set(rows[0])

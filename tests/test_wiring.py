@@ -1,4 +1,4 @@
-"""Your own robot and constraint (drake_hybrid.wiring): a CustomTask is wired exactly like a built-in task."""
+"""Your own robot and constraint (drake_hybrid.scenario.custom): a CustomTask is wired exactly like a built-in task."""
 
 import dataclasses
 import math
@@ -9,9 +9,9 @@ import pytest
 from pydrake.multibody.parsing import Parser
 from pydrake.multibody.plant import DiscreteContactApproximation, MultibodyPlant
 
-from drake_hybrid.simulation import simulate
-from drake_hybrid.tasks import TASKS, get_task, register_task
-from drake_hybrid.wiring import CustomTask, add_actuators, urdf_effort_limits, weld_joints
+from drake_hybrid.experiments.simulation import simulate
+from drake_hybrid.scenario.custom import CustomTask, add_actuators, urdf_effort_limits, weld_joints
+from drake_hybrid.scenario.tasks import TASKS, get_task, register_task
 
 ARM_WITH_GRIPPER = """<?xml version="1.0"?>
 <robot name="arm_with_gripper">

@@ -42,12 +42,12 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from pydrake.multibody.tree import JacobianWrtVariable  # noqa: E402
 
-from drake_hybrid.charts import PlanarChart, PoseChart  # noqa: E402
-from drake_hybrid.controller import ControlSolution  # noqa: E402
-from drake_hybrid.errors import ConstraintRankError  # noqa: E402
-from drake_hybrid.linalg import rank_margin  # noqa: E402
-from drake_hybrid.projections import KernelVelocityProjection  # noqa: E402
-from drake_hybrid.symbolic import CompiledFunction, time_derivative  # noqa: E402
+from drake_hybrid.control.controller import ControlSolution  # noqa: E402
+from drake_hybrid.core.charts import PlanarChart, PoseChart  # noqa: E402
+from drake_hybrid.core.errors import ConstraintRankError  # noqa: E402
+from drake_hybrid.core.linalg import rank_margin  # noqa: E402
+from drake_hybrid.core.projections import KernelVelocityProjection  # noqa: E402
+from drake_hybrid.core.symbolic import CompiledFunction, time_derivative  # noqa: E402
 
 OPTIMIZATIONS = ("fused-symbolic", "rank-from-factors", "raw-lapack", "lean-kernel", "lean-kinematics")
 

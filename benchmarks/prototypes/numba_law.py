@@ -24,11 +24,10 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 import numba  # noqa: E402
-
-
-from drake_hybrid.errors import ConstraintRankError  # noqa: E402
-from drake_hybrid.symbolic import _Printer  # noqa: E402
 from lean_law import LeanLaw, _column, check_agreement, make_solution  # noqa: E402
+
+from drake_hybrid.core.errors import ConstraintRankError  # noqa: E402
+from drake_hybrid.core.symbolic import _Printer  # noqa: E402
 
 
 def compile_into_array(name, argument_symbols, column):

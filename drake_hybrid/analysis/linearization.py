@@ -1,0 +1,505 @@
+"""Stability analysis: designed eigenvalues, closed-loop linearization, matching.
+
+* ``predicted_eigenvalues``: the eigenvalues the gains design (spec section 4
+  table): -eig(K_v); the roots of s^2 + K_v s + K_p (position and impedance
+  modes); eig(-(I + K_fp)^-1 K_fi).
+* ``predicted_errors``: the error trajectories those loops predict from an
+  initial condition (for plots and tracking tests).
+* ``linearize_continuous``: Drake's ``Linearize`` of a continuous closed loop
+  (continuous plant, continuous controller, low-pass on the wrench) at a
+  contact equilibrium.
+* ``linearize_discrete``: the Jacobian of the sampled closed loop's
+  one-period map (discrete plant, sampled controller) by central
+  differences: multipliers that see the control period.
+* ``match_eigenvalues``: pairs every predicted eigenvalue with a distinct
+  measured one (minimum total relative distance) and says which are within
+  tolerance.
+
+Size: the designed eigenvalues and the three linearizations (continuous, discrete, the sampled
+loop's one-period map) are compared with each other; splitting them is planned with the law
+module (issue 13 closing note).
+"""
+
+import copy
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.linalg import expm
+from scipy.optimize import linear_sum_assignment
+
+from pydrake.systems.analysis import InitializeParams, Simulator
+from pydrake.systems.primitives import Linearize
+
+from drake_hybrid.control.controller import impedance_blocks
+from drake_hybrid.control.gains import ControlMode
+from drake_hybrid.control.sampling import SAMPLE_LEAD
+from drake_hybrid.scenario.builder import build_scenario
+from drake_hybrid.scenario.start import set_initial_conditions
+from drake_hybrid.scenario.tasks import get_task
+from drake_hybrid.systems.faults import SensorFaultConfig
+from drake_hybrid.systems.sources import Profile
+
+
+@dataclass
+class PredictedEigenvalues:
+    """Designed eigenvalues, by loop."""
+
+    velocity: np.ndarray          # -eig(K_v), or the roots of s^2 + K_v s + K_p
+    force: np.ndarray             # eig(-(I + K_fp)^-1 K_fi)
+    marginal: int = 0             # zero eigenvalues expected: k = d - m (see predicted_eigenvalues)
+
+    @property
+    def designed(self):
+        return np.concatenate([self.velocity, self.force])
+
+    @property
+    def all(self):
+        return np.concatenate([self.designed, np.zeros(self.marginal)])
+
+
+def velocity_loop_matrix(gains, mode):
+    """A of the velocity loop: e_p'-dot = A e_p' (velocity mode) or d/dt [e_p; e_p'] = A [e_p; e_p']."""
+    K_v, K_p = gains.velocity, gains.position
+    k = K_v.shape[0]
+    if ControlMode.parse(mode).integrates_position:
+        return np.block([[np.zeros((k, k)), np.eye(k)], [-K_p, -K_v]])
+    return -K_v
+
+
+def predicted_eigenvalues(gains, mode, kinematic_rows=0, redundancy=0):
+    """The closed-loop eigenvalues the validated gains design (``ValidatedGains``).
+
+    Besides the designed ones, a linearized closed loop has k = d - m zero
+    eigenvalues: in velocity mode the positions along the constraint are not
+    regulated (any point of N is an equilibrium); in position and impedance
+    modes the controller's integral e_p and the plant's tangent position move
+    together (their difference is conserved), which leaves one zero per row.
+
+    Each of ``kinematic_rows`` (rows the controller holds, not the contact)
+    replaces a force eigenvalue by the roots -w_c, -2 w_c of C-ddot + 3 w_c C-dot
+    + 2 w_c^2 C = 0 and leaves its (frozen) force integral as another zero.
+    The force loop's eigenvalues are then those of the force-controlled rows
+    (``gains.force_rate`` restricted to them).
+
+    A redundant arm (``redundancy`` = n - d > 0) adds its self-motion: the
+    null-space damping q-ddot_0 = -K_n q-dot gives -K_n and a zero per extra joint.
+    """
+    mode = ControlMode.parse(mode)
+    velocity = np.linalg.eigvals(velocity_loop_matrix(gains, mode))
+    kinematic = list(kinematic_rows) if not isinstance(kinematic_rows, int) else list(range(kinematic_rows))
+    m = gains.force_rate.shape[0]
+    physical = [i for i in range(m) if i not in kinematic]
+    force = np.linalg.eigvals(-gains.force_rate[np.ix_(physical, physical)]) if physical else np.zeros(0)
+    held = np.tile([-gains.constraint_frequency, -2.0 * gains.constraint_frequency], len(kinematic)).astype(complex)
+    null_space = np.full(redundancy, -gains.null_space_damping, dtype=complex)
+    return PredictedEigenvalues(velocity=np.sort_complex(np.concatenate([velocity, null_space])),
+                                force=np.sort_complex(np.concatenate([force, held])),
+                                marginal=gains.velocity.shape[0] + len(kinematic) + redundancy)
+
+
+def predicted_errors(gains, mode, times, velocity_error0, force_integral0, position_error0=None, kinematic_rows=()):
+    """Errors predicted by (3.1-14), (3.1-15) / Remark 3 from an initial condition.
+
+    Kinematic rows have no force loop (their force error is zero).
+    Returns (velocity_error (N x k), force_error (N x m), position_error (N x k)).
+    """
+    mode = ControlMode.parse(mode)
+    times = np.asarray(times, dtype=float)
+    k = gains.velocity.shape[0]
+    A = velocity_loop_matrix(gains, mode)
+    if mode.integrates_position:
+        e_p0 = np.zeros(k) if position_error0 is None else np.asarray(position_error0, dtype=float)
+        initial = np.concatenate([e_p0, velocity_error0])
+        states = np.array([expm(A * t) @ initial for t in times])
+        position, velocity = states[:, :k], states[:, k:]
+    else:
+        velocity = np.array([expm(A * t) @ velocity_error0 for t in times])
+        position = np.zeros_like(velocity)
+    G = gains.force_rate.copy()
+    kinematic = list(kinematic_rows)
+    G[kinematic, :] = 0.0
+    G[:, kinematic] = 0.0
+    xi = np.array([expm(-G * t) @ np.asarray(force_integral0, dtype=float) for t in times])
+    force = -(G @ xi.T).T                                             # e_f = xi-dot = -G xi
+    return velocity, force, position
+
+
+def controller_prediction(controller):
+    """``predicted_eigenvalues`` for a HybridController (its gains, mode, kinematic rows, n - d)."""
+    return predicted_eigenvalues(controller.validated_gains(), controller.mode, controller.kinematic_rows,
+                                 controller.num_joints - controller.task_size)
+
+
+def design_time_constant(gains, mode, kinematic_rows=()):
+    """The slowest designed time constant 1 / min |Re(lambda)| (s)."""
+    eigenvalues = predicted_eigenvalues(gains, mode, kinematic_rows).designed
+    return 1.0 / np.min(np.abs(eigenvalues.real))
+
+
+@dataclass
+class EigenvalueMatch:
+    predicted: np.ndarray
+    measured: np.ndarray                               # all closed-loop eigenvalues
+    partner: np.ndarray                                # measured eigenvalue matched to each predicted one
+    relative_error: np.ndarray                         # |partner - predicted| / |predicted|
+    tolerance: float
+    matched: bool
+    extra: np.ndarray = field(default_factory=lambda: np.zeros(0, complex))   # measured, not matched
+    unstable_extra: np.ndarray = field(default_factory=lambda: np.zeros(0, complex))
+    marginal_partners: np.ndarray = field(default_factory=lambda: np.zeros(0, complex))  # nearest 0
+
+    def as_dict(self):
+        pairs = lambda values: [[float(np.real(v)), float(np.imag(v))] for v in values]
+        return {"predicted": pairs(self.predicted), "closed_loop": pairs(self.measured),
+                "matched_partners": pairs(self.partner), "relative_error": [float(e) for e in self.relative_error],
+                "tolerance": self.tolerance, "matched": bool(self.matched), "extra_modes": pairs(self.extra),
+                "marginal_modes": pairs(self.marginal_partners), "unstable_modes": pairs(self.unstable_extra)}
+
+
+def match_eigenvalues(designed, measured, tolerance=0.05, marginal=0, marginal_real=None):
+    """Pair each designed eigenvalue with a distinct measured one (Hungarian algorithm on the
+    relative distance |mu - lambda| / |lambda|) and sort out the rest.
+
+    The designed eigenvalues are the nonzero ones of ``predicted_eigenvalues``. The theory also
+    predicts ``marginal`` zero eigenvalues (unregulated positions, frozen integrals): the
+    ``marginal`` unmatched measured eigenvalues nearest to 0 are reported as their partners
+    (``marginal_partners``); compliant contact may move them slightly either way. Every other
+    unmatched eigenvalue is an extra mode (contact, filter, sampling, joint space).
+
+    ``matched`` is True when every designed eigenvalue has a partner within ``tolerance`` and no
+    unmatched eigenvalue (marginal or extra) has a real part above ``marginal_real`` (default
+    ``tolerance`` times 1 1/s: slower than 5 % per second of growth is counted as marginal, not
+    unstable).
+    """
+    designed = np.asarray(designed, dtype=complex)
+    measured = np.asarray(measured, dtype=complex)
+    marginal_real = tolerance * 1.0 if marginal_real is None else marginal_real
+    cost = np.abs(measured[None, :] - designed[:, None]) / np.abs(designed)[:, None]
+    rows, cols = linear_sum_assignment(cost)
+    order = np.argsort(rows)
+    rows, cols = rows[order], cols[order]
+    partner = measured[cols]
+    relative_error = cost[rows, cols]
+    rest = np.delete(measured, cols)
+    by_size = np.argsort(np.abs(rest))
+    marginal_partners = rest[by_size[:marginal]]
+    extra = rest[by_size[marginal:]]
+    unstable = rest[rest.real > marginal_real]
+    matched = bool(np.all(relative_error <= tolerance) and unstable.size == 0)
+    return EigenvalueMatch(predicted=designed, measured=measured, partner=partner, relative_error=relative_error,
+                           tolerance=tolerance, matched=matched, extra=extra, unstable_extra=unstable,
+                           marginal_partners=marginal_partners)
+
+
+# ------------------------------------------------------------------------------------------------
+# Linearization of a scenario's closed loop
+# ------------------------------------------------------------------------------------------------
+
+def at_rest_config(config):
+    """A copy of ``config`` at rest, its sampling kept: zero desired velocity, constant F_d(0), zero
+    start integrals, starting in contact, no contact supervisor, sensor faults or wrench conditioner
+    (sampled systems outside the law, with their own timing); the model error is kept. Its start is
+    an equilibrium of the closed loop."""
+
+
+    c = copy.deepcopy(config)
+    size = get_task(c.task).constraint_space(c).velocity_size
+    c.desired_velocity = Profile(kind="constant", value=[0.0] * size)
+    c.desired_force = Profile(kind="constant", value=list(c.desired_force.evaluate(0.0)[0]))
+    c.start.force_integral = []
+    c.start.position_error = []
+    c.start.in_contact = True
+    c.supervision.enabled = False
+    c.sensor_faults = SensorFaultConfig()
+    c.sensor.condition = False
+    return c
+
+
+def equilibrium_config(config, bandwidth_hz=200.0):
+    """The continuous-time version of ``at_rest_config(config)``: continuous plant and controller,
+    a low-pass on the wrench (to break the algebraic loop), and no friction.
+
+    Friction is removed because at rest it sticks: the pad is then held in the tangent directions
+    by the contact, not by the designed loop, whose modes become marginal (DRAKE_NOTES); the
+    designed loop is the paper's frictionless one (section 3.1)."""
+    c = at_rest_config(config)
+    c.plant.time_step = 0.0
+    c.control_period = 0.0
+    c.contact.friction = 0.0
+    if not c.sensor.bandwidth_hz > 0:
+        c.sensor.bandwidth_hz = bandwidth_hz
+    return c
+
+
+@dataclass
+class Linearization:
+    A: np.ndarray
+    eigenvalues: np.ndarray
+    equilibrium_residual: float        # max |x-dot| at the linearization point
+    predicted: PredictedEigenvalues
+    match: EigenvalueMatch
+    wall_time: float
+
+
+def linearize_continuous(config, tolerance=0.05, bandwidth_hz=200.0):
+    """Linearize the continuous closed loop of ``config`` at its contact equilibrium.
+
+    Builds ``equilibrium_config(config)``, sets the start, checks it is an
+    equilibrium, runs Drake's ``Linearize`` (AutoDiffXd through plant,
+    contact, sensor, filter and controller) and matches eig(A) against the
+    designed eigenvalues.
+    """
+
+
+
+    c = equilibrium_config(config, bandwidth_hz)
+    scenario = build_scenario(c, with_loggers=False)
+    context = scenario.diagram.CreateDefaultContext()
+    set_initial_conditions(scenario, context)
+    derivatives = scenario.diagram.EvalTimeDerivatives(context).CopyToVector()
+    residual = float(np.max(np.abs(derivatives)))
+    if not (context.num_abstract_states() == 0 and context.has_only_continuous_state()):
+        raise ValueError("linearize_continuous needs a purely continuous closed loop")
+    start = time.perf_counter()
+    linear = Linearize(scenario.diagram, context, equilibrium_check_tolerance=np.inf)
+    wall = time.perf_counter() - start
+    A = np.asarray(linear.A())
+    eigenvalues = np.linalg.eigvals(A)
+    predicted = controller_prediction(scenario.controller)
+    match = match_eigenvalues(predicted.designed, eigenvalues, tolerance=tolerance, marginal=predicted.marginal)
+    return Linearization(A=A, eigenvalues=eigenvalues, equilibrium_residual=residual, predicted=predicted,
+                         match=match, wall_time=wall)
+
+
+# ------------------------------------------------------------------------------------------------
+# Discrete closed loops: Jacobian of the one-period map
+# ------------------------------------------------------------------------------------------------
+
+def _one_period_jacobian(step, x0, epsilon):
+    """Central-difference Jacobian of a one-period map ``step`` at x0, and max |step(x0) - x0|."""
+    residual = float(np.max(np.abs(step(x0) - x0)))
+    A = np.zeros((x0.size, x0.size))
+    for j in range(x0.size):
+        dx = np.zeros(x0.size)
+        dx[j] = epsilon
+        A[:, j] = (step(x0 + dx) - step(x0 - dx)) / (2 * epsilon)
+    return A, residual
+
+
+@dataclass
+class DiscreteLinearization:
+    A: np.ndarray                    # Jacobian of the one-period map x_{k+1} = f(x_k)
+    multipliers: np.ndarray          # eig(A)
+    eigenvalues: np.ndarray          # log(multipliers) / period: the equivalent continuous eigenvalues
+    period: float
+    equilibrium_residual: float      # max |f(x) - x| at the linearization point
+    predicted: PredictedEigenvalues
+    match: EigenvalueMatch
+    wall_time: float
+
+
+def linearize_discrete(config, tolerance=0.05, epsilon=1e-6, settle_time=0.0):
+    """Linearize a discrete closed loop (discrete SAP plant and sampled controller) at its equilibrium.
+
+    For plants that only exist in discrete time (the crank: its SAP weld constraint needs a discrete
+    plant). The closed loop is rebuilt with every discrete update at the same instants (the
+    controller ticks at k h, one period of delay; the plant's output ports unsampled, so the state
+    is just the plant's and the controller's), which makes it one map x+ = f(x) per period
+    (``EvalUniquePeriodicDiscreteUpdate``). Its Jacobian is taken by central differences
+    (``epsilon``; DRAKE_NOTES: much smaller is noisy with SAP), and the multipliers mu are mapped
+    to continuous-time eigenvalues log(mu) / h. The one period of actuation delay shifts the
+    designed eigenvalues by about lambda^2 h / 2 (0.5 % at -10 1/s and 1 kHz).
+
+    ``settle_time`` (s): first simulate the rebuilt loop at rest for this long, so that the
+    compliant constraint forces settle onto the equilibrium.
+    """
+
+
+
+
+    c = at_rest_config(config)
+    if not c.plant.time_step > 0:
+        raise ValueError("linearize_discrete needs a discrete plant (time_step > 0)")
+    c.control_period = c.plant.time_step
+    c.log_period = c.plant.time_step
+    c.sensor.bandwidth_hz = 0.0
+    scenario = build_scenario(c, with_loggers=False, sampled_plant_outputs=False, controller_sample_lead=False)
+    simulator = Simulator(scenario.diagram)
+    context = simulator.get_mutable_context()
+    set_initial_conditions(scenario, context)
+    simulator.Initialize()
+    if settle_time > 0:
+        simulator.AdvanceTo(settle_time)
+    if context.num_abstract_states() != 0 or context.num_continuous_states() != 0:
+        raise ValueError("linearize_discrete needs a closed loop with discrete state only")
+    diagram = scenario.diagram
+
+    def state_vector(ctx):
+        return np.concatenate([ctx.get_discrete_state(i).CopyToVector()
+                               for i in range(ctx.num_discrete_state_groups())])
+
+    def set_state(ctx, x):
+        start = 0
+        for i in range(ctx.num_discrete_state_groups()):
+            size_i = ctx.get_discrete_state(i).size()
+            ctx.SetDiscreteState(i, x[start:start + size_i])
+            start += size_i
+
+    def step(x):
+        work = context.Clone()
+        set_state(work, x)
+        update = diagram.EvalUniquePeriodicDiscreteUpdate(work)
+        return np.concatenate([update.get_vector(i).CopyToVector() for i in range(update.num_groups())])
+
+    start = time.perf_counter()
+    A, residual = _one_period_jacobian(step, state_vector(context), epsilon)
+    wall = time.perf_counter() - start
+    multipliers = np.linalg.eigvals(A)
+    h = c.plant.time_step
+    # Multipliers at 0 (pure delays, e.g. the held torque) have no continuous-time counterpart.
+    keep = np.abs(multipliers) > 1e-9
+    eigenvalues = np.log(multipliers[keep].astype(complex)) / h
+    predicted = controller_prediction(scenario.controller)
+    match = match_eigenvalues(predicted.designed, eigenvalues, tolerance=tolerance, marginal=predicted.marginal)
+    return DiscreteLinearization(A=A, multipliers=multipliers, eigenvalues=eigenvalues, period=h,
+                                 equilibrium_residual=residual, predicted=predicted, match=match, wall_time=wall)
+
+
+def impedance_realization(scenario, log):
+    """How well a logged run realizes the impedance/force design (spec section 5).
+
+    Returns a dict of arrays over the log:
+
+    * ``impedance_residual``: e_p'' + K_v e_p' + K_p e_p - F_v (3.2-11, first line), with e_p''
+      from central differences of the logged e_p';
+    * ``tangential_force``: F_v;
+    * ``force_loop`` and ``force_loop_predicted``: g_f = (I + K_fp) e_f + K_fi xi on the
+      force-controlled rows (xi rebuilt from the logged e_f and xi(0)) and its prediction
+      -M_f^-1 M_fp F_v (3.2-11, second line), with the partition of HybridController (kinematic
+      rows count as motion rows, their measured force with F_v).
+    """
+    controller = scenario.controller
+    gains = controller.validated_gains()
+    t = log["t"]
+    e_p, e_p_dot, F_v = log["position_error"], log["velocity_error"], log["tangential_force"]
+    e_p_ddot = np.gradient(e_p_dot, t, axis=0)
+    residual = e_p_ddot + e_p_dot @ gains.velocity.T + e_p @ gains.position.T - F_v
+    m = controller.force_size
+    physical = [i for i in range(m) if i not in controller.kinematic_rows]
+    kinematic = list(controller.kinematic_rows)
+    start = scenario.config.start.force_integral
+    xi0 = np.asarray(start, dtype=float) if start else np.zeros(m)
+    period = np.diff(t, prepend=t[0])
+    xi = xi0 + np.cumsum(log["force_error"] * period[:, None], axis=0) - log["force_error"] * period[:, None]
+    g_f = log["force_error"] @ (np.eye(m) + gains.force_proportional).T + xi @ gains.force_integral.T
+    plant = scenario.controller_plant
+    context = plant.CreateDefaultContext()
+    predicted = []
+    for q, v, F_tangent, F in zip(log["q"], log["v"], F_v, log["force"]):
+        plant.SetPositions(context, q)
+        plant.SetVelocities(context, v)
+        task = controller.kinematics.evaluate(context)
+        values = scenario.constraint_space.evaluate(task.configuration, task.velocity)
+        mobility = task.jacobian @ np.linalg.solve(plant.CalcMassMatrix(context), task.jacobian.T)
+        M_f, M_fp, _ = impedance_blocks(values.velocity_projection, values.force_projection, mobility, kinematic)
+        motion_force = np.concatenate([F_tangent, F[kinematic]])
+        predicted.append(-np.linalg.solve(M_f, M_fp @ motion_force))
+    return {"impedance_residual": residual, "tangential_force": F_v, "force_loop": g_f[:, physical],
+            "force_loop_predicted": np.array(predicted)}
+
+
+def linearize_sampled_loop(config, epsilon=1e-5, tolerance=0.05, periods=1):
+    """Jacobian of the simulated sampled closed loop's one-period map at its contact equilibrium.
+
+    Unlike ``linearize_discrete`` (which rebuilds the loop with one period of actuation delay so
+    that Drake evaluates its map directly), this differentiates the loop exactly as ``simulate``
+    runs it, zero-delay hold and sampled sensors included, by simulating one period from perturbed
+    states: slower, and only piecewise smooth with hydroelastic contact (below), but it is the
+    loop whose stability a sweep over control periods asks about.
+
+    The map takes the vector state x_k (plant q, v; controller xi, e_p and
+    held torque) at t_k = k h - delta/2, between the controller's tick at
+    k h - delta and the plant's step at k h (docs/design.md, "Sampling"), to
+    x_{k+1} one control period h later, by simulating the full diagram. At that
+    instant the plant's sampled contact results (abstract state) are overwritten
+    by the step at k h before the next tick reads them, so x_k is the whole
+    state of the loop and the map is a function of it alone. Its Jacobian is taken
+    by central differences (``epsilon``, absolute, per state; about 1e-5 with
+    SAP, smaller is noisy). Multipliers inside the unit circle mean a stable
+    sampled loop: this sees the sampling, the zero-order hold and the SAP step
+    that the continuous linearization cannot. ``eigenvalues`` are
+    log(multipliers) / (periods h), matched against the designed continuous
+    ones; ``periods`` > 1 differentiates the map over that many periods.
+
+    Accuracy (window task, 5 MPa pad, 1 ms): the SAP solve and the tessellated
+    contact surface make the map only piecewise smooth, so the slow rates
+    (multipliers near 1) move by a few 1/s with ``epsilon`` (1e-4, 1e-5,
+    1e-6: the velocity-loop rates between -3.6 and -10.7 1/s against the
+    designed -10, -8; a -5.0 1/s mode in all). Multipliers far outside the
+    unit circle (the stiff-contact force loop: |mu| 1.1 to 1.9) are robust.
+
+    Needs a discrete plant, a sampled controller with a period that is a whole
+    number of plant steps, and no wrench filter (a filter would sample the
+    contact results at k h, where the stale abstract state would enter).
+    """
+
+
+
+    h, time_step = float(config.control_period), float(config.plant.time_step)
+    if not (time_step > 0 and h > 0):
+        raise ValueError("linearize_discrete needs a discrete plant (time_step > 0) and a sampled controller "
+                         f"(control_period > 0); got time_step = {time_step}, control_period = {h}")
+    steps = h / time_step
+    if abs(steps - round(steps)) > 1e-9 * steps:
+        raise ValueError(f"linearize_discrete needs control_period to be a whole number of plant steps; "
+                         f"got control_period = {h}, time_step = {time_step}")
+    if config.sensor.bandwidth_hz > 0:
+        raise ValueError("linearize_discrete needs sensor.bandwidth_hz = 0 (a sampled wrench filter reads the "
+                         "plant's sampled contact results at the plant's steps, outside the map's vector state)")
+    if not epsilon > 0:
+        raise ValueError(f"epsilon must be positive, got {epsilon}")
+
+    c = at_rest_config(config)
+    scenario = build_scenario(c, with_loggers=False)
+    diagram = scenario.diagram
+    base = diagram.CreateDefaultContext()
+    set_initial_conditions(scenario, base)
+    t_k = h * (1.0 - 0.5 * SAMPLE_LEAD)
+    base.SetTime(t_k)
+    groups = base.num_discrete_state_groups()
+    sizes = [base.get_discrete_state(i).size() for i in range(groups)]
+    continuous_size = base.num_continuous_states()
+
+    def get_state(context):
+        parts = [context.get_discrete_state(i).CopyToVector() for i in range(groups)]
+        if continuous_size:
+            parts.append(context.get_continuous_state_vector().CopyToVector())
+        return np.concatenate(parts)
+
+    def one_period(x):
+        context = base.Clone()
+        offset = 0
+        for i, size in enumerate(sizes):
+            context.SetDiscreteState(i, x[offset:offset + size])
+            offset += size
+        if continuous_size:
+            context.SetContinuousState(x[offset:])
+        simulator = Simulator(diagram, context)
+        # No initialization events: they would recompute the held torque from the stale sensor reading.
+        simulator.Initialize(InitializeParams(suppress_initialization_events=True))
+        simulator.AdvanceTo(t_k + periods * h)
+        return get_state(context)
+
+    start = time.perf_counter()
+    A, residual = _one_period_jacobian(one_period, get_state(base), epsilon)
+    wall = time.perf_counter() - start
+    multipliers = np.linalg.eigvals(A)
+    # Multipliers at 0 (the held torque is recomputed every tick) have no continuous counterpart:
+    # floor |mu| so that they map to a large negative real part instead of -inf.
+    magnitude = np.maximum(np.abs(multipliers), np.finfo(float).tiny)
+    eigenvalues = (np.log(magnitude) + 1j * np.angle(multipliers)) / (periods * h)
+    predicted = controller_prediction(scenario.controller)
+    match = match_eigenvalues(predicted.designed, eigenvalues, tolerance=tolerance, marginal=predicted.marginal)
+    return DiscreteLinearization(A=A, multipliers=multipliers, eigenvalues=eigenvalues, period=h,
+                                 equilibrium_residual=residual, predicted=predicted, match=match, wall_time=wall)

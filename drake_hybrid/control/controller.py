@@ -1,0 +1,605 @@
+"""The hybrid velocity/force controller of Li & Sastry (1987) as a Drake LeafSystem.
+
+Implements, in the implementable form of spec section 4 (general E^-1 block),
+
+* hybrid velocity/force control (3.1-12),
+* hybrid position/force control (Remark 3),
+* hybrid impedance/force control (3.2-6),
+
+for square arms (n = d, as in the paper) and redundant arms (n > d, with the
+dynamically consistent generalization and null-space damping of spec section
+8a), protected against what the paper assumes away (``safety``): effort limits
+(graceful saturation, anti-windup), kinematic singularities (damped inverse),
+non-finite inputs, and contact that is not there yet or is lost (the guarded
+move of ``supervision.ContactSupervisor``). See ``HybridController`` for ports,
+law and closed loop.
+
+Size: about half is the system's docstring (ports, law, protections) and its port and cache
+declarations; the law itself is planned to move to control/law.py (issue 13 closing note).
+"""
+
+import numpy as np
+
+from pydrake.autodiffutils import AutoDiffXd
+from pydrake.common.value import AbstractValue
+from pydrake.multibody.tree import MultibodyForces_
+from pydrake.systems.framework import BasicVector_, LeafSystem_, ValueProducer
+from pydrake.systems.scalar_conversion import TemplateSystem
+
+from drake_hybrid.control.gains import ControlMode, HybridGains
+from drake_hybrid.control.phases import ContactPhase
+from drake_hybrid.control.sampling import SAMPLE_LEAD
+from drake_hybrid.control.safety import SafetyConfig, bounded_solve, bounded_task_inertia, saturate, warn_singularity
+from drake_hybrid.core.errors import DimensionError
+from drake_hybrid.core.kinematics import declare_task_input, resolve_frame
+from drake_hybrid.core.linalg import all_finite, inv, solve, value
+
+
+def impedance_blocks(velocity_projection, force_projection, task_mobility, kinematic_rows=()):
+    """The blocks (3.2-8) of the impedance/force law on its partition of E's rows.
+
+    Motion rows: [E_p; E_f[kinematic_rows]]; force rows: the other rows of E_f. With the task
+    mobility L = J M^-1 J^T (= Lambda^-1, also for redundant arms), returns
+    (M_f, M_fp, M_p) = (F L F^T, F L P^T, P L P^T) for force rows F and motion rows P
+    (M_f and M_fp have no rows when every row of E_f is kinematic). Float or AutoDiffXd.
+    """
+    kinematic = list(kinematic_rows)
+    physical = [i for i in range(force_projection.shape[0]) if i not in kinematic]
+    motion_rows = np.vstack([velocity_projection, force_projection[kinematic]]) if kinematic else velocity_projection
+    force_rows = force_projection[physical]
+    return (force_rows @ task_mobility @ force_rows.T, force_rows @ task_mobility @ motion_rows.T,
+            motion_rows @ task_mobility @ motion_rows.T)
+
+
+def impedance_gain(velocity_projection, force_projection, task_mobility, kinematic_rows=()):
+    """K_0 = I + M_fp^T M_f^-1 M_fp - M_p of the impedance/force law (3.2-6), spec section 5.
+
+    K_0 = I - S with S = M_p - M_fp^T M_f^-1 M_fp, the Schur complement of M_f (the inverse of the
+    constrained task inertia in the motion-row coordinates); blocks from ``impedance_blocks``.
+    """
+    M_f, M_fp, M_p = impedance_blocks(velocity_projection, force_projection, task_mobility, kinematic_rows)
+    K_0 = np.eye(M_p.shape[0]) - M_p
+    if M_f.shape[0]:
+        K_0 = K_0 + M_fp.T @ solve(M_f, M_fp)
+    return K_0
+
+
+class ControlSolution:
+    """Everything one evaluation of the law computes (held in a cache entry)."""
+
+    __slots__ = ("actuation", "velocity_error", "force_error", "constraint_value", "projected_velocity", "force",
+                 "tangential_force", "position_error_rate", "force_integral_rate", "wrench_valid", "contact_phase",
+                 "saturation_scale", "actuator_clipped", "smallest_singular_value", "singularity_damping")
+
+
+@TemplateSystem.define("HybridController_", T_list=[float, AutoDiffXd])
+def HybridController_(T):
+
+    class Impl(LeafSystem_[T]):
+        """Hybrid velocity/force (3.1-12), position/force (Remark 3) and impedance/force (3.2-6) control.
+
+        .. pydrake_system::
+
+            name: HybridController
+            input_ports:
+            - estimated_state
+            - measured_wrench
+            - desired_velocity
+            - desired_acceleration
+            - desired_force
+            - contact_phase (only with guarded_move)
+            output_ports:
+            - actuation
+            - velocity_error
+            - force_error
+            - constraint_value
+            - projected_velocity
+            - force
+            - tangential_force
+            - position_error
+
+        Ports (k = d - m velocity-controlled and m force-controlled coordinates):
+
+        ====================  ====  ===================================================
+        estimated_state       2n    [q; v] of the controller's plant
+        measured_wrench       6     SpatialForce [n; f] on the end effector BY the
+                                    environment, at the end-effector point, world frame
+        desired_velocity      k     r-dot_pd
+        desired_acceleration  k     r-ddot_pd (its derivative along the trajectory)
+        desired_force         m     F_d, in the coordinates of the constraint's E_f
+        contact_phase         1     safety.ContactPhase (only with ``guarded_move``)
+        actuation             n_u   joint torques mapped to the actuators
+        velocity_error        k     e_p' = E_p r-dot - r-dot_pd
+        force_error           m     e_f = F - F_d
+        constraint_value      m     C(r)
+        projected_velocity    k     r-dot_p = E_p r-dot
+        force                 m     F, from [F_v; F] = E^-T w (w: the wrench in chart coordinates)
+        tangential_force      k     F_v
+        position_error        k     e_p = integral of e_p' (zero in velocity-force mode)
+        ====================  ====  ===================================================
+
+        Law (spec section 4; F is the force on the robot, spec section 0)::
+
+            a_p  = r-ddot_pd - K_v e_p'              velocity-force  (3.1-12)
+                   ... - K_p e_p                     position-force  (Remark 3)
+                   ... - K_p e_p + K_0 F_v           impedance-force (3.2-6)
+            r-ddot* = E^-1 ([a_p; 0] - E-dot r-dot)                  (3.0-11)
+            u_f  = -F_d + K_fp e_f + K_fi xi,   xi = integral of e_f
+            tau  = h + g + M J^-1 (r-ddot* - J-dot q-dot) + J^T E_f^T u_f          (n = d)
+            tau  = h + g + J^T Lambda (r-ddot* - J-dot q-dot) + J^T E_f^T u_f
+                   - N^T M K_n q-dot,  Lambda = (J M^-1 J^T)^-1                  (n > d)
+
+        with K_0 = I + M_fp^T M_f^-1 M_fp - M_p recomputed every evaluation
+        (spec section 5).
+
+        In impedance mode the kinematic rows count as motion-controlled rows:
+        K_0 is built on the partition [E_p; kinematic rows of E_f] / (force-
+        controlled rows of E_f), and the measured force along them is
+        compensated like F_v, so their closed loop is C-ddot + 3 w_c C-dot +
+        2 w_c^2 C = F (unit-mass impedance).
+
+        Kinematic rows (``constraint.kinematic_rows``, e.g. the orientation rows
+        of a point contact, which the environment does not enforce) are held by
+        the controller instead of force-controlled: their row of [a_p; a_f] is
+        a_f = -3 w_c C-dot - 2 w_c^2 C (C-dot = E_f r-dot), so C-ddot + 3 w_c C-dot
+        + 2 w_c^2 C = 0: eigenvalues -w_c and -2 w_c (``gains.constraint_frequency``;
+        distinct roots, so a linearization can tell them apart).
+        Their force error is zero: no force feedback and no integral, only the
+        feedforward -F_d (normally 0). With an exact model and rigid contact the closed loop
+        is (3.1-13)-(3.1-15)::
+
+            e_p'-dot + K_v e_p' (+ K_p e_p) = 0 (+ F_v in impedance mode)
+            (I + K_fp) e_f + K_fi xi = 0  ->  xi-dot = -(I + K_fp)^-1 K_fi xi
+
+        so the designed eigenvalues are -eig(K_v) (or the roots of
+        s^2 + K_v s + K_p) and eig(-(I + K_fp)^-1 K_fi).
+
+        State: xi (m) and, in position and impedance modes, e_p (k). Without a
+        ``control_period`` they are continuous and the actuation is direct
+        feedthrough (use this for linearization). With a period h the law runs
+        in a periodic discrete update (forward-Euler integrals) and the
+        actuation is held in discrete state until the next tick (a sampled
+        controller; no direct feedthrough). The ticks are at k h - delta
+        (delta = ``SAMPLE_LEAD`` h, a nanosecond at 1 kHz), just before a
+        discrete plant's steps at k h: the torque for the step from t_k is
+        computed from the state at t_k, a zero-order hold without computation
+        delay. (Ticking at k h itself would apply every torque one period late;
+        the lagged feedforward h + g then biases the velocity loop by about
+        M^-1 (dh/dq) q-dot h.) An initialization event computes the first
+        held actuation from the initial state.
+
+        A measured wrench with a NaN or inf entry (sensor dropout) is ignored
+        for that evaluation: the force error is taken as zero and the
+        integrals hold, so the torque stays finite. A non-finite state or
+        command raises ValueError naming the port.
+
+        Protections (``safety``; none changes the law where it is not active):
+
+        * effort limits: the actuation is saturated gracefully (the task part of
+          tau = (h + g) + tau_task scaled by the largest s <= 1 within the limits)
+          and, with ``anti_windup``, xi and e_p are frozen while saturated;
+        * kinematic singularities: where sigma_min(J) < ``singularity_threshold``
+          and the task part would command a joint acceleration beyond
+          ``max_joint_acceleration``, the inverse of J (n = d) or of J M^-1 J^T
+          (n > d) is damped just enough to meet the bound, with a
+          ``KinematicSingularityWarning`` the first time;
+        * contact not there (``guarded_move`` given): with ``contact_phase`` not
+          CONTACT the force-controlled rows of [a_p; a_f] become the guarded move
+          a_f = -K_a (C-dot - s n_C) (n_C = -F_d / |F_d|, the pressing direction;
+          s = approach_speed in APPROACH, 0 in TARE and HOLD), u_f = 0 on them and
+          xi is frozen (anti-windup while off the surface). The velocity rows keep
+          their law.
+
+        Preconditions: the plant is finalized, has nq = nv = n >= d and one
+        actuator per joint; J has full row rank along the task; the chart and
+        E = [E_p; E_f] are regular there (typed errors otherwise).
+
+        Args:
+            plant: the controller's model of the robot (float MultibodyPlant).
+            end_effector_frame: a Frame of ``plant`` or its name.
+            end_effector_point: p_EP, the controlled point in that frame (m).
+            constraint_space: a ConstraintSpace (chart, C, E_p).
+            gains: HybridGains.
+            mode: ControlMode or its string ("velocity-force", ...).
+            control_period: None (continuous) or the sampling period (s).
+            sample_lead: with a control period, tick just before the multiples of
+                the period (zero-delay hold, default) or exactly at them (every
+                torque one period late; all discrete updates then share one
+                timing, which the discrete-time linearization needs).
+            safety: a SafetyConfig (effort limits, anti-windup, the joint
+                acceleration bound); None = defaults (the plant's effort limits).
+            guarded_move: None, or an object with ``approach_speed`` (units of C
+                per second, >= 0) and ``approach_gain`` (K_a, 1/s), e.g. a
+                ``supervision.SupervisionConfig``: declares the ``contact_phase``
+                input and the guarded move off the surface.
+            sampled_diagnostics: with a control period, also store the
+                diagnostics (velocity_error, force_error, constraint_value,
+                projected_velocity, force, tangential_force) computed at each
+                tick in discrete state and output them, concatenated, on a
+                ``diagnostics`` port (layout: ``diagnostic_slices()``). Loggers
+                then read what the tick computed, as Drake's sampled output
+                ports do, instead of re-evaluating the law after the tick has
+                changed the integrals (which runs the law twice per period).
+                Off by default: the stored copy adds states with zero
+                multipliers to a discrete-time linearization.
+        """
+
+        def _construct(self, plant, end_effector_frame, end_effector_point, constraint_space, gains=None,
+                       mode=ControlMode.VELOCITY_FORCE, control_period=None, sample_lead=True, safety=None,
+                       guarded_move=None, sampled_diagnostics=False, converter=None):
+            LeafSystem_[T].__init__(self, converter)
+            if not hasattr(plant, "is_finalized") or not hasattr(plant, "MakeActuationMatrix"):
+                raise TypeError(f"HybridController: plant must be a MultibodyPlant, got {type(plant).__name__}")
+            if plant.is_finalized() is False:
+                raise ValueError("HybridController: the plant must be finalized")
+            if not all(hasattr(constraint_space, name) for name in ("chart", "force_size", "velocity_size", "evaluate")):
+                raise TypeError("HybridController: constraint_space must be a ConstraintSpace (a constraint with its "
+                                f"velocity projection), got {type(constraint_space).__name__}")
+            self._float_plant = plant
+            self._float_frame = resolve_frame(plant, end_effector_frame)
+            self._end_effector_point = np.asarray(end_effector_point, dtype=float)
+            self.constraint_space = constraint_space
+            self.gains = gains if gains is not None else HybridGains()
+            self.mode = ControlMode.parse(mode)
+            self.control_period = control_period
+            self.sample_lead = bool(sample_lead)
+            chart = constraint_space.chart
+            d, m, k = chart.velocity_size, constraint_space.force_size, constraint_space.velocity_size
+            n = plant.num_velocities()
+            self.task_size, self.force_size, self.velocity_size, self.num_joints = d, m, k, n
+            if n < d:
+                raise DimensionError(
+                    f"HybridController: the task has d = {d} coordinates ({chart.name} chart) but the plant has "
+                    f"only n = {n} joints; the law needs n >= d")
+            if control_period is not None and not float(control_period) > 0:
+                raise ValueError(f"HybridController: control_period must be positive or None, got {control_period}")
+            self.sampled_diagnostics = bool(sampled_diagnostics)
+            if self.sampled_diagnostics and control_period is None:
+                raise ValueError("HybridController: sampled_diagnostics needs a control_period (a sampled controller)")
+            self._gains = self.gains.matrices(k, m, self.mode)
+            self.kinematic_rows = tuple(constraint_space.constraint.kinematic_rows)
+            self._force_controlled = np.ones(m)
+            self._force_controlled[list(self.kinematic_rows)] = 0.0
+            actuation_matrix = plant.MakeActuationMatrix()
+            if actuation_matrix.shape != (n, n) or abs(np.linalg.det(actuation_matrix)) < 0.5:
+                raise ValueError(
+                    f"HybridController needs one actuator per joint; the plant has {plant.num_actuators()} actuators "
+                    f"for {n} joints")
+            self._actuation_from_torque = np.linalg.inv(actuation_matrix)  # u = B^-1 tau (a permutation here)
+            self.safety = safety if safety is not None else SafetyConfig()
+            plant_limits = [plant.get_joint_actuator(i).effort_limit() for i in plant.GetJointActuatorIndices()]
+            (self.effort_limits, self._anti_windup, self._singularity_threshold,
+             self._max_joint_acceleration) = self.safety.validated(n, plant_limits)
+            self.guarded_move = guarded_move
+            if guarded_move is not None:
+                speed, gain = float(guarded_move.approach_speed), float(guarded_move.approach_gain)
+                if not speed >= 0:
+                    raise ValueError(f"HybridController: approach_speed must be >= 0, got {speed}")
+                if not gain > 0:
+                    raise ValueError(f"HybridController: approach_gain must be positive, got {gain}")
+                self._approach_speed, self._approach_gain = speed, gain
+
+            # -- ports ------------------------------------------------------------------
+            # estimated_state, the controller's own plant of this system's scalar type, its kinematics.
+            _, self.kinematics, self._state_port, self._plant_context_cache = declare_task_input(
+                self, T, plant, self._float_frame, self._end_effector_point, chart)
+            self._plant = self.kinematics.plant
+            self._forces = MultibodyForces_[T](self._plant)
+            self._zero_acceleration = np.zeros(n) if T == float else np.array([AutoDiffXd(0.0)] * n, dtype=object)
+            self._wrench_port = self.DeclareVectorInputPort("measured_wrench", 6)
+            self._velocity_port = self.DeclareVectorInputPort("desired_velocity", k)
+            self._acceleration_port = self.DeclareVectorInputPort("desired_acceleration", k)
+            self._force_port = self.DeclareVectorInputPort("desired_force", m)
+            self._phase_port = None
+            if guarded_move is not None:
+                self._phase_port = self.DeclareVectorInputPort("contact_phase", 1)
+
+            integrated = m + (k if self.mode.integrates_position else 0)
+            self._integrated_size = integrated
+            if control_period is None:
+                self.DeclareContinuousState(integrated)
+                state_ticket = self.xc_ticket()
+            else:
+                # Discrete state: [xi; e_p; held actuation].
+                self.DeclareDiscreteState(integrated + n)
+                offset = float(control_period) * (1.0 - SAMPLE_LEAD) if self.sample_lead else 0.0
+                self.DeclarePeriodicDiscreteUpdateEvent(float(control_period), offset, self._discrete_update)
+                self.DeclareInitializationDiscreteUpdateEvent(self._initialize_actuation)
+                state_ticket = self.xd_ticket()
+            self._solution_cache = self.DeclareCacheEntry(
+                description="hybrid control law",
+                value_producer=ValueProducer(allocate=lambda: AbstractValue.Make(ControlSolution()),
+                                             calc=self._calc_solution),
+                prerequisites_of_calc={self.all_input_ports_ticket(), state_ticket,
+                                       self._plant_context_cache.ticket()})
+            solution_ticket = {self._solution_cache.ticket()}
+            if control_period is None:
+                self.DeclareVectorOutputPort("actuation", n, self._calc_actuation, prerequisites_of_calc=solution_ticket)
+            else:
+                self.DeclareVectorOutputPort("actuation", n, self._calc_held_actuation,
+                                             prerequisites_of_calc={self.xd_ticket()})
+            self._diagnostic_slices, start = {}, 0
+            for name, size in [("velocity_error", k), ("force_error", m), ("constraint_value", m),
+                               ("projected_velocity", k), ("force", m), ("tangential_force", k)]:
+                self.DeclareVectorOutputPort(name, size, self._make_solution_output(name),
+                                             prerequisites_of_calc=solution_ticket)
+                self._diagnostic_slices[name] = slice(start, start + size)
+                start += size
+            if self.sampled_diagnostics:
+                # Discrete state group 1: the diagnostics of the last tick.
+                self.DeclareDiscreteState(start)
+                self.DeclareVectorOutputPort("diagnostics", start, self._calc_sampled_diagnostics,
+                                             prerequisites_of_calc={self.xd_ticket()})
+            self.DeclareVectorOutputPort("position_error", k, self._calc_position_error,
+                                         prerequisites_of_calc={state_ticket})
+
+        def _construct_copy(self, other, converter=None):
+            Impl._construct(self, other._float_plant, other._float_frame, other._end_effector_point,
+                            other.constraint_space, other.gains, other.mode, other.control_period,
+                            other.sample_lead, other.safety, other.guarded_move, other.sampled_diagnostics,
+                            converter=converter)
+
+        # -- public helpers ---------------------------------------------------------------
+        def plant(self):
+            """The controller's own plant (of this system's scalar type)."""
+            return self._plant
+
+        def validated_gains(self):
+            """The gains as matrices (K_v, K_p, K_fp, K_fi)."""
+            return self._gains
+
+        def get_estimated_state_input_port(self):
+            return self._state_port
+
+        def get_measured_wrench_input_port(self):
+            return self._wrench_port
+
+        def get_desired_velocity_input_port(self):
+            return self._velocity_port
+
+        def get_desired_acceleration_input_port(self):
+            return self._acceleration_port
+
+        def get_desired_force_input_port(self):
+            return self._force_port
+
+        def get_contact_phase_input_port(self):
+            """The ``contact_phase`` input (only with ``guarded_move``; else None)."""
+            return self._phase_port
+
+        def diagnostics(self, context):
+            """What the protections did in the evaluation at ``context``: a dict with the contact
+            phase, the saturation scale s, whether an actuator was clipped, sigma_min(J) (None
+            when the exact inverse was within its bound and no SVD was needed), the damping
+            lambda^2 and whether the wrench was valid."""
+            solution = self._solution(context)
+            return {"contact_phase": ContactPhase(solution.contact_phase),
+                    "saturation_scale": solution.saturation_scale, "actuator_clipped": solution.actuator_clipped,
+                    "smallest_singular_value": solution.smallest_singular_value,
+                    "singularity_damping": solution.singularity_damping, "wrench_valid": solution.wrench_valid}
+
+        def diagnostic_slices(self):
+            """{name: slice} of each diagnostic in the ``diagnostics`` output (``sampled_diagnostics``)."""
+            return dict(self._diagnostic_slices)
+
+        def integral_state_slices(self):
+            """Slices of (xi, e_p) in the continuous or discrete state vector."""
+            m, k = self.force_size, self.velocity_size
+            return slice(0, m), slice(m, m + (k if self.mode.integrates_position else 0))
+
+        # -- evaluation -----------------------------------------------------------------
+        def _integrals(self, context):
+            if self.control_period is None:
+                return context.get_continuous_state_vector().CopyToVector()
+            return context.get_discrete_state(0).CopyToVector()[:self._integrated_size]
+
+        def _calc_solution(self, context, abstract_value):
+            plant_context = self._plant_context_cache.Eval(context)
+            abstract_value.set_value(self._evaluate_law(context, plant_context))
+
+        def _contact_phase(self, context):
+            if self._phase_port is None:
+                return ContactPhase.CONTACT
+            code = float(value(self._phase_port.Eval(context))[0])
+            if code not in (0.0, 1.0, 2.0, 3.0):
+                raise ValueError(f"HybridController: contact_phase must be one of {[int(p) for p in ContactPhase]} "
+                                 f"({', '.join(p.name for p in ContactPhase)}), got {code}")
+            return ContactPhase(int(code))
+
+        def _check_finite_commands(self, *commands):
+            """ValueError naming the first non-finite command (the state is checked by the plant-context cache)."""
+            for port, command in zip((self._velocity_port, self._acceleration_port, self._force_port), commands):
+                if not all_finite(command):
+                    raise ValueError(f"HybridController: input '{port.get_name()}' has non-finite entries "
+                                     f"{value(command).tolist()}")
+
+        def _guarded_acceleration(self, values, nu, desired_force, phase):
+            """The guarded move on the force-controlled rows: a_f = -K_a (C-dot - s n_C) (0 on kinematic rows)."""
+            pressing = -value(desired_force) * self._force_controlled       # -F_d: the way the robot pushes
+            norm = np.linalg.norm(pressing)
+            direction = pressing / norm if norm > 0 else pressing           # n_C
+            speed = self._approach_speed if phase is ContactPhase.APPROACH else 0.0
+            C_dot = values.force_projection @ nu                             # C-dot = E_f r-dot
+            return -self._approach_gain * (C_dot - speed * direction) * self._force_controlled
+
+        def _evaluate_law(self, context, plant_context):
+            space = self.constraint_space
+            gains = self._gains
+            m, k = self.force_size, self.velocity_size
+            plant = self._plant
+            phase = self._contact_phase(context)
+            in_contact = phase is ContactPhase.CONTACT
+            kin = self.kinematics.evaluate(plant_context)
+            x, nu = kin.configuration, kin.velocity
+            values = space.evaluate(x, nu)                                   # E_p, E_f, E-dot r-dot, C
+            integrals = self._integrals(context)
+            xi = integrals[:m]
+            e_p = integrals[m:]
+
+            desired_velocity = self._velocity_port.Eval(context)
+            desired_acceleration = self._acceleration_port.Eval(context)
+            desired_force = self._force_port.Eval(context)
+            wrench = self._wrench_port.Eval(context)
+            self._check_finite_commands(desired_velocity, desired_acceleration, desired_force)
+
+            # Force decomposition [F_v; F] = E^-T w (spec section 0); a dropout is ignored.
+            wrench_valid = all_finite(wrench)
+            if wrench_valid:
+                tangential_force, force = space.split_wrench(values, self.kinematics.chart.generalized_force(x, wrench))
+            else:
+                tangential_force, force = np.zeros(k), desired_force
+            force_error = (force - desired_force) * self._force_controlled     # e_f = F - F_d (0 on kinematic rows)
+            projected_velocity = values.velocity_projection @ nu                # r-dot_p = E_p r-dot  (3.0-6)
+            velocity_error = projected_velocity - desired_velocity              # e_p'
+
+            acceleration = desired_acceleration - gains.velocity @ velocity_error             # (3.1-12)
+            if self.mode.integrates_position:
+                acceleration = acceleration - gains.position @ e_p                            # Remark 3
+            J, bias = kin.jacobian, kin.bias
+            n, d = self.num_joints, self.task_size
+            need_inertia = self.mode is ControlMode.IMPEDANCE_FORCE or n > d
+            if need_inertia:
+                M = plant.CalcMassMatrix(plant_context)
+                M_inverse = inv(M)
+                task_mobility = J @ M_inverse @ J.T                              # J M^-1 J^T = Lambda^-1
+            constraint_acceleration = None
+            if self.kinematic_rows:
+                # Kinematic rows are held by the controller: C-ddot = -3 w_c C-dot - 2 w_c^2 C.
+                w_c = gains.constraint_frequency
+                C_dot = values.force_projection @ nu
+                held = (-3.0 * w_c * C_dot - 2.0 * w_c * w_c * values.constraint_value) * (1.0 - self._force_controlled)
+                constraint_acceleration = held
+            if self.mode is ControlMode.IMPEDANCE_FORCE:
+                # Motion-controlled rows: E_p and the kinematic rows; force-controlled rows: the rest of
+                # E_f. The measured force along the motion rows is F_v (and F on kinematic rows).
+                kinematic = list(self.kinematic_rows)
+                K_0 = impedance_gain(values.velocity_projection, values.force_projection, task_mobility, kinematic)
+                motion_force = np.concatenate([tangential_force, force[kinematic]]) if kinematic else tangential_force
+                compensation = K_0 @ motion_force                                # (3.2-6)
+                acceleration = acceleration + compensation[:k]
+                if kinematic:
+                    extra = np.zeros(m, dtype=compensation.dtype)
+                    extra[kinematic] = compensation[k:]
+                    constraint_acceleration = constraint_acceleration + extra
+
+            if not in_contact:
+                # Off the surface: the guarded move on the force rows instead of a_f = 0.
+                guarded = self._guarded_acceleration(values, nu, desired_force, phase)
+                constraint_acceleration = guarded if constraint_acceleration is None else constraint_acceleration + guarded
+            task_acceleration = space.task_acceleration(values, acceleration, constraint_acceleration)  # (3.0-11)
+            force_command = -desired_force + gains.force_proportional @ force_error + gains.force_integral @ xi
+            if not in_contact:
+                force_command = force_command * (1.0 - self._force_controlled)   # no force loop off the surface
+            force_torque = J.T @ (values.force_projection.T @ force_command)    # J^T E_f^T u_f
+
+            self._plant.CalcForceElementsContribution(plant_context, self._forces)
+            threshold, bound = self._singularity_threshold, self._max_joint_acceleration
+            base_torque = None                                                  # h + g, for the saturation
+            if n == d:
+                # J^-1 (r-ddot* - J-dot q-dot), damped where it would exceed the bound (safety.py).
+                joint_acceleration, sigma_min, lambda_squared = bounded_solve(J, task_acceleration - bias, threshold,
+                                                                              bound)
+                torque = plant.CalcInverseDynamics(plant_context, joint_acceleration, self._forces) + force_torque
+            else:
+                # Dynamically consistent generalization (spec section 8a).
+                v = plant.GetVelocities(plant_context)
+                Lambda, sigma_min, lambda_squared = bounded_task_inertia(J, M_inverse, task_mobility,
+                                                                         task_acceleration - bias, threshold, bound)
+                J_bar = M_inverse @ J.T @ Lambda
+                null_space_transpose = np.eye(n) - J.T @ J_bar.T
+                base_torque = plant.CalcInverseDynamics(plant_context, self._zero_acceleration, self._forces)
+                torque = (base_torque
+                          + J.T @ (Lambda @ (task_acceleration - bias)) + force_torque
+                          - null_space_transpose @ (M @ (gains.null_space_damping * v)))
+            if lambda_squared > 0:
+                warn_singularity(self, sigma_min, bound)
+
+            def base_actuation():
+                torque_0 = base_torque if base_torque is not None else plant.CalcInverseDynamics(
+                    plant_context, self._zero_acceleration, self._forces)
+                return self._actuation_from_torque @ torque_0
+
+            actuation, scale, clipped = saturate(self._actuation_from_torque @ torque, base_actuation,
+                                                 self.effort_limits)
+            if not all_finite(actuation):
+                raise FloatingPointError(f"HybridController: non-finite actuation {value(actuation).tolist()} at "
+                                         f"q = {value(plant.GetPositions(plant_context)).tolist()}")
+            frozen = self._anti_windup and (scale < 1.0 or clipped)            # conditional integration
+
+            solution = ControlSolution()
+            solution.actuation = actuation
+            solution.velocity_error = velocity_error
+            solution.force_error = force_error
+            solution.constraint_value = values.constraint_value
+            solution.projected_velocity = projected_velocity
+            solution.force = force
+            solution.tangential_force = tangential_force
+            solution.position_error_rate = velocity_error * 0.0 if frozen else velocity_error
+            solution.force_integral_rate = force_error * 0.0 if (frozen or not in_contact) else force_error
+            solution.wrench_valid = wrench_valid
+            solution.contact_phase = int(phase)
+            solution.saturation_scale = scale
+            solution.actuator_clipped = clipped
+            solution.smallest_singular_value = sigma_min
+            solution.singularity_damping = lambda_squared
+            return solution
+
+        def _solution(self, context):
+            return self._solution_cache.Eval(context)
+
+        def _make_solution_output(self, field):
+            def calc(context, output):
+                output.SetFromVector(getattr(self._solution(context), field))
+            return calc
+
+        def _calc_actuation(self, context, output):
+            output.SetFromVector(self._solution(context).actuation)
+
+        def _calc_held_actuation(self, context, output):
+            output.SetFromVector(context.get_discrete_state(0).CopyToVector()[self._integrated_size:])
+
+        def _calc_sampled_diagnostics(self, context, output):
+            output.SetFromVector(context.get_discrete_state(1).CopyToVector())
+
+        def _store_diagnostics(self, solution, discrete_state):
+            if self.sampled_diagnostics:
+                discrete_state.get_mutable_vector(1).SetFromVector(np.concatenate(
+                    [getattr(solution, name) for name in self._diagnostic_slices]))
+
+        def _calc_position_error(self, context, output):
+            m, k = self.force_size, self.velocity_size
+            if self.mode.integrates_position:
+                output.SetFromVector(self._integrals(context)[m:m + k])
+            else:
+                output.SetFromVector(np.zeros(k))
+
+        def DoCalcTimeDerivatives(self, context, derivatives):
+            if self.control_period is not None or self._integrated_size == 0:
+                return
+            solution = self._solution(context)
+            rates = [solution.force_integral_rate]
+            if self.mode.integrates_position:
+                rates.append(solution.position_error_rate)
+            derivatives.get_mutable_vector().SetFromVector(np.concatenate(rates))
+
+        def _discrete_update(self, context, discrete_state):
+            solution = self._solution(context)
+            h = float(self.control_period)
+            integrals = self._integrals(context)
+            rates = [solution.force_integral_rate]
+            if self.mode.integrates_position:
+                rates.append(solution.position_error_rate)
+            new_integrals = integrals + h * np.concatenate(rates)
+            discrete_state.get_mutable_vector(0).SetFromVector(np.concatenate([new_integrals, solution.actuation]))
+            self._store_diagnostics(solution, discrete_state)
+
+        def _initialize_actuation(self, context, discrete_state):
+            solution = self._solution(context)
+            discrete_state.get_mutable_vector(0).SetFromVector(
+                np.concatenate([self._integrals(context), solution.actuation]))
+            self._store_diagnostics(solution, discrete_state)
+
+    return Impl
+
+
+HybridController = HybridController_[None]

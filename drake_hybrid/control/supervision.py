@@ -1,0 +1,213 @@
+"""Making, losing and re-acquiring contact: the contact supervisor.
+
+The paper's law assumes the tool is on the constraint surface and stays there. A task that
+starts in free space, or whose surface moves away, needs a supervisor that decides when the
+hybrid law applies. ``ContactSupervisor`` is that state machine; the controller reads its phase
+(``HybridController(..., guarded_move=...)``) and runs the guarded move off the surface::
+
+    TARE ──(t >= tare_time)──► APPROACH ──(p >= contact_threshold |F_d|)──► CONTACT
+    hold still; the            guarded move at s along n_C                  the hybrid law
+    conditioner tares            │     ▲                                      │
+                                 │     └──(p < loss_threshold |F_d| for loss_dwell)──┘
+                                 │ travel > max_travel
+                                 ▼
+                               HOLD ──(p >= contact_threshold |F_d|)──► CONTACT
+                               hold still, wait
+
+p = F . F_d / |F_d| is the measured force along the commanded one (|F_d| when the force loop
+has converged), over the force-controlled rows of C; travel = n_C . (C - C_entry), with
+n_C = -F_d / |F_d| the pressing direction in C's coordinates and C_entry the constraint value
+when APPROACH began. While the measured wrench is invalid (a NaN from the wrench conditioner:
+a sensor dropout longer than it bridges) nothing changes and the timers hold. Anti-windup off
+the surface: the controller freezes xi in every phase but CONTACT, so a lost contact does not
+wind up the force integral; on re-contact xi resumes from its value before the loss.
+
+A lost contact is re-acquired by the same guarded move: the arm moves along n_C at the
+approach speed s until the force exceeds the contact threshold. The impact at re-contact is
+that of a pad arriving at speed s (the peak force grows with s and the pad's stiffness; the
+reliability figures in docs/reliability.md measure it).
+"""
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from pydrake.autodiffutils import AutoDiffXd
+from pydrake.systems.framework import LeafSystem_
+from pydrake.systems.scalar_conversion import TemplateSystem
+
+from drake_hybrid.control.phases import ContactPhase
+from drake_hybrid.control.sampling import SAMPLE_LEAD
+from drake_hybrid.core.errors import ConfigError, check_fields
+from drake_hybrid.core.linalg import all_finite, value
+
+
+@dataclass
+class SupervisionConfig:
+    """The contact supervisor and the controller's guarded move (``ScenarioConfig.supervision``).
+
+    A scenario builds the supervisor when ``enabled`` or when the start is off the surface
+    (``start.in_contact: false``).
+
+    approach_speed: s, along the pressing direction, in units of C per second (m/s for the
+        window and the sphere).
+    approach_gain: K_a (1/s), the guarded move's velocity gain.
+    contact_threshold: p at which contact is declared, as a fraction of |F_d|.
+    loss_threshold: p below which (for ``loss_dwell`` seconds) contact is declared lost.
+    max_travel: how far (units of C) the guarded move may go without finding the surface.
+    tare_time: s; > 0 starts in TARE (needs ``sensor.condition``) when the start is in free space.
+    """
+
+    enabled: bool = False
+    approach_speed: float = 0.02
+    approach_gain: float = 30.0
+    contact_threshold: float = 0.3
+    loss_threshold: float = 0.1
+    loss_dwell: float = 0.01
+    max_travel: float = 0.05
+    tare_time: float = 0.0
+
+    def validate(self):
+        """ValueError naming the first bad field."""
+        check_fields(self, "supervision.", positive=("approach_gain", "loss_dwell", "max_travel"),
+                     nonnegative=("approach_speed", "tare_time"))
+        if not 0 < float(self.loss_threshold) < float(self.contact_threshold) <= 1:
+            raise ConfigError("supervision thresholds must satisfy 0 < loss_threshold < contact_threshold <= 1 "
+                             f"(fractions of |F_d|), got loss_threshold = {self.loss_threshold}, contact_threshold = "
+                             f"{self.contact_threshold}")
+        return self
+
+
+@TemplateSystem.define("ContactSupervisor_", T_list=[float, AutoDiffXd])
+def ContactSupervisor_(T):
+
+    class Impl(LeafSystem_[T]):
+        """The contact state machine of the module docstring, sampled with the controller.
+
+        .. pydrake_system::
+
+            name: ContactSupervisor
+            input_ports:
+            - force
+            - desired_force
+            - constraint_value
+            - measured_wrench
+            output_ports:
+            - contact_phase
+            - contact_count
+
+        ==================  ====  ==============================================================
+        force               m     F (the controller's ``force`` output)
+        desired_force       m     F_d
+        constraint_value    m     C(r) (the controller's ``constraint_value`` output)
+        measured_wrench     6     the wrench the controller reads (NaN entries: no decision)
+        contact_phase       1     safety.ContactPhase (state)
+        contact_count       1     how many times CONTACT was entered (state)
+        ==================  ====  ==============================================================
+
+        Discrete state [phase, timer, contact count, C_entry (m)], updated every ``period`` at
+        the controller's tick (k h - SAMPLE_LEAD h), from the controller's outputs at that tick:
+        a transition takes effect at the next tick (one period of latency).
+
+        The AutoDiffXd instance decides on the values (a phase has no derivative); it exists so
+        that a diagram containing the supervisor converts.
+
+        Args:
+            config: SupervisionConfig.
+            force_size: m.
+            kinematic_rows: rows of C held kinematically (excluded from p and n_C).
+            period: the control period h (s).
+            initial_phase: the phase at t = 0 (a ContactPhase).
+        """
+
+        def _construct(self, config, force_size, kinematic_rows, period, initial_phase=ContactPhase.CONTACT,
+                       converter=None):
+            LeafSystem_[T].__init__(self, converter)
+            config.validate()
+            if not (period is not None and float(period) > 0):
+                raise ValueError(f"ContactSupervisor: period must be positive, got {period}")
+            m = int(force_size)
+            if m < 1:
+                raise ValueError(f"ContactSupervisor: force_size must be >= 1, got {force_size}")
+            self.config, self.force_size, self.period = config, m, float(period)
+            self.kinematic_rows = tuple(int(i) for i in kinematic_rows)
+            if any(not 0 <= i < m for i in self.kinematic_rows):
+                raise ValueError(f"ContactSupervisor: kinematic_rows {self.kinematic_rows} out of range 0..{m - 1}")
+            self.initial_phase = ContactPhase(initial_phase)
+            self._force_controlled = np.ones(m)
+            self._force_controlled[list(self.kinematic_rows)] = 0.0
+            self._force_port = self.DeclareVectorInputPort("force", m)
+            self._desired_force_port = self.DeclareVectorInputPort("desired_force", m)
+            self._constraint_port = self.DeclareVectorInputPort("constraint_value", m)
+            self._wrench_port = self.DeclareVectorInputPort("measured_wrench", 6)
+            initial = np.zeros(3 + m)
+            initial[0] = float(self.initial_phase)
+            self._state_index = self.DeclareDiscreteState(initial)
+            self.DeclarePeriodicDiscreteUpdateEvent(self.period, self.period * (1.0 - SAMPLE_LEAD), self._update)
+            self.DeclareVectorOutputPort("contact_phase", 1, self._calc_phase, prerequisites_of_calc={self.xd_ticket()})
+            self.DeclareVectorOutputPort("contact_count", 1, self._calc_count, prerequisites_of_calc={self.xd_ticket()})
+
+        def _construct_copy(self, other, converter=None):
+            Impl._construct(self, other.config, other.force_size, other.kinematic_rows, other.period,
+                            other.initial_phase, converter=converter)
+
+        def get_contact_phase_output_port(self):
+            return self.GetOutputPort("contact_phase")
+
+        def set_initial_state(self, context, phase, constraint_value):
+            """Start in ``phase`` with C_entry = ``constraint_value`` (C at the start: the travel of a
+            first APPROACH counts from there), timers and count reset."""
+            constraint_value = np.asarray(value(constraint_value), dtype=float)
+            if constraint_value.shape != (self.force_size,):
+                raise ValueError(f"ContactSupervisor: constraint_value must have {self.force_size} entries, got "
+                                 f"{constraint_value.shape}")
+            context.SetDiscreteState(0, np.concatenate([[float(ContactPhase(phase)), 0.0, 0.0], constraint_value]))
+
+        def _calc_phase(self, context, output):
+            output.SetFromVector(context.get_discrete_state(0).CopyToVector()[:1])
+
+        def _calc_count(self, context, output):
+            output.SetFromVector(context.get_discrete_state(0).CopyToVector()[2:3])
+
+        def next_state(self, state, force, desired_force, constraint_value, wrench_valid):
+            """The transition of the module docstring (floats): the state after one period."""
+            config, h = self.config, self.period
+            phase, timer, count = ContactPhase(int(state[0])), float(state[1]), float(state[2])
+            entry = np.array(state[3:], dtype=float)
+            commanded = desired_force * self._force_controlled
+            magnitude = float(np.linalg.norm(commanded))
+            if magnitude == 0:                      # no pressing direction: nothing to supervise
+                return np.concatenate([[float(phase), timer, count], entry])
+            pressing = float(force @ commanded) / magnitude if wrench_valid else None     # p
+            direction = -commanded / magnitude                                             # n_C
+            touching = pressing is not None and pressing >= config.contact_threshold * magnitude
+            if phase is ContactPhase.TARE:
+                timer += h
+                if timer >= config.tare_time - 0.5 * h:
+                    phase, timer, entry = ContactPhase.APPROACH, 0.0, constraint_value.copy()
+            elif phase in (ContactPhase.APPROACH, ContactPhase.HOLD):
+                if touching:
+                    phase, timer, count = ContactPhase.CONTACT, 0.0, count + 1
+                elif phase is ContactPhase.APPROACH and direction @ (constraint_value - entry) > config.max_travel:
+                    phase, timer = ContactPhase.HOLD, 0.0
+            elif pressing is not None:              # CONTACT, with a valid measurement
+                if pressing < config.loss_threshold * magnitude:
+                    timer += h
+                    if timer >= config.loss_dwell - 0.5 * h:
+                        phase, timer, entry = ContactPhase.APPROACH, 0.0, constraint_value.copy()
+                else:
+                    timer = 0.0
+            return np.concatenate([[float(phase), timer, count], entry])
+
+        def _update(self, context, discrete_state):
+            state = value(context.get_discrete_state(0).CopyToVector())
+            force = value(self._force_port.Eval(context))
+            wrench_valid = all_finite(self._wrench_port.Eval(context)) and all_finite(force)
+            new_state = self.next_state(state, force, value(self._desired_force_port.Eval(context)),
+                                        value(self._constraint_port.Eval(context)), wrench_valid)
+            discrete_state.get_mutable_vector(0).SetFromVector(new_state)
+
+    return Impl
+
+
+ContactSupervisor = ContactSupervisor_[None]

@@ -1,0 +1,65 @@
+"""Typed errors raised by drake_hybrid.
+
+Every error is a ``ValueError`` subclass, so callers that do not care about the
+kind can catch ``ValueError``; tests and users that do care can catch the
+specific type. Messages always name the offending object and the numbers.
+"""
+
+
+class DrakeHybridError(ValueError):
+    """Base class of every error raised on purpose by drake_hybrid."""
+
+
+class ConfigError(DrakeHybridError):
+    """A configuration field has a value (or a name, or a type) that is not allowed; the message
+    names the field (dotted, as in the YAML) and what is allowed."""
+
+
+class ChartSingularityError(DrakeHybridError):
+    """A coordinate chart was evaluated at (or too near) its singular set.
+
+    For z-x-z Euler angles this is |sin(theta)| below the chart's tolerance,
+    where the Euler-rate map T(eta) loses rank (spec section 1).
+    """
+
+
+class ConstraintRankError(DrakeHybridError):
+    """dC (the force projection E_f) lost rank, or E = [E_p; E_f] is singular."""
+
+
+class UnknownVariableError(DrakeHybridError):
+    """A symbolic expression uses variables that are not the chart's coordinates."""
+
+
+class DimensionError(DrakeHybridError):
+    """An array has the wrong shape for the object it is given to."""
+
+
+class GainError(DrakeHybridError):
+    """A gain matrix is not of the right size or not positive definite."""
+
+
+class BranchError(DrakeHybridError):
+    """A configuration satisfies C(r) = 0 on the wrong branch (e.g. the tool
+    pointing away from the workpiece instead of toward it)."""
+
+
+class KinematicSingularityWarning(UserWarning):
+    """The arm is near a kinematic singularity: the controller bounds the joint acceleration with a
+    damped inverse of J there, so the commanded task acceleration is only approximately produced."""
+
+
+class OffConstraintError(DrakeHybridError):
+    """A configuration that should satisfy C(r) = 0 does not (e.g. a start
+    configuration off the constraint)."""
+
+
+def check_fields(owner, prefix, positive=(), nonnegative=(), error=ConfigError):
+    """Raise ``error`` (ConfigError) naming ``prefix.field`` if a field of ``owner`` (a config dataclass)
+    listed in ``positive`` is not > 0 or one in ``nonnegative`` is not >= 0 (NaN fails both)."""
+    for names, test, words in ((positive, lambda x: x > 0, "positive"), (nonnegative, lambda x: x >= 0, ">= 0")):
+        for name in names:
+            number = getattr(owner, name)
+            if not test(float(number)):
+                raise error(f"{prefix}{name} must be {words}, got {number}")
+    return owner

@@ -1,0 +1,198 @@
+"""End-effector kinematics in chart coordinates, from a MultibodyPlant.
+
+``EndEffectorKinematics`` turns Drake's geometric quantities of an
+end-effector point P fixed in a frame E (pose, geometric Jacobian J_g, bias
+spatial acceleration J_g-dot v) into the chart's x, nu, analytic Jacobian J
+and J-dot q-dot (spec section 1, last part). Works for float and AutoDiffXd
+plants; frames are resolved by index, so the same object can be rebuilt on a
+scalar-converted plant with ``for_plant``.
+"""
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from pydrake.common.value import AbstractValue
+from pydrake.math import RotationMatrix
+from pydrake.multibody.tree import FrameIndex, JacobianWrtVariable
+from pydrake.systems.framework import ValueProducer
+
+from drake_hybrid.core.errors import DimensionError
+from drake_hybrid.core.linalg import all_finite, value
+
+
+@dataclass
+class TaskKinematics:
+    """Chart quantities of the end-effector point at one plant state."""
+
+    configuration: np.ndarray        # x (the paper's r)
+    velocity: np.ndarray             # nu = J q-dot (the paper's r-dot)
+    jacobian: np.ndarray             # J (d x n)
+    bias: np.ndarray                 # J-dot q-dot (d)
+    rotation: np.ndarray             # R_WE (3 x 3)
+    position: np.ndarray             # p_WP (3)
+    spatial_jacobian: np.ndarray     # J_g (6 x n), rows [omega; v]
+
+
+def frame_names(plant):
+    """Names of all frames of ``plant`` (for error messages)."""
+    return sorted({plant.get_frame(FrameIndex(i)).name() for i in range(plant.num_frames())})
+
+
+def resolve_frame(plant, frame):
+    """The Frame of ``plant`` given one of its Frames or a frame name. Raises
+    ValueError naming the plant's frames if it is not there."""
+    if isinstance(frame, str):
+        if not plant.HasFrameNamed(frame):
+            raise ValueError(f"frame '{frame}' is not in the plant; its frames are {frame_names(plant)}")
+        return plant.GetFrameByName(frame)
+    try:
+        name = frame.name()
+    except AttributeError:
+        raise TypeError(f"expected a Frame or a frame name, got {type(frame).__name__}") from None
+    if frame.GetParentPlant() is not plant:
+        raise ValueError(f"frame '{name}' is not in the plant; its frames are {frame_names(plant)}")
+    return frame
+
+
+class EndEffectorKinematics:
+    """Chart coordinates of the point P (``point_in_frame`` = p_EP) of frame E.
+
+    Args:
+        plant: a finalized MultibodyPlant (float or AutoDiffXd) with nq == nv.
+        frame: the end-effector frame E (a Frame of ``plant`` or its name).
+        point_in_frame: p_EP, the end-effector point in E (m).
+        chart: the coordinate chart; the end-effector orientation is E's.
+    """
+
+    def __init__(self, plant, frame, point_in_frame, chart):
+        if not plant.is_finalized():
+            raise ValueError("EndEffectorKinematics: the plant must be finalized")
+        if plant.num_positions() != plant.num_velocities():
+            raise ValueError(
+                f"EndEffectorKinematics needs q-dot = v (nq == nv); the plant has nq = {plant.num_positions()}, "
+                f"nv = {plant.num_velocities()}")
+        point = np.asarray(point_in_frame, dtype=float)
+        if point.shape != (3,):
+            raise DimensionError(f"point_in_frame must be a 3-vector, got shape {point.shape}")
+        self.plant = plant
+        self.frame = resolve_frame(plant, frame)
+        self.point_in_frame = point
+        self.chart = chart
+        self._world = plant.world_frame()
+
+    def for_plant(self, plant):
+        """The same kinematics on another scalar type of the same plant."""
+        return EndEffectorKinematics(plant, plant.get_frame(self.frame.index()), self.point_in_frame, self.chart)
+
+    def evaluate(self, plant_context, check=True):
+        """TaskKinematics at the state in ``plant_context``."""
+        plant = self.plant
+        X_WE = plant.CalcRelativeTransform(plant_context, self._world, self.frame)
+        R_WE = X_WE.rotation().matrix()
+        p_WP = X_WE.translation() + R_WE @ self.point_in_frame
+        J_spatial = plant.CalcJacobianSpatialVelocity(
+            plant_context, JacobianWrtVariable.kV, self.frame, self.point_in_frame, self._world, self._world)
+        A_bias = plant.CalcBiasSpatialAcceleration(
+            plant_context, JacobianWrtVariable.kV, self.frame, self.point_in_frame, self._world, self._world
+        ).get_coeffs()
+        v = plant.GetVelocities(plant_context)
+        chart = self.chart
+        x = chart.configuration(R_WE, p_WP)
+        if check:
+            chart.check(x)
+        nu = chart.task_velocity(x, J_spatial @ v)
+        return TaskKinematics(
+            configuration=x,
+            velocity=nu,
+            jacobian=chart.task_jacobian(x, J_spatial),
+            bias=chart.task_bias(x, nu, A_bias),
+            rotation=R_WE,
+            position=p_WP,
+            spatial_jacobian=J_spatial,
+        )
+
+
+def declare_plant_context_cache(system, plant, state_port):
+    """Declare, on ``system``, a cache entry holding a context of ``plant`` whose
+    positions and velocities are those on ``state_port`` ([q; v]).
+
+    Per-context plant state lives in the system's cache (as in Drake's
+    JointStiffnessController), never in a member shared by every context.
+    Returns the CacheEntry; ``entry.Eval(context)`` is the plant context.
+    """
+
+    def calc(context, abstract_value):
+        state = state_port.Eval(context)
+        if not all_finite(state):
+            # Drake's SetPositionsAndVelocities aborts on a non-finite state; say which input it was.
+            raise ValueError(f"{system.get_name() or type(system).__name__}: input '{state_port.get_name()}' has "
+                             f"non-finite entries {value(state).tolist()}")
+        plant.SetPositionsAndVelocities(abstract_value.get_mutable_value(), state)
+
+    return system.DeclareCacheEntry(
+        description="plant context",
+        value_producer=ValueProducer(allocate=lambda: AbstractValue.Make(plant.CreateDefaultContext()), calc=calc),
+        prerequisites_of_calc={state_port.ticket()})
+
+
+def declare_cached_value(system, description, compute, prerequisites):
+    """Declare, on ``system``, a cache entry holding the Python object ``compute(context)``,
+    recomputed only when one of ``prerequisites`` (cache tickets) changes. Returns the CacheEntry."""
+    return system.DeclareCacheEntry(
+        description=description,
+        value_producer=ValueProducer(allocate=lambda: AbstractValue.Make(object()),
+                                     calc=lambda context, abstract_value: abstract_value.set_value(compute(context))),
+        prerequisites_of_calc=set(prerequisites))
+
+
+def declare_task_input(system, T, plant, end_effector_frame, end_effector_point, chart):
+    """The end-effector input of a system that reads the robot's state: declares the
+    ``estimated_state`` input ([q; v]) and the per-context plant-context cache on ``system``.
+
+    Returns (frame, kinematics, state_port, plant_context_cache): ``frame`` resolved on the float
+    ``plant``, ``kinematics`` an EndEffectorKinematics on the plant of scalar type T.
+    """
+    frame = resolve_frame(plant, end_effector_frame)
+    plant_T = plant if T == float else plant.ToAutoDiffXd()
+    kinematics = EndEffectorKinematics(plant_T, plant_T.get_frame(frame.index()), end_effector_point, chart)
+    state_port = system.DeclareVectorInputPort("estimated_state", 2 * plant.num_velocities())
+    return frame, kinematics, state_port, declare_plant_context_cache(system, plant_T, state_port)
+
+
+def inverse_kinematics(kinematics, plant_context, X_target, q_guess, tolerance=1e-12, max_iterations=200):
+    """Joint positions that put the end-effector pose at ``X_target`` (RigidTransform of E with
+    its point P at X_target's origin), by damped Gauss-Newton from ``q_guess``.
+
+    Uses the world-frame pose error [log(R_target R^T); p_target - p] and J_g, so it works for
+    every chart; for a redundant arm it moves as little as possible from ``q_guess``. Steps are
+    limited to 0.2 rad, the result is wrapped to the turn nearest ``q_guess`` and checked against
+    the plant's position limits. Raises ValueError if it does not converge or violates a limit.
+    """
+    plant = kinematics.plant
+    q_guess = np.array(q_guess, dtype=float)
+    q = q_guess.copy()
+    target_R = X_target.rotation()
+    target_p = X_target.translation()
+    error_norm = np.inf
+    for _ in range(max_iterations):
+        plant.SetPositions(plant_context, q)
+        task = kinematics.evaluate(plant_context, check=False)
+        R_error = target_R.multiply(RotationMatrix(task.rotation).inverse()).ToAngleAxis()
+        error = np.concatenate([R_error.angle() * R_error.axis(), target_p - task.position])
+        error_norm = np.linalg.norm(error)
+        if error_norm < tolerance:
+            break
+        J = task.spatial_jacobian
+        step = J.T @ np.linalg.solve(J @ J.T + 1e-6 * np.eye(6), error)
+        largest = np.max(np.abs(step))
+        q = q + (step * (0.2 / largest) if largest > 0.2 else step)
+    if error_norm > 1e-8:
+        raise ValueError(f"inverse kinematics did not converge (pose error {error_norm:.3g}); is the target reachable?")
+    # Revolute joints: the same pose on the turn nearest the guess.
+    q = q_guess + np.remainder(q - q_guess + np.pi, 2 * np.pi) - np.pi
+    lower, upper = plant.GetPositionLowerLimits(), plant.GetPositionUpperLimits()
+    if np.any(q < lower - 1e-9) or np.any(q > upper + 1e-9):
+        raise ValueError(f"inverse kinematics: the solution {np.round(q, 3).tolist()} violates the joint limits "
+                         f"[{np.round(lower, 3).tolist()}, {np.round(upper, 3).tolist()}]")
+    return q

@@ -1,0 +1,170 @@
+"""Run a scenario and turn its logs into arrays, a summary and files.
+
+``simulate(config)`` builds the scenario, sets the start, runs Drake's
+Simulator (with an optional progress bar and Meshcat recording) and returns a
+``SimulationResult`` with the log (arrays keyed as in ``log.npz``) and the
+summary (as in ``summary.json``); ``viz.outputs.write_run(result, out_dir)`` writes both
+plus the tracking plots.
+"""
+
+import math
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+from tqdm import tqdm
+
+from pydrake.systems.analysis import Simulator
+
+from drake_hybrid.analysis.linearization import controller_prediction, design_time_constant, predicted_errors
+from drake_hybrid.scenario.builder import build_scenario
+from drake_hybrid.scenario.config import dump_config
+from drake_hybrid.scenario.start import set_initial_conditions
+
+
+@dataclass
+class SimulationResult:
+    config: object
+    log: dict
+    summary: dict
+    scenario: object = None
+    html: str = None
+    extra: dict = field(default_factory=dict)
+
+
+def _logged(scenario, context, name):
+    """(times, samples x size) of logger ``name``; a (logger, columns) entry is a slice of a shared logger."""
+    logger, columns = scenario.loggers[name], slice(None)
+    if isinstance(logger, tuple):
+        logger, columns = logger
+    log = logger.FindLog(context)
+    return log.sample_times(), log.data().T[:, columns]
+
+
+def settling_time(times, error_norm, bound):
+    """First time after which ``error_norm`` stays at or below ``bound`` (inf if never)."""
+    outside = np.nonzero(error_norm > bound)[0]
+    if outside.size == 0:
+        return float(times[0])
+    if outside[-1] == len(times) - 1:
+        return math.inf
+    return float(times[outside[-1] + 1])
+
+
+def simulate(config, progress=False, meshcat=None, record_html=False):
+    """Simulate ``config``; returns a SimulationResult (log arrays and summary)."""
+    scenario = build_scenario(config, meshcat=meshcat)
+    simulator = Simulator(scenario.diagram)
+    context = simulator.get_mutable_context()
+    set_initial_conditions(scenario, context)
+    if meshcat is not None and record_html:
+        meshcat.StartRecording(set_visualizations_while_recording=False)
+    simulator.Initialize()
+    start = time.perf_counter()
+    duration = float(config.duration)
+    if progress:
+        steps = 100
+        with tqdm(total=steps, desc=f"simulating {config.task}", unit="%", leave=False) as bar:
+            for i in range(1, steps + 1):
+                simulator.AdvanceTo(duration * i / steps)
+                bar.update(1)
+    else:
+        simulator.AdvanceTo(duration)
+    wall = time.perf_counter() - start
+    html = None
+    if meshcat is not None and record_html:
+        meshcat.StopRecording()
+        meshcat.PublishRecording()
+        html = meshcat.StaticHtml()
+    log = collect_log(scenario, context)
+    summary = summarize(scenario, log, wall)
+    return SimulationResult(config=config, log=log, summary=summary, scenario=scenario, html=html)
+
+
+def collect_log(scenario, context):
+    """The logged signals as arrays (the keys of log.npz)."""
+    t, velocity = _logged(scenario, context, "projected_velocity")
+    log = {"t": t, "velocity": velocity}
+    for key, name in [("desired_velocity", "desired_velocity"), ("force", "force"), ("desired_force", "desired_force"),
+                      ("constraint", "constraint_value"), ("torque", "actuation"),
+                      ("velocity_error", "velocity_error"), ("force_error", "force_error"),
+                      ("position_error", "position_error"), ("tangential_force", "tangential_force"),
+                      ("wrench", "wrench")]:
+        log[key] = _logged(scenario, context, name)[1]
+    state = _logged(scenario, context, "state")[1]
+    n = state.shape[1] // 2
+    log["q"], log["v"] = state[:, :n], state[:, n:]
+    for optional in ("true_wrench", "contact_phase"):        # sensor faults or conditioning; supervision
+        if optional in scenario.loggers:
+            log[optional] = _logged(scenario, context, optional)[1]
+    return log
+
+
+def effort_limits(scenario):
+    """The effort limits of the arm's actuators (N m for revolute joints), in actuation order."""
+    plant = scenario.plant
+    return np.array([plant.get_joint_actuator(i).effort_limit() for i in plant.GetJointActuatorIndices(scenario.robot.arm)])
+
+
+def _percent(error, scale):
+    return float(100.0 * error / scale) if scale > 0 else float("nan")
+
+
+def summarize(scenario, log, wall_time):
+    """The run's summary (summary.json): gains, mode, designed eigenvalues, errors."""
+    config = scenario.config
+    controller = scenario.controller
+    gains = controller.validated_gains()
+    k, m = controller.velocity_size, controller.force_size
+    predicted = controller_prediction(controller)
+    tau = design_time_constant(gains, controller.mode, controller.kinematic_rows)
+    t = log["t"]
+    speed_scale = float(np.max(np.linalg.norm(log["desired_velocity"], axis=1)))
+    force_scale = float(np.max(np.linalg.norm(log["desired_force"], axis=1)))
+    velocity_error = np.linalg.norm(log["velocity_error"], axis=1)
+    force_error = np.linalg.norm(log["force_error"], axis=1)
+    settled = t >= 5 * tau
+    torque_ratio = np.max(np.abs(log["torque"]) / effort_limits(scenario), axis=0)
+    pairs = lambda values: [[float(np.real(v)), float(np.imag(v))] for v in values]
+    summary = {
+        "task": config.task,
+        "mode": controller.mode.value,
+        "duration": float(config.duration),
+        "time_step": float(config.plant.time_step),
+        "control_period": float(config.control_period),
+        "velocity_dim": k,
+        "force_dim": m,
+        "gains": config.gains.as_lists(k, m, controller.mode),
+        "predicted_eigenvalues": pairs(predicted.designed),
+        "design_time_constant": float(tau),
+        "final_velocity_error": log["velocity_error"][-1].tolist(),
+        "final_force_error": log["force_error"][-1].tolist(),
+        "final_velocity_error_percent": _percent(velocity_error[-1], speed_scale),
+        "final_force_error_percent": _percent(force_error[-1], force_scale),
+        "max_velocity_error_percent_after_5_time_constants":
+            _percent(float(np.max(velocity_error[settled])), speed_scale) if settled.any() else None,
+        "max_force_error_percent_after_5_time_constants":
+            _percent(float(np.max(force_error[settled])), force_scale) if settled.any() else None,
+        "velocity_settling_time_1_percent": settling_time(t, velocity_error, 0.01 * speed_scale),
+        "force_settling_time_1_percent": settling_time(t, force_error, 0.01 * force_scale),
+        "max_constraint_residual": float(np.max(np.abs(log["constraint"]))),
+        "max_torque_to_effort_limit": torque_ratio.tolist(),
+        "wall_time": float(wall_time),
+        "real_time_factor": float(config.duration / wall_time) if wall_time > 0 else None,
+        "command_scales": {"speed": speed_scale, "force": force_scale},
+    }
+    return summary
+
+
+def predicted_tracking(scenario_or_controller, config, log):
+    """Predicted (velocity, force) trajectories: the desired ones plus the designed error decay
+    from the logged initial velocity error and the configured initial integrals."""
+    controller = getattr(scenario_or_controller, "controller", scenario_or_controller)
+    gains = controller.validated_gains()
+    m = controller.force_size
+    xi0 = np.asarray(config.start.force_integral, dtype=float) if config.start.force_integral else np.zeros(m)
+    e_p0 = np.asarray(config.start.position_error, dtype=float) if config.start.position_error else None
+    velocity_error, force_error, _ = predicted_errors(gains, controller.mode, log["t"], log["velocity_error"][0],
+                                                      xi0, e_p0, controller.kinematic_rows)
+    return log["desired_velocity"] + velocity_error, log["desired_force"] + force_error

@@ -1,0 +1,444 @@
+"""Stability maps and robustness sweeps, on this machine or a Dask cluster.
+
+``run_sweep(task, spec, out_dir)`` evaluates every point of a sweep spec
+(``drake_hybrid.experiments.sweep_spec``: grid and Monte Carlo over any scenario-config
+field) and writes one row per point to ``out_dir/results.csv`` as soon as the
+point finishes, so an interrupted or partly failed sweep keeps every finished
+point and ``resume=True`` runs only the missing ones.
+
+One point (``evaluate_point``, run on a worker from the point's config YAML:
+Drake diagrams do not pickle, configs do)::
+
+    config YAML ─► simulate (discrete plant, sampled controller, spec's horizon) ─► errors, settling, peak force
+               ├─► linearize_continuous (continuous plant and controller)         ─► eigenvalues (sampling not seen)
+               └─► linearize_sampled_loop (one control period, central differences)   ─► multipliers (sampling seen)
+
+Per point it records the parameters, the verdicts, the metrics below and, on
+failure, the error text of every stage that failed (never dropped):
+
+* ``stable_simulation``: the run finished with finite values and, over the
+  last ``steady_window`` of the horizon, max |e_f| and max |e_p'| stayed
+  within ``steady_tolerance`` of the command (|F_d|, max |r-dot_pd|; absolute
+  units when a command is zero). Contact loss, chatter, limit cycles and
+  blow-up all fail it.
+* ``stable_continuous``: every eigenvalue of the continuous closed loop,
+  except the k = d - m marginal ones the law leaves (unregulated positions,
+  ``analysis.predicted_eigenvalues``), has Re(s) < ``eigenvalue_margin``. The
+  continuous linearization sees neither the control period nor the plant's
+  time step: it is the verdict for continuous loops only.
+* ``stable_discrete``: the same test on log(mu) / h for the multipliers mu of
+  the one-period map (``analysis.linearize_sampled_loop``): it sees the sampling.
+* ``stable``: the simulation's verdict and the linearization that models the
+  simulated loop (discrete when the controller is sampled, continuous when
+  it is not), both True; if one of them is missing, the other.
+* ``worst_*_real``: the largest Re(s) over the non-marginal eigenvalues (1/s);
+  ``marginal_*_real``: the largest over the marginal ones (a slow drift of
+  the unregulated positions; reported, not part of the verdict);
+  ``spectral_radius``: the largest |mu| over all multipliers.
+
+Execution: ``workers=N`` starts a Dask ``LocalCluster`` of N single-threaded
+worker processes; ``scheduler=ADDRESS`` uses an existing Dask cluster (its
+workers need drake_hybrid installed); ``workers=0`` runs in this process
+without Dask (the reference the tests compare against).
+
+Size: one sweep point (simulation, linearizations, verdicts), its Dask execution and the
+incremental results table belong together: the table's columns are the point's outputs.
+"""
+
+import copy
+import csv
+import json
+import logging
+import math
+import os
+import socket
+import time
+import traceback
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import dask
+import numpy as np
+import yaml
+from distributed import Client, LocalCluster, as_completed
+from tqdm import tqdm
+
+from drake_hybrid.analysis.linearization import linearize_continuous, linearize_sampled_loop, predicted_eigenvalues
+from drake_hybrid.control.gains import ControlMode
+from drake_hybrid.core.errors import GainError
+from drake_hybrid.experiments.simulation import simulate
+from drake_hybrid.experiments.sweep_spec import (StabilityCriteria, SweepSpecError, apply_parameters, parameters_digest,
+                                                 set_config_value)
+from drake_hybrid.scenario.config import dump_config, load_config
+from drake_hybrid.scenario.tasks import get_task
+
+VERDICT_COLUMNS = ["stable", "stable_simulation", "stable_continuous", "stable_discrete"]
+METRIC_COLUMNS = [
+    "worst_continuous_real", "marginal_continuous_real",
+    "worst_discrete_real", "marginal_discrete_real", "spectral_radius", "discrete_equilibrium_residual",
+    "velocity_settling_time", "force_settling_time",
+    "steady_velocity_error", "steady_force_error", "steady_velocity_error_percent", "steady_force_error_percent",
+    "final_velocity_error", "final_force_error",
+    "peak_force", "max_constraint_residual",
+    "simulation_wall_time", "linearization_wall_time", "wall_time", "cpu_time",
+]
+TEXT_COLUMNS = ["worker", "error"]
+RESULT_COLUMNS = VERDICT_COLUMNS + METRIC_COLUMNS + TEXT_COLUMNS
+RESULTS_FILE = "results.csv"
+
+
+# ------------------------------------------------------------------------------------------------
+# One point
+# ------------------------------------------------------------------------------------------------
+
+def _worst_real(match, marginal_count):
+    """(worst Re over the designed partners and the extra modes, worst Re over the marginal modes:
+    the measured partners of the predicted zeros; see ``analysis.match_eigenvalues``)."""
+    regulated = np.concatenate([np.asarray(match.partner), np.asarray(match.extra)])
+    marginal = np.asarray(match.marginal_partners)
+    worst = float(np.max(regulated.real)) if regulated.size else None
+    return worst, (float(np.max(marginal.real)) if marginal.size else None)
+
+
+def _error_norms(log, key):
+    return np.linalg.norm(np.atleast_2d(log[key]).reshape(len(log["t"]), -1), axis=1)
+
+
+def simulation_metrics(result, criteria):
+    """The simulation's columns from a SimulationResult (see the module docstring)."""
+    log, summary = result.log, result.summary
+    t = log["t"]
+    finite = all(np.all(np.isfinite(np.asarray(v, dtype=float))) for v in log.values())
+    window = t >= t[-1] - criteria.steady_window * (t[-1] - t[0])
+    speed, force = summary["command_scales"]["speed"], summary["command_scales"]["force"]
+    velocity_error, force_error = _error_norms(log, "velocity_error"), _error_norms(log, "force_error")
+    steady_velocity, steady_force = float(np.max(velocity_error[window])), float(np.max(force_error[window]))
+    settled = (steady_velocity <= criteria.steady_tolerance * (speed if speed > 0 else 1.0)
+               and steady_force <= criteria.steady_tolerance * (force if force > 0 else 1.0))
+    percent = lambda error, scale: 100.0 * error / scale if scale > 0 else None
+    return {
+        "stable_simulation": bool(finite and settled),
+        "velocity_settling_time": summary["velocity_settling_time_1_percent"],
+        "force_settling_time": summary["force_settling_time_1_percent"],
+        "steady_velocity_error": steady_velocity,
+        "steady_force_error": steady_force,
+        "steady_velocity_error_percent": percent(steady_velocity, speed),
+        "steady_force_error_percent": percent(steady_force, force),
+        "final_velocity_error": float(velocity_error[-1]),
+        "final_force_error": float(force_error[-1]),
+        "peak_force": float(np.max(_error_norms(log, "force"))),
+        "max_constraint_residual": summary["max_constraint_residual"],
+        "simulation_wall_time": summary["wall_time"],
+    }
+
+
+def _stage_error(stage, error):
+    text = f"{type(error).__name__}: {error}".strip()
+    if not str(error).strip():      # an error without a message: keep where it came from
+        text += " | " + traceback.format_exc(limit=-3).replace("\n", " | ")
+    return f"{stage}: {text}"
+
+
+def evaluate_point(config_yaml, criteria=None, continuous=True, discrete=True):
+    """Evaluate one sweep point from its config YAML; returns the result columns as a dict.
+
+    Each stage (simulation, continuous and discrete linearization) runs on its
+    own: a failing stage leaves its columns empty and adds its error text to
+    ``error``; the others still run."""
+    criteria = StabilityCriteria(**(criteria or {}))
+    start, cpu_start = time.perf_counter(), time.process_time()
+    row = {column: None for column in RESULT_COLUMNS}
+    row["worker"] = f"{socket.gethostname()}:{os.getpid()}"
+    errors = []
+    try:
+        config = load_config(data=config_yaml)
+    except Exception as error:
+        row.update(error=_stage_error("config", error), wall_time=time.perf_counter() - start)
+        return row
+    try:
+        row.update(simulation_metrics(simulate(config), criteria))
+    except Exception as error:
+        errors.append(_stage_error("simulation", error))
+    linearization_start = time.perf_counter()
+    if continuous:
+        try:
+            linear = linearize_continuous(config)
+            row["worst_continuous_real"], row["marginal_continuous_real"] = _worst_real(
+                linear.match, linear.predicted.marginal)
+            row["stable_continuous"] = row["worst_continuous_real"] < criteria.eigenvalue_margin
+        except Exception as error:
+            errors.append(_stage_error("continuous linearization", error))
+    if discrete and config.control_period > 0:
+        try:
+            linear = linearize_sampled_loop(config)
+            row["worst_discrete_real"], row["marginal_discrete_real"] = _worst_real(
+                linear.match, linear.predicted.marginal)
+            row["spectral_radius"] = float(np.max(np.abs(linear.multipliers)))
+            row["discrete_equilibrium_residual"] = linear.equilibrium_residual
+            row["stable_discrete"] = row["worst_discrete_real"] < criteria.eigenvalue_margin
+        except Exception as error:
+            errors.append(_stage_error("discrete linearization", error))
+    row["linearization_wall_time"] = time.perf_counter() - linearization_start
+    linear_verdict = row["stable_discrete"] if config.control_period > 0 else row["stable_continuous"]
+    verdicts = [v for v in (row["stable_simulation"], linear_verdict) if v is not None]
+    row["stable"] = all(verdicts) if verdicts else None
+    row["error"] = " || ".join(errors) or None
+    row["wall_time"] = time.perf_counter() - start
+    row["cpu_time"] = time.process_time() - cpu_start      # well below wall_time: the core was shared
+    return row
+
+
+# ------------------------------------------------------------------------------------------------
+# The results table (CSV, appended point by point)
+# ------------------------------------------------------------------------------------------------
+
+def _cell(value):
+    if value is None or (isinstance(value, float) and math.isnan(value)):
+        return ""
+    if isinstance(value, (bool, np.bool_)):
+        return "True" if value else "False"
+    if isinstance(value, (float, np.floating)):
+        return repr(float(value))            # round-trips exactly
+    return str(value)
+
+
+def _parse_cell(column, text):
+    if text == "":
+        return None
+    if column in VERDICT_COLUMNS:
+        return text == "True"
+    if column in TEXT_COLUMNS:
+        return text
+    try:
+        return int(text) if column == "point" else float(text)
+    except ValueError:
+        return text                           # a non-numeric parameter value (e.g. a mode name)
+
+
+class ResultsTable:
+    """``results.csv``: a header, then one row per finished point, flushed as it arrives."""
+
+    def __init__(self, path, columns):
+        self.path = Path(path)
+        self.columns = list(columns)
+        if self.path.exists():
+            with self.path.open(newline="") as f:
+                header = next(csv.reader(f), None)
+            if header != self.columns:
+                raise SweepSpecError(f"{self.path} has columns {header}, this sweep writes {self.columns}")
+        else:
+            with self.path.open("w", newline="") as f:
+                csv.writer(f).writerow(self.columns)
+
+    def append(self, row):
+        with self.path.open("a", newline="") as f:
+            csv.writer(f).writerow([_cell(row.get(column)) for column in self.columns])
+            f.flush()
+            os.fsync(f.fileno())
+
+
+def read_results(path):
+    """The rows of a results.csv as dicts (numbers as float, verdicts as bool, empty cells as None),
+    sorted by point index."""
+    path = Path(path)
+    if path.is_dir():
+        path = path / RESULTS_FILE
+    latest = {}
+    with path.open(newline="") as f:
+        for row in csv.DictReader(f):
+            row = {k: _parse_cell(k, v) for k, v in row.items()}
+            latest[row["point"]] = row             # a retried point's last row wins
+    return [latest[i] for i in sorted(latest)]
+
+
+def column(rows, name):
+    """One column of ``rows`` as a float array (None -> nan; verdicts as 1.0 / 0.0)."""
+    return np.array([np.nan if row.get(name) is None else float(row[name]) for row in rows])
+
+
+# ------------------------------------------------------------------------------------------------
+# Running a sweep
+# ------------------------------------------------------------------------------------------------
+
+@dataclass
+class SweepRun:
+    out_dir: Path
+    results_path: Path
+    points: int            # in the spec
+    evaluated: int         # in this run
+    failures: int          # rows with an error, in the whole table
+    wall_time: float       # of this run (s)
+    workers: str           # "serial", "local:N" or the scheduler address
+
+
+def sweep_points(task_name, spec):
+    """(base config, [(index, parameters, point config YAML)]) for ``spec`` on ``task_name``."""
+    if spec.task is not None and spec.task != task_name:
+        raise SweepSpecError(f"the sweep spec is for task '{spec.task}', not '{task_name}'")
+    task = get_task(task_name)
+    try:
+        base = apply_parameters(task.default_config(), spec.base)
+    except ValueError as error:
+        raise SweepSpecError(f"base: {error}") from None
+    points = []
+    for index, parameters in enumerate(spec.points()):
+        try:
+            config = apply_parameters(base, parameters)
+        except ValueError as error:
+            raise SweepSpecError(f"point {index}: {error}") from None
+        points.append((index, parameters, dump_config(config)))
+    return base, points
+
+
+def _prepare_out_dir(out, task_name, spec, base, points, resume):
+    out.mkdir(parents=True, exist_ok=True)
+    manifest = {"task": task_name, "points": len(points),
+                "digest": parameters_digest([[p, y] for _, p, y in points]),
+                "parameters": spec.paths}
+    manifest_path = out / "manifest.json"
+    results_path = out / RESULTS_FILE
+    if results_path.exists() and not resume:
+        raise SweepSpecError(f"{results_path} exists: pass resume=True (--resume) to continue it, "
+                             "or choose another output directory")
+    if resume and manifest_path.exists():
+        previous = json.loads(manifest_path.read_text())
+        if previous.get("digest") != manifest["digest"]:
+            raise SweepSpecError(f"--resume: {out} holds a different sweep ({previous.get('task')}, "
+                                 f"{previous.get('points')} points, parameters {previous.get('parameters')}); "
+                                 "use the same spec and task, or another output directory")
+    manifest_path.write_text(json.dumps(manifest, indent=2))
+    (out / "spec.yaml").write_text(yaml.safe_dump(spec.source, sort_keys=False))
+    (out / "base_config.yaml").write_text(dump_config(base))
+    return results_path
+
+
+WORKER_MEMORY = "4GB"
+
+
+def _start_client(scheduler, workers, worker_memory=WORKER_MEMORY):
+    """A client of the cluster at ``scheduler``, or of a new LocalCluster of ``workers`` processes.
+
+    Drake 1.51 never frees a diagram that holds Python LeafSystems (drake#22515,
+    drake#23161): a worker grows by about 10 to 30 MB per point here. The local
+    cluster's nannies therefore restart a worker whose memory passes 95 % of
+    ``worker_memory`` (no spilling, no pausing: a paused worker would never
+    shrink); the point it was running is run again elsewhere."""
+
+
+    if scheduler:
+        return Client(scheduler), None, scheduler
+    memory = {"target": False, "spill": False, "pause": False, "terminate": 0.95}
+    # The nannies read the terminate threshold when they start; a restarted worker gets ``config``.
+    with dask.config.set({f"distributed.worker.memory.{key}": value for key, value in memory.items()}):
+        cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=":0",
+                               memory_limit=worker_memory, silence_logs=logging.ERROR,
+                               config=copy.deepcopy(dask.config.config))
+    return Client(cluster), cluster, f"local:{workers}"
+
+
+def run_sweep(task_name, spec, out_dir, scheduler=None, workers=2, resume=False, retry_failed=False,
+              progress=True, worker_memory=WORKER_MEMORY):
+    """Evaluate the points of ``spec`` missing from ``out_dir/results.csv`` and append them.
+
+    ``workers``: worker processes of the local Dask cluster (0: this process,
+    no Dask); ignored with ``scheduler`` (an existing cluster's address).
+    ``resume``: continue a table from the same spec and task (checked by a
+    digest of the points); ``retry_failed`` also re-runs points whose row
+    has an error (the new row is appended; ``read_results`` keeps the last
+    row of a point). ``worker_memory``: memory limit of each local worker
+    (restarted past 95 %; see ``_start_client``)."""
+    if not (isinstance(workers, int) and workers >= 0):
+        raise ValueError(f"workers must be a non-negative integer, got {workers!r}")
+    out = Path(out_dir)
+    base, points = sweep_points(task_name, spec)
+    results_path = _prepare_out_dir(out, task_name, spec, base, points, resume)
+    columns = ["point"] + spec.paths + RESULT_COLUMNS
+    table = ResultsTable(results_path, columns)
+    finished = {row["point"]: row for row in read_results(results_path)}
+    done = {i for i, row in finished.items() if not (retry_failed and row.get("error"))}
+    pending = [p for p in points if p[0] not in done]
+    failures = sum(1 for i in done if finished[i].get("error"))
+    options = {"criteria": asdict(spec.stability), "continuous": spec.linearize_continuous,
+               "discrete": spec.linearize_discrete}
+    start = time.perf_counter()
+    bar = tqdm(total=len(points), initial=len(done), desc=f"sweep {task_name}", unit="pt", disable=not progress,
+               dynamic_ncols=True)
+    bar.set_postfix(failures=failures)
+
+    def record(index, parameters, row):
+        nonlocal failures
+        row = dict(row, point=index, **parameters)
+        table.append(row)
+        failures += bool(row.get("error"))
+        bar.update(1)
+        bar.set_postfix(failures=failures)
+
+    where = "serial" if pending else "nothing to run"
+    try:
+        if workers == 0 and not scheduler:
+            for index, parameters, config_yaml in pending:
+                record(index, parameters, evaluate_point(config_yaml, **options))
+        elif pending:
+            client, cluster, where = _start_client(scheduler, workers, worker_memory)
+            try:
+                futures = {client.submit(evaluate_point, config_yaml, pure=False, **options): (index, parameters)
+                           for index, parameters, config_yaml in pending}
+                for future in as_completed(futures):
+                    index, parameters = futures.pop(future)
+                    try:
+                        row = future.result()
+                    except Exception as error:   # the worker died (e.g. a crash in C++): keep the point
+                        row = {"error": _stage_error("worker", error)}
+                    future.release()             # the worker may drop the result (a restart will not redo it)
+                    record(index, parameters, row)
+            finally:
+                client.close()
+                if cluster is not None:
+                    cluster.close()
+    finally:
+        bar.close()
+    return SweepRun(out_dir=out, results_path=results_path, points=len(points), evaluated=len(pending),
+                    failures=failures, wall_time=time.perf_counter() - start, workers=where)
+
+
+# ------------------------------------------------------------------------------------------------
+# The theory's verdict (for the stability map's overlay)
+# ------------------------------------------------------------------------------------------------
+
+def rigid_contact_theory_stable(config, sizes=None):
+    """The paper's verdict on ``config``: with rigid contact, an exact model and a continuous
+    controller the errors obey (3.1-14), (3.1-15) (Remark 3, (3.2-11) in the other modes), so the
+    loop is stable iff the designed eigenvalues (-eig(K_v) or the roots of s^2 + K_v s + K_p, and
+    eig(-(I + K_fp)^-1 K_fi)) are in the open left half-plane. None when the gains are outside the
+    law's admissible set (GainError). The theory sees no contact stiffness and no sampling.
+    ``sizes``: (d - m, m) if known (saves building the task's constraint)."""
+    velocity_size, force_size = sizes or constraint_sizes(config)
+    mode = ControlMode.parse(config.mode)
+    try:
+        gains = config.gains.matrices(velocity_size, force_size, mode)
+    except GainError:
+        return None
+    return bool(np.all(predicted_eigenvalues(gains, mode).designed.real < 0))
+
+
+def constraint_sizes(config):
+    """(d - m, m): the velocity- and force-controlled dimensions of ``config``'s task."""
+    space = get_task(config.task).constraint_space(config)
+    return space.velocity_size, space.force_size
+
+
+def theory_on_plane(base_config, x_path, y_path, x_values, y_values, fixed=None):
+    """``rigid_contact_theory_stable`` over the (x, y) plane (other fields from ``fixed`` and the base):
+    an array (len(y_values) x len(x_values)) of 1.0 (stable), 0.0 (unstable) and nan (not admissible)."""
+
+
+    sizes = constraint_sizes(base_config)
+    verdict = np.full((len(y_values), len(x_values)), np.nan)
+    for i, y in enumerate(y_values):
+        for j, x in enumerate(x_values):
+            config = copy.deepcopy(base_config)
+            for path, value in {**(fixed or {}), x_path: x, y_path: y}.items():
+                set_config_value(config, path, value)
+            stable = rigid_contact_theory_stable(config, sizes)
+            verdict[i, j] = np.nan if stable is None else float(stable)
+    return verdict

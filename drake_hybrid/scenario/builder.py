@@ -1,0 +1,193 @@
+"""The builder that wires a whole closed loop from a ``ScenarioConfig`` (scenario.config).
+
+``build_scenario(config)`` validates the config (``ScenarioConfig.validate`` and the task's
+``Task.options``, once) and returns a
+``Scenario`` whose ``diagram`` is::
+
+    ProfileSource / DesiredFieldSource ──desired_*──────────────┐
+    plant ──state──────────────────────────────────────────────►├─► HybridController ──actuation──► plant
+    plant ──contact_results / reaction_forces─► sensor ─► filter ┘
+    loggers ◄── every named output
+
+and, when the config asks for them (parts in brackets are optional)::
+
+    sensor ─► [SensorFaultInjector] ─faulty_wrench, sequence─► [WrenchConditioner] ─► controller
+    controller ─force, constraint_value─► [ContactSupervisor] ─contact_phase─► controller, conditioner
+    plant ─state─► [JointFriction] ─generalized_force─► plant (model error, simulation only)
+
+with named handles to every part. The same config builds the same diagram in
+a test, a notebook, the CLI or a worker process.
+"""
+
+from dataclasses import dataclass, field
+from typing import Dict, Optional
+
+from pydrake.geometry import MeshcatVisualizer
+from pydrake.systems.framework import DiagramBuilder
+from pydrake.systems.primitives import LogVectorOutput
+
+from drake_hybrid.control.controller import HybridController
+from drake_hybrid.control.gains import ControlMode
+from drake_hybrid.control.phases import ContactPhase
+from drake_hybrid.control.supervision import ContactSupervisor
+from drake_hybrid.core.errors import ConfigError
+from drake_hybrid.core.kinematics import EndEffectorKinematics
+from drake_hybrid.scenario.config import ScenarioConfig, WristSensorConfig
+from drake_hybrid.scenario.plant import RobotModel, build_controller_plant, build_plant
+from drake_hybrid.scenario.start import check_start_sizes
+from drake_hybrid.scenario.tasks import get_task
+from drake_hybrid.systems.faults import JointFriction, SensorFaultInjector
+from drake_hybrid.systems.sensors import ContactWrenchSensor, LowPassFilter, WrenchConditioner, WristForceTorqueSensor
+
+
+@dataclass
+class Scenario:
+    """A built closed loop and named handles to its parts."""
+
+    config: ScenarioConfig
+    task: object
+    diagram: object
+    plant: object
+    scene_graph: object
+    robot: RobotModel
+    controller_plant: object
+    controller: object
+    sensor: object
+    wrench_filter: Optional[object]
+    source: object
+    constraint_space: object
+    kinematics: EndEffectorKinematics            # on the simulation plant
+    loggers: Dict[str, object] = field(default_factory=dict)   # name -> VectorLogSink or (sink, columns)
+    meshcat: Optional[object] = None
+    fault_injector: Optional[object] = None      # SensorFaultInjector
+    conditioner: Optional[object] = None         # WrenchConditioner
+    supervisor: Optional[object] = None          # ContactSupervisor
+
+    def plant_context(self, root_context):
+        return self.plant.GetMyMutableContextFromRoot(root_context)
+
+
+
+def build_scenario(config, meshcat=None, with_loggers=True, sampled_plant_outputs=True, controller_sample_lead=True):
+    """Build the closed-loop diagram of ``config``. See the module docstring.
+
+    The last two arguments exist for ``analysis.linearize_discrete`` (see there)."""
+    if not isinstance(config, ScenarioConfig):
+        raise TypeError(f"build_scenario: expected a ScenarioConfig, got {type(config).__name__}")
+    task = get_task(config.task)
+    mode = ControlMode.parse(config.mode)
+    config.validate()
+    task.options(config)
+    control_period = config.control_period if config.control_period > 0 else None
+    bandwidth = config.sensor.bandwidth_hz
+
+    builder = DiagramBuilder()
+    plant, scene_graph, robot = build_plant(task, config, builder, sampled_outputs=sampled_plant_outputs)
+    controller_plant, _ = build_controller_plant(task, config)
+    constraint_space = task.constraint_space(config)
+    supervised = config.supervised
+    controller = builder.AddNamedSystem("controller", HybridController(
+        controller_plant, robot.end_effector_frame, robot.end_effector_point, constraint_space,
+        gains=config.gains, mode=mode, control_period=control_period, sample_lead=controller_sample_lead,
+        safety=config.safety, guarded_move=config.supervision if supervised else None,
+        sampled_diagnostics=with_loggers and control_period is not None))
+    check_start_sizes(config, controller)
+
+    robot_bodies = [plant.get_body(index) for instance in robot.model_instances
+                    for index in plant.GetBodyIndices(instance)]
+    if isinstance(config.sensor, WristSensorConfig):
+        if robot.tool_weld is None:
+            raise ConfigError(f"sensor: task '{task.name}' has no wrist weld for a WristSensorConfig; "
+                              "use !ContactSensorConfig")
+        sensor = builder.AddNamedSystem("wrench_sensor", WristForceTorqueSensor(
+            plant, robot.tool_weld, robot.end_effector_frame, robot.end_effector_point))
+        builder.Connect(plant.get_reaction_forces_output_port(), sensor.get_input_port(0))
+    else:                                                # ContactSensorConfig (ScenarioConfig.validate)
+        sensor = builder.AddNamedSystem("wrench_sensor", ContactWrenchSensor(
+            plant, robot_bodies, robot.end_effector_frame, robot.end_effector_point))
+        builder.Connect(plant.get_contact_results_output_port(), sensor.get_input_port(0))
+    builder.Connect(plant.get_body_poses_output_port(), sensor.get_input_port(1))
+    wrench_output = sensor.get_output_port(0)
+    true_wrench = wrench_output
+    injector = conditioner = wrench_filter = supervisor = None
+    if config.sensor_faults.active():
+        injector = builder.AddNamedSystem("sensor_faults", SensorFaultInjector(config.sensor_faults, control_period))
+        builder.Connect(wrench_output, injector.GetInputPort("wrench"))
+        wrench_output = injector.GetOutputPort("faulty_wrench")
+    tare = supervised and config.supervision.tare_time > 0 and not config.start.in_contact
+    if config.sensor.condition:
+        conditioner = builder.AddNamedSystem("wrench_conditioner", WrenchConditioner(
+            control_period, bandwidth, config.sensor.max_hold_time, use_sequence=injector is not None, tare=tare))
+        builder.Connect(wrench_output, conditioner.GetInputPort("raw_wrench"))
+        if injector is not None:
+            builder.Connect(injector.GetOutputPort("sequence"), conditioner.GetInputPort("sequence"))
+        wrench_output = conditioner.GetOutputPort("wrench")
+    elif bandwidth > 0:
+        wrench_filter = builder.AddNamedSystem("wrench_filter", LowPassFilter(6, bandwidth, control_period))
+        builder.Connect(wrench_output, wrench_filter.get_input_port(0))
+        wrench_output = wrench_filter.get_output_port(0)
+    builder.Connect(wrench_output, controller.get_measured_wrench_input_port())
+    if config.model_error.joint_friction > 0:
+        friction = builder.AddNamedSystem("joint_friction", JointFriction(
+            plant, robot.arm, config.model_error.joint_friction, config.model_error.friction_speed))
+        builder.Connect(plant.get_state_output_port(robot.arm), friction.get_input_port(0))
+        builder.Connect(friction.get_output_port(0), plant.get_applied_generalized_force_input_port())
+    task.connect_environment(builder, plant, config)
+    builder.Connect(plant.get_state_output_port(robot.arm), controller.get_estimated_state_input_port())
+    builder.Connect(controller.GetOutputPort("actuation"), plant.get_actuation_input_port(robot.arm))
+
+    source = builder.AddNamedSystem("desired", task.make_source(config, controller_plant, robot, constraint_space))
+    if source.num_input_ports():
+        builder.Connect(plant.get_state_output_port(robot.arm), source.get_input_port(0))
+    for name in ("desired_velocity", "desired_acceleration", "desired_force"):
+        builder.Connect(source.GetOutputPort(name), controller.GetInputPort(name))
+    if supervised:
+        if config.start.in_contact:
+            initial_phase = ContactPhase.CONTACT
+        else:
+            initial_phase = ContactPhase.TARE if tare else ContactPhase.APPROACH
+        supervisor = builder.AddNamedSystem("contact_supervisor", ContactSupervisor(
+            config.supervision, constraint_space.force_size, controller.kinematic_rows, control_period,
+            initial_phase))
+        for name in ("force", "constraint_value"):
+            builder.Connect(controller.GetOutputPort(name), supervisor.GetInputPort(name))
+        builder.Connect(source.GetOutputPort("desired_force"), supervisor.GetInputPort("desired_force"))
+        builder.Connect(wrench_output, supervisor.GetInputPort("measured_wrench"))
+        builder.Connect(supervisor.GetOutputPort("contact_phase"), controller.get_contact_phase_input_port())
+        if tare:
+            builder.Connect(supervisor.GetOutputPort("contact_phase"), conditioner.GetInputPort("contact_phase"))
+
+    loggers = {}
+    if with_loggers:
+        period = config.log_period
+        if controller.sampled_diagnostics:
+            # What each tick computed (one logger; no re-evaluation of the law after the tick).
+            diagnostics = LogVectorOutput(controller.GetOutputPort("diagnostics"), builder, period)
+            for name, columns in controller.diagnostic_slices().items():
+                loggers[name] = (diagnostics, columns)
+        else:
+            for name in controller.diagnostic_slices():
+                loggers[name] = LogVectorOutput(controller.GetOutputPort(name), builder, period)
+        for name in ("position_error", "actuation"):
+            loggers[name] = LogVectorOutput(controller.GetOutputPort(name), builder, period)
+        for name in ("desired_velocity", "desired_force"):
+            loggers[name] = LogVectorOutput(source.GetOutputPort(name), builder, period)
+        loggers["state"] = LogVectorOutput(plant.get_state_output_port(robot.arm), builder, period)
+        loggers["wrench"] = LogVectorOutput(wrench_output, builder, period)
+        if true_wrench is not wrench_output:
+            loggers["true_wrench"] = LogVectorOutput(true_wrench, builder, period)
+        if supervisor is not None:
+            loggers["contact_phase"] = LogVectorOutput(supervisor.GetOutputPort("contact_phase"), builder, period)
+    if meshcat is not None:
+        MeshcatVisualizer.AddToBuilder(builder, scene_graph, meshcat)
+    diagram = builder.Build()
+    diagram.set_name(f"hybrid_{task.name}")
+    kinematics = EndEffectorKinematics(plant, robot.end_effector_frame, robot.end_effector_point,
+                                       constraint_space.chart)
+    return Scenario(config=config, task=task, diagram=diagram, plant=plant, scene_graph=scene_graph, robot=robot,
+                    controller_plant=controller_plant, controller=controller, sensor=sensor,
+                    wrench_filter=wrench_filter, source=source, constraint_space=constraint_space,
+                    kinematics=kinematics, loggers=loggers, meshcat=meshcat, fault_injector=injector,
+                    conditioner=conditioner, supervisor=supervisor)
+
+

@@ -1,0 +1,252 @@
+"""The configuration of a run: typed dataclasses that load from and dump to YAML.
+
+``ScenarioConfig`` embeds Drake's own configuration types where Drake has them
+(``MultibodyPlantConfig`` for the plant and its contact model, ``SimulatorConfig`` for the
+integrator), as the scenarios of Drake's ``manipulation`` package do, and adds what is this
+package's: the task, the law's mode and gains, the pad's material, the sensor (a Union of
+sensor configs chosen by YAML tag), the desired profiles, the start and the faults and
+protections.
+
+The walk from a file to a diagram::
+
+    YAML --yaml_load_typed--> ScenarioConfig     types and names (unknown key, wrong type: ConfigError)
+         --config.validate()--> checked values   every field, once, naming it (ConfigError)
+         --build_scenario--> Diagram             (scenario.builder; the task's typed options resolved
+                                                  by Task.options, scenario.task)
+
+Every config dataclass validates itself with ``validate(prefix)``, raising ``ConfigError`` with
+the dotted field name; ``ScenarioConfig.validate`` calls them all.
+"""
+
+import dataclasses
+from dataclasses import dataclass, field
+from typing import Dict, List, Union
+
+from pydrake.common.yaml import yaml_dump_typed, yaml_load_typed
+from pydrake.multibody.plant import MultibodyPlantConfig
+from pydrake.systems.analysis import SimulatorConfig
+
+from drake_hybrid.control.gains import HybridGains
+from drake_hybrid.control.safety import SafetyConfig
+from drake_hybrid.control.supervision import SupervisionConfig
+from drake_hybrid.core.errors import ConfigError, check_fields
+from drake_hybrid.systems.faults import SensorFaultConfig
+from drake_hybrid.systems.sources import Profile
+
+# The values Drake 1.51 accepts for the MultibodyPlantConfig fields checked here.
+CONTACT_MODELS = ("hydroelastic", "hydroelastic_with_fallback", "point")
+DISCRETE_APPROXIMATIONS = ("sap", "tamsi", "similar", "lagged")
+
+
+def default_plant_config():
+    """The plant of every built-in task: discrete (1 kHz) SAP with compliant hydroelastic contact.
+
+    ``time_step: 0`` makes it continuous (what ``analysis.linearize_continuous`` linearizes).
+    SAP models dissipation with its own linear law (``ContactConfig.relaxation_time``) and ignores
+    the pad's Hunt-Crossley dissipation; "similar" or "lagged" use Hunt-Crossley
+    (``ContactConfig.pad_dissipation``), like the continuous plant (docs/drake_notes.md)."""
+    return MultibodyPlantConfig(time_step=1.0e-3, contact_model="hydroelastic", discrete_contact_approximation="sap")
+
+
+def validate_plant_config(plant, prefix="plant."):
+    """ConfigError naming the MultibodyPlantConfig field Drake would reject (or that would break the law)."""
+    if not plant.time_step >= 0:
+        raise ConfigError(f"{prefix}time_step must be >= 0 (0 means continuous), got {plant.time_step}")
+    if plant.contact_model not in CONTACT_MODELS:
+        raise ConfigError(f"{prefix}contact_model must be one of {CONTACT_MODELS}, got '{plant.contact_model}'")
+    if plant.discrete_contact_approximation not in DISCRETE_APPROXIMATIONS + ("",):
+        raise ConfigError(f"{prefix}discrete_contact_approximation must be one of {DISCRETE_APPROXIMATIONS}, "
+                          f"got '{plant.discrete_contact_approximation}'")
+    if not plant.sap_near_rigid_threshold > 0:
+        raise ConfigError(f"{prefix}sap_near_rigid_threshold must be positive, got {plant.sap_near_rigid_threshold}")
+
+
+def validate_simulator_config(simulator, prefix="simulator."):
+    if not simulator.max_step_size > 0:
+        raise ConfigError(f"{prefix}max_step_size must be positive, got {simulator.max_step_size}")
+    if not simulator.accuracy > 0:
+        raise ConfigError(f"{prefix}accuracy must be positive, got {simulator.accuracy}")
+    if not simulator.target_realtime_rate >= 0:
+        raise ConfigError(f"{prefix}target_realtime_rate must be >= 0, got {simulator.target_realtime_rate}")
+
+
+@dataclass
+class ContactConfig:
+    """The pad's and the workpiece's contact material (the contact model itself is ``plant``)."""
+
+    pad_modulus: float = 5.0e6                   # Pa, the pad's hydroelastic modulus
+    pad_dissipation: float = 10.0                # s/m, Hunt-Crossley dissipation (continuous, similar, lagged)
+    relaxation_time: float = -1.0                # s, SAP's linear dissipation (discrete plants); < 0: Drake's default
+    friction: float = 0.0                        # Coulomb mu (static = dynamic) of pad and workpiece
+    pad_resolution: float = 0.003                # m, mesh resolution hint of the pad (see docs: tessellation torque)
+
+    def validate(self, prefix="contact."):
+        check_fields(self, prefix, positive=("pad_modulus", "pad_resolution"),
+                     nonnegative=("pad_dissipation", "friction"))
+
+
+@dataclass
+class WrenchPathConfig:
+    """What every sensor's wrench passes through before the controller."""
+
+    bandwidth_hz: float = 0.0                    # first-order low-pass; 0 = none (a continuous plant needs one)
+    condition: bool = False                      # a WrenchConditioner (dropout rejection, tare, the low-pass)
+    max_hold_time: float = 0.01                  # s, how long the conditioner bridges a dropout by holding
+
+    def validate(self, prefix="sensor."):
+        check_fields(self, prefix, nonnegative=("bandwidth_hz", "max_hold_time"))
+
+
+@dataclass
+class ContactSensorConfig(WrenchPathConfig):
+    """The ideal sensor: Drake's contact results on the robot, shifted to the end-effector point
+    (``systems.sensors.ContactWrenchSensor``). YAML: ``sensor: !ContactSensorConfig {...}`` (the
+    default, so the tag may be left out)."""
+
+
+@dataclass
+class WristSensorConfig(WrenchPathConfig):
+    """A force/torque sensor in the weld between wrist and tool: the weld's reaction force minus the
+    tool's weight (``systems.sensors.WristForceTorqueSensor``). YAML: ``sensor: !WristSensorConfig {...}``."""
+
+
+SensorConfig = Union[ContactSensorConfig, WristSensorConfig]
+
+
+@dataclass
+class StartConfig:
+    """Start of the run: where on the constraint, and the controller's initial integrals."""
+
+    configuration: List[float] = field(default_factory=list)   # task-specific start (see the task's docs)
+    in_contact: bool = True                      # start pressing with the desired force; else approach (supervision)
+    gap: float = 0.01                            # m from the surface along the pressing direction when not in contact
+    tolerance: float = 5.0e-3                    # max |C(r)| allowed at the start (units of C's rows)
+    force_integral: List[float] = field(default_factory=list)  # xi(0); empty = zeros
+    position_error: List[float] = field(default_factory=list)  # e_p(0); empty = zeros
+
+    def validate(self, prefix="start."):
+        check_fields(self, prefix, positive=("tolerance", "gap"))
+
+
+
+@dataclass
+class ModelErrorConfig:
+    """How the simulated robot differs from the controller's model (defaults: no error).
+
+    The scales multiply masses and rotational inertias (same shape, same centre
+    of mass) of the SIMULATION plant only; the controller keeps the nominal
+    model. Drake stores masses as context parameters, so ``apply_model_error``
+    sets them in a plant context; ``set_initial_conditions`` does it for every
+    run and linearization.
+
+    payload_mass_scale: the tool (the bodies of the robot's non-arm model instances): mass and
+        rotational inertia together.
+    link_mass_scale: the arm's links, mass and rotational inertia together (a uniformly denser
+        link: gravity changes too).
+    link_inertia_scale: the rotational inertia about the centre of mass of every arm link only
+        (masses and centres of mass kept: gravity stays exact).
+    joint_damping: viscous friction (N m s/rad) added to every arm joint (set when the plant is built).
+    joint_friction: Coulomb friction tau_c (N m) in every arm joint (``faults.JointFriction``),
+        regularized over ``friction_speed`` (rad/s).
+    """
+
+    payload_mass_scale: float = 1.0
+    link_mass_scale: float = 1.0
+    link_inertia_scale: float = 1.0
+    joint_damping: float = 0.0
+    joint_friction: float = 0.0
+    friction_speed: float = 0.05
+
+    def validate(self, prefix="model_error."):
+        return check_fields(self, prefix, positive=("payload_mass_scale", "link_mass_scale", "link_inertia_scale",
+                                             "friction_speed"),
+                            nonnegative=("joint_damping", "joint_friction"))
+
+
+@dataclass
+class ScenarioConfig:
+    """Everything that defines a run. Loads from YAML (``load_config``)."""
+
+    task: str = "window-washing"
+    mode: str = "velocity-force"
+    duration: float = 3.0
+    plant: MultibodyPlantConfig = field(default_factory=default_plant_config)
+    simulator: SimulatorConfig = field(default_factory=SimulatorConfig)
+    control_period: float = 1.0e-3               # controller: 0 = continuous
+    log_period: float = 1.0e-3
+    gains: HybridGains = field(default_factory=HybridGains)
+    contact: ContactConfig = field(default_factory=ContactConfig)
+    sensor: SensorConfig = field(default_factory=ContactSensorConfig)
+    desired_velocity: Profile = field(default_factory=Profile)
+    desired_force: Profile = field(default_factory=Profile)
+    start: StartConfig = field(default_factory=StartConfig)
+    # The task's own parameters (numbers) and options (words); their names and types are the task's
+    # (``Task.Options``): ``Task.options(config)`` reads both into it, rejecting unknown names and
+    # wrong types (scenario.task).
+    task_parameters: Dict[str, float] = field(default_factory=dict)
+    task_options: Dict[str, str] = field(default_factory=dict)
+    model_error: ModelErrorConfig = field(default_factory=ModelErrorConfig)
+    sensor_faults: SensorFaultConfig = field(default_factory=SensorFaultConfig)
+    supervision: SupervisionConfig = field(default_factory=SupervisionConfig)
+    safety: SafetyConfig = field(default_factory=SafetyConfig)
+
+    def replace(self, **changes):
+        """A copy with some top-level fields changed."""
+        return dataclasses.replace(self, **changes)
+
+    @property
+    def supervised(self):
+        """True if the run has a contact supervisor: asked for, or needed by a start off the surface."""
+        return bool(self.supervision.enabled or not self.start.in_contact)
+
+    @property
+    def continuous_plant(self):
+        return self.plant.time_step == 0
+
+    def validate(self):
+        """Check every field's value, once (the types were checked by the YAML loader); ConfigError
+        naming the field. The gains and profiles are checked against the task's sizes by the systems
+        that use them (HybridController, ProfileSource), the start by ``scenario.start.check_start``."""
+        if self.control_period < 0:
+            raise ConfigError(f"control_period must be >= 0 (0 means continuous), got {self.control_period}")
+        check_fields(self, "", positive=("duration", "log_period"))
+        if not isinstance(self.sensor, (ContactSensorConfig, WristSensorConfig)):
+            raise ConfigError(f"sensor must be a ContactSensorConfig or a WristSensorConfig (YAML tags "
+                              f"!ContactSensorConfig, !WristSensorConfig), got {self.sensor!r}")
+        validate_plant_config(self.plant)
+        validate_simulator_config(self.simulator)
+        self.contact.validate()
+        self.sensor.validate()
+        self.start.validate()
+        self.model_error.validate()
+        self.sensor_faults.validate()
+        self.supervision.validate()
+        sampled_parts = [name for name, used in (("supervision (or a start off the surface)", self.supervised),
+                                                 ("sensor_faults", self.sensor_faults.active()),
+                                                 ("sensor.condition", self.sensor.condition)) if used]
+        if sampled_parts and not self.control_period > 0:
+            raise ConfigError(f"{', '.join(sampled_parts)} need a sampled controller: set control_period > 0")
+        if self.supervision.tare_time > 0 and not self.start.in_contact and not self.sensor.condition:
+            raise ConfigError("supervision.tare_time > 0 tares the sensor in the wrench conditioner: "
+                              "set sensor.condition")
+        if self.continuous_plant and not self.control_period > 0 and not self.sensor.bandwidth_hz > 0:
+            raise ConfigError(
+                "sensor.bandwidth_hz must be > 0 with a continuous plant and a continuous controller: the contact "
+                "wrench is direct feedthrough of the actuation, so plant -> sensor -> controller -> plant is an "
+                "algebraic loop that the low-pass filter breaks")
+        return self
+
+
+def load_config(path=None, data=None, defaults=None):
+    """A ScenarioConfig from a YAML file or string, on top of ``defaults``; ConfigError (one line)
+    for an unknown key, a wrong type or an unknown sensor tag."""
+    try:
+        return yaml_load_typed(schema=ScenarioConfig, filename=path, data=data,
+                               defaults=defaults if defaults is not None else ScenarioConfig())
+    except (RuntimeError, ValueError, TypeError) as error:
+        where = f"{path}: " if path else ""
+        raise ConfigError(f"{where}{str(error).splitlines()[0]}") from None
+
+
+def dump_config(config):
+    return yaml_dump_typed(config)

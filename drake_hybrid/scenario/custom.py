@@ -1,0 +1,244 @@
+"""Your own robot and your own constraint in the closed loop, in a handful of lines.
+
+The built-in tasks (``drake_hybrid.scenario.tasks``) are recipes that ``build_scenario``
+wires into plant -> sensor -> controller -> plant. ``CustomTask`` is the same
+recipe made from pieces you pass in, so every scenario tool works on it
+unchanged once it is registered by name::
+
+    task = CustomTask("panda-drum", add_robot=add_panda, add_workpiece=add_drum,
+                      constraint_space=space, start_pose=X_WP0, joint_guess=q_guess)
+    register_task(task)
+    result = simulate(task.default_config(desired_velocity=[0.05, 0, 0, 0, 0], desired_force=[10.0]))
+    linearize_continuous(result.config)               # eigenvalues, as for the paper's tasks
+
+The pieces:
+
+* ``add_robot(plant) -> RobotModel``: parse your arm, weld its base, and attach
+  a tool (``attach_pad_tool`` attaches the compliant ball pad of
+  ``models/pad_tool.sdf``). It is called twice: on the simulation plant (with a
+  SceneGraph) and on the controller's own plant (without). Helpers for arms
+  from URDF model packages: ``weld_joints`` (e.g. gripper fingers: the law
+  needs one actuator per joint), ``add_actuators`` (URDFs without
+  transmissions; effort limits from the URDF).
+* ``add_workpiece(plant) -> geometry ids``: ``add_rigid_workpiece`` registers a
+  rigid hydroelastic shape on the world body.
+* ``constraint_space``: a ``ConstraintSpace`` (your chart, C and E_p).
+* ``start_pose``: the end-effector pose with the controlled point on the
+  constraint (touching, not pressing). The start that presses with F_d(0) is
+  found as for the built-in tasks (``scenario.start.pressing_positions``): inverse
+  kinematics from ``joint_guess`` at depths along the pressing direction
+  -sum_i F_d,i grad_p C_i (the robot pushes the workpiece with -F_d).
+"""
+
+from xml.etree import ElementTree
+
+import numpy as np
+
+from pydrake.geometry import AddRigidHydroelasticProperties, ProximityProperties
+from pydrake.math import RigidTransform, RollPitchYaw
+from pydrake.multibody.parsing import Parser
+from pydrake.multibody.plant import CoulombFriction
+
+from drake_hybrid.control.gains import HybridGains
+from drake_hybrid.core.kinematics import inverse_kinematics
+from drake_hybrid.scenario.config import ScenarioConfig, StartConfig
+from drake_hybrid.scenario.parsing import ConfigureParser
+from drake_hybrid.scenario.plant import RobotModel
+from drake_hybrid.scenario.start import pressing_positions
+from drake_hybrid.scenario.task import Task
+from drake_hybrid.scenario.tasks.robots import add_pad_tool
+from drake_hybrid.systems.sources import Profile
+
+# ------------------------------------------------------------------------------------------------
+# Robots from model packages
+# ------------------------------------------------------------------------------------------------
+
+def weld_joints(plant, joint_names, model_instance=None):
+    """Replace each named joint by a weld at its zero position (before ``Finalize``).
+
+    For parts the task does not move, such as gripper fingers: the hybrid law
+    needs one actuator per joint and nq == nv. Drake's ``RemoveJoint`` refuses
+    while the plant has any constraint, and pydrake does not say which joints a
+    coupler constraint (what a parser makes of a URDF ``<mimic>``) couples, so
+    **every** constraint of the plant is removed first: call this before adding
+    constraints of your own. Returns the new WeldJoints.
+    """
+    joints = []
+    for name in joint_names:
+        if model_instance is None:
+            if not plant.HasJointNamed(name):
+                raise ValueError(f"weld_joints: the plant has no joint '{name}'")
+            joints.append(plant.GetJointByName(name))
+        else:
+            if not plant.HasJointNamed(name, model_instance):
+                raise ValueError(f"weld_joints: model instance {model_instance} has no joint '{name}'")
+            joints.append(plant.GetJointByName(name, model_instance))
+    for constraint_id in plant.GetConstraintIds():
+        plant.RemoveConstraint(constraint_id)
+    welds = []
+    for joint in joints:
+        parent, child = joint.frame_on_parent(), joint.frame_on_child()
+        plant.RemoveJoint(joint)
+        welds.append(plant.WeldFrames(parent, child, RigidTransform()))
+    return welds
+
+
+def urdf_effort_limits(path):
+    """{joint name: effort limit (N m or N)} from the ``<limit effort=...>`` tags of a URDF file.
+    (Drake keeps a URDF's effort limits only on the actuators of its transmissions.)"""
+    root = ElementTree.parse(path).getroot()
+    return {joint.get("name"): float(joint.find("limit").get("effort"))
+            for joint in root.iter("joint") if joint.find("limit") is not None and joint.find("limit").get("effort")}
+
+
+def add_actuators(plant, model_instance, effort_limits=None):
+    """One actuator per single-dof joint of ``model_instance`` that has none (a URDF without
+    transmissions), with the effort limit ``effort_limits[joint name]`` (e.g. from
+    ``urdf_effort_limits``; inf where not given). Returns the actuator names."""
+    effort_limits = effort_limits or {}
+    actuated = {plant.get_joint_actuator(index).joint().index() for index in plant.GetJointActuatorIndices()}
+    names = []
+    for index in plant.GetJointIndices(model_instance):
+        joint = plant.get_joint(index)
+        if joint.num_velocities() != 1 or joint.index() in actuated:
+            continue
+        plant.AddJointActuator(f"{joint.name()}_actuator", joint, float(effort_limits.get(joint.name(), np.inf)))
+        names.append(f"{joint.name()}_actuator")
+    return names
+
+
+def attach_pad_tool(plant, arm, flange_frame, X_flange_tool=None):
+    """Weld the compliant ball pad tool (``models/pad_tool.sdf``: 20 mm ball, its centre 0.05 m
+    along the tool's +z) to ``flange_frame`` of ``arm``; the controlled point is the pad centre.
+    Returns the RobotModel that ``CustomTask``'s ``add_robot`` returns, with ``only_pad_contact``:
+    the arm's own collision shapes touch neither each other nor the workpiece (watch the
+    animation for clearance), so only the pad makes contact."""
+    parser = ConfigureParser(Parser(plant))
+    frame = plant.GetFrameByName(flange_frame, arm) if isinstance(flange_frame, str) else flange_frame
+    tool, weld, pad = add_pad_tool(plant, parser, frame, X_flange_tool if X_flange_tool is not None
+                                   else RigidTransform())
+    return RobotModel(arm=arm, model_instances=[arm, tool], end_effector_frame="pad_center",
+                      end_effector_point=np.zeros(3), tool_weld=weld, pad_geometries=pad,
+                      only_pad_contact=True)
+
+
+def add_rigid_workpiece(plant, shape, X_WG, name="workpiece", resolution_hint=0.005,
+                        color=(0.55, 0.6, 0.7, 1.0)):
+    """Register ``shape`` (a pydrake.geometry Shape) on the world body at X_WG as a rigid
+    hydroelastic collision geometry (mesh resolution ``resolution_hint``, m) and a visual one.
+    Returns the collision geometry ids. Contact friction is set from the scenario config."""
+    world = plant.world_body()
+    properties = ProximityProperties()
+    AddRigidHydroelasticProperties(resolution_hint, properties)
+    properties.AddProperty("material", "coulomb_friction", CoulombFriction(0.0, 0.0))
+    geometry = plant.RegisterCollisionGeometry(world, X_WG, shape, name, properties)
+    plant.RegisterVisualGeometry(world, X_WG, shape, f"{name}_visual", np.asarray(color, dtype=float))
+    return [geometry]
+
+
+# ------------------------------------------------------------------------------------------------
+# The task
+# ------------------------------------------------------------------------------------------------
+
+class CustomTask(Task):
+    """A task from your own robot, workpiece, constraint space and start (see the module docstring).
+
+    Args:
+        name: the task's name (``ScenarioConfig.task``; ``register_task`` makes it known).
+        add_robot: ``add_robot(plant) -> RobotModel`` (see ``attach_pad_tool``).
+        add_workpiece: ``add_workpiece(plant) -> list of collision geometry ids``.
+        constraint_space: a ConstraintSpace (chart, constraint C, velocity projection E_p).
+        start_pose: RigidTransform of the end-effector frame, its controlled point on C = 0
+            (``start.configuration`` stores it as [x, y, z, roll, pitch, yaw]).
+        joint_guess: the arm's joint positions to start inverse kinematics from (redundant
+            arms stay close to it).
+        labels: plot labels ``{"velocity": [...], "velocity_units": ..., "force": [...],
+            "force_units": ...}``.
+        camera: Meshcat view for animations, (camera position, target) in world (m).
+    """
+
+    def __init__(self, name, add_robot, add_workpiece, constraint_space, start_pose, joint_guess,
+                 labels=None, camera=None, description="a user-defined task"):
+        self.name = name
+        self.camera = camera
+        self.description = description
+        self._add_robot = add_robot
+        self._add_workpiece = add_workpiece
+        self.space = constraint_space
+        self.start_pose = start_pose
+        self.joint_guess = np.asarray(joint_guess, dtype=float)
+        k, m = constraint_space.velocity_size, constraint_space.force_size
+        self._labels = labels or {"velocity": [f"r-dot_p[{i}]" for i in range(k)], "velocity_units": "SI",
+                                  "force": [f"F[{i}]" for i in range(m)], "force_units": "SI"}
+
+    def base_config(self, options):
+        """A ScenarioConfig for this task: velocity-force mode (as every built-in task), constant
+        zero desired velocity (k entries) and force (m entries) unless ``default_config`` is given
+        ``desired_velocity=[...]``, ``desired_force=[...]``; hydroelastic contact with point-contact
+        fallback (an arm's own collision shapes are not hydroelastic)."""
+        k, m = self.space.velocity_size, self.space.force_size
+        config = ScenarioConfig(
+            task=self.name, mode="velocity-force", duration=2.0, gains=HybridGains(),
+            desired_velocity=Profile(kind="constant", value=[0.0] * k),
+            desired_force=Profile(kind="constant", value=[0.0] * m),
+            start=StartConfig(configuration=list(self.start_pose.translation())
+                              + list(RollPitchYaw(self.start_pose.rotation()).vector()), in_contact=True))
+        config.plant.contact_model = "hydroelastic_with_fallback"
+        return config
+
+    def labels(self):
+        return self._labels
+
+    # -- the Task protocol (scenario.task) -----------------------------------------------------
+    def add_robot(self, plant, config):
+        robot = self._add_robot(plant)
+        if not isinstance(robot, RobotModel):
+            raise TypeError(f"task '{self.name}': add_robot must return a RobotModel (see attach_pad_tool), "
+                            f"got {type(robot).__name__}")
+        return robot
+
+    def add_workpiece(self, plant, config):
+        return list(self._add_workpiece(plant))
+
+    def constraint_space(self, config):
+        return self.space
+
+    def start_pose_of(self, config):
+        values = list(config.start.configuration)
+        if len(values) != 6:
+            raise ValueError(f"task '{self.name}': start.configuration must be [x, y, z, roll, pitch, yaw] "
+                             f"of the end-effector frame, got {values}")
+        return RigidTransform(RollPitchYaw(values[3:]), values[:3])
+
+    def pressing_direction(self, config, X_WE):
+        """Unit world direction in which the robot pushes the workpiece at the start:
+        -sum_i F_d,i grad_p C_i (F_d: force on the robot, in E_f's coordinates)."""
+        space, chart = self.space, self.space.chart
+        x = chart.configuration(X_WE.rotation().matrix(), X_WE.translation())
+        E_f = space.constraint.force_projection(x)
+        # grad_p C_i: C-dot for a unit world velocity of the point along each axis (any chart).
+        gradient = np.column_stack([E_f @ chart.task_velocity(x, np.r_[0, 0, 0, axis]) for axis in np.eye(3)])
+        desired = np.asarray(config.desired_force.evaluate(0.0)[0], dtype=float)
+        direction = -(desired @ gradient)
+        norm = np.linalg.norm(direction)
+        if not norm > 0:
+            raise ValueError(f"task '{self.name}': the desired force F_d(0) = {desired.tolist()} pushes along no "
+                             "position direction of C; set a nonzero desired force on a position row")
+        return direction / norm
+
+    def start_positions(self, scenario):
+        config = scenario.config
+        X_WE = self.start_pose_of(config)
+        kinematics = scenario.controller.kinematics
+        plant = kinematics.plant
+        context = plant.CreateDefaultContext()
+        X_EP = RigidTransform(kinematics.point_in_frame)
+        direction = self.pressing_direction(config, X_WE.multiply(X_EP))
+
+        def positions_at_depth(depth):
+            X_target = RigidTransform(X_WE.rotation(), X_WE.multiply(X_EP).translation() + depth * direction)
+            return inverse_kinematics(kinematics, context, X_target, self.joint_guess)
+
+        if not config.start.in_contact:
+            return positions_at_depth(-config.start.gap)
+        return pressing_positions(scenario, positions_at_depth)

@@ -1,0 +1,41 @@
+"""Where the models live and how Drake's Parser finds them.
+
+The top-level ``models/`` folder is a ROS-style package (``package.xml``)
+named ``drake_hybrid``; models are referenced as
+``package://drake_hybrid/<file>``. In a source checkout (or an editable
+install) it is ``<repo>/models``; a regular install ships it as
+``drake_hybrid/models``. ::
+
+    parser = Parser(plant)
+    ConfigureParser(parser)
+    parser.AddModelsFromUrl(model_url("planar_3r.sdf"))
+"""
+
+from pathlib import Path
+
+_PACKAGE = Path(__file__).resolve().parent.parent          # drake_hybrid/
+
+
+def models_directory():
+    """The folder holding package.xml and the model files."""
+    for candidate in (_PACKAGE / "models", _PACKAGE.parent / "models"):
+        if (candidate / "package.xml").exists():
+            return candidate
+    raise FileNotFoundError(f"drake_hybrid's models folder (with package.xml) is missing next to {_PACKAGE}")
+
+
+def ConfigureParser(parser):
+    """Make ``package://drake_hybrid/...`` resolve to the models folder. Returns the parser."""
+    package_map = parser.package_map()
+    if not package_map.Contains("drake_hybrid"):
+        package_map.AddPackageXml(str(models_directory() / "package.xml"))
+    return parser
+
+
+def model_url(file_name):
+    """The package URL of a model file; FileNotFoundError naming the available ones."""
+    folder = models_directory()
+    if not (folder / file_name).exists():
+        available = sorted(p.name for p in folder.iterdir() if p.suffix in (".sdf", ".urdf"))
+        raise FileNotFoundError(f"no model '{file_name}' in {folder}; available: {available}")
+    return f"package://drake_hybrid/{file_name}"

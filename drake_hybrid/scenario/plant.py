@@ -1,0 +1,116 @@
+"""The plant of a task: robot, tool and workpiece in a MultibodyPlant with the pad's contact material.
+
+``build_plant`` adds the simulation plant (``ScenarioConfig.plant``, a Drake
+``MultibodyPlantConfig``) to a builder; ``build_controller_plant`` builds the controller's own
+model (robot and tool, no workpiece, continuous); ``apply_model_error`` makes the simulated robot
+differ from that model (``ModelErrorConfig``).
+"""
+
+import copy
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from pydrake.geometry import CollisionFilterDeclaration, GeometrySet, ProximityProperties, Role, RoleAssign
+from pydrake.multibody.plant import AddMultibodyPlant, CoulombFriction, MultibodyPlant
+from pydrake.multibody.tree import SpatialInertia
+
+from drake_hybrid.core.errors import ConfigError
+
+
+@dataclass
+class RobotModel:
+    """What a task's ``add_robot`` added to a plant."""
+
+    arm: object                                  # ModelInstanceIndex of the actuated arm
+    model_instances: list                        # arm and tool instances
+    end_effector_frame: str                      # name of frame E
+    end_effector_point: np.ndarray               # p_EP
+    tool_weld: object = None                     # WeldJoint wrist -> tool (for the wrist sensor)
+    pad_geometries: list = field(default_factory=list)
+    passive_geometries: list = field(default_factory=list)   # collision geometries to drop (arm links)
+    only_pad_contact: bool = False               # filter every contact of the robot but the pad's
+
+
+
+def _set_contact_properties(plant, scene_graph, geometry_ids, config, pad):
+    inspector = scene_graph.model_inspector()
+    for geometry_id in geometry_ids:
+        properties = ProximityProperties(inspector.GetProximityProperties(geometry_id))
+        if pad:
+            properties.UpdateProperty("hydroelastic", "hydroelastic_modulus", float(config.pad_modulus))
+            properties.UpdateProperty("hydroelastic", "resolution_hint", float(config.pad_resolution))
+            properties.UpdateProperty("material", "hunt_crossley_dissipation", float(config.pad_dissipation))
+            if config.relaxation_time >= 0:
+                properties.UpdateProperty("material", "relaxation_time", float(config.relaxation_time))
+        properties.UpdateProperty("material", "coulomb_friction",
+                                  CoulombFriction(float(config.friction), float(config.friction)))
+        scene_graph.AssignRole(plant.get_source_id(), geometry_id, properties, RoleAssign.kReplace)
+
+
+def build_plant(task, config, builder, time_step=None, sampled_outputs=True):
+    """Add the task's plant (robot, tool, workpiece, contact properties) to ``builder``.
+
+    ``sampled_outputs=False`` makes a discrete plant's contact results and reaction forces those
+    of the step being taken (used by the discrete-time linearization)."""
+    time_step = config.plant.time_step if time_step is None else time_step
+    plant_config = copy.copy(config.plant)
+    plant_config.time_step = time_step
+    plant_config.use_sampled_output_ports = sampled_outputs
+    plant, scene_graph = AddMultibodyPlant(plant_config, builder)
+    robot = task.add_robot(plant, config)
+    if config.model_error.joint_damping > 0:
+        for index in plant.GetJointIndices(robot.arm):
+            joint = plant.get_joint(index)
+            if joint.num_velocities() == 1:          # viscous friction of the simulated joints only
+                joint.set_default_damping(joint.default_damping() + float(config.model_error.joint_damping))
+    workpiece_geometries = task.add_workpiece(plant, config)
+    for geometry_id in robot.passive_geometries:
+        scene_graph.RemoveRole(plant.get_source_id(), geometry_id, Role.kProximity)
+    _set_contact_properties(plant, scene_graph, robot.pad_geometries, config.contact, pad=True)
+    _set_contact_properties(plant, scene_graph, workpiece_geometries, config.contact, pad=False)
+    plant.Finalize()
+    if robot.only_pad_contact:
+        # Arm models made for motion planning (spheres and cylinders around the links) overlap
+        # between non-adjacent links, and AutoDiffXd point-contact queries (Linearize) reject most
+        # shape pairs even out of contact: let only the pad touch the workpiece.
+        arm_geometries = [geometry for instance in robot.model_instances for index in plant.GetBodyIndices(instance)
+                          for geometry in plant.GetCollisionGeometriesForBody(plant.get_body(index))
+                          if geometry not in robot.pad_geometries]
+        scene_graph.collision_filter_manager().Apply(
+            CollisionFilterDeclaration()
+            .ExcludeWithin(GeometrySet(arm_geometries + list(robot.pad_geometries)))
+            .ExcludeBetween(GeometrySet(arm_geometries), GeometrySet(workpiece_geometries)))
+    return plant, scene_graph, robot
+
+
+def build_controller_plant(task, config):
+    """The controller's own model: the robot and tool only, no workpiece."""
+    plant = MultibodyPlant(0.0)
+    robot = task.add_robot(plant, config)
+    plant.Finalize()
+    return plant, robot
+
+
+def apply_model_error(plant, plant_context, robot, model_error):
+    """Scale the simulated payload's and links' inertias in ``plant_context`` (see ModelErrorConfig)."""
+    for name in ("payload_mass_scale", "link_mass_scale", "link_inertia_scale"):
+        scale = getattr(model_error, name)
+        if not (np.isfinite(scale) and scale > 0):
+            raise ConfigError(f"model_error.{name} must be a positive number, got {scale}")
+    for instance in robot.model_instances:
+        on_arm = instance == robot.arm
+        mass_scale = model_error.link_mass_scale if on_arm else model_error.payload_mass_scale
+        inertia_scale = model_error.link_inertia_scale if on_arm else 1.0
+        if mass_scale == 1.0 and inertia_scale == 1.0:
+            continue
+        for index in plant.GetBodyIndices(instance):
+            body = plant.get_body(index)
+            M_BBo_B = body.default_spatial_inertia()         # nominal (the model's), so applying twice is safe
+            mass, com = M_BBo_B.get_mass(), M_BBo_B.get_com()
+            if mass == 0:
+                continue
+            # Rotational inertia about the centre of mass: scaled with the mass, and by inertia_scale.
+            central = M_BBo_B.Shift(com).CalcRotationalInertia() * (mass_scale * inertia_scale)
+            body.SetSpatialInertiaInBodyFrame(plant_context,
+                                              SpatialInertia.MakeFromCentralInertia(mass_scale * mass, com, central))

@@ -1,0 +1,176 @@
+"""The start of a run: where the robot is, what the controller's states hold, and the checks that
+the hybrid law can start there.
+
+``set_initial_conditions`` puts a built scenario at its task's start (pressing with F_d, or a gap
+away for the guarded approach), primes a discrete plant's sampled outputs, and sets the
+integrals, the held torque and the wrench filters; ``static_torque`` is the torque that holds the
+arm there, ``pressing_positions`` the joint positions that press with F_d (root finding on a
+static probe), ``check_start`` the typed errors for a start the law cannot use.
+"""
+
+import numpy as np
+from scipy.optimize import brentq
+
+from pydrake.systems.framework import DiagramBuilder
+
+from drake_hybrid.core.errors import DimensionError, OffConstraintError
+from drake_hybrid.core.kinematics import EndEffectorKinematics
+from drake_hybrid.scenario.plant import apply_model_error, build_plant
+from drake_hybrid.systems.sensors import ContactWrenchSensor
+
+
+def check_start_sizes(config, controller):
+    """DimensionError if the start's integrals do not have the controller's sizes."""
+    xi_slice, e_p_slice = controller.integral_state_slices()
+    m, k = xi_slice.stop, e_p_slice.stop - e_p_slice.start
+    if config.start.force_integral and len(config.start.force_integral) != m:
+        raise DimensionError(f"start.force_integral must have m = {m} entries, got {len(config.start.force_integral)}")
+    if config.start.position_error and k and len(config.start.position_error) != k:
+        raise DimensionError(f"start.position_error must have k = {k} entries, got {len(config.start.position_error)}")
+
+
+
+# ------------------------------------------------------------------------------------------------
+# Initial conditions
+# ------------------------------------------------------------------------------------------------
+
+# Plant steps taken (and undone) at the start so that a discrete plant's sampled outputs hold the
+# start's static contact or constraint wrench (see set_initial_conditions).
+PRIMING_STEPS = 20
+
+
+def set_initial_conditions(scenario, root_context):
+    """Put the robot at the task's start, pressing with the desired force if ``start.in_contact``
+    (else ``start.gap`` away, for the supervisor's approach); apply the model error to the
+    simulated plant; set the controller's integrals and the filter's (or conditioner's) output
+    to the first sensor reading."""
+    config, task, plant = scenario.config, scenario.task, scenario.plant
+    plant_context = scenario.plant_context(root_context)
+    apply_model_error(plant, plant_context, scenario.robot, config.model_error)
+    q0 = task.start_positions(scenario)
+    check_start(scenario, q0)
+    plant.SetPositions(plant_context, scenario.robot.arm, q0)
+    plant.SetVelocities(plant_context, scenario.robot.arm, np.zeros(len(q0)))
+    task.set_environment_state(scenario, plant_context)
+    environment = plant.GetPositionsAndVelocities(plant_context)
+    controller = scenario.controller
+    controller_context = controller.GetMyMutableContextFromRoot(root_context)
+    xi_slice, e_p_slice = controller.integral_state_slices()
+    integrals = np.zeros(xi_slice.stop + (e_p_slice.stop - e_p_slice.start))
+    if config.start.force_integral:
+        integrals[xi_slice] = config.start.force_integral
+    if config.start.position_error and e_p_slice.stop > e_p_slice.start:
+        integrals[e_p_slice] = config.start.position_error
+    if controller.control_period is None:
+        controller_context.SetContinuousState(integrals)
+    else:
+        held = static_torque(scenario, q0, pressing=config.start.in_contact)
+        controller_context.SetDiscreteState(0, np.concatenate([integrals, held]))
+    if plant.time_step() > 0 and plant.has_sampled_output_ports():
+        # A discrete plant's contact results and reaction forces are sampled at its steps; before the
+        # first step they are empty. Take steps from the initial state (with the held static torque)
+        # and put the state back, so the sensors read the start's contact wrench at t = 0.
+        # Several steps let compliant constraints (e.g. a SAP weld) build up the static force.
+        for _ in range(PRIMING_STEPS):
+            plant.ExecuteForcedEvents(plant_context, publish=False)
+        plant.SetPositionsAndVelocities(plant_context, environment)
+    reading = scenario.sensor.get_output_port(0).Eval(scenario.sensor.GetMyContextFromRoot(root_context))
+    if scenario.fault_injector is not None:
+        injector = scenario.fault_injector
+        injector.set_initial_sample(injector.GetMyMutableContextFromRoot(root_context), reading)
+        faulty = injector.GetOutputPort("faulty_wrench").Eval(injector.GetMyContextFromRoot(root_context))
+        reading = faulty if np.all(np.isfinite(faulty)) else reading
+    if scenario.wrench_filter is not None:
+        filter_context = scenario.wrench_filter.GetMyMutableContextFromRoot(root_context)
+        scenario.wrench_filter.set_initial_output(filter_context, reading)
+    if scenario.conditioner is not None:
+        scenario.conditioner.set_initial_output(scenario.conditioner.GetMyMutableContextFromRoot(root_context), reading)
+    if scenario.supervisor is not None:
+        supervisor = scenario.supervisor
+        controller_plant_context = scenario.controller_plant.CreateDefaultContext()
+        scenario.controller_plant.SetPositions(controller_plant_context, q0)
+        start = controller.kinematics.evaluate(controller_plant_context).configuration
+        supervisor.set_initial_state(supervisor.GetMyMutableContextFromRoot(root_context), supervisor.initial_phase,
+                                     scenario.constraint_space.constraint.value(start))
+
+
+def check_start(scenario, q):
+    """Raise a typed error if the arm at ``q`` is not a valid start of the hybrid law: off the
+    constraint (OffConstraintError), on the wrong branch (BranchError), at a chart singularity
+    (ChartSingularityError) or where E loses rank (ConstraintRankError)."""
+    plant = scenario.controller_plant
+    context = plant.CreateDefaultContext()
+    plant.SetPositions(context, q)
+    task = scenario.controller.kinematics.evaluate(context)
+    x = task.configuration
+    scenario.constraint_space.evaluate(x, task.velocity)
+    constraint = scenario.constraint_space.constraint
+    if scenario.config.start.in_contact:
+        try:
+            constraint.check_satisfied(x, scenario.config.start.tolerance)
+        except OffConstraintError as error:
+            raise OffConstraintError(f"{error}; to start off the surface and approach it, set start.in_contact: "
+                                     "false (the contact supervisor's guarded move)") from None
+    constraint.check_branch(x)
+
+
+def static_torque(scenario, q, pressing=True):
+    """tau = g(q) - J^T E_f^T F_d: the actuation that holds the robot at rest pressing with F_d
+    (``pressing=False``: g(q) only, in free space)."""
+    controller = scenario.controller
+    plant = scenario.controller_plant
+    context = plant.CreateDefaultContext()
+    plant.SetPositions(context, q)
+    kinematics = controller.kinematics
+    task = kinematics.evaluate(context)
+    values = scenario.constraint_space.evaluate(task.configuration, task.velocity)
+    desired_force = np.asarray(scenario.config.desired_force.evaluate(0.0)[0]) * (1.0 if pressing else 0.0)
+    gravity = -plant.CalcGravityGeneralizedForces(context)
+    torque = gravity - task.jacobian.T @ (values.force_projection.T @ desired_force)
+    return np.linalg.solve(plant.MakeActuationMatrix(), torque)
+
+
+def pressing_positions(scenario, positions_at_depth, max_depth=0.01):
+    """Joint positions that press on the workpiece with the desired force F_d(0).
+
+    ``positions_at_depth(s)`` gives the arm's q with the pad pushed s metres into
+    the workpiece along the task's normal (s = 0: touching). A static probe (a
+    continuous copy of the plant, the same contact properties, and the ideal
+    contact sensor) measures F at q(s) in the controller's E_f coordinates, and
+    s is found by root finding so that F . F_d / |F_d| = |F_d|.
+    """
+    config, task = scenario.config, scenario.task
+    desired = np.asarray(config.desired_force.evaluate(0.0)[0], dtype=float)
+    magnitude = float(np.linalg.norm(desired))
+    if magnitude == 0:
+        return positions_at_depth(0.0)
+    builder = DiagramBuilder()
+    plant, _, robot = build_plant(task, config, builder, time_step=0.0)
+    robot_bodies = [plant.get_body(i) for instance in robot.model_instances for i in plant.GetBodyIndices(instance)]
+    sensor = builder.AddSystem(ContactWrenchSensor(plant, robot_bodies, robot.end_effector_frame,
+                                                   robot.end_effector_point))
+    builder.Connect(plant.get_contact_results_output_port(), sensor.get_input_port(0))
+    builder.Connect(plant.get_body_poses_output_port(), sensor.get_input_port(1))
+    probe = builder.Build()
+    context = probe.CreateDefaultContext()
+    plant_context = plant.GetMyMutableContextFromRoot(context)
+    sensor_context = sensor.GetMyContextFromRoot(context)
+    kinematics = EndEffectorKinematics(plant, robot.end_effector_frame, robot.end_effector_point,
+                                       scenario.constraint_space.chart)
+    space = scenario.constraint_space
+
+    def pressing_force(depth):
+        plant.SetPositions(plant_context, robot.arm, positions_at_depth(depth))
+        task_kinematics = kinematics.evaluate(plant_context)
+        values = space.evaluate(task_kinematics.configuration, task_kinematics.velocity)
+        wrench = space.chart.generalized_force(task_kinematics.configuration, sensor.get_output_port(0).Eval(sensor_context))
+        force = space.split_wrench(values, wrench)[1]
+        return float(force @ desired) / magnitude - magnitude
+
+    if pressing_force(max_depth) < 0:
+        raise ValueError(
+            f"task '{task.name}': even {max_depth * 1000:.0f} mm of penetration presses with less than the desired "
+            f"{magnitude:.3g} N; raise contact.pad_modulus or lower the desired force")
+    depth = brentq(pressing_force, 0.0, max_depth, xtol=1e-10)
+    return positions_at_depth(depth)
+

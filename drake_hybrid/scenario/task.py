@@ -1,0 +1,170 @@
+"""The Task protocol: what a task gives the scenario builder, and its typed options.
+
+A task is a recipe for a closed loop: the robot and tool it adds to a plant, the workpiece, the
+constraint space (chart, C, E_p), the desired-value source, the start, its default
+``ScenarioConfig``, and its own options. Every task, built in (``scenario.tasks``) or yours
+(``scenario.custom.CustomTask``), subclasses ``Task``::
+
+    Task.default_config(options=None, **changes) -> ScenarioConfig
+        base_config(options)                       the task's defaults (subclass)
+        options: {name: value} of Task.Options     into task_parameters / task_options
+        changes: top-level ScenarioConfig fields   (desired_velocity / desired_force may be
+                                                    lists: constant profiles)
+    Task.options(config) -> Task.Options           typed; ConfigError for an unknown name or a
+                                                    value of the wrong type or not allowed
+
+Options live in the config file as ``task_parameters`` (numbers) and ``task_options`` (words),
+because the file names the task by a string and a task registered at run time declares its own
+options: the schema of the options is known only once the task is. ``Task.options`` is where
+they get their types, once, for ``ScenarioConfig.validate``-time checking
+(``scenario.builder.build_scenario`` calls it before building anything).
+"""
+
+import abc
+import dataclasses
+from dataclasses import dataclass
+
+from drake_hybrid.core.errors import ConfigError
+from drake_hybrid.scenario.config import ScenarioConfig
+from drake_hybrid.systems.sources import Profile, ProfileSource
+
+
+def choice(default, allowed):
+    """A string option whose value must be one of ``allowed``."""
+    return dataclasses.field(default=default, metadata={"allowed": tuple(allowed)})
+
+
+@dataclass
+class NoOptions:
+    """A task without options."""
+
+
+_TRUE, _FALSE = ("true", "yes", "on", "1"), ("false", "no", "off", "0")
+
+
+def _coerce(task_name, field, raw):
+    """``raw`` (from task_parameters or task_options) as the type of ``field``; ConfigError otherwise."""
+    where = f"task option '{field.name}' of task '{task_name}'"
+    kind = field.type if isinstance(field.type, type) else type(field.default)
+    if kind is bool:
+        word = str(raw).strip().lower()
+        if isinstance(raw, bool) or word in _TRUE + _FALSE:
+            return raw if isinstance(raw, bool) else word in _TRUE
+        raise ConfigError(f"{where} must be true or false, got {raw!r}")
+    if kind in (int, float):
+        try:
+            number = float(raw)
+        except (TypeError, ValueError):
+            raise ConfigError(f"{where} must be a number, got {raw!r}") from None
+        if kind is int:
+            if number != int(number):
+                raise ConfigError(f"{where} must be an integer, got {raw!r}")
+            return int(number)
+        return number
+    allowed = field.metadata.get("allowed")
+    word = str(raw)
+    if allowed and word not in allowed:
+        raise ConfigError(f"{where} must be one of {list(allowed)}, got {raw!r}")
+    return word
+
+
+def as_profile(value):
+    """A Profile from a Profile or a list of constant values."""
+    return value if isinstance(value, Profile) else Profile(kind="constant", value=[float(v) for v in value])
+
+
+class Task(abc.ABC):
+    """Base class of every task (see the module docstring). Attributes: ``name``,
+    ``description``, ``camera`` (Meshcat view: position, target), ``Options`` (a dataclass)."""
+
+    name = "task"
+    description = ""
+    camera = None
+    Options = NoOptions
+
+    # -- configuration -----------------------------------------------------------------------------
+    continuous_plant = True        # the task runs on a continuous plant too (linearize_continuous)
+
+    @abc.abstractmethod
+    def base_config(self, options):
+        """The task's default ScenarioConfig before ``options`` and changes are applied (``options``,
+        the dict the caller gave, for tasks whose defaults depend on an option)."""
+
+    def default_config(self, options=None, **changes):
+        """The task's default ScenarioConfig with ``options`` (names of ``Options``) and ``changes``
+        (top-level ScenarioConfig fields; desired_velocity and desired_force may be lists)."""
+        options = dict(options or {})
+        config = self.base_config(options)
+        for name, raw in options.items():
+            self._set_option(config, name, raw)
+        for name in ("desired_velocity", "desired_force"):
+            if name in changes:
+                changes[name] = as_profile(changes[name])
+        unknown = sorted(set(changes) - {f.name for f in dataclasses.fields(ScenarioConfig)})
+        if unknown:
+            raise ConfigError(f"{self.name}.default_config: {unknown[0]} is not a ScenarioConfig field")
+        config = dataclasses.replace(config, **changes) if changes else config
+        self.options(config)
+        return config
+
+    def _set_option(self, config, name, raw):
+        """Store option ``name`` in task_parameters (numbers) or task_options (words and booleans)."""
+        fields = {f.name: f for f in dataclasses.fields(self.Options)}
+        if name not in fields:
+            raise ConfigError(f"task '{self.name}' has no option '{name}'; its options: {sorted(fields) or 'none'}")
+        value = _coerce(self.name, fields[name], raw)
+        config.task_parameters.pop(name, None)
+        config.task_options.pop(name, None)
+        if isinstance(value, bool):
+            config.task_options[name] = "true" if value else "false"
+        elif isinstance(value, (int, float)):
+            config.task_parameters[name] = float(value)
+        else:
+            config.task_options[name] = value
+
+    def options(self, config):
+        """The task's typed options from ``config.task_parameters`` and ``config.task_options``."""
+        fields = {f.name: f for f in dataclasses.fields(self.Options)}
+        values = {}
+        for section in ("task_parameters", "task_options"):
+            for name, raw in getattr(config, section).items():
+                if name not in fields:
+                    raise ConfigError(f"{section}.{name}: task '{self.name}' has no such option; its options: "
+                                      f"{sorted(fields) or 'none'}")
+                values[name] = _coerce(self.name, fields[name], raw)
+        return self.Options(**values)
+
+    def labels(self):
+        """Plot labels of the velocity- and force-controlled coordinates."""
+        return {"velocity": [], "velocity_units": "SI", "force": [], "force_units": "SI"}
+
+    # -- models ------------------------------------------------------------------------------------
+    @abc.abstractmethod
+    def add_robot(self, plant, config):
+        """Add the robot and its tool to ``plant``; return a ``scenario.plant.RobotModel``."""
+
+    @abc.abstractmethod
+    def add_workpiece(self, plant, config):
+        """Add the workpiece to ``plant``; return its collision geometry ids."""
+
+    def connect_environment(self, builder, plant, config):
+        """Wire systems that drive the environment (e.g. a moving window). Default: none."""
+
+    # -- the law's task ----------------------------------------------------------------------------
+    @abc.abstractmethod
+    def constraint_space(self, config):
+        """The ConstraintSpace (chart, C, E_p) of the task."""
+
+    def make_source(self, config, controller_plant, robot, constraint_space):
+        """The system producing desired_velocity, desired_acceleration and desired_force.
+        Default: the config's profiles."""
+        return ProfileSource(config.desired_velocity, config.desired_force, constraint_space.velocity_size,
+                             constraint_space.force_size)
+
+    # -- the start ---------------------------------------------------------------------------------
+    @abc.abstractmethod
+    def start_positions(self, scenario):
+        """The arm's joint positions at the start of ``scenario``."""
+
+    def set_environment_state(self, scenario, plant_context):
+        """Set the environment's own state at the start (e.g. the crank's angle). Default: none."""

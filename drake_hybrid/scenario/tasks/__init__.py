@@ -1,0 +1,34 @@
+"""The paper's tasks as scenario recipes (robot, workpiece, constraint, start).
+
+``get_task(name)`` returns a task object; ``TASKS`` lists them; ``register_task``
+adds your own (``drake_hybrid.scenario.custom.CustomTask``). A task knows
+how to add its robot and workpiece to a plant, its chart, constraint and
+velocity projection, its default ScenarioConfig and its start configuration.
+"""
+
+from drake_hybrid.scenario.tasks.crank_turning import CrankTurning
+from drake_hybrid.scenario.tasks.grinding import Grinding
+from drake_hybrid.scenario.tasks.sphere_polishing import SpherePolishing
+from drake_hybrid.scenario.tasks.window_washing import WindowWashing
+
+TASKS = {task.name: task for task in (WindowWashing(), CrankTurning(), SpherePolishing(), Grinding())}
+
+
+BUILT_IN_TASKS = frozenset(TASKS)
+
+
+def register_task(task):
+    """Make ``task`` (e.g. a ``wiring.CustomTask``) known by its name to ``get_task``, and so to
+    ``build_scenario``, ``simulate`` and ``linearize_continuous``. A task registered earlier under
+    the same name is replaced (re-running a notebook cell); a built-in task cannot be. Returns it."""
+    if task.name in BUILT_IN_TASKS:
+        raise ValueError(f"'{task.name}' is a built-in task; give your task another name")
+    TASKS[task.name] = task
+    return task
+
+
+def get_task(name):
+    try:
+        return TASKS[name]
+    except KeyError:
+        raise ValueError(f"unknown task '{name}'; available tasks: {sorted(TASKS)}") from None

@@ -1,0 +1,157 @@
+"""Grinding: a task with real friction (spec section 5, the paper's section 3.2).
+
+The window-washing task (planar, default) or the sphere-polishing task (6-DOF,
+``task_options.workpiece = sphere``) with Coulomb friction on the pad (mu
+between 0.3 and 1.0, ``contact.friction``) and, on the window, a rough patch:
+a stretch of the pane with a higher mu (``task_parameters.rough_friction``
+between ``rough_start`` and ``rough_end`` along x) that the pad crosses.
+
+The paper's answer to friction is hybrid impedance/force control (3.2-6):
+impedance e_p'' + K_v e_p' + K_p e_p = F_v in the tangent directions, force
+control in the normal one. The default mode here is ``impedance-force``; run
+``--mode velocity-force`` on the same task to compare. The log has the usual
+arrays plus ``position_error`` (e_p) and ``tangential_force`` (F_v).
+
+Friction of two geometries combines as 2 mu_1 mu_2 / (mu_1 + mu_2) in Drake;
+the patch's own coefficient is chosen so that the pad on the patch sees
+``rough_friction``.
+"""
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from pydrake.geometry import AddContactMaterial, AddRigidHydroelasticProperties, Box, ProximityProperties
+from pydrake.math import RigidTransform
+from pydrake.multibody.plant import CoulombFriction
+
+from drake_hybrid.control.gains import HybridGains
+from drake_hybrid.core.errors import ConfigError
+from drake_hybrid.scenario.task import Task, choice
+from drake_hybrid.scenario.tasks.sphere_polishing import SpherePolishing, SpherePolishingOptions
+from drake_hybrid.scenario.tasks.window_washing import WindowWashing, WindowWashingOptions
+
+PANE_SIZE = (3.0, 0.5, 0.02)       # models/window.sdf
+PANE_CENTER_X = 1.0
+# SAP's linear (Kelvin-Voigt) dissipation of the pad: a damped pad, as real grinding and polishing
+# pads are. Left at Drake's default, the pad's contact mode rings for about 0.2 s after each jump of
+# the friction force (docs/impedance.md).
+PAD_RELAXATION_TIME = 0.002
+
+
+@dataclass
+class GrindingOptions(WindowWashingOptions, SpherePolishingOptions):
+    workpiece: str = choice("window", ("window", "sphere"))
+    rough_friction: float = 0.9           # mu of the pad on the rough patch (window)
+    rough_start: float = 1.05             # m, the patch along x
+    rough_end: float = 1.15
+
+
+class Grinding(Task):
+    Options = GrindingOptions
+    name = "grinding"
+    continuous_plant = True
+    description = "grinding with Coulomb friction and a rough patch: impedance/force vs velocity/force (section 3.2)"
+
+    def __init__(self):
+        # The base tasks read this task's options (a superset of theirs).
+        self._window = WindowWashing()
+        self._window.Options = GrindingOptions
+        self._sphere = SpherePolishing()
+        self._sphere.Options = GrindingOptions
+
+    def _base(self, config):
+        return self._window if self.options(config).workpiece == "window" else self._sphere
+
+    def base_config(self, options):
+        """Defaults for the window (``options={"workpiece": "sphere"}``: ``sphere_config``)."""
+        return self.sphere_config() if options.get("workpiece", "window") == "sphere" else self.window_config()
+
+    def window_config(self):
+        """The planar variant: the window with mu = 0.5 and a rough patch of mu = 0.9."""
+        config = self._window.base_config({})
+        config.task = self.name
+        config.mode = "impedance-force"
+        config.duration = 3.0
+        # A stiff tangential impedance (roots -10 and -30 1/s) and the same K_v for velocity mode.
+        config.gains = HybridGains(velocity=[40.0, 40.0], position=[300.0, 300.0], force_proportional=0.5,
+                                   force_integral=15.0)
+        config.contact.friction = 0.5
+        config.contact.relaxation_time = PAD_RELAXATION_TIME
+        config.start.force_integral = []
+        config.task_parameters.update({"rough_friction": 0.9, "rough_start": 1.05, "rough_end": 1.15})
+        config.task_options = {"workpiece": "window"}
+        return config
+
+    def sphere_config(self):
+        """The 6-DOF variant: the sphere's latitude path with mu = 0.5."""
+        config = self._sphere.base_config({})
+        config.task = self.name
+        config.mode = "impedance-force"
+        config.gains = HybridGains(velocity=[10.0, 40.0, 40.0], position=[16.0, 300.0, 300.0],
+                                   force_proportional=[0.5, 0.0, 0.0], force_integral=[15.0, 1.0, 1.0],
+                                   constraint_frequency=15.0)
+        config.contact.friction = 0.5
+        config.contact.relaxation_time = PAD_RELAXATION_TIME
+        config.start.force_integral = []
+        config.task_options.update(workpiece="sphere")
+        return config
+
+    def labels(self):
+        return self._window.labels()
+
+    # -- delegated to the base task -------------------------------------------------------------
+    def add_robot(self, plant, config):
+        return self._base(config).add_robot(plant, config)
+
+    def constraint_space(self, config):
+        return self._base(config).constraint_space(config)
+
+    def make_source(self, config, controller_plant, robot, constraint_space):
+        return self._base(config).make_source(config, controller_plant, robot, constraint_space)
+
+    def start_positions(self, scenario):
+        return self._base(scenario.config).start_positions(scenario)
+
+    def inverse_kinematics(self, config, *args):
+        return self._window.inverse_kinematics(config, *args)
+
+    # -- the workpiece with friction ---------------------------------------------------------
+    def add_workpiece(self, plant, config):
+        base = self._base(config)
+        if base is self._sphere:
+            return base.add_workpiece(plant, config)
+        return self._add_window_with_rough_patch(plant, config)
+
+    def _add_window_with_rough_patch(self, plant, config):
+        """Three rigid hydroelastic boxes side by side (smooth, rough, smooth), lower faces at the
+        window's height, registered on the world body."""
+        options = self.options(config)
+        height, start, end = options.window_height, options.rough_start, options.rough_end
+        mu, mu_rough = float(config.contact.friction), options.rough_friction
+        x_min, x_max = PANE_CENTER_X - PANE_SIZE[0] / 2, PANE_CENTER_X + PANE_SIZE[0] / 2
+        if not x_min < start < end < x_max:
+            raise ConfigError(f"grinding: the rough patch [{start}, {end}] must lie on the pane [{x_min}, {x_max}]")
+        if mu == 0:
+            mu_rough = 0.0                      # a frictionless copy (e.g. for the linearization)
+        elif not 0 < mu_rough < 2 * mu:
+            raise ConfigError(f"grinding: rough_friction must be in (0, 2 mu) = (0, {2 * mu}) so that a coefficient "
+                             f"of the patch combines with the pad's mu = {mu} to it; got {mu_rough}")
+        # 2 mu mu_patch / (mu + mu_patch) = mu_rough
+        mu_patch = mu_rough * mu / (2 * mu - mu_rough) if mu > 0 else 0.0
+        geometries = []
+        world = plant.world_body()
+        for name, (a, b), friction, color in [("pane_left", (x_min, start), mu, [0.6, 0.8, 0.95, 0.5]),
+                                              ("rough_patch", (start, end), mu_patch, [0.6, 0.4, 0.2, 0.9]),
+                                              ("pane_right", (end, x_max), mu, [0.6, 0.8, 0.95, 0.5])]:
+            box = Box(b - a, PANE_SIZE[1], PANE_SIZE[2])
+            X = RigidTransform([(a + b) / 2, 0.0, height + PANE_SIZE[2] / 2])
+            properties = ProximityProperties()
+            AddRigidHydroelasticProperties(properties)
+            AddContactMaterial(friction=CoulombFriction(friction, friction), properties=properties)
+            geometry = plant.RegisterCollisionGeometry(world, X, box, name, properties)
+            plant.RegisterVisualGeometry(world, X, box, name, np.array(color))
+            if name != "rough_patch":
+                geometries.append(geometry)
+        # The scenario sets contact.friction on the returned (smooth) geometries; the patch keeps its own.
+        return geometries

@@ -1,0 +1,430 @@
+"""Wrench sensing for the controller's ``measured_wrench`` input.
+
+All sensors output the SpatialForce [n; f] (6-vector) exerted **on the robot
+by the environment**, at the end-effector point P, expressed in the world
+frame: the sign convention of spec section 0.
+
+``ContactWrenchSensor``
+    ideal: sums the contact results on the robot's bodies and shifts them to P.
+``WristForceTorqueSensor``
+    a force/torque sensor in a weld joint between the wrist and the tool: the
+    joint's reaction force (on the tool, from the wrist) is what the sensor
+    measures; subtracting it from zero and removing the tool's weight gives
+    the contact wrench (static compensation: tool inertia is neglected).
+``LowPassFilter``
+    first-order low-pass with a bandwidth in Hz, continuous or sampled. On a
+    continuous plant, the contact results are direct feedthrough of the
+    actuation, so plant -> sensor -> controller -> plant is an algebraic loop;
+    a filter breaks it (see docs/drake_notes.md).
+``WrenchConditioner``
+    what a real sensor needs before the controller: dropout (NaN) and
+    stale-sample rejection with a bounded hold, a tare against a constant bias,
+    and the same low-pass, sampled at the control period.
+
+All are TemplateSystems (float and AutoDiffXd) so closed loops linearize.
+
+Size: the four wrench systems share the sign convention, the shift to the end-effector point
+and the sampling; each is a TemplateSystem of about 100 lines.
+"""
+
+import math
+
+import numpy as np
+
+from pydrake.autodiffutils import AutoDiffXd
+from pydrake.common.cpp_param import List
+from pydrake.common.value import AbstractValue, Value
+from pydrake.math import RigidTransform_
+from pydrake.multibody.math import SpatialForce_
+from pydrake.multibody.plant import ContactResults_
+from pydrake.systems.framework import LeafSystem_
+from pydrake.systems.scalar_conversion import TemplateSystem
+
+from drake_hybrid.control.phases import ContactPhase
+from drake_hybrid.control.sampling import SAMPLE_LEAD
+from drake_hybrid.core.errors import DimensionError
+from drake_hybrid.core.kinematics import resolve_frame
+from drake_hybrid.core.linalg import all_finite, value
+
+
+def _robot_geometry_ids(plant, robot_bodies):
+    ids = set()
+    for body in robot_bodies:
+        ids.update(plant.GetCollisionGeometriesForBody(body))
+    return ids
+
+
+def _point_in_world(body_poses, body_index, point_in_body):
+    X_WB = body_poses[int(body_index)]
+    return X_WB.translation() + X_WB.rotation().matrix() @ point_in_body
+
+
+def _point(point, owner):
+    point = np.asarray(point, dtype=float)
+    if point.shape != (3,):
+        raise DimensionError(f"{owner}: end_effector_point must be a 3-vector, got shape {point.shape}")
+    return point
+
+
+def _shift(F_coefficients, p_from_to_W):
+    """Shift a spatial force [n; f] applied at point A to point B (p_from_to = p_AB): n_B = n_A - p_AB x f."""
+    n, f, p = F_coefficients[:3], F_coefficients[3:], p_from_to_W
+    # p x f written out: np.cross costs ~15 us on 3-vectors in numpy 2 (benchmarks/PROFILE.md)
+    return np.array([n[0] - (p[1] * f[2] - p[2] * f[1]),
+                     n[1] - (p[2] * f[0] - p[0] * f[2]),
+                     n[2] - (p[0] * f[1] - p[1] * f[0]),
+                     f[0], f[1], f[2]])
+
+
+@TemplateSystem.define("ContactWrenchSensor_", T_list=[float, AutoDiffXd])
+def ContactWrenchSensor_(T):
+
+    class Impl(LeafSystem_[T]):
+        """Ideal contact-wrench sensor: the environment's wrench on the robot at P.
+
+        .. pydrake_system::
+
+            name: ContactWrenchSensor
+            input_ports:
+            - contact_results
+            - body_poses
+            output_ports:
+            - wrench
+
+        Sums, over hydroelastic and point contacts between a robot body and a
+        non-robot body, the spatial force on the robot body, shifted from the
+        contact point (centroid) to P, in world.
+
+        Args:
+            plant: the simulation plant (float, finalized, with a SceneGraph).
+            robot_bodies: the bodies that count as "the robot" (e.g. all bodies
+                of the arm and tool model instances).
+            end_effector_frame: frame E of ``plant`` (or its name) holding P.
+            end_effector_point: p_EP (m).
+        """
+
+        def _construct(self, plant, robot_bodies, end_effector_frame, end_effector_point, converter=None):
+            LeafSystem_[T].__init__(self, converter)
+            self._plant = plant
+            self._robot_bodies = list(robot_bodies)
+            if not self._robot_bodies:
+                raise ValueError("ContactWrenchSensor: robot_bodies is empty; give the bodies of the arm and tool")
+            if not plant.geometry_source_is_registered():
+                raise ValueError("ContactWrenchSensor: the plant has no SceneGraph (no contact results)")
+            self._robot_body_indices = {int(b.index()) for b in self._robot_bodies}
+            self._robot_geometries = _robot_geometry_ids(plant, self._robot_bodies)
+            frame = resolve_frame(plant, end_effector_frame)
+            self._frame = frame
+            self._end_effector_point = _point(end_effector_point, "ContactWrenchSensor")
+            self._body_index = frame.body().index()
+            self._point_in_body = frame.GetFixedPoseInBodyFrame().multiply(self._end_effector_point)
+            self.DeclareAbstractInputPort("contact_results", AbstractValue.Make(ContactResults_[T]()))
+            self.DeclareAbstractInputPort("body_poses", Value[List[RigidTransform_[T]]]([]))
+            # A function of the inputs only (not of time): a logger at the next instant reuses the value.
+            self.DeclareVectorOutputPort("wrench", 6, self._calc_wrench,
+                                         prerequisites_of_calc={self.all_input_ports_ticket()})
+
+        def _construct_copy(self, other, converter=None):
+            Impl._construct(self, other._plant, other._robot_bodies, other._frame, other._end_effector_point,
+                            converter=converter)
+
+        def _calc_wrench(self, context, output):
+            results = self.get_input_port(0).Eval(context)
+            body_poses = self.get_input_port(1).Eval(context)
+            p_WP = _point_in_world(body_poses, self._body_index, self._point_in_body)
+            total = np.zeros(6, dtype=p_WP.dtype)
+            for i in range(results.num_hydroelastic_contacts()):
+                info = results.hydroelastic_contact_info(i)
+                surface = info.contact_surface()
+                on_M = surface.id_M() in self._robot_geometries
+                on_N = surface.id_N() in self._robot_geometries
+                if on_M == on_N:
+                    continue
+                # F_Ac_W: on the body of geometry M, at the centroid; the other body gets its negative.
+                F = info.F_Ac_W().get_coeffs() * (1.0 if on_M else -1.0)
+                total = total + _shift(F, p_WP - surface.centroid())
+            for i in range(results.num_point_pair_contacts()):
+                info = results.point_pair_contact_info(i)
+                on_A = int(info.bodyA_index()) in self._robot_body_indices
+                on_B = int(info.bodyB_index()) in self._robot_body_indices
+                if on_A == on_B:
+                    continue
+                # F_Bc_W: on body B at the contact point; body A gets its negative.
+                F = info.contact_force() * (1.0 if on_B else -1.0)
+                total = total + _shift(np.concatenate([np.zeros(3), F]), p_WP - info.contact_point())
+            output.SetFromVector(total)
+
+    return Impl
+
+
+ContactWrenchSensor = ContactWrenchSensor_[None]
+
+
+@TemplateSystem.define("WristForceTorqueSensor_", T_list=[float, AutoDiffXd])
+def WristForceTorqueSensor_(T):
+
+    class Impl(LeafSystem_[T]):
+        """Wrist force/torque sensor in the weld joint between wrist and tool.
+
+        .. pydrake_system::
+
+            name: WristForceTorqueSensor
+            input_ports:
+            - reaction_forces
+            - body_poses
+            output_ports:
+            - wrench
+
+        The plant's reaction force of the weld joint J is F_CJc_Jc, the force
+        on the child (tool) at the joint's child frame, expressed there. For a
+        tool of mass m_t at rest, F_contact + F_CJc + m_t g = 0, so
+
+            wrench = -(F_CJc shifted to P) - (m_t g at the tool's centre of mass, shifted to P)
+
+        in world. During motion the tool's own inertia (m_t a) remains in the
+        reading; for the light tools here it is far below the contact forces.
+        On a continuous plant use ``contact_model="hydroelastic_with_fallback"``
+        or a discrete plant: with strict hydroelastic, continuous reaction
+        forces leave out gravity (DRAKE_NOTES).
+
+        Args:
+            plant: simulation plant (float, finalized).
+            weld_joint: the WeldJoint between wrist (parent) and tool (child).
+            end_effector_frame, end_effector_point: P, as for the controller.
+        """
+
+        def _construct(self, plant, weld_joint, end_effector_frame, end_effector_point, converter=None):
+            LeafSystem_[T].__init__(self, converter)
+            if type(weld_joint).__name__ != "WeldJoint" or weld_joint.GetParentPlant() is not plant:
+                raise ValueError(f"WristForceTorqueSensor: weld_joint must be a WeldJoint of the plant, got "
+                                 f"{type(weld_joint).__name__}")
+            self._plant = plant
+            self._weld_joint = weld_joint
+            self._joint_index = int(weld_joint.index())
+            tool = weld_joint.child_body()
+            self._tool_index = tool.index()
+            self._child_frame = weld_joint.frame_on_child()
+            self._X_tool_Jc = self._child_frame.GetFixedPoseInBodyFrame()
+            self._tool_mass = tool.default_mass()
+            self._tool_com = tool.default_com()
+            self._gravity = plant.gravity_field().gravity_vector()
+            frame = resolve_frame(plant, end_effector_frame)
+            self._frame = frame
+            self._end_effector_point = _point(end_effector_point, "WristForceTorqueSensor")
+            self._body_index = frame.body().index()
+            self._point_in_body = frame.GetFixedPoseInBodyFrame().multiply(self._end_effector_point)
+            self.DeclareAbstractInputPort("reaction_forces", Value[List[SpatialForce_[T]]]([]))
+            self.DeclareAbstractInputPort("body_poses", Value[List[RigidTransform_[T]]]([]))
+            # A function of the inputs only (not of time): a logger at the next instant reuses the value.
+            self.DeclareVectorOutputPort("wrench", 6, self._calc_wrench,
+                                         prerequisites_of_calc={self.all_input_ports_ticket()})
+
+        def _construct_copy(self, other, converter=None):
+            Impl._construct(self, other._plant, other._weld_joint, other._frame, other._end_effector_point,
+                            converter=converter)
+
+        def tool_mass(self):
+            return self._tool_mass
+
+        def _calc_wrench(self, context, output):
+            reaction = self.get_input_port(0).Eval(context)[self._joint_index]
+            body_poses = self.get_input_port(1).Eval(context)
+            X_W_tool = body_poses[int(self._tool_index)]
+            R_W_tool = X_W_tool.rotation().matrix()
+            p_WP = _point_in_world(body_poses, self._body_index, self._point_in_body)
+            R_WJc = R_W_tool @ self._X_tool_Jc.rotation().matrix()
+            p_WJc = X_W_tool.translation() + R_W_tool @ self._X_tool_Jc.translation()
+            coefficients = reaction.get_coeffs()
+            on_tool_from_wrist = np.concatenate([R_WJc @ coefficients[:3], R_WJc @ coefficients[3:]])
+            p_Wcom = X_W_tool.translation() + R_W_tool @ self._tool_com
+            weight = np.concatenate([np.zeros(3), self._tool_mass * self._gravity])
+            wrench = -_shift(on_tool_from_wrist, p_WP - p_WJc) - _shift(weight, p_WP - p_Wcom)
+            output.SetFromVector(wrench)
+
+    return Impl
+
+
+WristForceTorqueSensor = WristForceTorqueSensor_[None]
+
+
+def low_pass_coefficient(bandwidth_hz, period):
+    """alpha = 1 - exp(-2 pi f_c h): the exact discretization of y-dot = 2 pi f_c (u - y) for a held
+    input (1 when bandwidth_hz is 0: no filtering)."""
+    if not bandwidth_hz > 0:
+        return 1.0
+    return 1.0 - math.exp(-2 * math.pi * bandwidth_hz * period)
+
+
+@TemplateSystem.define("LowPassFilter_", T_list=[float, AutoDiffXd])
+def LowPassFilter_(T):
+
+    class Impl(LeafSystem_[T]):
+        """First-order low-pass y-dot = 2 pi f_c (u - y), continuous or sampled exactly.
+
+        .. pydrake_system::
+
+            name: LowPassFilter
+            input_ports:
+            - u
+            output_ports:
+            - y
+
+        The output is the state (no direct feedthrough). With ``period`` h the
+        update is y+ = y + (1 - exp(-2 pi f_c h)) (u - y), the exact
+        discretization for a held input. Set the initial state with
+        ``set_initial_output``.
+        """
+
+        def _construct(self, size, bandwidth_hz, period=None, converter=None):
+            LeafSystem_[T].__init__(self, converter)
+            if not bandwidth_hz > 0:
+                raise ValueError(f"LowPassFilter: bandwidth_hz must be positive, got {bandwidth_hz}")
+            if int(size) != size or size < 1:
+                raise ValueError(f"LowPassFilter: size must be a positive integer, got {size}")
+            if period is not None and not period > 0:
+                raise ValueError(f"LowPassFilter: period must be positive or None, got {period}")
+            self._size, self.bandwidth_hz, self.period = size, float(bandwidth_hz), period
+            self._rate = 2 * math.pi * self.bandwidth_hz
+            self.DeclareVectorInputPort("u", size)
+            if period is None:
+                state = self.DeclareContinuousState(size)
+                self.DeclareStateOutputPort("y", state)
+            else:
+                self._alpha = low_pass_coefficient(self.bandwidth_hz, period)
+                state = self.DeclareDiscreteState(size)
+                self.DeclarePeriodicDiscreteUpdateEvent(period, 0.0, self._update)
+                self.DeclareStateOutputPort("y", state)
+
+        def _construct_copy(self, other, converter=None):
+            Impl._construct(self, other._size, other.bandwidth_hz, other.period, converter=converter)
+
+        def DoCalcTimeDerivatives(self, context, derivatives):
+            u = self.get_input_port(0).Eval(context)
+            y = context.get_continuous_state_vector().CopyToVector()
+            derivatives.get_mutable_vector().SetFromVector(self._rate * (u - y))
+
+        def _update(self, context, discrete_state):
+            u = self.get_input_port(0).Eval(context)
+            y = context.get_discrete_state(0).get_value()
+            discrete_state.get_mutable_vector(0).SetFromVector(y + self._alpha * (u - y))
+
+        def set_initial_output(self, context, y0):
+            """Set the filter's state (= output) in its own context."""
+            if self.period is None:
+                context.get_mutable_continuous_state_vector().SetFromVector(y0)
+            else:
+                context.get_mutable_discrete_state(0).SetFromVector(y0)
+
+    return Impl
+
+
+LowPassFilter = LowPassFilter_[None]
+
+
+
+@TemplateSystem.define("WrenchConditioner_", T_list=[float, AutoDiffXd])
+def WrenchConditioner_(T):
+
+    class Impl(LeafSystem_[T]):
+        """Between a wrench sensor and the controller: rejects dropouts, tares, low-pass filters.
+
+        .. pydrake_system::
+
+            name: WrenchConditioner
+            input_ports:
+            - raw_wrench
+            - sequence (only with use_sequence)
+            - contact_phase (only with tare)
+            output_ports:
+            - wrench
+
+        Every ``period`` (at the controller's tick) a raw sample u_k is *fresh* when it is finite
+        and, with ``use_sequence``, its sequence number (the sensor's packet counter, as on an
+        F/T sensor's streaming interface) differs from the last one: a stale sample, repeated
+        by a stalled sensor, is not fresh. Then
+
+            y_k = y_{k-1} + alpha (u_k - y_{k-1}),   alpha = 1 - exp(-2 pi f_c h)   (alpha = 1: no filter)
+
+        and otherwise y_k = y_{k-1} (the last good value is held). The output is y_k - b (b: the
+        tare) while the last fresh sample is at most ``max_hold_time`` old, and NaN after: the
+        controller then ignores the wrench (no force feedback, integrals held) and the contact
+        supervisor makes no decision, instead of acting on a value that no longer describes the
+        contact. With ``tare``, b is the mean of the fresh samples taken while ``contact_phase``
+        is TARE (the arm held still in free space): a constant sensor bias is removed.
+
+        The output is direct feedthrough of the inputs (y_k from u_k at the same tick: no added
+        delay); the state [y (6), b (6), tare samples, age (samples since the last fresh one),
+        last sequence] advances at each tick.
+
+        The AutoDiffXd instance computes on values (no derivatives through the conditioner).
+
+        Args:
+            period: the sampling period h (s), normally the control period.
+            bandwidth_hz: f_c of the low-pass (0: none).
+            max_hold_time: how long a dropout is bridged by holding (s, >= 0).
+            use_sequence: declare the ``sequence`` input (stale-sample detection).
+            tare: declare the ``contact_phase`` input and tare during TARE.
+        """
+
+        def _construct(self, period, bandwidth_hz=0.0, max_hold_time=0.01, use_sequence=False, tare=False,
+                       converter=None):
+            LeafSystem_[T].__init__(self, converter)
+            if not (period is not None and float(period) > 0):
+                raise ValueError(f"WrenchConditioner: period must be positive, got {period}")
+            if not float(bandwidth_hz) >= 0:
+                raise ValueError(f"WrenchConditioner: bandwidth_hz must be >= 0, got {bandwidth_hz}")
+            if not float(max_hold_time) >= 0:
+                raise ValueError(f"WrenchConditioner: max_hold_time must be >= 0, got {max_hold_time}")
+            self.period, self.bandwidth_hz, self.max_hold_time = float(period), float(bandwidth_hz), float(max_hold_time)
+            self.use_sequence, self.tare = bool(use_sequence), bool(tare)
+            self._alpha = low_pass_coefficient(self.bandwidth_hz, self.period)
+            self._max_age = int(math.floor(self.max_hold_time / self.period + 1e-9))
+            self._raw_port = self.DeclareVectorInputPort("raw_wrench", 6)
+            self._sequence_port = self.DeclareVectorInputPort("sequence", 1) if self.use_sequence else None
+            self._phase_port = self.DeclareVectorInputPort("contact_phase", 1) if self.tare else None
+            self.DeclareDiscreteState(15)
+            self.DeclarePeriodicDiscreteUpdateEvent(self.period, self.period * (1.0 - SAMPLE_LEAD), self._update)
+            self.DeclareVectorOutputPort("wrench", 6, self._calc_wrench)
+
+        def _construct_copy(self, other, converter=None):
+            Impl._construct(self, other.period, other.bandwidth_hz, other.max_hold_time, other.use_sequence,
+                            other.tare, converter=converter)
+
+        def set_initial_output(self, context, y0, sequence=0.0):
+            """Start from the reading y0 (no tare, fresh)."""
+            state = np.zeros(15)
+            state[:6] = value(np.asarray(y0))
+            state[14] = float(sequence)
+            context.get_mutable_discrete_state(0).SetFromVector(state)
+
+        def _step(self, context):
+            """(new state, output) of the tick at ``context``'s time (floats)."""
+            state = value(context.get_discrete_state(0).CopyToVector())
+            y, tare, samples, age, last_sequence = state[:6], state[6:12], state[12], state[13], state[14]
+            raw = value(self._raw_port.Eval(context))
+            fresh = all_finite(raw)
+            sequence = last_sequence
+            if self._sequence_port is not None:
+                sequence = float(value(self._sequence_port.Eval(context))[0])
+                fresh = fresh and sequence != last_sequence
+            if fresh:
+                y = y + self._alpha * (raw - y)
+                age = 0.0
+                if self._phase_port is not None and int(value(self._phase_port.Eval(context))[0]) == ContactPhase.TARE:
+                    tare = (tare * samples + raw) / (samples + 1.0)
+                    samples += 1.0
+            else:
+                age += 1.0
+            output = y - tare if age <= self._max_age else np.full(6, np.nan)
+            return np.concatenate([y, tare, [samples, age, sequence]]), output
+
+        def _calc_wrench(self, context, output):
+            output.SetFromVector(self._step(context)[1])
+
+        def _update(self, context, discrete_state):
+            discrete_state.get_mutable_vector(0).SetFromVector(self._step(context)[0])
+
+    return Impl
+
+
+WrenchConditioner = WrenchConditioner_[None]

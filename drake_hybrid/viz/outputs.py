@@ -1,0 +1,32 @@
+"""The files of a run: log.npz, summary.json, config.yaml, the plots and the animation."""
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+from drake_hybrid.experiments.simulation import effort_limits, predicted_tracking
+from drake_hybrid.scenario.config import dump_config
+from drake_hybrid.viz.plotting import save_run_plots, save_tracking_plots
+
+
+def write_run(result, out_dir, plots=True):
+    """Write log.npz, summary.json, config.yaml and the plots (tracking, constraint residual,
+    torques) to ``out_dir``."""
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    np.savez_compressed(out / "log.npz", **result.log)
+    (out / "summary.json").write_text(json.dumps(result.summary, indent=2))
+    (out / "config.yaml").write_text(dump_config(result.config))
+    files = [out / "log.npz", out / "summary.json", out / "config.yaml"]
+    if plots:
+        predicted_velocity, predicted_force = predicted_tracking(result.scenario, result.config, result.log)
+        labels = result.scenario.task.labels()
+        files += save_tracking_plots(result.log, result.summary, predicted_velocity, predicted_force, out,
+                                     labels=labels)
+        files += save_run_plots(result.log, effort_limits(result.scenario), out,
+                                constraint_units=labels.get("constraint_units", "units of C"))
+    if result.html:
+        (out / "animation.html").write_text(result.html)
+        files.append(out / "animation.html")
+    return files

@@ -1,0 +1,406 @@
+"""Figures used by the CLI, the tutorials and the docs (matplotlib, Agg-safe).
+
+* ``tracking_figure``: velocity and force tracking against the designed
+  (predicted) exponential response.
+* ``save_tracking_plots``: the tracking PNGs a run writes; ``save_run_plots``
+  adds the constraint residual and the torques.
+* ``eigenvalue_figure``: predicted against measured closed-loop eigenvalues
+  (all of them, and a zoom on the designed ones).
+* ``eigenvalue_sweep_figure``: how the measured eigenvalues move with a
+  parameter (contact stiffness, a gain), against the design.
+* ``constraint_residual_figure``: |C(r)| along the run (the pad's compression).
+* ``torque_figure``: joint torques against the actuators' effort limits.
+
+Every axis says its unit.
+
+Size: one module for every figure of the package, so that they share one look (axes, units,
+the designed-prediction overlays); each function is one figure.
+"""
+
+from pathlib import Path
+
+import matplotlib
+import matplotlib.pyplot as plt
+import numpy as np
+from matplotlib import cm, colors
+from matplotlib.colors import SymLogNorm
+
+from drake_hybrid.experiments.sweep import theory_on_plane
+from drake_hybrid.scenario.config import load_config
+
+# Backends that need no display: kept as they are (Jupyter's inline backend reports "inline" or its
+# module name, depending on the matplotlib version).
+_HEADLESS_BACKENDS = ("agg", "pdf", "svg", "ps", "cairo", "inline", "module://matplotlib_inline.backend_inline",
+                      "widget", "ipympl", "module://ipympl.backend_nbagg", "nbagg")
+
+
+def _pyplot():
+    """pyplot on a backend that needs no display (Agg unless a headless one is already set)."""
+    if matplotlib.get_backend().lower() not in _HEADLESS_BACKENDS:
+        plt.switch_backend("Agg")
+    return plt
+
+
+def _tracking_axes(ax_values, ax_errors, t, actual, desired, predicted, labels, what):
+    for i in range(actual.shape[1]):
+        label = labels[i] if i < len(labels) else f"{what} {i + 1}"
+        line, = ax_values.plot(t, actual[:, i], lw=1.6, label=f"{label}: measured")
+        ax_values.plot(t, desired[:, i], color=line.get_color(), ls=":", lw=1.2, label=f"{label}: commanded")
+        ax_values.plot(t, predicted[:, i], color="k", ls="--", lw=0.9, label=f"{label}: predicted" if i == 0 else None)
+        ax_errors.semilogy(t, np.abs(actual[:, i] - desired[:, i]) + 1e-12, color=line.get_color(), lw=1.4,
+                           label=f"|error| {label}")
+        ax_errors.semilogy(t, np.abs(predicted[:, i] - desired[:, i]) + 1e-12, color="k", ls="--", lw=0.9,
+                           label="predicted" if i == 0 else None)
+    ax_values.legend(fontsize=7, loc="best")
+    ax_errors.legend(fontsize=7, loc="best")
+    ax_errors.set_xlabel("time t (s)")
+    ax_values.grid(alpha=0.3)
+    ax_errors.grid(alpha=0.3, which="both")
+
+
+def tracking_figure(log, summary, predicted, what, labels=(), units=""):
+    """Measured, commanded and predicted ``what`` ("velocity" or "force") and the error on a log scale."""
+    plt = _pyplot()
+    fig, (ax_values, ax_errors) = plt.subplots(2, 1, figsize=(7.5, 6.0), sharex=True)
+    actual, desired = log[what], log[f"desired_{what}"]
+    _tracking_axes(ax_values, ax_errors, log["t"], actual, desired, predicted, labels, what)
+    ax_values.set_ylabel(f"{what} ({units})" if units else what)
+    ax_errors.set_ylabel(f"|{what} error| ({units})" if units else f"|{what} error|")
+    one_percent = 0.01 * summary["command_scales"]["speed" if what == "velocity" else "force"]
+    ax_errors.axhline(one_percent, color="gray", lw=0.8, ls="-.", label="1 % of command")
+    ax_errors.axvline(5 * summary["design_time_constant"], color="gray", lw=0.8, ls=":")
+    ax_values.set_title(f"{summary['task']} ({summary['mode']}): {what} tracking vs. the designed exponential")
+    fig.tight_layout()
+    return fig
+
+
+def save_tracking_plots(log, summary, predicted_velocity, predicted_force, out_dir, labels=None):
+    """Write velocity_tracking.png and force_tracking.png; returns their paths."""
+    plt = _pyplot()
+    labels = labels or {}
+    out = Path(out_dir)
+    paths = []
+    for what, predicted in (("velocity", predicted_velocity), ("force", predicted_force)):
+        fig = tracking_figure(log, summary, predicted, what, labels.get(what, ()),
+                              units=labels.get(f"{what}_units", ""))
+        path = out / f"{what}_tracking.png"
+        fig.savefig(path, dpi=120)
+        plt.close(fig)
+        paths.append(path)
+    return paths
+
+
+def save_run_plots(log, effort_limits, out_dir, constraint_units="m", joint_names=None):
+    """Write constraint_residual.png and torques.png; returns their paths."""
+    plt = _pyplot()
+    out = Path(out_dir)
+    paths = []
+    for name, fig in (("constraint_residual", constraint_residual_figure(log, units=constraint_units)),
+                      ("torques", torque_figure(log, effort_limits, joint_names=joint_names))):
+        path = out / f"{name}.png"
+        fig.savefig(path, dpi=110)
+        plt.close(fig)
+        paths.append(path)
+    return paths
+
+
+def _complex_axes(ax, title):
+    ax.axvline(0, color="k", lw=0.8)
+    ax.axhline(0, color="k", lw=0.4)
+    ax.set_xlabel("Re(s) (1/s)")
+    ax.set_ylabel("Im(s) (rad/s)")
+    ax.grid(alpha=0.3)
+    ax.set_title(title, fontsize=10)
+
+
+def _designed_window(predicted, margin=0.35):
+    """Axis limits around the designed eigenvalues (and the origin)."""
+    predicted = np.asarray(predicted, dtype=complex)
+    radius = max(1.0, float(np.max(np.abs(predicted)))) if predicted.size else 1.0
+    return (-(1 + margin) * radius, margin * radius), (-(0.6 + margin) * radius, (0.6 + margin) * radius)
+
+
+def eigenvalue_figure(match, title="closed-loop eigenvalues", zoom=None):
+    """Predicted (crosses) and measured (dots) eigenvalues in the complex plane.
+
+    Left: every eigenvalue of the linearized closed loop (symmetric-log real
+    axis: the contact, filter and joint-space modes are 100 times faster than
+    the designed ones). Right: a zoom on the designed eigenvalues (``zoom`` =
+    ((re_min, re_max), (im_min, im_max)), default: around them), each joined
+    to the measured eigenvalue it was matched with.
+    """
+    plt = _pyplot()
+    fig, (ax_all, ax_zoom) = plt.subplots(1, 2, figsize=(11.0, 4.5), gridspec_kw={"width_ratios": [1.0, 1.2]})
+    measured, predicted = np.asarray(match.measured), np.asarray(match.predicted)
+    partner = np.asarray(getattr(match, "partner", np.zeros(0)))
+    ax_all.scatter(measured.real, measured.imag, s=22, color="tab:blue", label="linearized closed loop")
+    ax_all.scatter(predicted.real, predicted.imag, s=80, marker="x", color="tab:red", label="designed (gains)")
+    ax_all.set_xscale("symlog", linthresh=10.0)
+    _complex_axes(ax_all, f"{title}: all modes")
+    ax_all.legend(fontsize=8, loc="best")
+    (re_min, re_max), (im_min, im_max) = zoom if zoom is not None else _designed_window(predicted)
+    inside = ((measured.real >= re_min) & (measured.real <= re_max) & (measured.imag >= im_min)
+              & (measured.imag <= im_max))
+    ax_zoom.scatter(measured[inside].real, measured[inside].imag, s=30, color="tab:blue",
+                    label="linearized closed loop")
+    ax_zoom.scatter(predicted.real, predicted.imag, s=110, marker="x", color="tab:red", label="designed (gains)")
+    for p, q in zip(predicted, partner):
+        ax_zoom.plot([p.real, q.real], [p.imag, q.imag], color="gray", lw=0.8)
+    ax_zoom.set_xlim(re_min, re_max)
+    ax_zoom.set_ylim(im_min, im_max)
+    _complex_axes(ax_zoom, "zoom on the designed eigenvalues (gray: matched pairs)")
+    ax_zoom.legend(fontsize=8, loc="best")
+    fig.tight_layout()
+    return fig
+
+
+def eigenvalue_sweep_figure(values, linearizations, parameter, units="", title=None, zoom=None, log_scale=True):
+    """How the closed-loop eigenvalues move with a parameter.
+
+    ``values[i]`` is the parameter of ``linearizations[i]`` (each an
+    ``analysis.Linearization``). Dots: measured eigenvalues, coloured by the
+    parameter; crosses: the designed ones. Left: all modes (symmetric-log real
+    axis); right: ``zoom`` (default: around the designed eigenvalues).
+    """
+    plt = _pyplot()
+    values = np.asarray(values, dtype=float)
+    norm = colors.LogNorm(values.min(), values.max()) if log_scale and values.min() > 0 else \
+        colors.Normalize(values.min(), values.max())
+    colormap = cm.viridis
+    fig, (ax_all, ax_zoom) = plt.subplots(1, 2, figsize=(11.5, 4.5), gridspec_kw={"width_ratios": [1.0, 1.2]},
+                                          layout="constrained")
+    predicted_all = np.concatenate([lin.predicted.designed for lin in linearizations])
+    window = zoom if zoom is not None else _designed_window(predicted_all)
+    for value, lin in zip(values, linearizations):
+        color = colormap(norm(value))
+        measured = np.asarray(lin.eigenvalues)
+        designed = np.asarray(lin.predicted.designed)
+        for ax in (ax_all, ax_zoom):
+            ax.scatter(measured.real, measured.imag, s=18, color=color)
+            ax.scatter(designed.real, designed.imag, s=70, marker="x", color=color, linewidths=1.2)
+    ax_all.set_xscale("symlog", linthresh=10.0)
+    label = f"{parameter} ({units})" if units else parameter
+    _complex_axes(ax_all, "all modes (dots: linearized, crosses: designed)")
+    ax_zoom.set_xlim(*window[0])
+    ax_zoom.set_ylim(*window[1])
+    _complex_axes(ax_zoom, "zoom on the designed eigenvalues")
+    fig.colorbar(cm.ScalarMappable(norm=norm, cmap=colormap), ax=[ax_all, ax_zoom], label=label)
+    if title:
+        fig.suptitle(title)
+    return fig
+
+
+def constraint_residual_figure(log, units="m", labels=None, title="constraint residual"):
+    """|C(r)| of every constraint row along the run (log scale). For a contact row it is the
+    compression of the compliant contact (the rigid model of the paper has C = 0)."""
+    plt = _pyplot()
+    fig, ax = plt.subplots(figsize=(7.5, 3.2))
+    residual = np.atleast_2d(np.asarray(log["constraint"]).T).T
+    for i in range(residual.shape[1]):
+        label = labels[i] if labels and i < len(labels) else f"C_{i + 1}"
+        ax.semilogy(log["t"], np.abs(residual[:, i]) + 1e-15, lw=1.4, label=f"|{label}|")
+    ax.set_xlabel("time t (s)")
+    ax.set_ylabel(f"|C(r)| ({units})")
+    ax.grid(alpha=0.3, which="both")
+    ax.legend(fontsize=8, loc="best")
+    ax.set_title(title)
+    fig.tight_layout()
+    return fig
+
+
+def torque_figure(log, effort_limits, joint_names=None, units="N m", title="joint torques"):
+    """Each actuator's torque against its effort limit (dashed, where finite), one panel per joint;
+    the panel title gives the peak as a percentage of the limit."""
+    plt = _pyplot()
+    torque = np.asarray(log["torque"])
+    limits = np.asarray(effort_limits, dtype=float)
+    if limits.shape != (torque.shape[1],):
+        raise ValueError(f"torque_figure: {torque.shape[1]} actuators but {limits.size} effort limits")
+    n = torque.shape[1]
+    columns = 1 if n <= 3 else 2
+    rows = int(np.ceil(n / columns))
+    fig, axes = plt.subplots(rows, columns, figsize=(7.5 if columns == 1 else 10.0, 1.9 * rows + 0.6), sharex=True,
+                             squeeze=False)
+    for i, ax in enumerate(axes.flat):
+        if i >= n:
+            ax.axis("off")
+            continue
+        name = joint_names[i] if joint_names and i < len(joint_names) else f"joint {i + 1}"
+        ax.plot(log["t"], torque[:, i], lw=1.3, color="tab:blue")
+        peak = float(np.max(np.abs(torque[:, i])))
+        if np.isfinite(limits[i]):
+            for sign in (-1, 1):
+                ax.axhline(sign * limits[i], color="tab:red", ls="--", lw=0.9)
+            ax.set_title(f"{name}: peak {100 * peak / limits[i]:.1f} % of the {limits[i]:g} {units} limit", fontsize=9)
+            ax.set_ylim(-1.15 * max(limits[i], peak), 1.15 * max(limits[i], peak))
+        else:
+            ax.set_title(f"{name}: peak {peak:.3g} {units} (no limit)", fontsize=9)
+        ax.set_ylabel(f"tau ({units})")
+        ax.grid(alpha=0.3)
+    for column in range(columns):
+        # The lowest used panel of each column carries the time axis (the last row may have an empty panel).
+        last_row = max(row for row in range(rows) if row * columns + column < n)
+        axes[last_row, column].set_xlabel("time t (s)")
+        axes[last_row, column].tick_params(labelbottom=True)
+    fig.suptitle(f"{title} (dashed: effort limits)")
+    fig.tight_layout()
+    return fig
+
+
+# ------------------------------------------------------------------------------------------------
+# Sweeps: stability maps and Monte Carlo histograms (rows from drake_hybrid.experiments.sweep.read_results)
+# ------------------------------------------------------------------------------------------------
+
+SWEEP_LABELS = {
+    "contact.pad_modulus": "pad modulus E (Pa)",
+    "gains.force_proportional": "force gain K_fp",
+    "gains.force_integral": "force gain K_fi (1/s)",
+    "control_period": "control period h (s)",
+    "time_step": "plant time step (s)",
+    "worst_discrete_real": "worst Re log(mu)/h, sampled loop (1/s)",
+    "worst_continuous_real": "worst Re(s), continuous loop (1/s)",
+    "steady_force_error": "steady |e_f| (N)",
+    "steady_velocity_error": "steady |e_p'| (velocity units)",
+    "force_settling_time": "force settling time, 1 % (s)",
+    "velocity_settling_time": "velocity settling time, 1 % (s)",
+    "peak_force": "peak |F| (N)",
+    "model_error.payload_mass_scale": "payload mass / model",
+}
+
+
+def _label(name):
+    return SWEEP_LABELS.get(name, name)
+
+
+def _cell_edges(values):
+    """Edges of heatmap cells centred on sorted ``values`` (geometric when they span > 1 decade)."""
+    values = np.asarray(values, dtype=float)
+    if values.size == 1:
+        return np.array([values[0] * 0.9, values[0] * 1.1]) if values[0] else np.array([-0.5, 0.5]), False
+    logarithmic = bool(np.all(values > 0) and values[-1] / values[0] > 10)
+    v = np.log10(values) if logarithmic else values
+    middle = 0.5 * (v[1:] + v[:-1])
+    edges = np.concatenate([[v[0] - (middle[0] - v[0])], middle, [v[-1] + (v[-1] - middle[-1])]])
+    return (10 ** edges if logarithmic else edges), logarithmic
+
+
+def stability_map_figure(rows, x, y, facet=None, color="worst_discrete_real", verdict="stable_simulation",
+                         theory=None, title=None):
+    """Heatmap of ``color`` over (x, y), one panel per value of ``facet``.
+
+    Markers give the simulation's verdict per point (circle: stable, cross:
+    not), a grey square a point whose simulation failed (see its ``error``).
+    ``theory(x_values, y_values, facet_value)`` returns the theory's verdict on
+    a fine grid (1 stable, 0 unstable, nan not admissible); its boundary is
+    drawn where it changes, and a note says so where it does not."""
+    plt = _pyplot()
+    facet_values = sorted({row[facet] for row in rows}) if facet else [None]
+    fig, axes = plt.subplots(1, len(facet_values), figsize=(5.6 * len(facet_values) + 1.2, 4.8), squeeze=False)
+    fig.subplots_adjust(bottom=0.2, top=0.82 if title and facet else 0.86)   # room for the legend and title
+    values = np.array([np.nan if row.get(color) is None else row[color] for row in rows], dtype=float)
+    limit = np.nanmax(np.abs(values)) if np.isfinite(values).any() else 1.0
+    norm = SymLogNorm(linthresh=1.0, vmin=-limit, vmax=limit, base=10)
+    image = None
+    for ax, facet_value in zip(axes[0], facet_values):
+        subset = [row for row in rows if facet is None or row[facet] == facet_value]
+        xs, ys = sorted({row[x] for row in subset}), sorted({row[y] for row in subset})
+        grid = np.full((len(ys), len(xs)), np.nan)
+        for row in subset:
+            if row.get(color) is not None:
+                grid[ys.index(row[y]), xs.index(row[x])] = row[color]
+        x_edges, x_log = _cell_edges(xs)
+        y_edges, y_log = _cell_edges(ys)
+        image = ax.pcolormesh(x_edges, y_edges, np.ma.masked_invalid(grid), cmap="RdBu_r", norm=norm)
+        if x_log:
+            ax.set_xscale("log")
+        if y_log:
+            ax.set_yscale("log")
+        for row in subset:
+            state = row.get(verdict)
+            if state is None:
+                ax.scatter(row[x], row[y], marker="s", s=40, color="0.5", edgecolor="k", zorder=3)
+            else:
+                style = dict(marker="o", facecolor="none", edgecolor="k") if state else dict(marker="x", color="k")
+                ax.scatter(row[x], row[y], s=28, zorder=3, linewidths=1.2, **style)
+        if theory is not None:
+            fine_x = (np.geomspace if x_log else np.linspace)(xs[0], xs[-1], 40)
+            fine_y = (np.geomspace if y_log else np.linspace)(ys[0], ys[-1], 40)
+            verdicts = theory(fine_x, fine_y, facet_value)
+            finite = verdicts[np.isfinite(verdicts)]
+            if finite.size and finite.min() != finite.max():
+                ax.contour(fine_x, fine_y, verdicts, levels=[0.5], colors="k", linewidths=2.0, linestyles="--")
+                ax.plot([], [], "k--", lw=2.0, label="theory's boundary (rigid contact)")
+                ax.legend(fontsize=7, loc="lower left")
+            else:
+                note = ("stable everywhere here" if finite.size and finite.min() == 1 else
+                        "unstable everywhere here" if finite.size else "not defined here")
+                if finite.size and finite.size < verdicts.size:
+                    note += " (where the gains are admissible)"
+                ax.text(0.5, 1.01, f"rigid-contact theory: {note};\nit has no boundary over "
+                        f"{_label(x).split(' (')[0]} x {_label(y).split(' (')[0]}",
+                        transform=ax.transAxes, fontsize=7, ha="center", va="bottom")
+        ax.set_xlabel(_label(x))
+        ax.set_ylabel(_label(y))
+        ax.set_title(f"{_label(facet).split(' (')[0]} = {facet_value:g}" if facet else (title or ""), fontsize=10,
+                     pad=24)
+    colorbar = fig.colorbar(image, ax=axes[0].tolist(), shrink=0.9)
+    colorbar.set_label(_label(color))
+    handles = [plt.Line2D([], [], ls="", marker="o", mfc="none", mec="k", label="simulation: settles"),
+               plt.Line2D([], [], ls="", marker="x", color="k", label="simulation: does not settle"),
+               plt.Line2D([], [], ls="", marker="s", mfc="0.5", mec="k", label="failed (error recorded)")]
+    fig.legend(handles=handles, loc="lower center", ncol=3, fontsize=8, frameon=False, bbox_to_anchor=(0.45, -0.01))
+    if title and facet:
+        fig.suptitle(title, fontsize=10)
+    return fig
+
+
+def monte_carlo_figure(rows, metrics=("steady_force_error", "steady_velocity_error", "force_settling_time",
+                                      "velocity_settling_time", "peak_force", "worst_discrete_real"), group=None):
+    """Histograms of ``metrics`` over the Monte Carlo points, one colour per value of ``group``."""
+    plt = _pyplot()
+    columns = 3
+    lines = int(np.ceil(len(metrics) / columns))
+    fig, axes = plt.subplots(lines, columns, figsize=(4.2 * columns, 3.2 * lines), squeeze=False)
+    groups = sorted({row[group] for row in rows}) if group else [None]
+    for ax, metric in zip(axes.ravel(), metrics):
+        for value in groups:
+            data = np.array([row[metric] for row in rows if (group is None or row[group] == value)
+                             and row.get(metric) is not None], dtype=float)
+            never = int(np.sum(np.isinf(data)))             # a settling time of inf: never settled
+            data = data[np.isfinite(data)]
+            label = f"{_label(group).split(' (')[0]} = {value:g} (n = {data.size})" if group else f"n = {data.size}"
+            if never:
+                label += f"; {never} never"
+            ax.hist(data, bins=20, alpha=0.6, label=label)
+        ax.set_xlabel(_label(metric), fontsize=8)
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=7)
+    for ax in axes.ravel()[len(metrics):]:
+        ax.set_visible(False)
+    fig.tight_layout()
+    return fig
+
+
+def save_sweep_plots(rows, spec, out_dir, base_config=None):
+    """The spec's stability map (``map: {x, y, facet}``) and, with random axes, the Monte Carlo
+    histograms, as PNGs in ``out_dir``; returns their paths."""
+    plt = _pyplot()
+    out = Path(out_dir)
+    paths = []
+    if "x" in spec.map and "y" in spec.map:
+        base = base_config or load_config(path=out / "base_config.yaml")
+        x, y, facet = spec.map["x"], spec.map["y"], spec.map.get("facet")
+        theory = lambda xs, ys, facet_value: theory_on_plane(
+            base, x, y, xs, ys, fixed={facet: facet_value} if facet else None)
+        fig = stability_map_figure(rows, x, y, facet=facet, color=spec.map.get("color", "worst_discrete_real"),
+                                   theory=theory)
+        paths.append(out / "stability_map.png")
+        fig.savefig(paths[-1], dpi=130)
+        plt.close(fig)
+    if any(not axis.is_grid for axis in spec.parameters):
+        grid_axes = [axis.path for axis in spec.parameters if axis.is_grid]
+        fig = monte_carlo_figure(rows, group=grid_axes[0] if grid_axes else None)
+        paths.append(out / "monte_carlo.png")
+        fig.savefig(paths[-1], dpi=130)
+        plt.close(fig)
+    return paths
