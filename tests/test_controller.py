@@ -256,3 +256,23 @@ def test_bad_inputs_raise_clear_errors():
     spatial = ConstraintSpace(crank, KernelVelocityProjection(crank, r0))
     with pytest.raises(ValueError, match="the task has d = 6 coordinates .* only n = 3 joints"):
         HybridController(plant, "tip", np.zeros(3), spatial)
+
+
+def test_scalar_conversion_keeps_every_argument_and_contexts_do_not_share_scratch():
+    """ToAutoDiffXd rebuilds the controller from every argument it was given (none falls back to a
+    default), and each context owns its MultibodyForces scratch (a cache entry)."""
+    from drake_hybrid.scenario.builder import build_scenario
+    from drake_hybrid.scenario.tasks import get_task
+
+    config = get_task("window-washing").default_config()
+    config.safety.max_joint_acceleration = 12.0
+    controller = build_scenario(config, with_loggers=True).controller
+    converted = controller.ToAutoDiffXd()
+    assert converted._arguments.keys() == controller._arguments.keys()
+    for name, value in controller._arguments.items():
+        assert converted._arguments[name] is value, name
+    assert converted.sampled_diagnostics and converted._max_joint_acceleration == 12.0
+    first, second = controller.CreateDefaultContext(), controller.CreateDefaultContext()
+    for context in (first, second):
+        controller.get_input_port(0).FixValue(context, np.zeros(2 * controller.num_joints))
+    assert controller._forces_cache.Eval(first) is not controller._forces_cache.Eval(second)

@@ -28,7 +28,7 @@ import numpy as np
 from scipy.linalg import expm
 from scipy.optimize import linear_sum_assignment
 
-from pydrake.systems.analysis import InitializeParams, Simulator
+from pydrake.systems.analysis import ApplySimulatorConfig, InitializeParams, Simulator
 from pydrake.systems.primitives import Linearize
 
 from drake_hybrid.control.controller import impedance_blocks
@@ -326,6 +326,7 @@ def linearize_discrete(config, tolerance=0.05, epsilon=1e-6, settle_time=0.0):
     c.sensor.bandwidth_hz = 0.0
     scenario = build_scenario(c, with_loggers=False, sampled_plant_outputs=False, controller_sample_lead=False)
     simulator = Simulator(scenario.diagram)
+    ApplySimulatorConfig(c.simulator, simulator)
     context = simulator.get_mutable_context()
     set_initial_conditions(scenario, context)
     simulator.Initialize()

@@ -64,6 +64,15 @@ def impedance_gain(velocity_projection, force_projection, task_mobility, kinemat
     return K_0
 
 
+class MultibodyForcesHolder:
+    """A MultibodyForces in a cache entry (a Python object, so the cache holds it by reference)."""
+
+    __slots__ = ("forces",)
+
+    def __init__(self, forces):
+        self.forces = forces
+
+
 class ControlSolution:
     """Everything one evaluation of the law computes (held in a cache entry)."""
 
@@ -227,6 +236,12 @@ def HybridController_(T):
         def _construct(self, plant, end_effector_frame, end_effector_point, constraint_space, gains=None,
                        mode=ControlMode.VELOCITY_FORCE, control_period=None, sample_lead=True, safety=None,
                        guarded_move=None, sampled_diagnostics=False, converter=None):
+            # Every argument as given, for scalar conversion (_construct_copy): one added later cannot
+            # be forgotten there.
+            arguments = locals()
+            code = Impl._construct.__code__
+            self._arguments = {name: arguments[name] for name in code.co_varnames[1:code.co_argcount]
+                               if name != "converter"}
             LeafSystem_[T].__init__(self, converter)
             if not hasattr(plant, "is_finalized") or not hasattr(plant, "MakeActuationMatrix"):
                 raise TypeError(f"HybridController: plant must be a MultibodyPlant, got {type(plant).__name__}")
@@ -284,7 +299,12 @@ def HybridController_(T):
             _, self.kinematics, self._state_port, self._plant_context_cache = declare_task_input(
                 self, T, plant, self._float_frame, self._end_effector_point, chart)
             self._plant = self.kinematics.plant
-            self._forces = MultibodyForces_[T](self._plant)
+            # Per-context scratch: the force elements' contribution (gravity, joint damping, ...) at the
+            # context's state, in a MultibodyForces allocated once per context (never shared between contexts).
+            self._forces_cache = self.DeclareCacheEntry(
+                description="force elements",
+                value_producer=ValueProducer(allocate=self._allocate_forces, calc=self._calc_forces),
+                prerequisites_of_calc={self._plant_context_cache.ticket()})
             self._zero_acceleration = np.zeros(n) if T == float else np.array([AutoDiffXd(0.0)] * n, dtype=object)
             self._wrench_port = self.DeclareVectorInputPort("measured_wrench", 6)
             self._velocity_port = self.DeclareVectorInputPort("desired_velocity", k)
@@ -334,10 +354,14 @@ def HybridController_(T):
                                          prerequisites_of_calc={state_ticket})
 
         def _construct_copy(self, other, converter=None):
-            Impl._construct(self, other._float_plant, other._float_frame, other._end_effector_point,
-                            other.constraint_space, other.gains, other.mode, other.control_period,
-                            other.sample_lead, other.safety, other.guarded_move, other.sampled_diagnostics,
-                            converter=converter)
+            Impl._construct(self, **other._arguments, converter=converter)
+
+        def _allocate_forces(self):
+            return AbstractValue.Make(MultibodyForcesHolder(MultibodyForces_[T](self._plant)))
+
+        def _calc_forces(self, context, abstract_value):
+            plant_context = self._plant_context_cache.Eval(context)
+            self._plant.CalcForceElementsContribution(plant_context, abstract_value.get_mutable_value().forces)
 
         # -- public helpers ---------------------------------------------------------------
         def plant(self):
@@ -492,14 +516,14 @@ def HybridController_(T):
                 force_command = force_command * (1.0 - self._force_controlled)   # no force loop off the surface
             force_torque = J.T @ (values.force_projection.T @ force_command)    # J^T E_f^T u_f
 
-            self._plant.CalcForceElementsContribution(plant_context, self._forces)
+            forces = self._forces_cache.Eval(context).forces                  # h + g's force elements
             threshold, bound = self._singularity_threshold, self._max_joint_acceleration
             base_torque = None                                                  # h + g, for the saturation
             if n == d:
                 # J^-1 (r-ddot* - J-dot q-dot), damped where it would exceed the bound (safety.py).
                 joint_acceleration, sigma_min, lambda_squared = bounded_solve(J, task_acceleration - bias, threshold,
                                                                               bound)
-                torque = plant.CalcInverseDynamics(plant_context, joint_acceleration, self._forces) + force_torque
+                torque = plant.CalcInverseDynamics(plant_context, joint_acceleration, forces) + force_torque
             else:
                 # Dynamically consistent generalization (spec section 8a).
                 v = plant.GetVelocities(plant_context)
@@ -507,7 +531,7 @@ def HybridController_(T):
                                                                          task_acceleration - bias, threshold, bound)
                 J_bar = M_inverse @ J.T @ Lambda
                 null_space_transpose = np.eye(n) - J.T @ J_bar.T
-                base_torque = plant.CalcInverseDynamics(plant_context, self._zero_acceleration, self._forces)
+                base_torque = plant.CalcInverseDynamics(plant_context, self._zero_acceleration, forces)
                 torque = (base_torque
                           + J.T @ (Lambda @ (task_acceleration - bias)) + force_torque
                           - null_space_transpose @ (M @ (gains.null_space_damping * v)))
@@ -516,7 +540,7 @@ def HybridController_(T):
 
             def base_actuation():
                 torque_0 = base_torque if base_torque is not None else plant.CalcInverseDynamics(
-                    plant_context, self._zero_acceleration, self._forces)
+                    plant_context, self._zero_acceleration, forces)
                 return self._actuation_from_torque @ torque_0
 
             actuation, scale, clipped = saturate(self._actuation_from_torque @ torque, base_actuation,

@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
-from pydrake.systems.analysis import Simulator
+from pydrake.systems.analysis import ApplySimulatorConfig, Simulator
 
 from drake_hybrid.analysis.linearization import controller_prediction, design_time_constant, predicted_errors
 from drake_hybrid.scenario.builder import build_scenario
@@ -56,6 +56,7 @@ def simulate(config, progress=False, meshcat=None, record_html=False):
     """Simulate ``config``; returns a SimulationResult (log arrays and summary)."""
     scenario = build_scenario(config, meshcat=meshcat)
     simulator = Simulator(scenario.diagram)
+    ApplySimulatorConfig(config.simulator, simulator)
     context = simulator.get_mutable_context()
     set_initial_conditions(scenario, context)
     if meshcat is not None and record_html:
