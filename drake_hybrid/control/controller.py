@@ -116,7 +116,7 @@ def HybridController_(T):
         desired_velocity      k     r-dot_pd
         desired_acceleration  k     r-ddot_pd (its derivative along the trajectory)
         desired_force         m     F_d, in the coordinates of the constraint's E_f
-        contact_phase         1     safety.ContactPhase (only with ``guarded_move``)
+        contact_phase         1     phases.ContactPhase (only with ``guarded_move``)
         actuation             n_u   joint torques mapped to the actuators
         velocity_error        k     e_p' = E_p r-dot - r-dot_pd
         force_error           m     e_f = F - F_d

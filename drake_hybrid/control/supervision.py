@@ -101,7 +101,7 @@ def ContactSupervisor_(T):
         desired_force       m     F_d
         constraint_value    m     C(r) (the controller's ``constraint_value`` output)
         measured_wrench     6     the wrench the controller reads (NaN entries: no decision)
-        contact_phase       1     safety.ContactPhase (state)
+        contact_phase       1     phases.ContactPhase (state)
         contact_count       1     how many times CONTACT was entered (state)
         ==================  ====  ==============================================================
 

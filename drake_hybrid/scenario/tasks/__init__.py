@@ -18,7 +18,7 @@ BUILT_IN_TASKS = frozenset(TASKS)
 
 
 def register_task(task):
-    """Make ``task`` (e.g. a ``wiring.CustomTask``) known by its name to ``get_task``, and so to
+    """Make ``task`` (e.g. a ``scenario.custom.CustomTask``) known by its name to ``get_task``, and so to
     ``build_scenario``, ``simulate`` and ``linearize_continuous``. A task registered earlier under
     the same name is replaced (re-running a notebook cell); a built-in task cannot be. Returns it."""
     if task.name in BUILT_IN_TASKS:
