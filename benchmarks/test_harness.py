@@ -3,9 +3,8 @@
     pytest benchmarks/test_harness.py        # about 20 s; the UR5e case needs the bench extra
 
 They guard the claims the figures rest on: every timed tick really evaluates
-the law (no cached result), the plant-alone replay does the closed loop's
-plant work (it reproduces the closed loop's motion exactly), and the
-prototypes compute what the library computes.
+the law (no cached result) and the plant-alone replay does the closed loop's
+plant work (it reproduces the closed loop's motion exactly).
 """
 
 import sys
@@ -16,7 +15,6 @@ import pytest
 
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
-sys.path.insert(0, str(HERE / "prototypes"))
 
 from robots import make_robot  # noqa: E402
 from tick import hybrid_evaluation, inverse_dynamics_evaluation, sampled_update_evaluation  # noqa: E402
@@ -68,18 +66,3 @@ def test_torque_replay_reproduces_the_closed_loop_motion_exactly():
     rtf, contacts, drift = plant_alone_rtf(config, "replay", run.log)
     assert drift == 0.0
     assert contacts >= 1 and rtf > 0
-
-
-@pytest.mark.parametrize("name", ["planar-3r", "ur5e"])
-def test_prototypes_agree_with_the_library(name):
-    if name == "ur5e":
-        pytest.importorskip("airo_models")
-    from lean_law import LeanLaw, check_agreement
-
-    robot = make_robot(name)
-    assert check_agreement(robot, LeanLaw) < 1e-9
-    try:
-        from numba_law import NumbaLaw
-    except ImportError:
-        return
-    assert check_agreement(robot, NumbaLaw) < 1e-9

@@ -4,7 +4,8 @@ import numpy as np
 import pytest
 
 from drake_hybrid.analysis.linearization import impedance_realization, linearize_continuous
-from drake_hybrid.control.controller import HybridController, impedance_blocks, impedance_gain
+from drake_hybrid.control.controller import HybridController
+from drake_hybrid.control.law import impedance_blocks, impedance_gain
 from drake_hybrid.core.linalg import null_space_basis
 from drake_hybrid.experiments.simulation import simulate
 from drake_hybrid.scenario.plant import build_controller_plant

@@ -31,7 +31,7 @@ from scipy.optimize import linear_sum_assignment
 from pydrake.systems.analysis import ApplySimulatorConfig, InitializeParams, Simulator
 from pydrake.systems.primitives import Linearize
 
-from drake_hybrid.control.controller import impedance_blocks
+from drake_hybrid.control.law import impedance_blocks
 from drake_hybrid.control.gains import ControlMode
 from drake_hybrid.control.sampling import SAMPLE_LEAD
 from drake_hybrid.scenario.builder import build_scenario

@@ -14,8 +14,10 @@ non-finite inputs, and contact that is not there yet or is lost (the guarded
 move of ``supervision.ContactSupervisor``). See ``HybridController`` for ports,
 law and closed loop.
 
-Size: about half is the system's docstring (ports, law, protections) and its port and cache
-declarations; the law itself is planned to move to control/law.py (issue 13 closing note).
+The law itself, line by line, is in ``law``; this module keeps the system: ports, cache
+entries, state and events.
+
+Size: over half of the module is the system's docstring (ports, closed loop, protections, arguments).
 """
 
 import numpy as np
@@ -23,45 +25,17 @@ import numpy as np
 from pydrake.autodiffutils import AutoDiffXd
 from pydrake.common.value import AbstractValue
 from pydrake.multibody.tree import MultibodyForces_
-from pydrake.systems.framework import BasicVector_, LeafSystem_, ValueProducer
+from pydrake.systems.framework import LeafSystem_, ValueProducer
 from pydrake.systems.scalar_conversion import TemplateSystem
 
 from drake_hybrid.control.gains import ControlMode, HybridGains
 from drake_hybrid.control.phases import ContactPhase
 from drake_hybrid.control.sampling import SAMPLE_LEAD
-from drake_hybrid.control.safety import SafetyConfig, bounded_solve, bounded_task_inertia, saturate, warn_singularity
+from drake_hybrid.control.law import ControlSolution, LawConstants, evaluate_law
+from drake_hybrid.control.safety import SafetyConfig, warn_singularity
 from drake_hybrid.core.errors import DimensionError
 from drake_hybrid.core.kinematics import declare_task_input, resolve_frame
-from drake_hybrid.core.linalg import all_finite, inv, solve, value
-
-
-def impedance_blocks(velocity_projection, force_projection, task_mobility, kinematic_rows=()):
-    """The blocks (3.2-8) of the impedance/force law on its partition of E's rows.
-
-    Motion rows: [E_p; E_f[kinematic_rows]]; force rows: the other rows of E_f. With the task
-    mobility L = J M^-1 J^T (= Lambda^-1, also for redundant arms), returns
-    (M_f, M_fp, M_p) = (F L F^T, F L P^T, P L P^T) for force rows F and motion rows P
-    (M_f and M_fp have no rows when every row of E_f is kinematic). Float or AutoDiffXd.
-    """
-    kinematic = list(kinematic_rows)
-    physical = [i for i in range(force_projection.shape[0]) if i not in kinematic]
-    motion_rows = np.vstack([velocity_projection, force_projection[kinematic]]) if kinematic else velocity_projection
-    force_rows = force_projection[physical]
-    return (force_rows @ task_mobility @ force_rows.T, force_rows @ task_mobility @ motion_rows.T,
-            motion_rows @ task_mobility @ motion_rows.T)
-
-
-def impedance_gain(velocity_projection, force_projection, task_mobility, kinematic_rows=()):
-    """K_0 = I + M_fp^T M_f^-1 M_fp - M_p of the impedance/force law (3.2-6), spec section 5.
-
-    K_0 = I - S with S = M_p - M_fp^T M_f^-1 M_fp, the Schur complement of M_f (the inverse of the
-    constrained task inertia in the motion-row coordinates); blocks from ``impedance_blocks``.
-    """
-    M_f, M_fp, M_p = impedance_blocks(velocity_projection, force_projection, task_mobility, kinematic_rows)
-    K_0 = np.eye(M_p.shape[0]) - M_p
-    if M_f.shape[0]:
-        K_0 = K_0 + M_fp.T @ solve(M_f, M_fp)
-    return K_0
+from drake_hybrid.core.linalg import all_finite, value
 
 
 class MultibodyForcesHolder:
@@ -71,14 +45,6 @@ class MultibodyForcesHolder:
 
     def __init__(self, forces):
         self.forces = forces
-
-
-class ControlSolution:
-    """Everything one evaluation of the law computes (held in a cache entry)."""
-
-    __slots__ = ("actuation", "velocity_error", "force_error", "constraint_value", "projected_velocity", "force",
-                 "tangential_force", "position_error_rate", "force_integral_rate", "wrench_valid", "contact_phase",
-                 "saturation_scale", "actuator_clipped", "smallest_singular_value", "singularity_damping")
 
 
 @TemplateSystem.define("HybridController_", T_list=[float, AutoDiffXd])
@@ -273,26 +239,28 @@ def HybridController_(T):
                 raise ValueError("HybridController: sampled_diagnostics needs a control_period (a sampled controller)")
             self._gains = self.gains.matrices(k, m, self.mode)
             self.kinematic_rows = tuple(constraint_space.constraint.kinematic_rows)
-            self._force_controlled = np.ones(m)
-            self._force_controlled[list(self.kinematic_rows)] = 0.0
             actuation_matrix = plant.MakeActuationMatrix()
             if actuation_matrix.shape != (n, n) or abs(np.linalg.det(actuation_matrix)) < 0.5:
                 raise ValueError(
                     f"HybridController needs one actuator per joint; the plant has {plant.num_actuators()} actuators "
                     f"for {n} joints")
-            self._actuation_from_torque = np.linalg.inv(actuation_matrix)  # u = B^-1 tau (a permutation here)
+            actuation_from_torque = np.linalg.inv(actuation_matrix)   # u = B^-1 tau (a permutation here)
             self.safety = safety if safety is not None else SafetyConfig()
             plant_limits = [plant.get_joint_actuator(i).effort_limit() for i in plant.GetJointActuatorIndices()]
-            (self.effort_limits, self._anti_windup, self._singularity_threshold,
+            (self.effort_limits, anti_windup, singularity_threshold,
              self._max_joint_acceleration) = self.safety.validated(n, plant_limits)
             self.guarded_move = guarded_move
+            speed = gain = None
             if guarded_move is not None:
                 speed, gain = float(guarded_move.approach_speed), float(guarded_move.approach_gain)
                 if not speed >= 0:
                     raise ValueError(f"HybridController: approach_speed must be >= 0, got {speed}")
                 if not gain > 0:
                     raise ValueError(f"HybridController: approach_gain must be positive, got {gain}")
-                self._approach_speed, self._approach_gain = speed, gain
+            zero_acceleration = np.zeros(n) if T == float else np.array([AutoDiffXd(0.0)] * n, dtype=object)
+            self._law = LawConstants(self._gains, self.mode, self.kinematic_rows, m, singularity_threshold,
+                                     self._max_joint_acceleration, self.effort_limits, anti_windup,
+                                     actuation_from_torque, zero_acceleration, speed, gain)
 
             # -- ports ------------------------------------------------------------------
             # estimated_state, the controller's own plant of this system's scalar type, its kinematics.
@@ -305,7 +273,6 @@ def HybridController_(T):
                 description="force elements",
                 value_producer=ValueProducer(allocate=self._allocate_forces, calc=self._calc_forces),
                 prerequisites_of_calc={self._plant_context_cache.ticket()})
-            self._zero_acceleration = np.zeros(n) if T == float else np.array([AutoDiffXd(0.0)] * n, dtype=object)
             self._wrench_port = self.DeclareVectorInputPort("measured_wrench", 6)
             self._velocity_port = self.DeclareVectorInputPort("desired_velocity", k)
             self._acceleration_port = self.DeclareVectorInputPort("desired_acceleration", k)
@@ -437,135 +404,18 @@ def HybridController_(T):
                     raise ValueError(f"HybridController: input '{port.get_name()}' has non-finite entries "
                                      f"{value(command).tolist()}")
 
-        def _guarded_acceleration(self, values, nu, desired_force, phase):
-            """The guarded move on the force-controlled rows: a_f = -K_a (C-dot - s n_C) (0 on kinematic rows)."""
-            pressing = -value(desired_force) * self._force_controlled       # -F_d: the way the robot pushes
-            norm = np.linalg.norm(pressing)
-            direction = pressing / norm if norm > 0 else pressing           # n_C
-            speed = self._approach_speed if phase is ContactPhase.APPROACH else 0.0
-            C_dot = values.force_projection @ nu                             # C-dot = E_f r-dot
-            return -self._approach_gain * (C_dot - speed * direction) * self._force_controlled
-
         def _evaluate_law(self, context, plant_context):
-            space = self.constraint_space
-            gains = self._gains
-            m, k = self.force_size, self.velocity_size
-            plant = self._plant
-            phase = self._contact_phase(context)
-            in_contact = phase is ContactPhase.CONTACT
-            kin = self.kinematics.evaluate(plant_context)
-            x, nu = kin.configuration, kin.velocity
-            values = space.evaluate(x, nu)                                   # E_p, E_f, E-dot r-dot, C
-            integrals = self._integrals(context)
-            xi = integrals[:m]
-            e_p = integrals[m:]
-
+            """Read each input once and run the law (control/law.py) at ``context``."""
             desired_velocity = self._velocity_port.Eval(context)
             desired_acceleration = self._acceleration_port.Eval(context)
             desired_force = self._force_port.Eval(context)
-            wrench = self._wrench_port.Eval(context)
             self._check_finite_commands(desired_velocity, desired_acceleration, desired_force)
-
-            # Force decomposition [F_v; F] = E^-T w (spec section 0); a dropout is ignored.
-            wrench_valid = all_finite(wrench)
-            if wrench_valid:
-                tangential_force, force = space.split_wrench(values, self.kinematics.chart.generalized_force(x, wrench))
-            else:
-                tangential_force, force = np.zeros(k), desired_force
-            force_error = (force - desired_force) * self._force_controlled     # e_f = F - F_d (0 on kinematic rows)
-            projected_velocity = values.velocity_projection @ nu                # r-dot_p = E_p r-dot  (3.0-6)
-            velocity_error = projected_velocity - desired_velocity              # e_p'
-
-            acceleration = desired_acceleration - gains.velocity @ velocity_error             # (3.1-12)
-            if self.mode.integrates_position:
-                acceleration = acceleration - gains.position @ e_p                            # Remark 3
-            J, bias = kin.jacobian, kin.bias
-            n, d = self.num_joints, self.task_size
-            need_inertia = self.mode is ControlMode.IMPEDANCE_FORCE or n > d
-            if need_inertia:
-                M = plant.CalcMassMatrix(plant_context)
-                M_inverse = inv(M)
-                task_mobility = J @ M_inverse @ J.T                              # J M^-1 J^T = Lambda^-1
-            constraint_acceleration = None
-            if self.kinematic_rows:
-                # Kinematic rows are held by the controller: C-ddot = -3 w_c C-dot - 2 w_c^2 C.
-                w_c = gains.constraint_frequency
-                C_dot = values.force_projection @ nu
-                held = (-3.0 * w_c * C_dot - 2.0 * w_c * w_c * values.constraint_value) * (1.0 - self._force_controlled)
-                constraint_acceleration = held
-            if self.mode is ControlMode.IMPEDANCE_FORCE:
-                # Motion-controlled rows: E_p and the kinematic rows; force-controlled rows: the rest of
-                # E_f. The measured force along the motion rows is F_v (and F on kinematic rows).
-                kinematic = list(self.kinematic_rows)
-                K_0 = impedance_gain(values.velocity_projection, values.force_projection, task_mobility, kinematic)
-                motion_force = np.concatenate([tangential_force, force[kinematic]]) if kinematic else tangential_force
-                compensation = K_0 @ motion_force                                # (3.2-6)
-                acceleration = acceleration + compensation[:k]
-                if kinematic:
-                    extra = np.zeros(m, dtype=compensation.dtype)
-                    extra[kinematic] = compensation[k:]
-                    constraint_acceleration = constraint_acceleration + extra
-
-            if not in_contact:
-                # Off the surface: the guarded move on the force rows instead of a_f = 0.
-                guarded = self._guarded_acceleration(values, nu, desired_force, phase)
-                constraint_acceleration = guarded if constraint_acceleration is None else constraint_acceleration + guarded
-            task_acceleration = space.task_acceleration(values, acceleration, constraint_acceleration)  # (3.0-11)
-            force_command = -desired_force + gains.force_proportional @ force_error + gains.force_integral @ xi
-            if not in_contact:
-                force_command = force_command * (1.0 - self._force_controlled)   # no force loop off the surface
-            force_torque = J.T @ (values.force_projection.T @ force_command)    # J^T E_f^T u_f
-
-            forces = self._forces_cache.Eval(context).forces                  # h + g's force elements
-            threshold, bound = self._singularity_threshold, self._max_joint_acceleration
-            base_torque = None                                                  # h + g, for the saturation
-            if n == d:
-                # J^-1 (r-ddot* - J-dot q-dot), damped where it would exceed the bound (safety.py).
-                joint_acceleration, sigma_min, lambda_squared = bounded_solve(J, task_acceleration - bias, threshold,
-                                                                              bound)
-                torque = plant.CalcInverseDynamics(plant_context, joint_acceleration, forces) + force_torque
-            else:
-                # Dynamically consistent generalization (spec section 8a).
-                v = plant.GetVelocities(plant_context)
-                Lambda, sigma_min, lambda_squared = bounded_task_inertia(J, M_inverse, task_mobility,
-                                                                         task_acceleration - bias, threshold, bound)
-                J_bar = M_inverse @ J.T @ Lambda
-                null_space_transpose = np.eye(n) - J.T @ J_bar.T
-                base_torque = plant.CalcInverseDynamics(plant_context, self._zero_acceleration, forces)
-                torque = (base_torque
-                          + J.T @ (Lambda @ (task_acceleration - bias)) + force_torque
-                          - null_space_transpose @ (M @ (gains.null_space_damping * v)))
-            if lambda_squared > 0:
-                warn_singularity(self, sigma_min, bound)
-
-            def base_actuation():
-                torque_0 = base_torque if base_torque is not None else plant.CalcInverseDynamics(
-                    plant_context, self._zero_acceleration, forces)
-                return self._actuation_from_torque @ torque_0
-
-            actuation, scale, clipped = saturate(self._actuation_from_torque @ torque, base_actuation,
-                                                 self.effort_limits)
-            if not all_finite(actuation):
-                raise FloatingPointError(f"HybridController: non-finite actuation {value(actuation).tolist()} at "
-                                         f"q = {value(plant.GetPositions(plant_context)).tolist()}")
-            frozen = self._anti_windup and (scale < 1.0 or clipped)            # conditional integration
-
-            solution = ControlSolution()
-            solution.actuation = actuation
-            solution.velocity_error = velocity_error
-            solution.force_error = force_error
-            solution.constraint_value = values.constraint_value
-            solution.projected_velocity = projected_velocity
-            solution.force = force
-            solution.tangential_force = tangential_force
-            solution.position_error_rate = velocity_error * 0.0 if frozen else velocity_error
-            solution.force_integral_rate = force_error * 0.0 if (frozen or not in_contact) else force_error
-            solution.wrench_valid = wrench_valid
-            solution.contact_phase = int(phase)
-            solution.saturation_scale = scale
-            solution.actuator_clipped = clipped
-            solution.smallest_singular_value = sigma_min
-            solution.singularity_damping = lambda_squared
+            solution = evaluate_law(
+                self._law, self.constraint_space, self.kinematics.evaluate(plant_context), self._plant, plant_context,
+                self._forces_cache.Eval(context).forces, self._integrals(context), desired_velocity,
+                desired_acceleration, desired_force, self._wrench_port.Eval(context), self._contact_phase(context))
+            if solution.singularity_damping > 0:
+                warn_singularity(self, solution.smallest_singular_value, self._max_joint_acceleration)
             return solution
 
         def _solution(self, context):

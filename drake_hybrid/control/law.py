@@ -1,0 +1,306 @@
+"""The control law of Li & Sastry (1987): one small function per line, float or AutoDiffXd.
+
+This module is the law's single home. ``HybridController`` (control/controller.py) keeps the
+ports, cache entries, state and events, reads its inputs once per evaluation and calls
+``evaluate_law``, which runs the lines below in order (docs/theory.md §4, §5 and §8a; F is the
+force on the robot, §0; k = d - m velocity rows, m force rows)::
+
+    line of the law                                                 function
+    [F_v; F] = E^-T w                                     (3.0-8)   measured_forces
+    r-dot_p = E_p r-dot,  e_p' = r-dot_p - r-dot_pd        (3.0-6)   velocity_error
+    e_f = F - F_d                       (0 on kinematic rows)        force_error
+    a_p = r-ddot_pd - K_v e_p'                            (3.1-12)   motion_acceleration
+          ... - K_p e_p                                  (Remark 3)
+          ... + K_0 F_v                                   (3.2-6)   impedance_compensation
+    a_f = -3 w_c C-dot - 2 w_c^2 C      (kinematic rows)             held_row_acceleration
+    a_f = -K_a (C-dot - s n_C)          (off the surface)            guarded_acceleration
+    r-ddot* = E^-1 ([a_p; a_f] - E-dot r-dot)             (3.0-11)   ConstraintSpace.task_acceleration
+    u_f = -F_d + K_fp e_f + K_fi xi                       (3.1-12)   force_command
+    tau_f = J^T E_f^T u_f                                            force_torque
+    tau = ID(q, q-dot, J^-1 (r-ddot* - J-dot q-dot)) + tau_f   (n = d)   joint_torque
+    tau = h + g + J^T Lambda (r-ddot* - J-dot q-dot) + tau_f
+          - N^T M K_n q-dot,  Lambda = (J M^-1 J^T)^-1          (n > d)   joint_torque
+    u = saturate(B^-1 tau)                                           safety.saturate
+    xi-dot = e_f,  e_p-dot = e_p'       (frozen while saturated)     integral_rates
+
+The protections of ``safety`` (bounded inverses near singularities, graceful saturation) enter
+where the law inverts J or meets the effort limits; none changes the law where it is inactive.
+Every function is pure except that ``joint_torque`` asks the plant for M and inverse dynamics
+(the only Drake calls the law needs besides the kinematics the controller evaluates).
+"""
+
+import numpy as np
+
+from drake_hybrid.control.gains import ControlMode
+from drake_hybrid.control.phases import ContactPhase
+from drake_hybrid.control.safety import bounded_solve, bounded_task_inertia, saturate
+from drake_hybrid.core.linalg import all_finite, inv, solve, value
+
+
+class LawConstants:
+    """What the law needs that is fixed when the controller is built (no per-tick allocation).
+
+    gains: control.gains.ValidatedGains; mode: ControlMode; kinematic_rows: indices of the rows of
+    E_f held by the controller; force_controlled: 1 on force-controlled rows of E_f, 0 on kinematic
+    ones; singularity_threshold, max_joint_acceleration, effort_limits, anti_windup: from
+    SafetyConfig; actuation_from_torque: B^-1; zero_acceleration: a zero joint acceleration of the
+    controller's scalar type (for h + g by inverse dynamics); approach_speed, approach_gain: the guarded move's s
+    and K_a (None without a guarded move).
+    """
+
+    __slots__ = ("gains", "mode", "kinematic_rows", "force_controlled", "singularity_threshold",
+                 "max_joint_acceleration", "effort_limits", "anti_windup", "actuation_from_torque",
+                 "zero_acceleration", "approach_speed", "approach_gain")
+
+    def __init__(self, gains, mode, kinematic_rows, force_size, singularity_threshold, max_joint_acceleration,
+                 effort_limits, anti_windup, actuation_from_torque, zero_acceleration, approach_speed=None,
+                 approach_gain=None):
+        self.gains, self.mode = gains, mode
+        self.kinematic_rows = tuple(kinematic_rows)
+        self.force_controlled = np.ones(force_size)
+        self.force_controlled[list(self.kinematic_rows)] = 0.0
+        self.singularity_threshold, self.max_joint_acceleration = singularity_threshold, max_joint_acceleration
+        self.effort_limits, self.anti_windup = effort_limits, anti_windup
+        self.actuation_from_torque, self.zero_acceleration = actuation_from_torque, zero_acceleration
+        self.approach_speed, self.approach_gain = approach_speed, approach_gain
+
+
+class ControlSolution:
+    """Everything one evaluation of the law computes (held in the controller's cache entry)."""
+
+    __slots__ = ("actuation", "velocity_error", "force_error", "constraint_value", "projected_velocity", "force",
+                 "tangential_force", "position_error_rate", "force_integral_rate", "wrench_valid", "contact_phase",
+                 "saturation_scale", "actuator_clipped", "smallest_singular_value", "singularity_damping")
+
+
+# ------------------------------------------------------------------------------------------------
+# The lines of the law
+# ------------------------------------------------------------------------------------------------
+
+def measured_forces(space, values, configuration, wrench, desired_force):
+    """(F_v, F, valid): [F_v; F] = E^-T w (3.0-8), w the chart covector of the measured wrench
+    (the SpatialForce vector [n; f] on the end effector by the environment) at ``configuration``.
+
+    A wrench with a non-finite entry (sensor dropout) is ignored: F_v = 0 and F = F_d, so the
+    force error is zero and the integrals hold for that evaluation.
+    """
+    if not all_finite(wrench):
+        return np.zeros(space.velocity_size), desired_force, False
+    tangential_force, force = space.split_wrench(values, space.chart.generalized_force(configuration, wrench))
+    return tangential_force, force, True
+
+
+def velocity_error(velocity_projection, velocity, desired_velocity):
+    """(r-dot_p, e_p'): r-dot_p = E_p r-dot (3.0-6) and e_p' = r-dot_p - r-dot_pd."""
+    projected_velocity = velocity_projection @ velocity
+    return projected_velocity, projected_velocity - desired_velocity
+
+
+def force_error(force, desired_force, force_controlled):
+    """e_f = F - F_d on the force-controlled rows (0 on kinematic rows: no force loop there)."""
+    return (force - desired_force) * force_controlled
+
+
+def motion_acceleration(desired_acceleration, gains, velocity_error, position_error, mode):
+    """a_p = r-ddot_pd - K_v e_p' (3.1-12), minus K_p e_p in position and impedance modes (Remark 3)."""
+    acceleration = desired_acceleration - gains.velocity @ velocity_error
+    if mode.integrates_position:
+        acceleration = acceleration - gains.position @ position_error
+    return acceleration
+
+
+def impedance_blocks(velocity_projection, force_projection, task_mobility, kinematic_rows=()):
+    """The blocks (3.2-8) of the impedance/force law on its partition of E's rows.
+
+    Motion rows: [E_p; E_f[kinematic_rows]]; force rows: the other rows of E_f. With the task
+    mobility L = J M^-1 J^T (= Lambda^-1, also for redundant arms), returns
+    (M_f, M_fp, M_p) = (F L F^T, F L P^T, P L P^T) for force rows F and motion rows P
+    (M_f and M_fp have no rows when every row of E_f is kinematic). Float or AutoDiffXd.
+    """
+    kinematic = list(kinematic_rows)
+    physical = [i for i in range(force_projection.shape[0]) if i not in kinematic]
+    motion_rows = np.vstack([velocity_projection, force_projection[kinematic]]) if kinematic else velocity_projection
+    force_rows = force_projection[physical]
+    return (force_rows @ task_mobility @ force_rows.T, force_rows @ task_mobility @ motion_rows.T,
+            motion_rows @ task_mobility @ motion_rows.T)
+
+
+def impedance_gain(velocity_projection, force_projection, task_mobility, kinematic_rows=()):
+    """K_0 = I + M_fp^T M_f^-1 M_fp - M_p of the impedance/force law (3.2-6), docs/theory.md §5.
+
+    K_0 = I - S with S = M_p - M_fp^T M_f^-1 M_fp, the Schur complement of M_f (the inverse of the
+    constrained task inertia in the motion-row coordinates); blocks from ``impedance_blocks``.
+    """
+    M_f, M_fp, M_p = impedance_blocks(velocity_projection, force_projection, task_mobility, kinematic_rows)
+    K_0 = np.eye(M_p.shape[0]) - M_p
+    if M_f.shape[0]:
+        K_0 = K_0 + M_fp.T @ solve(M_f, M_fp)
+    return K_0
+
+
+def impedance_compensation(values, task_mobility, tangential_force, force, kinematic_rows):
+    """K_0 [F_v; F_kinematic] (3.2-6), split into its velocity rows (k) and its rows of E_f (m).
+
+    In impedance mode the kinematic rows count as motion rows: K_0 is built on the partition
+    [E_p; kinematic rows of E_f] / (force-controlled rows), and the measured force along them is
+    compensated like F_v, giving them the unit-mass impedance C-ddot + 3 w_c C-dot + 2 w_c^2 C = F.
+    """
+    kinematic = list(kinematic_rows)
+    K_0 = impedance_gain(values.velocity_projection, values.force_projection, task_mobility, kinematic)
+    motion_force = np.concatenate([tangential_force, force[kinematic]]) if kinematic else tangential_force
+    compensation = K_0 @ motion_force
+    k = tangential_force.shape[0]
+    on_force_rows = np.zeros(force.shape[0], dtype=compensation.dtype)
+    if kinematic:
+        on_force_rows[kinematic] = compensation[k:]
+    return compensation[:k], on_force_rows
+
+
+def held_row_acceleration(constraint_value, constraint_rate, constraint_frequency, force_controlled):
+    """a_f = -3 w_c C-dot - 2 w_c^2 C on the kinematic rows (0 on the others).
+
+    The controller holds these rows (the environment does not): C-ddot + 3 w_c C-dot + 2 w_c^2 C
+    = 0, eigenvalues -w_c and -2 w_c (distinct, so a linearization tells them apart).
+    """
+    w_c = constraint_frequency
+    return (-3.0 * w_c * constraint_rate - 2.0 * w_c * w_c * constraint_value) * (1.0 - force_controlled)
+
+
+def guarded_acceleration(constraint_rate, desired_force, force_controlled, phase, approach_speed, approach_gain):
+    """a_f = -K_a (C-dot - s n_C) on the force-controlled rows, off the surface (0 on kinematic rows).
+
+    n_C = -F_d / |F_d| is the way the robot pushes; s = ``approach_speed`` in APPROACH, 0 in TARE
+    and HOLD.
+    """
+    pressing = -value(desired_force) * force_controlled
+    norm = np.linalg.norm(pressing)
+    direction = pressing / norm if norm > 0 else pressing
+    speed = approach_speed if phase is ContactPhase.APPROACH else 0.0
+    return -approach_gain * (constraint_rate - speed * direction) * force_controlled
+
+
+def force_command(desired_force, gains, force_error, force_integral, force_controlled, in_contact):
+    """u_f = -F_d + K_fp e_f + K_fi xi (3.1-12); off the surface only the kinematic rows' feedforward."""
+    command = -desired_force + gains.force_proportional @ force_error + gains.force_integral @ force_integral
+    return command if in_contact else command * (1.0 - force_controlled)
+
+
+def force_torque(jacobian, force_projection, command):
+    """tau_f = J^T E_f^T u_f."""
+    return jacobian.T @ (force_projection.T @ command)
+
+
+def joint_torque(plant, plant_context, forces, jacobian, task_rhs, tau_f, constants, dynamics=None):
+    """(tau, base torque or None, sigma_min, lambda^2) for r-ddot* - J-dot q-dot = ``task_rhs``.
+
+    n = d: tau = ID(q, q-dot, J^-1 task_rhs) + tau_f, the inverse solved by ``bounded_solve``.
+    n > d (docs/theory.md §8a): tau = h + g + J^T Lambda task_rhs + tau_f - N^T M K_n q-dot with the
+    dynamically consistent Lambda = (J M^-1 J^T)^-1 (``bounded_task_inertia``) and
+    N^T = I - J^T J_bar^T, J_bar = M^-1 J^T Lambda; ``dynamics`` = (M, M^-1, J M^-1 J^T).
+    ``forces`` holds the plant's force elements (gravity, joint damping, ...); the base torque
+    h + g is returned when computed.
+    """
+    threshold, bound = constants.singularity_threshold, constants.max_joint_acceleration
+    d, n = jacobian.shape
+    if n == d:
+        joint_acceleration, sigma_min, lambda_squared = bounded_solve(jacobian, task_rhs, threshold, bound)
+        return (plant.CalcInverseDynamics(plant_context, joint_acceleration, forces) + tau_f, None, sigma_min,
+                lambda_squared)
+    M, M_inverse, task_mobility = dynamics
+    Lambda, sigma_min, lambda_squared = bounded_task_inertia(jacobian, M_inverse, task_mobility, task_rhs, threshold,
+                                                             bound)
+    J_bar = M_inverse @ jacobian.T @ Lambda
+    null_space_transpose = np.eye(n) - jacobian.T @ J_bar.T
+    base_torque = plant.CalcInverseDynamics(plant_context, constants.zero_acceleration, forces)
+    v = plant.GetVelocities(plant_context)
+    torque = (base_torque + jacobian.T @ (Lambda @ task_rhs) + tau_f
+              - null_space_transpose @ (M @ (constants.gains.null_space_damping * v)))
+    return torque, base_torque, sigma_min, lambda_squared
+
+
+def integral_rates(velocity_error, force_error, frozen, in_contact):
+    """(xi-dot, e_p-dot) = (e_f, e_p'), both frozen while saturated (anti-windup) and xi also off the
+    surface."""
+    position_rate = velocity_error * 0.0 if frozen else velocity_error
+    force_rate = force_error * 0.0 if (frozen or not in_contact) else force_error
+    return force_rate, position_rate
+
+
+# ------------------------------------------------------------------------------------------------
+# The law, line by line
+# ------------------------------------------------------------------------------------------------
+
+def evaluate_law(constants, space, kinematics, plant, plant_context, forces, integrals, desired_velocity,
+                 desired_acceleration, desired_force, wrench, phase):
+    """One evaluation of the law (the lines of the module docstring, in order) -> ControlSolution.
+
+    ``kinematics``: a core.kinematics evaluation (configuration r, velocity r-dot, J, J-dot q-dot);
+    ``integrals``: [xi; e_p] (e_p only in position and impedance modes); ``wrench``: the measured
+    SpatialForce vector [n; f] on the end effector by the environment; ``phase``: ContactPhase.
+    Raises FloatingPointError if the actuation is not finite.
+    """
+    gains, mode, mask = constants.gains, constants.mode, constants.force_controlled
+    m = space.force_size
+    in_contact = phase is ContactPhase.CONTACT
+    x, nu, J = kinematics.configuration, kinematics.velocity, kinematics.jacobian
+    values = space.evaluate(x, nu)                                       # E_p, E_f, E-dot r-dot, C
+    xi, e_p = integrals[:m], integrals[m:]
+
+    tangential_force, force, wrench_valid = measured_forces(space, values, x, wrench, desired_force)
+    projected_velocity, e_p_dot = velocity_error(values.velocity_projection, nu, desired_velocity)
+    e_f = force_error(force, desired_force, mask)
+
+    a_p = motion_acceleration(desired_acceleration, gains, e_p_dot, e_p, mode)
+    C_dot = values.force_projection @ nu
+    a_f = held_row_acceleration(values.constraint_value, C_dot, gains.constraint_frequency, mask)
+    n, d = J.shape[1], J.shape[0]
+    dynamics = None
+    if mode is ControlMode.IMPEDANCE_FORCE or n > d:
+        M = plant.CalcMassMatrix(plant_context)
+        M_inverse = inv(M)
+        task_mobility = J @ M_inverse @ J.T                               # J M^-1 J^T = Lambda^-1
+        dynamics = (M, M_inverse, task_mobility)
+    if mode is ControlMode.IMPEDANCE_FORCE:
+        on_velocity_rows, on_force_rows = impedance_compensation(values, task_mobility, tangential_force, force,
+                                                                 constants.kinematic_rows)
+        a_p = a_p + on_velocity_rows
+        a_f = a_f + on_force_rows
+    if not in_contact:
+        a_f = a_f + guarded_acceleration(C_dot, desired_force, mask, phase, constants.approach_speed,
+                                         constants.approach_gain)
+    task_acceleration = space.task_acceleration(values, a_p, a_f)       # (3.0-11)
+
+    u_f = force_command(desired_force, gains, e_f, xi, mask, in_contact)
+    tau_f = force_torque(J, values.force_projection, u_f)
+    torque, base_torque, sigma_min, lambda_squared = joint_torque(
+        plant, plant_context, forces, J, task_acceleration - kinematics.bias, tau_f, constants, dynamics)
+
+    B_inverse = constants.actuation_from_torque
+
+    def base_actuation():
+        torque_0 = base_torque if base_torque is not None else plant.CalcInverseDynamics(
+            plant_context, constants.zero_acceleration, forces)
+        return B_inverse @ torque_0
+
+    actuation, scale, clipped = saturate(B_inverse @ torque, base_actuation, constants.effort_limits)
+    if not all_finite(actuation):
+        raise FloatingPointError(f"HybridController: non-finite actuation {value(actuation).tolist()} at "
+                                 f"q = {value(plant.GetPositions(plant_context)).tolist()}")
+    frozen = constants.anti_windup and (scale < 1.0 or clipped)           # conditional integration
+
+    solution = ControlSolution()
+    solution.actuation = actuation
+    solution.velocity_error = e_p_dot
+    solution.force_error = e_f
+    solution.constraint_value = values.constraint_value
+    solution.projected_velocity = projected_velocity
+    solution.force = force
+    solution.tangential_force = tangential_force
+    solution.force_integral_rate, solution.position_error_rate = integral_rates(e_p_dot, e_f, frozen, in_contact)
+    solution.wrench_valid = wrench_valid
+    solution.contact_phase = int(phase)
+    solution.saturation_scale = scale
+    solution.actuator_clipped = clipped
+    solution.smallest_singular_value = sigma_min
+    solution.singularity_damping = lambda_squared
+    return solution
