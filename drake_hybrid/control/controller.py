@@ -1,14 +1,14 @@
 """The hybrid velocity/force controller of Li & Sastry (1987) as a Drake LeafSystem.
 
-Implements, in the implementable form of spec section 4 (general E^-1 block),
+Implements, in the implementable form of docs/theory.md §4 (general E^-1 block),
 
 * hybrid velocity/force control (3.1-12),
 * hybrid position/force control (Remark 3),
 * hybrid impedance/force control (3.2-6),
 
 for square arms (n = d, as in the paper) and redundant arms (n > d, with the
-dynamically consistent generalization and null-space damping of spec section
-8a), protected against what the paper assumes away (``safety``): effort limits
+dynamically consistent generalization and null-space damping of docs/theory.md
+§8 (a)), protected against what the paper assumes away (``safety``): effort limits
 (graceful saturation, anti-windup), kinematic singularities (damped inverse),
 non-finite inputs, and contact that is not there yet or is lost (the guarded
 move of ``supervision.ContactSupervisor``). See ``HybridController`` for ports,
@@ -52,7 +52,7 @@ def impedance_blocks(velocity_projection, force_projection, task_mobility, kinem
 
 
 def impedance_gain(velocity_projection, force_projection, task_mobility, kinematic_rows=()):
-    """K_0 = I + M_fp^T M_f^-1 M_fp - M_p of the impedance/force law (3.2-6), spec section 5.
+    """K_0 = I + M_fp^T M_f^-1 M_fp - M_p of the impedance/force law (3.2-6), docs/theory.md §5.
 
     K_0 = I - S with S = M_p - M_fp^T M_f^-1 M_fp, the Schur complement of M_f (the inverse of the
     constrained task inertia in the motion-row coordinates); blocks from ``impedance_blocks``.
@@ -127,7 +127,7 @@ def HybridController_(T):
         position_error        k     e_p = integral of e_p' (zero in velocity-force mode)
         ====================  ====  ===================================================
 
-        Law (spec section 4; F is the force on the robot, spec section 0)::
+        Law (docs/theory.md §4; F is the force on the robot, docs/theory.md §0)::
 
             a_p  = r-ddot_pd - K_v e_p'              velocity-force  (3.1-12)
                    ... - K_p e_p                     position-force  (Remark 3)
@@ -139,7 +139,7 @@ def HybridController_(T):
                    - N^T M K_n q-dot,  Lambda = (J M^-1 J^T)^-1                  (n > d)
 
         with K_0 = I + M_fp^T M_f^-1 M_fp - M_p recomputed every evaluation
-        (spec section 5).
+        (docs/theory.md §5).
 
         In impedance mode the kinematic rows count as motion-controlled rows:
         K_0 is built on the partition [E_p; kinematic rows of E_f] / (force-
@@ -466,7 +466,7 @@ def HybridController_(T):
             wrench = self._wrench_port.Eval(context)
             self._check_finite_commands(desired_velocity, desired_acceleration, desired_force)
 
-            # Force decomposition [F_v; F] = E^-T w (spec section 0); a dropout is ignored.
+            # Force decomposition [F_v; F] = E^-T w (docs/theory.md §0); a dropout is ignored.
             wrench_valid = all_finite(wrench)
             if wrench_valid:
                 tangential_force, force = space.split_wrench(values, self.kinematics.chart.generalized_force(x, wrench))
@@ -525,7 +525,7 @@ def HybridController_(T):
                                                                               bound)
                 torque = plant.CalcInverseDynamics(plant_context, joint_acceleration, forces) + force_torque
             else:
-                # Dynamically consistent generalization (spec section 8a).
+                # Dynamically consistent generalization (docs/theory.md §8 (a)).
                 v = plant.GetVelocities(plant_context)
                 Lambda, sigma_min, lambda_squared = bounded_task_inertia(J, M_inverse, task_mobility,
                                                                          task_acceleration - bias, threshold, bound)
