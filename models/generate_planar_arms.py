@@ -2,9 +2,9 @@
 
     python models/generate_planar_arms.py
 
-The 3R arm is the verification oracle of the spec (section 9): links 1.0, 0.8,
-0.3 m, masses 2.0, 1.5, 0.5 kg. The 4R arm is the redundant one of spec
-section 8 (0.8, 0.7, 0.5, 0.2 m; 2.0, 1.5, 1.0, 0.3 kg). Both move in the
+The 3R arm is the reference arm of docs/theory.md §9: links 1.0, 0.8,
+0.3 m, masses 2.0, 1.5, 0.5 kg. The 4R arm is the redundant one of
+docs/theory.md §8 (0.8, 0.7, 0.5, 0.2 m; 2.0, 1.5, 1.0, 0.3 kg). Both move in the
 world x-z plane with every joint turning about -y, so the absolute angle of
 the last link is the sum of the joint angles (PlanarChart's theta) and gravity
 acts along the chart's -y. A frame "tip" marks the end of the last link.

@@ -1,7 +1,8 @@
 """The package's layers (docs/design.md): no import cycles, no imports hidden in functions, modules
-of a readable size."""
+of a readable size; and the theory it cites lives in the repository (docs/theory.md)."""
 
 import ast
+import re
 import shutil
 import subprocess
 from pathlib import Path
@@ -13,6 +14,13 @@ PACKAGE = ROOT / "drake_hybrid"
 # Imports allowed inside functions: optional dependencies only (not installed by a plain install).
 OPTIONAL = {"playwright"}
 MAX_LINES = 400
+THEORY = ROOT / "docs" / "theory.md"
+# Files that may cite the theory: source, docs, notebooks, configuration.
+CITING_SUFFIXES = {".py", ".md", ".ipynb", ".yaml", ".yml", ".toml"}
+# Citations of the specification outside the repository (written so that this file does not match).
+OUTSIDE_REFERENCES = re.compile(r"\.\./shared|\bspec(?:ification)?\s+(?:section|§)|\bcorrected\s+spec(?:ification)?\b",
+                                re.IGNORECASE)
+THEORY_REFERENCE = re.compile(r"theory\.md\s*§\s*(\d+)")
 
 
 def modules():
@@ -49,3 +57,46 @@ def test_long_modules_say_why(path):
     if text.count("\n") > MAX_LINES:
         docstring = ast.get_docstring(ast.parse(text)) or ""
         assert "Size:" in docstring, f"{path.name} has {text.count(chr(10))} lines and no 'Size:' reason"
+
+
+def repository_files():
+    """Source, docs, notebooks and configuration of the repository (not .git, caches, build output)."""
+    skipped = {"__pycache__", "build", "dist", "node_modules", "venv"}
+    for path in sorted(ROOT.rglob("*")):
+        parts = path.relative_to(ROOT).parts
+        if any(part.startswith(".") or part.endswith(".egg-info") or part in skipped for part in parts[:-1]):
+            continue
+        if path.suffix in CITING_SUFFIXES and path.is_file():
+            yield path
+
+
+def theory_sections():
+    """The numbers N of the '## N. Title' sections of docs/theory.md."""
+    return {int(match) for match in re.findall(r"^## (\d+)\. ", THEORY.read_text(encoding="utf-8"), re.MULTILINE)}
+
+
+def test_the_theory_is_in_the_repository():
+    """No file cites the specification kept outside the repository (its directory beside the repository,
+    its section numbers): the theory is docs/theory.md, cited as 'docs/theory.md §N'."""
+    assert THEORY.is_file(), "docs/theory.md is missing"
+    offending = []
+    for path in repository_files():
+        for number, line in enumerate(path.read_text(encoding="utf-8", errors="replace").splitlines(), 1):
+            if OUTSIDE_REFERENCES.search(line):
+                offending.append(f"{path.relative_to(ROOT)}:{number}: {line.strip()[:100]}")
+    assert not offending, "cite docs/theory.md §N instead:\n" + "\n".join(offending)
+
+
+def test_theory_citations_name_existing_sections():
+    """Every 'theory.md §N' in the repository names a section '## N.' of docs/theory.md."""
+    sections = theory_sections()
+    assert sections >= set(range(13)), f"docs/theory.md sections: {sorted(sections)}"
+    cited, dangling = 0, []
+    for path in repository_files():
+        for number, line in enumerate(path.read_text(encoding="utf-8", errors="replace").splitlines(), 1):
+            for match in THEORY_REFERENCE.finditer(line):
+                cited += 1
+                if int(match.group(1)) not in sections:
+                    dangling.append(f"{path.relative_to(ROOT)}:{number}: §{match.group(1)}")
+    assert cited > 0, "no file cites docs/theory.md"
+    assert not dangling, f"citations of sections docs/theory.md does not have: {dangling}"

@@ -1,4 +1,4 @@
-"""Charts: Euler z-x-z maps (spec section 1), planar and pose charts, against finite differences."""
+"""Charts: Euler z-x-z maps (docs/theory.md §1), planar and pose charts, against finite differences."""
 
 import numpy as np
 import pytest

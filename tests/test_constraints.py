@@ -28,7 +28,7 @@ def sphere_point(phi, theta, psi, radius=1.0, center=(0.0, 0.0, 0.0)):
 
 
 def corrected_crank_E_f(r):
-    """(3.3-2), corrected (spec section 2)."""
+    """(3.3-2), corrected (docs/theory.md §2)."""
     x, y, z, phi, theta, psi = r
     return np.array([[2 * x, 2 * y, 0, 0, 0, 0],
                      [0, 0, 1, 0, 0, 0],
@@ -37,7 +37,7 @@ def corrected_crank_E_f(r):
 
 
 def corrected_sphere_E_f(r):
-    """(3.3-10), corrected (spec section 2)."""
+    """(3.3-10), corrected (docs/theory.md §2)."""
     x, y, z, phi, theta, psi = r
     return np.array([
         [2 * x, 2 * y, 2 * z, 0, 0, 0],
@@ -157,7 +157,7 @@ def test_sphere_equator_paper_form_loses_rank_and_the_fix_keeps_it():
 
 
 def test_sphere_spurious_equator_set_satisfies_the_paper_form():
-    """{z = 0, cos(theta) = 0, x^2 + y^2 = 1} with a not radial satisfies (2.2-8) (spec section 2)."""
+    """{z = 0, cos(theta) = 0, x^2 + y^2 = 1} with a not radial satisfies (2.2-8) (docs/theory.md §2)."""
     chart = EulerZXZChart()
     paper = sphere_constraint(chart, radius=1.0, form="paper", dropped_component=3)
     r = np.array([cos(0.2), sin(0.2), 0.0, 1.3, np.pi / 2, 0.4])     # a is horizontal but not -p

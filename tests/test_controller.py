@@ -1,6 +1,6 @@
 """HybridController: ports, scalar types, feedthrough, and the closed loop the law produces.
 
-The closed-loop checks solve the rigid-contact dynamics of spec section 4 with Drake's M, h, g:
+The closed-loop checks solve the rigid-contact dynamics of docs/theory.md §4 with Drake's M, h, g:
     [M, -J^T E_f^T (I + K_fp); E_f J, 0] [q-ddot; F] = [tau_a - h - g; -(E_f J-dot q-dot + E_f-dot r-dot)]
 and check (3.1-14), (3.1-15), Remark 3 and (3.2-11) to rounding.
 """

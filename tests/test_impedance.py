@@ -1,4 +1,4 @@
-"""Hybrid impedance/force control (3.2-6) and the grinding task with friction (spec section 5)."""
+"""Hybrid impedance/force control (3.2-6) and the grinding task with friction (docs/theory.md §5)."""
 
 import numpy as np
 import pytest
@@ -26,7 +26,7 @@ def random_state(task, config, plant, rng):
 @pytest.mark.parametrize("workpiece", ["window", "sphere"])
 def test_K0_is_identity_minus_the_schur_complement_of_M_f(workpiece, rng):
     """K_0 = I + M_fp^T M_f^-1 M_fp - M_p = I - S; without kinematic rows S^-1 = P^T Lambda P,
-    P the first block of E^-1 and Lambda = J^-T M J^-1 (spec section 5)."""
+    P the first block of E^-1 and Lambda = J^-T M J^-1 (docs/theory.md §5)."""
     config = GRINDING.default_config({"workpiece": workpiece})
     plant, _ = build_controller_plant(GRINDING, config)
     space = GRINDING.constraint_space(config)

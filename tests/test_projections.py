@@ -1,4 +1,4 @@
-"""Velocity projections, the general E^-1 block (spec section 3) and the force decomposition (section 0)."""
+"""Velocity projections, the general E^-1 block and the force decomposition (docs/theory.md §3, §0)."""
 
 import numpy as np
 import pytest
@@ -17,7 +17,7 @@ EPS = 1e-6
 
 
 def crank_true_velocity_rows(chart):
-    """E_t of spec section 6 (Option A): psi-dot and the crank angle rate -y x-dot + x y-dot."""
+    """E_t of docs/theory.md §6 (Option A): psi-dot and the crank angle rate -y x-dot + x y-dot."""
     x, y = chart.symbols[:2]
     return GivenVelocityProjection(chart, [[0, 0, 0, 0, 0, 1], [-y, x, 0, 0, 0, 0]], name="E_t crank")
 
@@ -83,7 +83,7 @@ def test_sphere_paper_projection_is_3_3_11_with_the_corrected_3_3_13(rng):
 
 
 def test_pseudo_velocity_error_equals_the_true_velocity_error(rng):
-    """Spec section 6: E_p r-dot - r-dot_pd^pseudo == E_t r-dot - r-dot_td for every r-dot (crank and sphere)."""
+    """docs/theory.md §6: E_p r-dot - r-dot_pd^pseudo == E_t r-dot - r-dot_td for every r-dot (crank and sphere)."""
     from drake_hybrid.core.projections import pseudo_desired_velocity
 
     chart = EulerZXZChart()
@@ -163,7 +163,7 @@ def test_given_projection_rate_matches_finite_differences(rng):
 
 
 def test_split_wrench_sign_and_scaling():
-    """Example 2.1: the robot pushes up on a ceiling y = 1 with 5 N, so F = -5 (spec section 0)."""
+    """Example 2.1: the robot pushes up on a ceiling y = 1 with 5 N, so F = -5 (docs/theory.md §0)."""
     chart = PlanarChart()
     E_p = GivenVelocityProjection(chart, [[1, 0, 0], [0, 0, 1]])
     space = ConstraintSpace(window_constraint(chart, height=1.0), E_p)

@@ -151,7 +151,7 @@ def test_crank_spin_pair_is_moved_by_the_handles_and_the_tools_inertia(mode):
 
 
 def test_naive_pseudo_velocity_tracks_worse_than_option_a():
-    """Spec section 6: the paper's pseudo-velocity with its unmeasurable Euler accelerations dropped
+    """docs/theory.md §6: the paper's pseudo-velocity with its unmeasurable Euler accelerations dropped
     (naive) against Option A: the true crank-rate error's deviation from the designed e^(-K_v t)."""
     deviations = {}
     for rows in ("true", "paper"):
@@ -239,7 +239,7 @@ def test_corrected_3_3_13a_and_appendix_b_on_the_task_sphere(rng):
 
 
 def test_outward_facing_starts_are_rejected():
-    """Both the crank and the sphere constraints admit an outward branch (spec section 2); a start
+    """Both the crank and the sphere constraints admit an outward branch (docs/theory.md §2); a start
     there is refused with a BranchError."""
     for task in (CRANK, SPHERE):
         config = task.default_config()

@@ -1,7 +1,7 @@
 """Stability analysis: designed eigenvalues, closed-loop linearization, matching.
 
-* ``predicted_eigenvalues``: the eigenvalues the gains design (spec section 4
-  table): -eig(K_v); the roots of s^2 + K_v s + K_p (position and impedance
+* ``predicted_eigenvalues``: the eigenvalues the gains design (docs/theory.md §4,
+  the table): -eig(K_v); the roots of s^2 + K_v s + K_p (position and impedance
   modes); eig(-(I + K_fp)^-1 K_fi).
 * ``predicted_errors``: the error trajectories those loops predict from an
   initial condition (for plots and tracking tests).
@@ -368,7 +368,7 @@ def linearize_discrete(config, tolerance=0.05, epsilon=1e-6, settle_time=0.0):
 
 
 def impedance_realization(scenario, log):
-    """How well a logged run realizes the impedance/force design (spec section 5).
+    """How well a logged run realizes the impedance/force design (docs/theory.md §5).
 
     Returns a dict of arrays over the log:
 

@@ -1,14 +1,14 @@
 """The hybrid velocity/force controller of Li & Sastry (1987) as a Drake LeafSystem.
 
-Implements, in the implementable form of spec section 4 (general E^-1 block),
+Implements, in the implementable form of docs/theory.md §4 (general E^-1 block),
 
 * hybrid velocity/force control (3.1-12),
 * hybrid position/force control (Remark 3),
 * hybrid impedance/force control (3.2-6),
 
 for square arms (n = d, as in the paper) and redundant arms (n > d, with the
-dynamically consistent generalization and null-space damping of spec section
-8a), protected against what the paper assumes away (``safety``): effort limits
+dynamically consistent generalization and null-space damping of docs/theory.md
+§8 (a)), protected against what the paper assumes away (``safety``): effort limits
 (graceful saturation, anti-windup), kinematic singularities (damped inverse),
 non-finite inputs, and contact that is not there yet or is lost (the guarded
 move of ``supervision.ContactSupervisor``). See ``HybridController`` for ports,
@@ -93,7 +93,7 @@ def HybridController_(T):
         position_error        k     e_p = integral of e_p' (zero in velocity-force mode)
         ====================  ====  ===================================================
 
-        Law (spec section 4; F is the force on the robot, spec section 0)::
+        Law (docs/theory.md §4; F is the force on the robot, docs/theory.md §0)::
 
             a_p  = r-ddot_pd - K_v e_p'              velocity-force  (3.1-12)
                    ... - K_p e_p                     position-force  (Remark 3)
@@ -105,7 +105,7 @@ def HybridController_(T):
                    - N^T M K_n q-dot,  Lambda = (J M^-1 J^T)^-1                  (n > d)
 
         with K_0 = I + M_fp^T M_f^-1 M_fp - M_p recomputed every evaluation
-        (spec section 5).
+        (docs/theory.md §5).
 
         In impedance mode the kinematic rows count as motion-controlled rows:
         K_0 is built on the partition [E_p; kinematic rows of E_f] / (force-
@@ -144,9 +144,10 @@ def HybridController_(T):
         held actuation from the initial state.
 
         A measured wrench with a NaN or inf entry (sensor dropout) is ignored
-        for that evaluation: the force error is taken as zero and the
-        integrals hold, so the torque stays finite. A non-finite state or
-        command raises ValueError naming the port.
+        for that evaluation: the force error is taken as zero and the force
+        integral xi holds (e_p keeps integrating the velocity error), so the
+        torque stays finite. A non-finite state or command raises ValueError
+        naming the port.
 
         Protections (``safety``; none changes the law where it is not active):
 

@@ -2,7 +2,7 @@
 
 This module is the law's single home. ``HybridController`` (control/controller.py) keeps the
 ports, cache entries, state and events, reads its inputs once per evaluation and calls
-``evaluate_law``, which runs the lines below in order (docs/theory.md §4, §5 and §8a; F is the
+``evaluate_law``, which runs the lines below in order (docs/theory.md §4, §5 and §8 (a); F is the
 force on the robot, §0; k = d - m velocity rows, m force rows)::
 
     line of the law                                                 function
@@ -82,7 +82,7 @@ def measured_forces(space, values, configuration, wrench, desired_force):
     (the SpatialForce vector [n; f] on the end effector by the environment) at ``configuration``.
 
     A wrench with a non-finite entry (sensor dropout) is ignored: F_v = 0 and F = F_d, so the
-    force error is zero and the integrals hold for that evaluation.
+    force error is zero and xi holds for that evaluation (e_p, from the velocity error, does not).
     """
     if not all_finite(wrench):
         return np.zeros(space.velocity_size), desired_force, False
@@ -194,7 +194,7 @@ def joint_torque(plant, plant_context, forces, jacobian, task_rhs, tau_f, consta
     """(tau, base torque or None, sigma_min, lambda^2) for r-ddot* - J-dot q-dot = ``task_rhs``.
 
     n = d: tau = ID(q, q-dot, J^-1 task_rhs) + tau_f, the inverse solved by ``bounded_solve``.
-    n > d (docs/theory.md §8a): tau = h + g + J^T Lambda task_rhs + tau_f - N^T M K_n q-dot with the
+    n > d (docs/theory.md §8 (a)): tau = h + g + J^T Lambda task_rhs + tau_f - N^T M K_n q-dot with the
     dynamically consistent Lambda = (J M^-1 J^T)^-1 (``bounded_task_inertia``) and
     N^T = I - J^T J_bar^T, J_bar = M^-1 J^T Lambda; ``dynamics`` = (M, M^-1, J M^-1 J^T).
     ``forces`` holds the plant's force elements (gravity, joint damping, ...); the base torque

@@ -34,7 +34,7 @@ Charts provided:
     written in p and the entries of R (or helpers such as the approach vector)
     rather than in angles, and the rotational velocity rows are not
     integrable, so an integrated rotational "position" error is path
-    dependent (spec section 6, position error caution).
+    dependent (docs/theory.md §6, position errors).
 """
 
 import math
@@ -243,7 +243,7 @@ class EulerZXZChart(Chart):
 
     The approach vector is a = (sin(theta) sin(phi), -sin(theta) cos(phi), cos(theta)).
     Euler rates map to the world angular velocity by omega = T(eta) eta-dot
-    (spec section 1), so
+    (docs/theory.md §1), so
 
     * J = blockdiag(I3, T^-1) J_g   (paper order: translation first),
     * J-dot q-dot = blockdiag(I3, T^-1) (J_g-dot q-dot - [0; T-dot eta-dot]),

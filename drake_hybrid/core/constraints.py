@@ -136,7 +136,7 @@ class Constraint:
                 f"constraint '{self.name}' loses rank at {_format_configuration(self.chart, x)}: "
                 f"the rank margin of E_f = dC is {margin:.3g} < {self.rank_tolerance:g} "
                 f"(rank {np.linalg.matrix_rank(value(E_f))} < m = {self.size}). The constraint description is not "
-                "valid here (spec section 2): use another form of C near this configuration."
+                "valid here (docs/theory.md §2): use another form of C near this configuration."
             )
 
     def check_satisfied(self, x, tolerance):
@@ -164,7 +164,7 @@ class Constraint:
 class SelectingConstraint:
     """A constraint with several equivalent descriptions, chosen by configuration.
 
-    Used for the sphere's equator fix (spec section 2, Example 2.3): (2.2-8)
+    Used for the sphere's equator fix (docs/theory.md §2, Example 2.3): (2.2-8)
     keeps components 1, 2 of p x a, which is valid only where a_3 != 0; near
     the equator one keeps the pair whose dropped component k has the largest
     |a_k|. ``select(x)`` returns the index of the piece to use at x. Every
@@ -253,10 +253,11 @@ def crank_constraint(chart, radius=0.2, height=0.3, center=(0.0, 0.0), form="pap
             X = x - cx, Y = y - cy (EulerZXZChart only; E_f is the corrected (3.3-2)).
             ``"approach"`` is chart-independent: (X^2 + Y^2 - radius^2, z - height,
             a_z, a_x Y - a_y X) (works with PoseChart). ``"orientation"`` is the
-            spec's orientation-fixing form (z - height, X + radius a_x, Y + radius a_y, a_z),
+            orientation-fixing form C' of docs/theory.md §2 (z - height, X + radius a_x, Y + radius a_y,
+            a_z),
             which selects the inward branch by itself.
 
-    The cross-product forms also admit outward-facing solutions (spec section 2,
+    The cross-product forms also admit outward-facing solutions (docs/theory.md §2,
     branch caveat); the constraint's ``check_branch`` rejects them
     (a . (X, Y, 0) must be negative).
     """
@@ -287,7 +288,7 @@ def sphere_constraint(chart, center=(0.0, 0.0, 0.0), radius=0.15, form="approach
     Args:
         center, radius: the sphere (SI units).
         form: ``"approach"`` (default) is C = (p - c) + radius a (m = 3), the
-            spec's p + a form: full rank wherever the chart is valid and it selects
+            p + a form of docs/theory.md §2: full rank wherever the chart is valid and it selects
             the inward branch. ``"paper"`` is (2.2-8): (|P|^2 - radius^2 and two
             components of P x a, P = p - c).
         dropped_component: for ``"paper"``: which component k (1, 2, 3) of P x a

@@ -19,7 +19,7 @@ class ChartSingularityError(DrakeHybridError):
     """A coordinate chart was evaluated at (or too near) its singular set.
 
     For z-x-z Euler angles this is |sin(theta)| below the chart's tolerance,
-    where the Euler-rate map T(eta) loses rank (spec section 1).
+    where the Euler-rate map T(eta) loses rank (docs/theory.md §1).
     """
 
 

@@ -3,7 +3,7 @@
 ``EndEffectorKinematics`` turns Drake's geometric quantities of an
 end-effector point P fixed in a frame E (pose, geometric Jacobian J_g, bias
 spatial acceleration J_g-dot v) into the chart's x, nu, analytic Jacobian J
-and J-dot q-dot (spec section 1, last part). Works for float and AutoDiffXd
+and J-dot q-dot (docs/theory.md §1). Works for float and AutoDiffXd
 plants; frames are resolved by index, so the same object can be rebuilt on a
 scalar-converted plant with ``for_plant``.
 """

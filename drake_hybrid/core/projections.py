@@ -5,7 +5,7 @@ E_p of rank d - m and E = [E_p; E_f] invertible. Three ways to get E_p:
 
 ``GivenVelocityProjection``
     written by the user as E_p(x), e.g. the paper's (3.3-1), (3.3-6) or
-    (3.3-11), or the "true-velocity rows" E_t of spec section 6 (Option A).
+    (3.3-11), or the "true-velocity rows" E_t of docs/theory.md §6 (Option A).
     Its rows need not be orthogonal to E_f.
 ``KernelVelocityProjection``
     automatic: a smooth orthonormal basis of ker E_f, anchored at a
@@ -13,7 +13,7 @@ E_p of rank d - m and E = [E_p; E_f] invertible. Three ways to get E_p:
     basis of ker E_f(x_0) and P_N the projector onto ker E_f(x)).
 
 ``ConstraintSpace`` combines a constraint with a projection. It always uses
-the general inverse E^-1 [a_p; 0] (spec section 3), never
+the general inverse E^-1 [a_p; 0] (docs/theory.md §3), never
 E_p^T (E_p E_p^T)^-1, so non-orthogonal E_p are handled exactly.
 """
 
@@ -211,7 +211,7 @@ class ConstraintSpace:
                 raise ConstraintRankError(
                     f"E = [E_p; E_f] is singular (rank margin {margin:.3g}) for constraint '{constraint.name}' and "
                     f"velocity projection '{self.velocity_projection.name}': E_p must be one-to-one on "
-                    "ker E_f (spec section 3)")
+                    "ker E_f (docs/theory.md §3)")
         return ConstraintSpaceValues(
             constraint_value=constraint.value(x),
             force_projection=E_f,
@@ -223,7 +223,7 @@ class ConstraintSpace:
         )
 
     def task_acceleration(self, values, velocity_acceleration, constraint_acceleration=None):
-        """r-ddot* = E^-1 ([a_p; a_f] - E-dot nu) (3.0-11, spec section 4).
+        """r-ddot* = E^-1 ([a_p; a_f] - E-dot nu) (3.0-11, docs/theory.md §4).
 
         Satisfies E_p r-ddot* + E_p-dot nu = a_p and E_f r-ddot* + E_f-dot nu = a_f,
         with a_f = 0 (the paper) unless ``constraint_acceleration`` is given (the
@@ -239,7 +239,7 @@ class ConstraintSpace:
         """(F_v, F) with w = E_p^T F_v + E_f^T F, i.e. [F_v; F] = E^-T w.
 
         ``generalized_force`` is the chart covector w of the wrench on the
-        robot by the environment (sign convention of spec section 0). F is in
+        robot by the environment (sign convention of docs/theory.md §0). F is in
         the coordinates of this E_f: rescaling a row of C rescales F inversely.
         """
         split = values.factorization.solve_transpose(generalized_force)
@@ -248,7 +248,7 @@ class ConstraintSpace:
 
 
 # ------------------------------------------------------------------------------------------------
-# The paper's velocity projections (section 3.3) and the true-velocity rows of spec section 6.
+# The paper's velocity projections (section 3.3) and the true-velocity rows of docs/theory.md §6.
 # ------------------------------------------------------------------------------------------------
 
 def crank_paper_projection(chart, center=(0.0, 0.0)):
@@ -256,7 +256,7 @@ def crank_paper_projection(chart, center=(0.0, 0.0)):
 
     Orthogonal to the (2.2-5) E_f identically. Its second row mixes units: on
     the circle of radius rho it reads (rho^2 + 1) times the crank rate, the
-    paper's pseudo-velocity (spec section 6).
+    paper's pseudo-velocity (docs/theory.md §6).
     """
     x, y = chart.symbols[:2]
     X, Y = x - sympy.Float(center[0]), y - sympy.Float(center[1])
@@ -264,7 +264,7 @@ def crank_paper_projection(chart, center=(0.0, 0.0)):
 
 
 def crank_true_velocity_projection(chart, center=(0.0, 0.0), radius=1.0):
-    """Option A rows E_t for the crank: (psi-dot, crank angle rate alpha-dot) (spec section 6).
+    """Option A rows E_t for the crank: (psi-dot, crank angle rate alpha-dot) (docs/theory.md §6).
 
     Row 2 is (-Y x-dot + X y-dot) / radius^2, which is alpha-dot in rad/s on the
     circle. Not orthogonal to E_f: ConstraintSpace uses the general E^-1 block.
@@ -308,7 +308,7 @@ def sphere_paper_projection(chart, center=(0.0, 0.0, 0.0), radius=1.0):
 
 def sphere_true_velocity_projection(chart, center=(0.0, 0.0, 0.0), radius=1.0, axis=(0.0, 0.0, 1.0)):
     """Option A rows E_t for the sphere: the spin about the approach axis and the tool-point
-    velocity along t_1 = e x P-hat and t_2 = t_1 x P-hat, e = ``axis`` (spec section 6 uses
+    velocity along t_1 = e x P-hat and t_2 = t_1 x P-hat, e = ``axis`` (docs/theory.md §6 uses
     e = e_z; m/s on the sphere, times |t_1| = sin of the angle between P-hat and e).
 
     t_1 and t_2 vanish where P-hat is parallel to e (the poles of e): E = [E_t; E_f] is singular

@@ -2,7 +2,7 @@
 
 All sensors output the SpatialForce [n; f] (6-vector) exerted **on the robot
 by the environment**, at the end-effector point P, expressed in the world
-frame: the sign convention of spec section 0.
+frame: the sign convention of docs/theory.md §0.
 
 ``ContactWrenchSensor``
     ideal: sums the contact results on the robot's bodies and shifts them to P.

@@ -1,16 +1,16 @@
-"""Desired motion and force for the controller (paper section 2.3, spec section 4).
+"""Desired motion and force for the controller (paper section 2.3, docs/theory.md §4).
 
 ``DesiredFieldSource``
     evaluates a desired velocity field Y_d : N -> TN (2.3-1) and a force field
     F_d : N -> R^m (2.3-4) at the measured configuration and outputs
     r-dot_pd = E_p(r) Y_d(r), its derivative along the actual trajectory
-    r-ddot_pd = E_p-dot Y_d + E_p (dY_d/dr) r-dot (spec section 4, last
-    bullet; computable from measurements) and F_d(r).
+    r-ddot_pd = E_p-dot Y_d + E_p (dY_d/dr) r-dot (docs/theory.md §4;
+    computable from measurements) and F_d(r).
 ``ProfileSource``
     time profiles r-dot_pd(t), r-ddot_pd(t) = d/dt r-dot_pd(t) and F_d(t).
 ``PseudoVelocitySource``
     the paper's desired pseudo-velocity (3.3-8), (3.3-16) for its orthogonal
-    E_p, built from a true-velocity command r-dot_td(t) (spec section 6), with
+    E_p, built from a true-velocity command r-dot_td(t) (docs/theory.md §6), with
     the unmeasurable Euler-acceleration term of r-ddot_pd dropped (the naive
     implementation; Option A, E = [E_t; E_f], is exact and the default).
 
@@ -137,7 +137,7 @@ ProfileSource = ProfileSource_[None]
 def PseudoVelocitySource_(T):
 
     class Impl(LeafSystem_[T]):
-        """The paper's desired pseudo-velocity for its E_p (spec section 6), naive form.
+        """The paper's desired pseudo-velocity for its E_p (docs/theory.md §6), naive form.
 
         .. pydrake_system::
 

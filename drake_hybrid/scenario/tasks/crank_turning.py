@@ -14,7 +14,7 @@ rows are enforced by the environment (the weld), so all are force-controlled:
 F = (radial, vertical, tilt, tangential/yaw) in the E_f of (3.3-2); the default
 command is no radial force and a 5 N downward push along the crank's axis
 (force on the robot +5 N along z). The velocity-controlled coordinates are the
-true-velocity rows of spec section 6 (Option A, default): the spin psi-dot and the
+true-velocity rows of docs/theory.md §6 (Option A, default): the spin psi-dot and the
 crank rate alpha-dot = (-Y x-dot + X y-dot) / rho^2; or the paper's (3.3-6) E_p
 with the pseudo-velocity (``task_options.velocity_rows = paper``, naive: its
 r-ddot_pd drops the unmeasurable phi-ddot).

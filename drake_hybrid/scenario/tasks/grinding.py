@@ -1,4 +1,4 @@
-"""Grinding: a task with real friction (spec section 5, the paper's section 3.2).
+"""Grinding: a task with real friction (docs/theory.md §5, the paper's section 3.2).
 
 The window-washing task (planar, default) or the sphere-polishing task (6-DOF,
 ``task_options.workpiece = sphere``) with Coulomb friction on the pad (mu

@@ -14,7 +14,7 @@ and 3 fix the orientation (a along -P); a point contact does not enforce them
 (it only pushes along the normal, through the pad's centre), so they are
 kinematic rows: the controller holds them (C-ddot + 3 w_c C-dot + 2 w_c^2 C = 0),
 with no force loop on them. The velocity-controlled coordinates are the
-true-velocity rows of spec section 6 (Option A): the spin about a and the pad
+true-velocity rows of docs/theory.md §6 (Option A): the spin about a and the pad
 centre's velocity along t_1 = e x P-hat and t_2 = t_1 x P-hat.
 
 Task options (``task_options``):

@@ -11,7 +11,7 @@ y = window_height (the paper's y = 1), so the pad centre is constrained to
 
 and the velocity-controlled coordinates are r-dot_p = (x-dot, theta-dot),
 E_p = [[1 0 0], [0 0 1]] (3.3-1). The robot presses up on the pane, so the
-force on the robot is downward and F_d < 0 (spec section 0: "push up with
+force on the robot is downward and F_d < 0 (docs/theory.md §0: "push up with
 10 N" is F_d = -10).
 
 Start (``start.configuration``): [x, theta] of the pad centre on the window.
