@@ -2,7 +2,6 @@
 a local Dask cluster checked against the same points run serially."""
 
 import csv
-import math
 
 import numpy as np
 import pytest
@@ -10,7 +9,7 @@ import pytest
 from drake_hybrid.analysis.linearization import linearize_sampled_loop
 from drake_hybrid.cli import make_parser
 from drake_hybrid.experiments.sweep import RESULT_COLUMNS, read_results, rigid_contact_theory_stable, run_sweep
-from drake_hybrid.experiments.sweep_spec import (SweepSpecError, apply_parameters, load_spec, parse_spec,
+from drake_hybrid.experiments.sweep_spec import (SweepSpecError, apply_parameters, load_spec,
                                                  set_config_value)
 from drake_hybrid.scenario.builder import build_scenario
 from drake_hybrid.scenario.config import dump_config, load_config
@@ -30,7 +29,7 @@ def test_grid_points_are_the_cartesian_product_in_order():
     spec = load_spec(text="""
 parameters:
   contact.pad_modulus: {logspace: [1e5, 1e9, 3]}     # YAML 1.1 reads 1e5 as a string: accepted
-  gains.force_proportional: [0.5, 2]
+  gains.force_proportional: {values: [0.5, 2]}
 """)
     points = spec.points()
     assert [p["contact.pad_modulus"] for p in points] == pytest.approx([1e5, 1e5, 1e7, 1e7, 1e9, 1e9])
@@ -58,14 +57,18 @@ seed: 11
 
 @pytest.mark.parametrize("text, message", [
     ("parameters: {}", "needs 'parameters'"),
-    ("parameters: {plant.time_step: {gaussian: [1, 2]}}", "unknown kind 'gaussian'"),
+    ("parameters: {plant.time_step: {gaussian: [1, 2]}}", r"fields \['gaussian'\] were unknown"),
+    ("parameters: {plant.time_step: [0.001]}", r"is a list where a mapping belongs.*values: \[0.001\]"),
+    ("parameters: {plant.time_step: {values: [0.001], uniform: [1, 2]}}", "give exactly one non-empty kind"),
+    ("parameters: {plant.time_step: {values: [0.001]}}\nsamples: 2.5", "Expected a <class 'int'> value for 'samples'"),
     ("parameters: {plant.time_step: {linspace: [1, 2]}}", "expected 3 numbers"),
     ("parameters: {plant.time_step: {logspace: [0, 1, 3]}}", "bounds must be positive"),
     ("parameters: {plant.time_step: {uniform: [2, 1]}}", "lower bound 2 exceeds upper 1"),
-    ("parameters: {plant.time_step: [0.001]}\nsamples: 3", "no parameter has a distribution"),
-    ("parameters: {plant.time_step: [0.001]}\nmap: {x: duration}", "map.x = 'duration' is not one of the parameters"),
-    ("parameters: {plant.time_step: [0.001]}\ngrid: 3", r"unknown key\(s\) \['grid'\]"),
-    ("parameters: {plant.time_step: [0.001]}\nstability: {steady_window: 2}", "steady_window must be in"),
+    ("parameters: {plant.time_step: {values: [0.001]}}\nsamples: 3", "no parameter has a distribution"),
+    ("parameters: {plant.time_step: {values: [0.001]}}\nmap: {x: duration}",
+     "map.x = 'duration' is not one of the parameters"),
+    ("parameters: {plant.time_step: {values: [0.001]}}\ngrid: 3", r"fields \['grid'\] were unknown"),
+    ("parameters: {plant.time_step: {values: [0.001]}}\nstability: {steady_window: 2}", "steady_window must be in"),
 ])
 def test_bad_specs_raise_naming_the_problem(text, message):
     with pytest.raises(SweepSpecError, match=message):
@@ -97,10 +100,11 @@ def test_applied_parameters_round_trip_through_yaml_and_type_errors_are_named():
 
 def test_sweep_rejects_a_spec_for_another_task_and_bad_base_paths(tmp_path):
     with pytest.raises(SweepSpecError, match="for task 'crank'"):
-        run_sweep(WINDOW, parse_spec({"task": "crank", "parameters": {"plant.time_step": [0.001]}}), tmp_path, workers=0)
-    with pytest.raises(SweepSpecError, match="base: .*has no field 'horizon'"):
-        run_sweep(WINDOW, parse_spec({"base": {"horizon": 1}, "parameters": {"plant.time_step": [0.001]}}), tmp_path,
+        run_sweep(WINDOW, load_spec(text="task: crank\nparameters: {plant.time_step: {values: [0.001]}}"), tmp_path,
                   workers=0)
+    with pytest.raises(SweepSpecError, match="base: .*has no field 'horizon'"):
+        run_sweep(WINDOW, load_spec(text="base: {horizon: 1}\nparameters: {plant.time_step: {values: [0.001]}}"),
+                  tmp_path, workers=0)
 
 
 @pytest.mark.parametrize("changes, message", [
@@ -165,8 +169,8 @@ base:
   duration: 0.15
 parameters:
   contact.pad_modulus: {values: [1e5, 5e6, 1e9]}     # 1e5 Pa: the start is not found (recorded, not dropped)
-  gains.force_proportional: [0.5, 2.0]
-  control_period: [0.001, 0.004]
+  gains.force_proportional: {values: [0.5, 2.0]}
+  control_period: {values: [0.001, 0.004]}
 map: {x: contact.pad_modulus, y: gains.force_proportional, facet: control_period}
 """
 TIMING_COLUMNS = {"wall_time", "simulation_wall_time", "linearization_wall_time", "cpu_time", "worker"}

@@ -27,7 +27,12 @@ the last one varying fastest), each with ``samples`` draws of the random axes
 spec always gives the same points, in the same order, on any machine.
 
 A value for a list field (the gains are stored as flat lists) may be a scalar:
-it becomes a one-entry list (a scalar gain times I).
+it becomes a one-entry list (a scalar gain times I); set one entry of a list
+with an index (``gains.velocity[1]``).
+
+The YAML is loaded with Drake's ``yaml_load_typed`` on ``SweepSpecFile``: an
+unknown key or a wrong type is an error naming it. Every parameter names its
+kind (``{values: [...]}``, not a bare list).
 """
 
 import copy
@@ -39,10 +44,12 @@ import math
 import re
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Dict, List, Optional
+from typing import Dict, List, Optional, Union
 
 import numpy as np
 import yaml
+
+from pydrake.common.yaml import yaml_dump_typed, yaml_load_typed
 
 from drake_hybrid.scenario.config import dump_config, load_config
 
@@ -105,7 +112,7 @@ class SweepSpec:
     linearize_discrete: bool = True
     stability: StabilityCriteria = field(default_factory=StabilityCriteria)
     map: Dict[str, str] = field(default_factory=dict)
-    source: dict = field(default_factory=dict)           # the YAML as read (saved next to the results)
+    source: dict = field(default_factory=dict)           # the spec as loaded, every field (saved with the results)
 
     @property
     def paths(self):
@@ -128,46 +135,63 @@ class SweepSpec:
         return points
 
 
+# ------------------------------------------------------------------------------------------------
+# The YAML schema (loaded with Drake's typed YAML: unknown keys and wrong types are errors)
+# ------------------------------------------------------------------------------------------------
+
+@dataclass
+class AxisSpec:
+    """One parameter: exactly one kind, with its list of arguments (see the module docstring)."""
+
+    values: List[Union[float, str]] = field(default_factory=list)     # grid: the values themselves
+    linspace: List[float] = field(default_factory=list)               # grid: [start, stop, count]
+    logspace: List[float] = field(default_factory=list)               # grid: [start, stop, count], start > 0
+    uniform: List[float] = field(default_factory=list)                # random: [low, high]
+    loguniform: List[float] = field(default_factory=list)             # random: [low, high], both > 0
+    normal: List[float] = field(default_factory=list)                 # random: [mean, standard deviation]
+    choice: List[Union[float, str]] = field(default_factory=list)     # random: one of the values
+
+
+@dataclass
+class LinearizeSpec:
+    """Which linearizations each point gets."""
+
+    continuous: bool = True
+    discrete: bool = True
+
+
+@dataclass
+class MapSpec:
+    """The stability map's axes: parameter paths (empty: no map); color: a results column."""
+
+    x: str = ""
+    y: str = ""
+    facet: str = ""
+    color: str = ""
+
+
+@dataclass
+class SweepSpecFile:
+    """A sweep spec as written in YAML (``load_spec`` turns it into a ``SweepSpec``)."""
+
+    task: str = ""
+    base: Dict[str, Union[float, bool, str]] = field(default_factory=dict)
+    parameters: Dict[str, AxisSpec] = field(default_factory=dict)
+    samples: int = 1
+    seed: int = 0
+    linearize: LinearizeSpec = field(default_factory=LinearizeSpec)
+    stability: StabilityCriteria = field(default_factory=StabilityCriteria)
+    map: MapSpec = field(default_factory=MapSpec)
+
+
 def _number(value, where):
     """YAML 1.1 reads 1e5 (no dot) as a string; accept it as a number."""
-    if isinstance(value, bool):
-        raise SweepSpecError(f"{where}: expected a number, got {value!r}")
-    if isinstance(value, (int, float)):
+    if isinstance(value, (int, float)) and not isinstance(value, bool):
         return value
     try:
         return float(value)
     except (TypeError, ValueError):
         raise SweepSpecError(f"{where}: expected a number, got {value!r}") from None
-
-
-def _parse_axis(path, entry):
-    where = f"parameters.{path}"
-    if isinstance(entry, list):
-        entry = {"values": entry}
-    if not isinstance(entry, dict) or len(entry) != 1:
-        raise SweepSpecError(f"{where}: give exactly one of {GRID_KINDS + RANDOM_KINDS} "
-                             f"(e.g. {{values: [1, 2]}} or {{uniform: [0.8, 1.2]}}), got {entry!r}")
-    kind, arguments = next(iter(entry.items()))
-    if kind not in GRID_KINDS + RANDOM_KINDS:
-        raise SweepSpecError(f"{where}: unknown kind '{kind}'; use one of {GRID_KINDS + RANDOM_KINDS}")
-    if not isinstance(arguments, list) or not arguments:
-        raise SweepSpecError(f"{where}.{kind}: expected a non-empty list, got {arguments!r}")
-    if kind in ("values", "choice"):
-        arguments = [v if isinstance(v, (list, dict)) else _maybe_number(v) for v in arguments]
-    else:
-        expected = 3 if kind in ("linspace", "logspace") else 2
-        if len(arguments) != expected:
-            raise SweepSpecError(f"{where}.{kind}: expected {expected} numbers, got {arguments!r}")
-        arguments = [_number(v, f"{where}.{kind}") for v in arguments]
-        if kind in ("linspace", "logspace") and not (float(arguments[2]).is_integer() and arguments[2] >= 1):
-            raise SweepSpecError(f"{where}.{kind}: the count must be a positive integer, got {arguments[2]}")
-        if kind in ("logspace", "loguniform") and not (arguments[0] > 0 and arguments[1] > 0):
-            raise SweepSpecError(f"{where}.{kind}: bounds must be positive, got {arguments[:2]}")
-        if kind == "uniform" and not arguments[0] <= arguments[1]:
-            raise SweepSpecError(f"{where}.uniform: lower bound {arguments[0]} exceeds upper {arguments[1]}")
-        if kind == "normal" and not arguments[1] >= 0:
-            raise SweepSpecError(f"{where}.normal: the standard deviation must be >= 0, got {arguments[1]}")
-    return Axis(path=path, kind=kind, arguments=arguments)
 
 
 def _maybe_number(value):
@@ -179,74 +203,84 @@ def _maybe_number(value):
     return value
 
 
-KNOWN_KEYS = {"task", "base", "parameters", "samples", "seed", "linearize", "stability", "map"}
+def _axis(path, entry):
+    """An Axis from one ``AxisSpec``, its arguments checked for its kind."""
+    where = f"parameters.{path}"
+    given = [(kind, getattr(entry, kind)) for kind in GRID_KINDS + RANDOM_KINDS if getattr(entry, kind)]
+    if len(given) != 1:
+        raise SweepSpecError(f"{where}: give exactly one non-empty kind of {GRID_KINDS + RANDOM_KINDS} "
+                             f"(e.g. {{values: [1, 2]}} or {{uniform: [0.8, 1.2]}}), got {[k for k, _ in given]}")
+    kind, arguments = given[0]
+    if kind in ("values", "choice"):
+        return Axis(path=path, kind=kind, arguments=[_maybe_number(v) for v in arguments])
+    expected = 3 if kind in ("linspace", "logspace") else 2
+    if len(arguments) != expected:
+        raise SweepSpecError(f"{where}.{kind}: expected {expected} numbers, got {arguments!r}")
+    if kind in ("linspace", "logspace") and not (float(arguments[2]).is_integer() and arguments[2] >= 1):
+        raise SweepSpecError(f"{where}.{kind}: the count must be a positive integer, got {arguments[2]}")
+    if kind in ("logspace", "loguniform") and not (arguments[0] > 0 and arguments[1] > 0):
+        raise SweepSpecError(f"{where}.{kind}: bounds must be positive, got {arguments[:2]}")
+    if kind == "uniform" and not arguments[0] <= arguments[1]:
+        raise SweepSpecError(f"{where}.uniform: lower bound {arguments[0]:g} exceeds upper {arguments[1]:g}")
+    if kind == "normal" and not arguments[1] >= 0:
+        raise SweepSpecError(f"{where}.normal: the standard deviation must be >= 0, got {arguments[1]}")
+    return Axis(path=path, kind=kind, arguments=list(arguments))
 
 
-def parse_spec(data):
-    """A SweepSpec from a dict (the YAML's content); SweepSpecError on anything malformed."""
-    if not isinstance(data, dict):
-        raise SweepSpecError(f"a sweep spec must be a mapping, got {type(data).__name__}")
-    unknown = set(data) - KNOWN_KEYS
-    if unknown:
-        raise SweepSpecError(f"unknown key(s) {sorted(unknown)} in the sweep spec; known: {sorted(KNOWN_KEYS)}")
-    parameters = data.get("parameters")
-    if not isinstance(parameters, dict) or not parameters:
+def parse_spec(spec_file):
+    """A SweepSpec from a ``SweepSpecFile`` (checks what the types cannot: SweepSpecError naming the key)."""
+    if not spec_file.parameters:
         raise SweepSpecError("the sweep spec needs 'parameters': a mapping of config paths to values or distributions")
-    axes = [_parse_axis(str(path), entry) for path, entry in parameters.items()]
-    base = data.get("base") or {}
-    if not isinstance(base, dict):
-        raise SweepSpecError(f"'base' must be a mapping of config paths to values, got {base!r}")
-    overlap = set(base) & set(parameters)
+    axes = [_axis(path, entry) for path, entry in spec_file.parameters.items()]
+    overlap = set(spec_file.base) & set(spec_file.parameters)
     if overlap:
         raise SweepSpecError(f"{sorted(overlap)} are both in 'base' and in 'parameters'")
-    random_axes = [a.path for a in axes if not a.is_grid]
-    samples = data.get("samples", 1)
-    if not (isinstance(samples, int) and samples >= 1):
-        raise SweepSpecError(f"'samples' must be a positive integer, got {samples!r}")
-    if "samples" in data and not random_axes:
+    if not spec_file.samples >= 1:
+        raise SweepSpecError(f"'samples' must be a positive integer, got {spec_file.samples}")
+    if spec_file.samples != 1 and all(axis.is_grid for axis in axes):
         raise SweepSpecError("'samples' is given but no parameter has a distribution (uniform, loguniform, "
                              "normal or choice)")
-    seed = data.get("seed", 0)
-    if not (isinstance(seed, int) and seed >= 0):
-        raise SweepSpecError(f"'seed' must be a non-negative integer, got {seed!r}")
-    linearize = data.get("linearize", {}) or {}
-    unknown = set(linearize) - {"continuous", "discrete"}
-    if unknown:
-        raise SweepSpecError(f"unknown key(s) {sorted(unknown)} in 'linearize'; known: continuous, discrete")
-    stability_data = data.get("stability", {}) or {}
-    known = {f.name for f in dataclasses.fields(StabilityCriteria)}
-    unknown = set(stability_data) - known
-    if unknown:
-        raise SweepSpecError(f"unknown key(s) {sorted(unknown)} in 'stability'; known: {sorted(known)}")
-    stability = StabilityCriteria(**{k: float(_number(v, f"stability.{k}")) for k, v in stability_data.items()})
+    if not spec_file.seed >= 0:
+        raise SweepSpecError(f"'seed' must be a non-negative integer, got {spec_file.seed}")
+    stability = spec_file.stability
     if not 0 < stability.steady_window <= 1:
         raise SweepSpecError(f"stability.steady_window must be in (0, 1], got {stability.steady_window}")
     if not stability.steady_tolerance > 0:
         raise SweepSpecError(f"stability.steady_tolerance must be positive, got {stability.steady_tolerance}")
-    map_data = data.get("map", {}) or {}
+    paths = [axis.path for axis in axes]
+    map_data = {key: getattr(spec_file.map, key) for key in ("x", "y", "facet", "color")
+                if getattr(spec_file.map, key)}
     for key in ("x", "y", "facet"):
-        if key in map_data and map_data[key] not in [a.path for a in axes]:
-            raise SweepSpecError(f"map.{key} = '{map_data[key]}' is not one of the parameters {[a.path for a in axes]}")
-    return SweepSpec(parameters=axes, base=dict(base), task=data.get("task"), samples=samples, seed=seed,
-                     linearize_continuous=bool(linearize.get("continuous", True)),
-                     linearize_discrete=bool(linearize.get("discrete", True)),
-                     stability=stability, map=dict(map_data), source=copy.deepcopy(data))
+        if key in map_data and map_data[key] not in paths:
+            raise SweepSpecError(f"map.{key} = '{map_data[key]}' is not one of the parameters {paths}")
+    return SweepSpec(parameters=axes, base={path: _maybe_number(v) for path, v in spec_file.base.items()},
+                     task=spec_file.task or None, samples=spec_file.samples, seed=spec_file.seed,
+                     linearize_continuous=spec_file.linearize.continuous,
+                     linearize_discrete=spec_file.linearize.discrete, stability=stability, map=map_data,
+                     source=yaml.safe_load(yaml_dump_typed(spec_file)))
 
 
 def load_spec(path=None, text=None):
-    """A SweepSpec from a YAML file or string."""
+    """A SweepSpec from a YAML file or string, loaded with Drake's ``yaml_load_typed`` on
+    ``SweepSpecFile``; any error is one SweepSpecError line naming the key."""
     if (path is None) == (text is None):
         raise ValueError("give exactly one of path and text")
+    where = "the sweep spec"
     if path is not None:
         path = Path(path)
         if not path.is_file():
             raise SweepSpecError(f"sweep spec '{path}' does not exist")
-        text = path.read_text()
+        text, where = path.read_text(), f"sweep spec '{path}'"
     try:
-        data = yaml.safe_load(text)
+        spec_file = yaml_load_typed(schema=SweepSpecFile, data=text)
+    except AssertionError as error:   # a bare list where a mapping belongs (e.g. path: [1, 2])
+        raise SweepSpecError(f"{where}: {error} is a list where a mapping belongs; each parameter takes one kind, "
+                             f"e.g. {{values: {error}}}") from None
+    except (RuntimeError, ValueError, TypeError) as error:
+        raise SweepSpecError(f"{where}: {str(error).splitlines()[0]}") from None
     except yaml.YAMLError as error:
-        raise SweepSpecError(f"the sweep spec is not valid YAML: {error}") from None
-    return parse_spec(data)
+        raise SweepSpecError(f"{where} is not valid YAML: {str(error).splitlines()[0]}") from None
+    return parse_spec(spec_file)
 
 
 # ------------------------------------------------------------------------------------------------
