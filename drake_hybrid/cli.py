@@ -4,10 +4,17 @@
     drake-hybrid analyze window-washing [--mode MODE] [--json FILE] [--plot FILE.png] [--config FILE]
     drake-hybrid sweep window-washing --grid SPEC.yaml [--out DIR] [--scheduler ADDRESS] [--workers N] [--resume]
     drake-hybrid tasks
+
+Bad input (a config field, a flag, a file) prints one line naming it and exits 2; a run that
+stops early (sensor fault, an error inside the simulation, Ctrl-C) writes what it logged up to
+the stop, prints why and exits 1. --traceback (or DRAKE_HYBRID_TRACEBACK=1) shows the full
+Python traceback instead.
 """
 
 import argparse
 import json
+import math
+import os
 import sys
 from pathlib import Path
 
@@ -18,7 +25,7 @@ from pydrake.geometry import Meshcat
 
 from drake_hybrid.analysis.linearization import linearize_continuous, linearize_discrete
 from drake_hybrid.control.gains import ControlMode
-from drake_hybrid.experiments.simulation import simulate
+from drake_hybrid.experiments.simulation import RunStopped, simulate
 from drake_hybrid.experiments.sweep import read_results, run_sweep
 from drake_hybrid.experiments.sweep_spec import SweepSpecError, load_spec
 from drake_hybrid.scenario.config import load_config
@@ -28,19 +35,63 @@ from drake_hybrid.viz.outputs import write_run
 from drake_hybrid.viz.plotting import eigenvalue_figure, save_sweep_plots
 
 
+class UsageError(ValueError):
+    """Bad command-line input (printed as one line, exit code 2)."""
+
+
+def _options(args):
+    """--option KEY=VALUE pairs as a dict (UsageError for an entry without '=')."""
+    options = {}
+    for option in getattr(args, "option", None) or []:
+        if "=" not in option:
+            raise UsageError(f"--option takes KEY=VALUE, got '{option}'")
+        key, value = option.split("=", 1)
+        options[key] = value
+    return options
+
+
+def _check_output_paths(args):
+    """Refuse, before anything runs, output paths that cannot be written (UsageError naming the flag)."""
+    for flag in ("out",):
+        value = getattr(args, flag, None)
+        if value and Path(value).exists() and not Path(value).is_dir():
+            raise UsageError(f"--{flag} '{value}' exists and is not a directory")
+        if value and not os.access(_existing_ancestor(Path(value)), os.W_OK):
+            raise UsageError(f"--{flag} '{value}' cannot be created (no write permission)")
+    for flag in ("html", "json", "plot"):
+        value = getattr(args, flag, None)
+        if not value or isinstance(value, bool):
+            continue
+        path = Path(value)
+        if path.is_dir():
+            raise UsageError(f"--{flag} '{value}' is a directory; give a file name")
+        if not path.parent.is_dir():
+            raise UsageError(f"--{flag} '{value}': the folder '{path.parent}' does not exist")
+        if not os.access(path.parent, os.W_OK) or (path.exists() and not os.access(path, os.W_OK)):
+            raise UsageError(f"--{flag} '{value}' is not writable")
+
+
+def _existing_ancestor(path):
+    path = path.absolute()
+    while not path.exists():
+        path = path.parent
+    return path
+
+
 def _config(args):
+    _check_output_paths(args)
     task = get_task(args.task)
-    options = dict(option.split("=", 1) for option in (getattr(args, "option", None) or []))
+    options = _options(args)
     config = task.default_config(options) if options else task.default_config()
     if getattr(args, "config", None):
         config = load_config(path=args.config, defaults=config)
         if config.task != task.name:
-            raise SystemExit(f"--config is for task '{config.task}', not '{task.name}'")
+            raise UsageError(f"--config is for task '{config.task}', not '{task.name}'")
     if getattr(args, "mode", None):
         config.mode = args.mode
     if getattr(args, "duration", None) is not None:
-        if not args.duration > 0:
-            raise SystemExit(f"--duration must be positive, got {args.duration}")
+        if not 0 < args.duration < math.inf:
+            raise UsageError(f"--duration must be positive and finite (s), got {args.duration}")
         config.duration = args.duration
     return config
 
@@ -58,12 +109,20 @@ def command_simulate(args):
 
         meshcat = Meshcat()
         set_task_camera(meshcat, get_task(config.task))
-    result = simulate(config, progress=not args.no_progress, meshcat=meshcat, record_html=bool(args.html))
+    try:
+        result, stopped = simulate(config, progress=not args.no_progress, meshcat=meshcat,
+                                   record_html=bool(args.html)), None
+    except RunStopped as error:
+        result, stopped = error.result, error
     files = write_run(result, out, plots=not args.no_plots)
-    if args.html:
+    if args.html and result.html:
         Path(args.html).write_text(result.html)
         files.append(Path(args.html))
     s = result.summary
+    if stopped is not None:
+        print(f"{s['task']}: {stopped}", file=sys.stderr)
+        print(f"  wrote what was logged up to the stop: {', '.join(str(f) for f in files)}", file=sys.stderr)
+        return 1
     print(f"{s['task']} ({s['mode']}), {s['duration']:.2f} s simulated in {s['wall_time']:.1f} s "
           f"(real-time factor {s['real_time_factor']:.2f})")
     print(f"  designed eigenvalues: {_fmt(np.array([complex(*e) for e in s['predicted_eigenvalues']]))}"
@@ -116,13 +175,15 @@ def command_analyze(args):
 
 
 def command_sweep(args):
+    _check_output_paths(args)
     out = Path(args.out) if args.out else Path("runs") / f"sweep-{args.task}"
     try:
         spec = load_spec(path=args.grid)
         run = run_sweep(args.task, spec, out, scheduler=args.scheduler, workers=args.workers, resume=args.resume,
                         retry_failed=args.retry_failed, progress=not args.no_progress)
     except (SweepSpecError, ValueError) as error:
-        raise SystemExit(f"drake-hybrid sweep: {error}") from None
+        print(f"drake-hybrid sweep: {_one_line(error)}", file=sys.stderr)
+        return 2
     rows = read_results(run.results_path)
     stable = sum(1 for row in rows if row.get("stable"))
     print(f"{args.task}: {run.evaluated} of {run.points} points evaluated in {run.wall_time:.1f} s on {run.workers}; "
@@ -144,8 +205,12 @@ def make_parser():
     parser = argparse.ArgumentParser(prog="drake-hybrid", description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     sub = parser.add_subparsers(dest="command", required=True)
+    common = argparse.ArgumentParser(add_help=False)
+    common.add_argument("--traceback", action="store_true",
+                        help="show the full Python traceback of an error (also DRAKE_HYBRID_TRACEBACK=1)")
     modes = [m.value for m in ControlMode]
-    simulate = sub.add_parser("simulate", help="simulate a task (discrete 1 kHz plant and controller)")
+    simulate = sub.add_parser(
+        "simulate", parents=[common], help="simulate a task (discrete 1 kHz plant and controller)")
     simulate.add_argument("task", choices=sorted(TASKS))
     simulate.add_argument("--duration", type=float, help="simulated time (s)")
     simulate.add_argument("--out", help="output directory (default ./runs/<task>)")
@@ -158,7 +223,8 @@ def make_parser():
     simulate.add_argument("--no-progress", action="store_true", help="no progress bar")
     simulate.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
     simulate.set_defaults(func=command_simulate)
-    analyze = sub.add_parser("analyze", help="linearize the closed loop; predicted vs. measured eigenvalues")
+    analyze = sub.add_parser(
+        "analyze", parents=[common], help="linearize the closed loop; predicted vs. measured eigenvalues")
     analyze.add_argument("task", choices=sorted(TASKS))
     analyze.add_argument("--mode", choices=modes)
     analyze.add_argument("--config", help="YAML scenario config")
@@ -167,7 +233,8 @@ def make_parser():
     analyze.add_argument("--plot", help="write the eigenvalue figure (predicted vs. linearized) to this PNG")
     analyze.add_argument("--tolerance", type=float, default=0.05, help="relative tolerance of the match")
     analyze.set_defaults(func=command_analyze)
-    sweep = sub.add_parser("sweep", help="stability map / Monte Carlo sweep over config fields (Dask)")
+    sweep = sub.add_parser(
+        "sweep", parents=[common], help="stability map / Monte Carlo sweep over config fields (Dask)")
     sweep.add_argument("task", choices=sorted(TASKS))
     sweep.add_argument("--grid", required=True, help="sweep spec YAML (see drake_hybrid/sweep_spec.py)")
     sweep.add_argument("--out", help="output directory (default ./runs/sweep-<task>)")
@@ -179,14 +246,37 @@ def make_parser():
     sweep.add_argument("--plot", action="store_true", help="write the stability map / histograms (spec's map:)")
     sweep.add_argument("--no-progress", action="store_true", help="no progress bar")
     sweep.set_defaults(func=command_sweep)
-    tasks = sub.add_parser("tasks", help="list the tasks")
+    tasks = sub.add_parser("tasks", parents=[common], help="list the tasks")
     tasks.set_defaults(func=command_tasks)
     return parser
 
 
 def main(argv=None):
     args = make_parser().parse_args(argv)
-    return args.func(args)
+    if args.traceback or os.environ.get("DRAKE_HYBRID_TRACEBACK", "") not in ("", "0"):
+        return args.func(args)
+    try:
+        return args.func(args)
+    except SystemExit:
+        raise
+    except KeyboardInterrupt:
+        print(f"drake-hybrid {args.command}: interrupted", file=sys.stderr)
+        return 130
+    except (ValueError, TypeError, KeyError, FileNotFoundError) as error:   # bad input: config, flags, files
+        print(f"drake-hybrid {args.command}: {_one_line(error)}", file=sys.stderr)
+        return 2
+    except Exception as error:   # noqa: BLE001 -- anything else: one line, with the way to see more
+        print(f"drake-hybrid {args.command}: {type(error).__name__}: {_one_line(error)} "
+              "(run with --traceback for details)", file=sys.stderr)
+        return 1
+
+
+def _one_line(error):
+    """The first line of an error's message (its type's name if it has none)."""
+    text = str(error).strip()
+    if isinstance(error, KeyError) and len(error.args) == 1:
+        text = str(error.args[0])
+    return text.splitlines()[0] if text else type(error).__name__
 
 
 if __name__ == "__main__":

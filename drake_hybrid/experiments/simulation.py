@@ -5,6 +5,12 @@ Simulator (with an optional progress bar and Meshcat recording) and returns a
 ``SimulationResult`` with the log (arrays keyed as in ``log.npz``) and the
 summary (as in ``summary.json``); ``viz.outputs.write_run(result, out_dir)`` writes both
 plus the tracking plots.
+
+A run that stops early is never reported as a success: a sensor fault (the measured wrench
+non-finite for longer than ``sensor.fault_time``), an error raised inside the simulation, or an
+interrupt (Ctrl-C) ends it at that time and ``simulate`` raises ``RunStopped``, whose ``result``
+holds the log up to the stop and a summary with ``status`` ("fault", "error" or "interrupted"),
+``stop_time`` and ``stop_reason`` (a completed run has ``status`` "completed").
 """
 
 import math
@@ -16,6 +22,7 @@ import numpy as np
 from tqdm import tqdm
 
 from pydrake.systems.analysis import ApplySimulatorConfig, Simulator
+from pydrake.systems.framework import EventStatus
 
 from drake_hybrid.analysis.linearization import controller_prediction, design_time_constant, predicted_errors
 from drake_hybrid.scenario.builder import build_scenario
@@ -31,6 +38,41 @@ class SimulationResult:
     scenario: object = None
     html: str = None
     extra: dict = field(default_factory=dict)
+
+
+class RunStopped(RuntimeError):
+    """The run stopped before its duration; ``result`` holds its log and summary up to the stop
+    (an error raised inside the run is the ``__cause__``)."""
+
+    def __init__(self, result):
+        summary = result.summary
+        super().__init__(f"the run stopped at t = {summary['stop_time']:.4g} s ({summary['status']}): "
+                         f"{summary['stop_reason']}")
+        self.result = result
+
+
+def sensor_fault_monitor(scenario, fault_time, stop):
+    """A Simulator monitor that ends the run when the wrench the controller reads has been
+    non-finite for longer than ``fault_time`` (s); it fills ``stop`` (status, time, reason)."""
+    controller = scenario.controller
+    port = controller.get_measured_wrench_input_port()
+    invalid_since = [None]
+
+    def monitor(root_context):
+        time_now = root_context.get_time()
+        if np.all(np.isfinite(port.Eval(controller.GetMyContextFromRoot(root_context)))):
+            invalid_since[0] = None
+            return EventStatus.Succeeded()
+        if invalid_since[0] is None:
+            invalid_since[0] = time_now
+        if time_now - invalid_since[0] > fault_time:
+            stop.update(status="fault", time=time_now, reason=(
+                f"sensor fault: the measured wrench has been non-finite since t = {invalid_since[0]:.4g} s, longer "
+                f"than sensor.fault_time = {fault_time:g} s"))
+            return EventStatus.ReachedTermination(controller, stop["reason"])
+        return EventStatus.Succeeded()
+
+    return monitor
 
 
 def _logged(scenario, context, name):
@@ -53,25 +95,39 @@ def settling_time(times, error_norm, bound):
 
 
 def simulate(config, progress=False, meshcat=None, record_html=False):
-    """Simulate ``config``; returns a SimulationResult (log arrays and summary)."""
+    """Simulate ``config``; returns a SimulationResult (log arrays and summary).
+
+    Raises RunStopped (with the result up to the stop) if the run ends early: see the module
+    docstring."""
     scenario = build_scenario(config, meshcat=meshcat)
     simulator = Simulator(scenario.diagram)
     ApplySimulatorConfig(config.simulator, simulator)
     context = simulator.get_mutable_context()
     set_initial_conditions(scenario, context)
+    stop = {}
+    simulator.set_monitor(sensor_fault_monitor(scenario, float(config.sensor.fault_time), stop))
     if meshcat is not None and record_html:
         meshcat.StartRecording(set_visualizations_while_recording=False)
     simulator.Initialize()
     start = time.perf_counter()
     duration = float(config.duration)
-    if progress:
-        steps = 100
-        with tqdm(total=steps, desc=f"simulating {config.task}", unit="%", leave=False) as bar:
-            for i in range(1, steps + 1):
-                simulator.AdvanceTo(duration * i / steps)
-                bar.update(1)
-    else:
-        simulator.AdvanceTo(duration)
+    try:
+        if progress:
+            steps = 100
+            with tqdm(total=steps, desc=f"simulating {config.task}", unit="%", leave=False) as bar:
+                for i in range(1, steps + 1):
+                    simulator.AdvanceTo(duration * i / steps)
+                    bar.update(1)
+                    if stop:
+                        break
+        else:
+            simulator.AdvanceTo(duration)
+    except KeyboardInterrupt:
+        stop.update(status="interrupted", time=context.get_time(), reason="interrupted (Ctrl-C)")
+    except Exception as error:   # noqa: BLE001 -- any error inside the run: keep what was logged
+        message = str(error).strip().splitlines()[0] if str(error).strip() else ""
+        stop.update(status="error", time=context.get_time(), reason=f"{type(error).__name__}: {message}",
+                    error=error)
     wall = time.perf_counter() - start
     html = None
     if meshcat is not None and record_html:
@@ -79,8 +135,20 @@ def simulate(config, progress=False, meshcat=None, record_html=False):
         meshcat.PublishRecording()
         html = meshcat.StaticHtml()
     log = collect_log(scenario, context)
-    summary = summarize(scenario, log, wall)
-    return SimulationResult(config=config, log=log, summary=summary, scenario=scenario, html=html)
+    if stop and len(log["t"]) < 2:
+        summary = {"task": config.task, "mode": scenario.controller.mode.value, "duration": duration}
+    else:
+        summary = summarize(scenario, log, wall)
+    summary.update(status=stop.get("status", "completed"), stop_time=float(stop.get("time", context.get_time())),
+                   stop_reason=stop.get("reason"))
+    if summary["status"] == "fault":
+        # The controller took F = F_d while the wrench was invalid: its force error is not a measurement.
+        for key in [key for key in summary if "force_error" in key or key == "force_settling_time_1_percent"]:
+            summary[key] = None
+    result = SimulationResult(config=config, log=log, summary=summary, scenario=scenario, html=html)
+    if stop:
+        raise RunStopped(result) from stop.get("error")
+    return result
 
 
 def collect_log(scenario, context):

@@ -66,7 +66,7 @@ from tqdm import tqdm
 from drake_hybrid.analysis.linearization import linearize_continuous, linearize_sampled_loop, predicted_eigenvalues
 from drake_hybrid.control.gains import ControlMode
 from drake_hybrid.core.errors import GainError
-from drake_hybrid.experiments.simulation import simulate
+from drake_hybrid.experiments.simulation import RunStopped, simulate
 from drake_hybrid.experiments.sweep_spec import (StabilityCriteria, SweepSpecError, apply_parameters, parameters_digest,
                                                  set_config_value)
 from drake_hybrid.scenario.config import dump_config, load_config
@@ -157,6 +157,9 @@ def evaluate_point(config_yaml, criteria=None, continuous=True, discrete=True):
         return row
     try:
         row.update(simulation_metrics(simulate(config), criteria))
+    except RunStopped as stopped:            # a fault or an error mid-run: never a stable point
+        row["stable_simulation"] = False
+        errors.append(f"simulation: {stopped}")
     except Exception as error:
         errors.append(_stage_error("simulation", error))
     linearization_start = time.perf_counter()

@@ -92,9 +92,11 @@ class WrenchPathConfig:
     bandwidth_hz: float = 0.0                    # first-order low-pass; 0 = none (a continuous plant needs one)
     condition: bool = False                      # a WrenchConditioner (dropout rejection, tare, the low-pass)
     max_hold_time: float = 0.01                  # s, how long the conditioner bridges a dropout by holding
+    fault_time: float = 0.05                     # s, a wrench invalid (non-finite) this long is a sensor fault:
+                                                 # the run stops there and reports it (inf = never)
 
     def validate(self, prefix="sensor."):
-        check_fields(self, prefix, nonnegative=("bandwidth_hz", "max_hold_time"))
+        check_fields(self, prefix, nonnegative=("bandwidth_hz", "max_hold_time"), positive=("fault_time",))
 
 
 @dataclass
