@@ -5,6 +5,9 @@ kind can catch ``ValueError``; tests and users that do care can catch the
 specific type. Messages always name the offending object and the numbers.
 """
 
+import dataclasses
+import math
+
 
 class DrakeHybridError(ValueError):
     """Base class of every error raised on purpose by drake_hybrid."""
@@ -62,4 +65,30 @@ def check_fields(owner, prefix, positive=(), nonnegative=(), error=ConfigError):
             number = getattr(owner, name)
             if not test(float(number)):
                 raise error(f"{prefix}{name} must be {words}, got {number}")
+    return owner
+
+
+def check_finite(owner, prefix="", allow_infinite=()):
+    """Raise ConfigError naming the field for a NaN anywhere among the numbers of a config
+    dataclass (its fields, lists, dicts and nested config dataclasses), and for +-inf except in the
+    fields named (dotted, relative to ``owner``) in ``allow_infinite``. Other objects (e.g. Drake's
+    config structs, checked by their own validators) are skipped."""
+    def walk(value, name):
+        if isinstance(value, bool) or value is None:
+            return
+        if isinstance(value, (int, float)):
+            if math.isnan(value) or (math.isinf(value) and name.split("[")[0] not in allow_infinite):
+                allowed = "a finite number" + (" or inf" if name.split("[")[0] in allow_infinite else "")
+                raise ConfigError(f"{prefix}{name} must be {allowed}, got {value}")
+        elif isinstance(value, (list, tuple)):
+            for index, item in enumerate(value):
+                walk(item, f"{name}[{index}]")
+        elif isinstance(value, dict):
+            for key, item in value.items():
+                walk(item, f"{name}.{key}")
+        elif dataclasses.is_dataclass(value):
+            for item in dataclasses.fields(value):
+                walk(getattr(value, item.name), f"{name}.{item.name}" if name else item.name)
+
+    walk(owner, "")
     return owner

@@ -16,7 +16,6 @@ holds the log up to the stop and a summary with ``status`` ("fault", "error" or 
 import math
 import time
 from dataclasses import dataclass, field
-from pathlib import Path
 
 import numpy as np
 from tqdm import tqdm
@@ -26,7 +25,6 @@ from pydrake.systems.framework import EventStatus
 
 from drake_hybrid.analysis.linearization import controller_prediction, design_time_constant, predicted_errors
 from drake_hybrid.scenario.builder import build_scenario
-from drake_hybrid.scenario.config import dump_config
 from drake_hybrid.scenario.start import set_initial_conditions
 
 

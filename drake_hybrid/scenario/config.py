@@ -20,7 +20,10 @@ the dotted field name; ``ScenarioConfig.validate`` calls them all.
 
 import dataclasses
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Dict, List, Union
+
+import yaml
 
 from pydrake.common.yaml import yaml_dump_typed, yaml_load_typed
 from pydrake.multibody.plant import MultibodyPlantConfig
@@ -29,7 +32,7 @@ from pydrake.systems.analysis import SimulatorConfig
 from drake_hybrid.control.gains import HybridGains
 from drake_hybrid.control.safety import SafetyConfig
 from drake_hybrid.control.supervision import SupervisionConfig
-from drake_hybrid.core.errors import ConfigError, check_fields
+from drake_hybrid.core.errors import ConfigError, check_fields, check_finite
 from drake_hybrid.systems.faults import SensorFaultConfig
 from drake_hybrid.systems.sources import Profile
 
@@ -209,9 +212,14 @@ class ScenarioConfig:
         """Check every field's value, once (the types were checked by the YAML loader); ConfigError
         naming the field. The gains and profiles are checked against the task's sizes by the systems
         that use them (HybridController, ProfileSource), the start by ``scenario.start.check_start``."""
-        if self.control_period < 0:
+        check_finite(self, allow_infinite=ALLOWED_INFINITE)
+        if not self.control_period >= 0:
             raise ConfigError(f"control_period must be >= 0 (0 means continuous), got {self.control_period}")
         check_fields(self, "", positive=("duration", "log_period"))
+        for name in ("control_period", "log_period"):
+            if getattr(self, name) >= self.duration:
+                raise ConfigError(f"{name} ({getattr(self, name):g} s) must be shorter than duration "
+                                  f"({self.duration:g} s)")
         if not isinstance(self.sensor, (ContactSensorConfig, WristSensorConfig)):
             raise ConfigError(f"sensor must be a ContactSensorConfig or a WristSensorConfig (YAML tags "
                               f"!ContactSensorConfig, !WristSensorConfig), got {self.sensor!r}")
@@ -223,6 +231,14 @@ class ScenarioConfig:
         self.model_error.validate()
         self.sensor_faults.validate()
         self.supervision.validate()
+        step, period = self.plant.time_step, self.control_period
+        if step > 0 and period > 0 and step > period * (1 + 1e-9):
+            raise ConfigError(f"plant.time_step ({self.plant.time_step:g} s) must not exceed control_period "
+                              f"({self.control_period:g} s): the controller would act on states the plant has not "
+                              "stepped to")
+        if not self.start.in_contact and not self.supervision.approach_speed > 0:
+            raise ConfigError("supervision.approach_speed must be > 0 with start.in_contact: false (the tool "
+                              "would never reach the surface)")
         sampled_parts = [name for name, used in (("supervision (or a start off the surface)", self.supervised),
                                                  ("sensor_faults", self.sensor_faults.active()),
                                                  ("sensor.condition", self.sensor.condition)) if used]
@@ -239,15 +255,52 @@ class ScenarioConfig:
         return self
 
 
+# Fields where inf is a meaningful value (all others must be finite numbers; NaN never).
+ALLOWED_INFINITE = ("sensor.fault_time", "safety.effort_limits", "supervision.max_travel")
+
+
 def load_config(path=None, data=None, defaults=None):
     """A ScenarioConfig from a YAML file or string, on top of ``defaults``; ConfigError (one line)
-    for an unknown key, a wrong type or an unknown sensor tag."""
+    for an unknown key, a wrong type, a repeated key or an unknown sensor tag."""
+    where = f"{path}: " if path else ""
+    if path is not None and not Path(path).is_file():
+        raise ConfigError(f"config file '{path}' does not exist")
+    check_unique_keys(Path(path).read_text() if path is not None else data, where)
     try:
         return yaml_load_typed(schema=ScenarioConfig, filename=path, data=data,
                                defaults=defaults if defaults is not None else ScenarioConfig())
+    except AssertionError as error:    # Drake's loader: a scalar or list where a section belongs
+        raise ConfigError(f"{where}expected a section (a mapping of fields) where the YAML gives {error}") from None
     except (RuntimeError, ValueError, TypeError) as error:
-        where = f"{path}: " if path else ""
         raise ConfigError(f"{where}{str(error).splitlines()[0]}") from None
+
+
+class _UniqueKeyLoader(yaml.SafeLoader):
+    """A YAML loader that refuses a key given twice in one mapping (and accepts any !Tag)."""
+
+    def construct_mapping(self, node, deep=False):
+        seen = set()
+        for key_node, _ in node.value:
+            key = self.construct_object(key_node, deep=deep)
+            if key in seen:
+                raise ConfigError(f"the key '{key}' is given twice (line {key_node.start_mark.line + 1}); "
+                                  "YAML would silently keep the last one")
+            seen.add(key)
+        return super().construct_mapping(node, deep=deep)
+
+
+_UniqueKeyLoader.add_multi_constructor("!", lambda loader, suffix, node: (
+    loader.construct_mapping(node) if isinstance(node, yaml.MappingNode) else None))
+
+
+def check_unique_keys(text, where=""):
+    """ConfigError if a mapping in the YAML ``text`` repeats a key (Drake's loader keeps the last)."""
+    try:
+        yaml.load(text, Loader=_UniqueKeyLoader)
+    except ConfigError as error:
+        raise ConfigError(f"{where}{error}") from None
+    except yaml.YAMLError as error:
+        raise ConfigError(f"{where}not valid YAML: {str(error).splitlines()[0]}") from None
 
 
 def dump_config(config):
