@@ -43,7 +43,7 @@ from drake_hybrid.control.gains import HybridGains
 from drake_hybrid.core.kinematics import inverse_kinematics
 from drake_hybrid.scenario.config import ScenarioConfig, StartConfig
 from drake_hybrid.scenario.parsing import ConfigureParser
-from drake_hybrid.scenario.plant import RobotModel
+from drake_hybrid.scenario.plant import RobotModel, get_frame
 from drake_hybrid.scenario.start import pressing_positions
 from drake_hybrid.scenario.task import Task
 from drake_hybrid.scenario.tasks.robots import add_pad_tool
@@ -114,7 +114,7 @@ def attach_pad_tool(plant, arm, flange_frame, X_flange_tool=None):
     the arm's own collision shapes touch neither each other nor the workpiece (watch the
     animation for clearance), so only the pad makes contact."""
     parser = ConfigureParser(Parser(plant))
-    frame = plant.GetFrameByName(flange_frame, arm) if isinstance(flange_frame, str) else flange_frame
+    frame = get_frame(plant, flange_frame, arm, "flange_frame") if isinstance(flange_frame, str) else flange_frame
     tool, weld, pad = add_pad_tool(plant, parser, frame, X_flange_tool if X_flange_tool is not None
                                    else RigidTransform())
     return RobotModel(arm=arm, model_instances=[arm, tool], end_effector_frame="pad_center",
