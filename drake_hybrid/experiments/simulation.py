@@ -5,6 +5,19 @@ Simulator (with an optional progress bar and Meshcat recording) and returns a
 ``SimulationResult`` with the log (arrays keyed as in ``log.npz``) and the
 summary (as in ``summary.json``); ``viz.outputs.write_run(result, out_dir)`` writes both
 plus the tracking plots.
+
+The result also holds the built ``scenario`` (its ``diagram``, ``plant``, ``controller``, ...),
+the ``simulator`` and its root ``context`` after the run. To act during the run (a monitor, a
+visualizer, a changed parameter), pass ``setup``: it is called as ``setup(scenario, simulator,
+context)`` after the start is set and before ``Simulator.Initialize``::
+
+    def watch(scenario, simulator, context):        # stop the run if the force gets too large
+        force = scenario.controller.GetOutputPort("force")
+        simulator.set_monitor(lambda root: EventStatus.ReachedTermination(None, "too hard")
+                              if abs(force.Eval(scenario.controller.GetMyContextFromRoot(root))[0]) > 50
+                              else EventStatus.Succeeded())
+
+    result = simulate(config, setup=watch)
 """
 
 import math
@@ -28,9 +41,11 @@ class SimulationResult:
     config: object
     log: dict
     summary: dict
-    scenario: object = None
+    scenario: object = None                      # the built Scenario: diagram, plant, controller, ...
     html: str = None
     extra: dict = field(default_factory=dict)
+    simulator: object = None                     # Drake's Simulator after the run
+    context: object = None                       # its root context (the diagram's) at the end
 
 
 def _logged(scenario, context, name):
@@ -52,13 +67,17 @@ def settling_time(times, error_norm, bound):
     return float(times[outside[-1] + 1])
 
 
-def simulate(config, progress=False, meshcat=None, record_html=False):
-    """Simulate ``config``; returns a SimulationResult (log arrays and summary)."""
+def simulate(config, progress=False, meshcat=None, record_html=False, setup=None):
+    """Simulate ``config``; returns a SimulationResult (log arrays, summary, scenario, simulator and
+    context). ``setup(scenario, simulator, context)``, if given, runs after the start is set and
+    before ``Simulator.Initialize`` (e.g. ``simulator.set_monitor``)."""
     scenario = build_scenario(config, meshcat=meshcat)
     simulator = Simulator(scenario.diagram)
     ApplySimulatorConfig(config.simulator, simulator)
     context = simulator.get_mutable_context()
     set_initial_conditions(scenario, context)
+    if setup is not None:
+        setup(scenario, simulator, context)
     if meshcat is not None and record_html:
         meshcat.StartRecording(set_visualizations_while_recording=False)
     simulator.Initialize()
@@ -80,7 +99,8 @@ def simulate(config, progress=False, meshcat=None, record_html=False):
         html = meshcat.StaticHtml()
     log = collect_log(scenario, context)
     summary = summarize(scenario, log, wall)
-    return SimulationResult(config=config, log=log, summary=summary, scenario=scenario, html=html)
+    return SimulationResult(config=config, log=log, summary=summary, scenario=scenario, html=html,
+                            simulator=simulator, context=context)
 
 
 def collect_log(scenario, context):

@@ -31,6 +31,9 @@ and every time ``add_robot(plant)`` parses it (the simulation plant and the cont
 Unknown frames raise ``UnknownFrameError`` listing the model's frames. The joint-guess finder
 (``LoadedArm.find_joint_guess``) runs Drake's ``InverseKinematics`` from several seeds within the
 joint limits and keeps the solution whose pad Jacobian is best conditioned.
+
+Size: the file's rewriting, the plant-level fixes and the joint-guess finder are one idea (an arm
+as a model package ships it, made usable) and write one report.
 """
 
 import hashlib
