@@ -10,7 +10,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-import sympy
+import trimesh
 
 from pydrake.geometry import Box
 from pydrake.math import RigidTransform, RotationMatrix
@@ -121,6 +121,45 @@ def test_gripper_welded_and_tool_frame(cache):
     X_WT = arm.plant.GetFrameByName("panda_hand_tcp").CalcPoseInWorld(context)
     X_WP = arm.plant.GetFrameByName("pad_center").CalcPoseInWorld(context)
     np.testing.assert_allclose(X_WT.inverse().multiply(X_WP).translation(), [0, 0, 0.05], atol=1e-12)
+
+
+SDF_ARM = """<?xml version="1.0"?>
+<sdf version="1.9">
+  <model name="two_link">
+    <link name="base">
+      <inertial><mass>2.0</mass><inertia><ixx>0.01</ixx><iyy>0.01</iyy><izz>0.01</izz></inertia></inertial>
+      <collision name="base_collision"><geometry><mesh><uri>block.stl</uri></mesh></geometry></collision>
+    </link>
+    <link name="link1">
+      <pose>0 0 0.1 0 0 0</pose>
+      <inertial><mass>1.0</mass><inertia><ixx>0.01</ixx><iyy>0.01</iyy><izz>0.01</izz></inertia></inertial>
+      <visual name="link1_visual"><geometry><mesh><uri>block.stl</uri></mesh></geometry></visual>
+    </link>
+    <link name="link2">
+      <pose>0 0 0.4 0 0 0</pose>
+      <inertial><mass>1.0</mass><inertia><ixx>0.01</ixx><iyy>0.01</iyy><izz>0.01</izz></inertia></inertial>
+    </link>
+    <joint name="joint1" type="revolute">
+      <parent>base</parent><child>link1</child>
+      <axis><xyz>0 0 1</xyz><limit><lower>-2</lower><upper>2</upper><effort>40</effort></limit></axis>
+    </joint>
+    <joint name="joint2" type="revolute">
+      <parent>link1</parent><child>link2</child>
+      <axis><xyz>0 1 0</xyz><limit><lower>-2</lower><upper>2</upper><effort>25</effort></limit></axis>
+    </joint>
+  </model>
+</sdf>
+"""
+
+
+def test_sdf_model(cache, tmp_path):
+    trimesh.creation.box((0.1, 0.1, 0.1)).export(tmp_path / "block.stl")
+    (tmp_path / "two_link.sdf").write_text(SDF_ARM)
+    arm = load_arm(tmp_path / "two_link.sdf", flange="link2", cache_dir=cache)
+    assert len(arm.report.converted_meshes) == 1 and arm.report.effort_limits == {"joint1": 40.0, "joint2": 25.0}
+    assert any(line.startswith("floating base 'base'") for line in arm.report.changes)
+    plant, _ = simulation_plant(arm)
+    assert plant.num_positions() == plant.num_actuators() == 2
 
 
 def test_collision_meshes_dropped(cache):
@@ -266,16 +305,16 @@ def tracking(arm, name, x):
     return summary
 
 
-def test_loaded_six_dof_arm_tracks_on_a_plane(kinova):
+def test_loaded_six_dof_arm_tracks_on_a_plane(ur10):
     # Five time constants: 0.5 s; measured 0.66 % (velocity, the transient's tail) and 1e-4 % (force).
-    summary = tracking(kinova, "kinova-plane", 0.45)
+    summary = tracking(ur10, "ur10-plane", 0.7)
     assert summary["max_velocity_error_percent_after_5_time_constants"] <= 2.0
     assert summary["max_force_error_percent_after_5_time_constants"] <= 2.0
 
 
 @pytest.mark.slow
-def test_loaded_ur10_tracks_on_a_plane(ur10):
-    summary = tracking(ur10, "ur10-plane", 0.7)
+def test_loaded_kinova_tracks_on_a_plane(kinova):
+    summary = tracking(kinova, "kinova-plane", 0.45)
     assert summary["max_velocity_error_percent_after_5_time_constants"] <= 2.0
     assert summary["max_force_error_percent_after_5_time_constants"] <= 2.0
 

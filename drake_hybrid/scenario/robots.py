@@ -403,6 +403,9 @@ def fix_arm(plant, model_instance, flange, tool_frame, base_pose, effort_limits,
         note(f"kept the model's actuators (transmissions) of {kept} joints")
     if unlimited:
         note(f"no effort limit in the model for {', '.join(unlimited)}: unlimited")
+    damped = [f"{joint.name()} {joint.default_damping():g}" for joint in arm_joints if joint.default_damping() > 0]
+    if damped:
+        note(f"kept the model's joint damping (N m s/rad): {', '.join(damped)}")
     if report is not None:
         report.arm_joints = [joint.name() for joint in arm_joints]
     return flange_frame, tool
