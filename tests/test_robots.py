@@ -194,12 +194,20 @@ def on_plane(x):
     return RigidTransform(RotationMatrix.MakeXRotation(np.pi), [x, 0.0, PLANE_HEIGHT + PAD_RADIUS])
 
 
+def plate_at(x, height=PLANE_HEIGHT):
+    """add_workpiece of a 60 cm square plate, 5 cm thick, its top at ``height``, centred at (x, 0)."""
+    def add_plate(plant):
+        return add_rigid_workpiece(plant, Box(0.6, 0.6, 0.05), RigidTransform([x, 0.0, height - 0.025]), name="plate")
+    return add_plate
+
+
 @pytest.mark.parametrize("name, x", [("ur10", 0.7), ("kinova", 0.45)])
 def test_joint_guess_on_the_surface(name, x, request):
     arm = request.getfixturevalue(name)
     target = on_plane(x)
-    guess = arm.find_joint_guess(target, seeds=8)
-    assert guess.solutions >= 1
+    plate = plate_at(x)
+    guess = arm.find_joint_guess(target, seeds=8, add_workpiece=plate)
+    assert guess.solutions >= 1 and arm.workpiece_penetrations(plate, guess.positions) == []
     X = arm.pad_pose(guess.positions)
     np.testing.assert_allclose(X.translation(), target.translation(), atol=1e-5)
     assert X.rotation().inverse().multiply(target.rotation()).ToAngleAxis().angle() < 1e-5
@@ -207,6 +215,15 @@ def test_joint_guess_on_the_surface(name, x, request):
     assert np.all(guess.positions >= lower) and np.all(guess.positions <= upper) and guess.limit_margin >= 0.05 - 1e-6
     assert guess.condition_number == pytest.approx(arm.condition_number(guess.positions))
     assert guess.condition_number < 20
+
+
+def test_joint_guess_keeps_the_links_off_the_workpiece(ur10):
+    # The best-conditioned solution from these seeds puts the UR10's forearm through the plate.
+    plate = plate_at(0.7)
+    free = ur10.find_joint_guess(on_plane(0.7), seeds=12)
+    assert ur10.workpiece_penetrations(plate, free.positions) == ["forearm_link"]
+    clear = ur10.find_joint_guess(on_plane(0.7), seeds=12, add_workpiece=plate)
+    assert ur10.workpiece_penetrations(plate, clear.positions) == [] and clear.solutions < free.solutions
 
 
 def test_unreachable_pose(ur10):
@@ -220,10 +237,7 @@ def test_unreachable_pose(ur10):
 
 def plane_task(arm, name, x, plate_height=PLANE_HEIGHT, start_height=PLANE_HEIGHT, normal_rows=False):
     """A CustomTask: the pad on a plate whose top is at plate_height, C: the plane z = start_height."""
-    def add_plate(plant):
-        return add_rigid_workpiece(plant, Box(0.6, 0.6, 0.05), RigidTransform([x, 0.0, plate_height - 0.025]),
-                                   name="plate")
-
+    add_plate = plate_at(x, plate_height)
     chart = PoseChart()
     plane = surface_constraint(chart, lambda p: p[2] - (start_height + PAD_RADIUS), name="plane",
                                normal_rows=normal_rows)
@@ -232,7 +246,7 @@ def plane_task(arm, name, x, plate_height=PLANE_HEIGHT, start_height=PLANE_HEIGH
     else:
         E_p = GivenVelocityProjection(chart, np.delete(np.eye(6), 2, axis=0), name="(vx, vy, wx, wy, wz)")
     start = on_plane(x)
-    guess = arm.find_joint_guess(start, seeds=6)
+    guess = arm.find_joint_guess(start, seeds=8, add_workpiece=plate_at(x))
     return register_task(CustomTask(name, add_robot=arm.add_robot, add_workpiece=add_plate,
                                     constraint_space=ConstraintSpace(plane, E_p), start_pose=start,
                                     joint_guess=guess.positions))

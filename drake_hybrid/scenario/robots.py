@@ -50,9 +50,10 @@ import trimesh
 from pydrake.math import RigidTransform, RotationMatrix
 from pydrake.multibody.inverse_kinematics import InverseKinematics
 from pydrake.multibody.parsing import PackageMap, Parser
-from pydrake.multibody.plant import MultibodyPlant
+from pydrake.multibody.plant import AddMultibodyPlant, MultibodyPlant, MultibodyPlantConfig
 from pydrake.multibody.tree import JacobianWrtVariable
 from pydrake.solvers import Solve
+from pydrake.systems.framework import DiagramBuilder
 
 from drake_hybrid.core.errors import ConfigError, UnreachablePoseError
 from drake_hybrid.scenario.custom import attach_pad_tool
@@ -105,9 +106,9 @@ class JointGuess:
     """The result of ``LoadedArm.find_joint_guess``."""
 
     positions: np.ndarray                          # the chosen joint positions
-    condition_number: float                        # cond(J) of the pad's 6 x n spatial Jacobian there
+    condition_number: float                        # LoadedArm.condition_number there (translation scaled)
     seeds: int                                     # inverse-kinematics problems solved
-    solutions: int                                 # of them, how many reached the pose within the limits
+    solutions: int                                 # of them, how many reached the pose (within the limits, clear)
     limit_margin: float                            # smallest distance to a joint limit (rad or m)
 
 
@@ -465,8 +466,15 @@ class LoadedArm:
         return plant.CalcJacobianSpatialVelocity(context, JacobianWrtVariable.kV, frame, np.zeros(3),
                                                  plant.world_frame(), plant.world_frame())
 
-    def condition_number(self, q):
-        singular = np.linalg.svd(self.pad_jacobian(q), compute_uv=False)
+    def condition_number(self, q, length_scale=None):
+        """cond(S J) of the pad's spatial Jacobian at ``q``, its translational rows divided by
+        ``length_scale`` (m; default: the distance from the base to the pad, at least 0.1 m) so that
+        the number does not depend on the unit of length."""
+        J = self.pad_jacobian(q)
+        if length_scale is None:
+            base = self.base_pose.translation() if self.base_pose is not None else np.zeros(3)
+            length_scale = max(float(np.linalg.norm(self.pad_pose(q).translation() - base)), 0.1)
+        singular = np.linalg.svd(np.vstack([J[:3], J[3:] / length_scale]), compute_uv=False)
         return float(singular[0] / singular[-1]) if singular[-1] > 0 else float("inf")
 
     def pad_pose(self, q):
@@ -476,16 +484,43 @@ class LoadedArm:
         plant.SetPositions(context, q)
         return plant.GetFrameByName(self.robot.end_effector_frame).CalcPoseInWorld(context)
 
-    def find_joint_guess(self, X_WE, seeds=12, rng=0, near=None, position_tolerance=1e-6,
+    def workpiece_penetrations(self, add_workpiece, q):
+        """Names of the arm's bodies (the pad excepted) whose collision shapes penetrate the
+        workpiece of ``add_workpiece(plant) -> geometry ids`` (CustomTask's) at joint positions ``q``."""
+        if getattr(self, "_clearance_probe", (None,))[0] is not add_workpiece:
+            builder = DiagramBuilder()
+            plant, scene_graph = AddMultibodyPlant(MultibodyPlantConfig(time_step=0.0), builder)
+            robot = self.add_robot(plant)
+            workpiece = set(add_workpiece(plant))
+            plant.Finalize()
+            diagram = builder.Build()
+            self._clearance_probe = (add_workpiece, diagram, plant, scene_graph, robot, workpiece)
+        _, diagram, plant, scene_graph, robot, workpiece = self._clearance_probe
+        context = diagram.CreateDefaultContext()
+        plant.SetPositions(plant.GetMyMutableContextFromRoot(context), robot.arm, q)
+        query = scene_graph.get_query_output_port().Eval(scene_graph.GetMyContextFromRoot(context))
+        inspector = query.inspector()
+        pad = set(robot.pad_geometries)
+        touching = set()
+        for pair in query.ComputePointPairPenetration():
+            ids = {pair.id_A, pair.id_B}
+            if ids & workpiece and not ids & pad and not ids <= workpiece:
+                (other,) = ids - workpiece
+                touching.add(plant.GetBodyFromFrameId(inspector.GetFrameId(other)).name())
+        return sorted(touching)
+
+    def find_joint_guess(self, X_WE, seeds=12, rng=0, near=None, add_workpiece=None, position_tolerance=1e-6,
                          angle_tolerance=1e-6, limit_margin=0.05):
         """Joint positions that put the pad centre frame at ``X_WE`` (a RigidTransform: e.g. the
         start pose of a CustomTask, its point on the surface), from Drake's InverseKinematics.
 
         Solves from ``seeds`` starts: ``near`` (if given), the middle of the joint limits, and
         uniform random positions within the limits (continuous joints within +-pi; ``rng`` a seed
-        or numpy Generator), each held ``limit_margin`` inside the limits. Of the solutions that reach
-        the pose, the one whose 6 x n pad Jacobian has the smallest condition number is returned
-        (a JointGuess). UnreachablePoseError if none does."""
+        or numpy Generator), each held ``limit_margin`` inside the limits. With ``add_workpiece``
+        (CustomTask's), solutions where an arm link (not the pad) penetrates the workpiece are
+        rejected. Of the solutions left, the one whose pad Jacobian is best conditioned
+        (``condition_number``: translation rows scaled by the base-to-pad distance) is returned
+        (a JointGuess). UnreachablePoseError if none is left."""
         plant = self.plant
         lower, upper = self.joint_limits()
         low = np.where(np.isfinite(lower), lower, -np.pi) + limit_margin
@@ -514,6 +549,8 @@ class LoadedArm:
                         X.rotation().inverse().multiply(X_WE.rotation()).ToAngleAxis().angle())
             if error > 10 * max(position_tolerance, angle_tolerance):
                 continue
+            if add_workpiece is not None and self.workpiece_penetrations(add_workpiece, solution):
+                continue
             solutions += 1
             condition = self.condition_number(solution)
             if best is None or condition < best[1]:
@@ -521,8 +558,9 @@ class LoadedArm:
         if best is None:
             raise UnreachablePoseError(
                 f"arm '{self.name}': no joint positions within the limits put the pad centre at "
-                f"p = {np.round(X_WE.translation(), 4).tolist()} m with the requested orientation ({len(starts)} "
-                "inverse-kinematics seeds); move the workpiece or the base (base_pose), or change the tool axis")
+                f"p = {np.round(X_WE.translation(), 4).tolist()} m with the requested orientation"
+                f"{' clear of the workpiece' if add_workpiece is not None else ''} ({len(starts)} inverse-kinematics "
+                "seeds); move the workpiece or the base (base_pose), change the tool axis, or try more seeds")
         margin = float(np.min(np.minimum(best[0] - lower, upper - best[0])))
         return JointGuess(positions=best[0], condition_number=best[1], seeds=len(starts), solutions=solutions,
                           limit_margin=margin)
