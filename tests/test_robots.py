@@ -14,7 +14,8 @@ import trimesh
 
 from pydrake.geometry import Box
 from pydrake.math import RigidTransform, RotationMatrix
-from pydrake.multibody.plant import AddMultibodyPlant, MultibodyPlantConfig
+from pydrake.multibody.parsing import Parser
+from pydrake.multibody.plant import AddMultibodyPlant, MultibodyPlant, MultibodyPlantConfig
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder
 
@@ -23,11 +24,11 @@ from drake_hybrid.core.errors import (ConfigError, ForceSignError, OffConstraint
                                       UnreachablePoseError)
 from drake_hybrid.experiments.simulation import simulate
 from drake_hybrid.scenario.builder import build_scenario
-from drake_hybrid.scenario.custom import CustomTask, add_rigid_workpiece
+from drake_hybrid.scenario.custom import CustomTask, add_rigid_workpiece, attach_pad_tool
 from drake_hybrid.scenario.robots import load_arm
 from drake_hybrid.scenario.start import set_initial_conditions
 from drake_hybrid.scenario.task import pad_kinematic_rows
-from drake_hybrid.scenario.tasks import register_task
+from drake_hybrid.scenario.tasks import get_task, register_task
 from drake_hybrid.systems.sources import Profile
 
 # Drake notes, once per joint, what it ignores in these URDFs (mechanical reductions, joint friction).
@@ -284,6 +285,22 @@ def test_pulling_force_names_the_sign_convention(ur10):
     task = plane_task(ur10, "ur10-pull", 0.7)
     with pytest.raises(ForceSignError, match="pulls: .*F_d is the force ON the robot"):
         start(task.default_config(desired_force=[-10.0]))
+
+
+def test_pulling_force_on_a_built_in_task():
+    # The arm presses up on the pane: F_d = -10 N (the pane pushes the robot down). +10 N would pull; the
+    # window's start moves up along its fixed normal whatever the sign of F_d, and the contact pushes back.
+    config = get_task("window-washing").default_config()
+    config.desired_force = Profile(value=[10.0])
+    with pytest.raises(ForceSignError, match="pulls: in contact the workpiece pushes the pad with -"):
+        start(config)
+
+
+def test_attach_pad_tool_names_an_unknown_frame(ur10):
+    plant = MultibodyPlant(0.0)
+    instance = Parser(plant).AddModels(ur10.report.model)[0]
+    with pytest.raises(UnknownFrameError, match="flange_frame 'flange' is not a frame of model 'ur10'; its frames: "):
+        attach_pad_tool(plant, instance, "flange")
 
 
 def test_kinematic_rows_padded(ur10):

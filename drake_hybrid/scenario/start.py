@@ -176,14 +176,14 @@ def pressing_positions(scenario, positions_at_depth, max_depth=0.01):
             "that C describes (a penetration); move the workpiece or the start so that they agree")
     deepest = pressing_force(max_depth) + magnitude
     if deepest < magnitude:
-        if abs(deepest) < 1e-9 * max(magnitude, 1.0):
-            opposite = pressing_force(-max_depth) + magnitude
-            if opposite < 0:
-                raise ForceSignError(
-                    f"task '{task.name}': the desired force F_d(0) = {desired.tolist()} pulls: along the pressing "
-                    f"direction (-sum_i F_d,i grad C_i) the pad leaves the workpiece, and pushed the other way the "
-                    f"contact gives {opposite:.3g} N along F_d. F_d is the force ON the robot in E_f's coordinates "
-                    "(the rows of dC/dr) and a contact only pushes: flip the sign of desired_force")
+        tiny = 1e-9 * max(magnitude, 1.0)
+        against = deepest if deepest < -tiny else min(pressing_force(-max_depth) + magnitude, 0.0)
+        if against < -tiny:
+            raise ForceSignError(
+                f"task '{task.name}': the desired force F_d(0) = {desired.tolist()} pulls: in contact the workpiece "
+                f"pushes the pad with {against:.3g} N along F_d. F_d is the force ON the robot in E_f's coordinates "
+                "(the rows of dC/dr), and a contact only pushes: flip the sign of desired_force")
+        if abs(deepest) <= tiny:
             raise OffConstraintError(
                 f"task '{task.name}': the pad touches nothing even {max_depth * 1000:.0f} mm beyond the start pose "
                 "along the pressing direction: the workpiece's geometry is farther than the surface C = 0 (a gap); "
