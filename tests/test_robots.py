@@ -100,6 +100,8 @@ def test_seven_dof_arm_with_transmissions(cache):
     assert len(arm.report.arm_joints) == 7
     assert list(arm.report.effort_limits.values()) == [50.0, 50.0, 30.0, 30.0, 30.0, 20.0, 20.0]
     assert any("kept the model's actuators" in line for line in arm.report.changes)
+    assert any(line.startswith("removed Coulomb joint friction") for line in arm.report.changes)
+    assert any(line.startswith("kept the model's joint damping (N m s/rad): joint1 10") for line in arm.report.changes)
     plant, _ = simulation_plant(arm)
     assert plant.num_positions() == plant.num_actuators() == 7
 

@@ -221,6 +221,38 @@ def _fix_materials(root, report):
         report.changes.append(f"material '{name}' defined again with other colours: renamed {', '.join(renamed)}")
 
 
+def _drop_what_drake_ignores(root, report):
+    """Remove from a URDF what Drake's parser warns it ignores, once per element, and say so once:
+    Coulomb joint friction, mechanical reductions, safety controllers, transmissions of fixed joints."""
+    parents = _parents(root)
+    fixed = {joint.get("name") for joint in root.iter("joint") if joint.get("type") == "fixed"}
+    friction = []
+    for joint in root.iter("joint"):
+        for dynamics in joint.iter("dynamics"):
+            if float(dynamics.get("friction", 0) or 0) != 0:
+                friction.append(f"{joint.get('name')} {dynamics.get('friction')}")
+                del dynamics.attrib["friction"]
+    if friction:
+        report.changes.append(f"removed Coulomb joint friction Drake ignores (N m): {', '.join(friction)}")
+    reductions = [element for element in root.iter("mechanicalReduction") if float(element.text or 1) != 1]
+    for element in reductions:
+        parents[element].remove(element)
+    if reductions:
+        report.changes.append(f"removed {len(reductions)} mechanical reductions Drake ignores (the effort limits are "
+                              "joint torques)")
+    safety = list(root.iter("safety_controller"))
+    for element in safety:
+        parents[element].remove(element)
+    if safety:
+        report.changes.append(f"removed {len(safety)} <safety_controller> tags Drake ignores")
+    dead = [transmission for transmission in root.iter("transmission")
+            if any(joint.get("name") in fixed for joint in transmission.iter("joint"))]
+    for transmission in dead:
+        parents[transmission].remove(transmission)
+    if dead:
+        report.changes.append(f"removed {len(dead)} transmissions of fixed joints")
+
+
 def prepare_model(path, collision="convert", packages=None, cache_dir=None):
     """The model file rewritten for Drake (see the module docstring) and its LoadReport."""
     path = Path(path)
@@ -266,6 +298,7 @@ def prepare_model(path, collision="convert", packages=None, cache_dir=None):
                               "(collision='drop': only the pad touches anything)")
     if urdf:
         _fix_materials(root, report)
+        _drop_what_drake_ignores(root, report)
     rewritten = ElementTree.tostring(root, encoding="unicode")
     digest = hashlib.sha256((str(path.resolve()) + rewritten).encode()).hexdigest()[:20]
     target = cache_dir / "models" / f"{path.stem}-{digest}{suffix}"
