@@ -165,6 +165,26 @@ def test_sdf_model(cache, tmp_path):
     assert plant.num_positions() == plant.num_actuators() == 2
 
 
+WELDED_URDF = """<robot name="one_joint">
+  <link name="world"/>
+  <link name="base"><inertial><mass value="1"/><inertia ixx="0.01" iyy="0.01" izz="0.01" ixy="0" ixz="0" iyz="0"/></inertial></link>
+  <joint name="mount" type="fixed"><parent link="world"/><child link="base"/><origin xyz="0 0 0.5"/></joint>
+  <link name="link1"><inertial><mass value="1"/><inertia ixx="0.01" iyy="0.01" izz="0.01" ixy="0" ixz="0" iyz="0"/></inertial></link>
+  <joint name="joint1" type="revolute"><parent link="base"/><child link="link1"/><axis xyz="0 0 1"/>
+    <limit effort="5" lower="-1" upper="1" velocity="1"/></joint>
+</robot>
+"""
+
+
+def test_base_pose_composes_with_the_models_own_weld(cache, tmp_path):
+    (tmp_path / "one_joint.urdf").write_text(WELDED_URDF)
+    arm = load_arm(tmp_path / "one_joint.urdf", flange="link1", base_pose=RigidTransform([1.0, 0.0, 0.0]),
+                   cache_dir=cache)
+    X_WB = arm.plant.GetFrameByName("base").CalcPoseInWorld(arm.plant.CreateDefaultContext())
+    np.testing.assert_allclose(X_WB.translation(), [1.0, 0.0, 0.5], atol=1e-15)
+    assert arm.report.base == "base" and arm.report.effort_limits == {"joint1": 5.0}
+
+
 def test_collision_meshes_dropped(cache):
     arm = load_arm(UR10, flange="tool0", collision="drop", cache_dir=cache)
     assert len(arm.report.dropped_geometries) == 7

@@ -383,10 +383,13 @@ def fix_arm(plant, model_instance, flange, tool_frame, base_pose, effort_limits,
         base = first.child_body()
         if first.num_velocities() == 1:
             base = first.parent_body()                 # the model's own world link holds a one-dof joint
+            if base_pose is not None:
+                note(f"base_pose not applied: the model attaches its first joint '{first.name()}' to the world itself")
         else:
             kind = first.type_name()
+            # The model's own weld to the world, kept under base_pose: X_W_child = X_WB X_WF X_FM X_CM^-1.
             X_PC = X_WB if kind != "weld" else X_WB.multiply(
-                first.frame_on_parent().GetFixedPoseInBodyFrame().multiply(
+                first.frame_on_parent().GetFixedPoseInBodyFrame().multiply(first.X_FM()).multiply(
                     first.frame_on_child().GetFixedPoseInBodyFrame().inverse()))
             _weld(plant, first, X_PC)
             chain = chain[1:]
