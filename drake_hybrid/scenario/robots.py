@@ -576,10 +576,10 @@ class LoadedArm:
             ik.AddOrientationConstraint(plant.world_frame(), X_WE.rotation(), frame, RotationMatrix(),
                                         angle_tolerance)
             ik.prog().AddQuadraticErrorCost(1e-3 * np.eye(len(start)), start, q)
-            result = Solve(ik.prog(), start)
-            if not result.is_success():
+            # SNOPT often reports "infeasible" at a solution within 1e-6 of the pose: judge by the pose itself.
+            solution = Solve(ik.prog(), start).GetSolution(q)
+            if np.any(solution < low - 1e-9) or np.any(solution > high + 1e-9):
                 continue
-            solution = result.GetSolution(q)
             X = self.pad_pose(solution)
             error = max(np.linalg.norm(X.translation() - X_WE.translation()),
                         X.rotation().inverse().multiply(X_WE.rotation()).ToAngleAxis().angle())
