@@ -57,6 +57,21 @@ class OffConstraintError(DrakeHybridError):
     configuration off the constraint)."""
 
 
+class UnknownFrameError(DrakeHybridError):
+    """A frame named by the user (a flange, a tool frame) is not in the model; the message lists
+    the model's frames."""
+
+
+class UnreachablePoseError(DrakeHybridError):
+    """No joint positions within the joint limits put the end effector at the requested pose."""
+
+
+class ForceSignError(DrakeHybridError):
+    """The desired force pulls on the workpiece: F_d is the force ON the robot in E_f's coordinates,
+    and a contact can only push, so along the pressing direction -sum_i F_d,i grad C_i the pad must
+    go into the workpiece."""
+
+
 def check_fields(owner, prefix, positive=(), nonnegative=(), error=ConfigError):
     """Raise ``error`` (ConfigError) naming ``prefix.field`` if a field of ``owner`` (a config dataclass)
     listed in ``positive`` is not > 0 or one in ``nonnegative`` is not >= 0 (NaN fails both)."""

@@ -11,6 +11,22 @@ non-finite for longer than ``sensor.fault_time``), an error raised inside the si
 interrupt (Ctrl-C) ends it at that time and ``simulate`` raises ``RunStopped``, whose ``result``
 holds the log up to the stop and a summary with ``status`` ("fault", "error" or "interrupted"),
 ``stop_time`` and ``stop_reason`` (a completed run has ``status`` "completed").
+
+The result also holds the built ``scenario`` (its ``diagram``, ``plant``, ``controller``, ...),
+the ``simulator`` and its root ``context`` after the run. To act during the run (a monitor, a
+visualizer, a changed parameter), pass ``setup``: it is called as ``setup(scenario, simulator,
+context)`` after the start is set and before ``Simulator.Initialize``::
+
+    def watch(scenario, simulator, context):        # stop the run if the force gets too large
+        force = scenario.controller.GetOutputPort("force")
+        simulator.set_monitor(lambda root: EventStatus.ReachedTermination(None, "too hard")
+                              if abs(force.Eval(scenario.controller.GetMyContextFromRoot(root))[0]) > 50
+                              else EventStatus.Succeeded())
+
+    result = simulate(config, setup=watch)
+
+A monitor set in ``setup`` runs after the sensor-fault monitor (both are kept; a termination
+the user's monitor asks for ends the run as a completed run, at that time).
 """
 
 import math
@@ -33,9 +49,11 @@ class SimulationResult:
     config: object
     log: dict
     summary: dict
-    scenario: object = None
+    scenario: object = None                      # the built Scenario: diagram, plant, controller, ...
     html: str = None
     extra: dict = field(default_factory=dict)
+    simulator: object = None                     # Drake's Simulator after the run
+    context: object = None                       # its root context (the diagram's) at the end
 
 
 class RunStopped(RuntimeError):
@@ -73,6 +91,18 @@ def sensor_fault_monitor(scenario, fault_time, stop):
     return monitor
 
 
+def chain_monitors(first, second):
+    """A monitor that runs ``first`` and, unless it ends the run, ``second`` (None: only ``first``)."""
+    if second is None:
+        return first
+
+    def monitor(root_context):
+        status = first(root_context)
+        return status if status.severity() != EventStatus.Severity.kSucceeded else second(root_context)
+
+    return monitor
+
+
 def _logged(scenario, context, name):
     """(times, samples x size) of logger ``name``; a (logger, columns) entry is a slice of a shared logger."""
     logger, columns = scenario.loggers[name], slice(None)
@@ -92,8 +122,10 @@ def settling_time(times, error_norm, bound):
     return float(times[outside[-1] + 1])
 
 
-def simulate(config, progress=False, meshcat=None, record_html=False):
-    """Simulate ``config``; returns a SimulationResult (log arrays and summary).
+def simulate(config, progress=False, meshcat=None, record_html=False, setup=None):
+    """Simulate ``config``; returns a SimulationResult (log arrays, summary, scenario, simulator and
+    context). ``setup(scenario, simulator, context)``, if given, runs after the start is set and
+    before ``Simulator.Initialize`` (e.g. ``simulator.set_monitor``).
 
     Raises RunStopped (with the result up to the stop) if the run ends early: see the module
     docstring."""
@@ -102,8 +134,11 @@ def simulate(config, progress=False, meshcat=None, record_html=False):
     ApplySimulatorConfig(config.simulator, simulator)
     context = simulator.get_mutable_context()
     set_initial_conditions(scenario, context)
+    if setup is not None:
+        setup(scenario, simulator, context)
     stop = {}
-    simulator.set_monitor(sensor_fault_monitor(scenario, float(config.sensor.fault_time), stop))
+    simulator.set_monitor(chain_monitors(sensor_fault_monitor(scenario, float(config.sensor.fault_time), stop),
+                                         simulator.get_monitor()))
     if meshcat is not None and record_html:
         meshcat.StartRecording(set_visualizations_while_recording=False)
     simulator.Initialize()
@@ -143,7 +178,8 @@ def simulate(config, progress=False, meshcat=None, record_html=False):
         # The controller took F = F_d while the wrench was invalid: its force error is not a measurement.
         for key in [key for key in summary if "force_error" in key or key == "force_settling_time_1_percent"]:
             summary[key] = None
-    result = SimulationResult(config=config, log=log, summary=summary, scenario=scenario, html=html)
+    result = SimulationResult(config=config, log=log, summary=summary, scenario=scenario, html=html,
+                              simulator=simulator, context=context)
     if stop:
         raise RunStopped(result) from stop.get("error")
     return result

@@ -19,6 +19,7 @@ with named handles to every part. The same config builds the same diagram in
 a test, a notebook, the CLI or a worker process.
 """
 
+import dataclasses
 from dataclasses import dataclass, field
 from typing import Dict, Optional
 
@@ -35,6 +36,7 @@ from drake_hybrid.core.kinematics import EndEffectorKinematics
 from drake_hybrid.scenario.config import ScenarioConfig, WristSensorConfig
 from drake_hybrid.scenario.plant import RobotModel, build_controller_plant, build_plant
 from drake_hybrid.scenario.start import check_start_sizes
+from drake_hybrid.scenario.task import pad_kinematic_rows
 from drake_hybrid.scenario.tasks import get_task
 from drake_hybrid.systems.faults import JointFriction, SensorFaultInjector
 from drake_hybrid.systems.sensors import ContactWrenchSensor, LowPassFilter, WrenchConditioner, WristForceTorqueSensor
@@ -78,13 +80,16 @@ def build_scenario(config, meshcat=None, with_loggers=True, sampled_plant_output
     mode = ControlMode.parse(config.mode)
     config.validate()
     task.options(config)
+    constraint_space = task.constraint_space(config)
+    # A desired force given for the force-controlled rows only: zeros for the kinematic rows.
+    config = dataclasses.replace(config, desired_force=pad_kinematic_rows(
+        config.desired_force, constraint_space.force_size, constraint_space.constraint.kinematic_rows))
     control_period = config.control_period if config.control_period > 0 else None
     bandwidth = config.sensor.bandwidth_hz
 
     builder = DiagramBuilder()
     plant, scene_graph, robot = build_plant(task, config, builder, sampled_outputs=sampled_plant_outputs)
     controller_plant, _ = build_controller_plant(task, config)
-    constraint_space = task.constraint_space(config)
     supervised = config.supervised
     controller = builder.AddNamedSystem("controller", HybridController(
         controller_plant, robot.end_effector_frame, robot.end_effector_point, constraint_space,
