@@ -231,11 +231,14 @@ def HybridController_(T):
                 changed the integrals (which runs the law twice per period).
                 Off by default: the stored copy adds states with zero
                 multipliers to a discrete-time linearization.
+            velocity_row_inertia: None (the paper's massless constraint, default) or I_v (k x k): the
+                inertia of a mechanism that moves along the velocity rows (a crank's handle). See
+                ``_mechanism_compensation``.
         """
 
         def _construct(self, plant, end_effector_frame, end_effector_point, constraint_space, gains=None,
                        mode=ControlMode.VELOCITY_FORCE, control_period=None, sample_lead=True, safety=None,
-                       guarded_move=None, sampled_diagnostics=False, converter=None):
+                       guarded_move=None, sampled_diagnostics=False, velocity_row_inertia=None, converter=None):
             # Every argument as given, for scalar conversion (_construct_copy): one added later cannot
             # be forgotten there.
             arguments = locals()
@@ -293,6 +296,15 @@ def HybridController_(T):
                 if not gain > 0:
                     raise ValueError(f"HybridController: approach_gain must be positive, got {gain}")
                 self._approach_speed, self._approach_gain = speed, gain
+
+            # Issue 18: the mechanism's inertia along the velocity rows (None: the paper's form).
+            self._velocity_row_inertia = None
+            if velocity_row_inertia is not None:
+                I_v = np.asarray(velocity_row_inertia, dtype=float)
+                if I_v.shape != (k, k) or not np.all(np.isfinite(I_v)):
+                    raise DimensionError(f"HybridController: velocity_row_inertia must be a finite {k}x{k} matrix, "
+                                         f"got shape {I_v.shape}")
+                self._velocity_row_inertia = I_v
 
             # -- ports ------------------------------------------------------------------
             # estimated_state, the controller's own plant of this system's scalar type, its kinematics.
@@ -480,6 +492,9 @@ def HybridController_(T):
             if self.mode.integrates_position:
                 acceleration = acceleration - gains.position @ e_p                            # Remark 3
             J, bias = kin.jacobian, kin.bias
+            mechanism_force = self._mechanism_compensation(acceleration)          # issue 18 (None: paper)
+            external_tangential_force = (tangential_force if mechanism_force is None
+                                         else tangential_force + mechanism_force)
             n, d = self.num_joints, self.task_size
             need_inertia = self.mode is ControlMode.IMPEDANCE_FORCE or n > d
             if need_inertia:
@@ -498,7 +513,8 @@ def HybridController_(T):
                 # E_f. The measured force along the motion rows is F_v (and F on kinematic rows).
                 kinematic = list(self.kinematic_rows)
                 K_0 = impedance_gain(values.velocity_projection, values.force_projection, task_mobility, kinematic)
-                motion_force = np.concatenate([tangential_force, force[kinematic]]) if kinematic else tangential_force
+                motion_force = (np.concatenate([external_tangential_force, force[kinematic]]) if kinematic
+                                else external_tangential_force)
                 compensation = K_0 @ motion_force                                # (3.2-6)
                 acceleration = acceleration + compensation[:k]
                 if kinematic:
@@ -515,6 +531,8 @@ def HybridController_(T):
             if not in_contact:
                 force_command = force_command * (1.0 - self._force_controlled)   # no force loop off the surface
             force_torque = J.T @ (values.force_projection.T @ force_command)    # J^T E_f^T u_f
+            if mechanism_force is not None:
+                force_torque = force_torque + J.T @ (values.velocity_projection.T @ mechanism_force)
 
             forces = self._forces_cache.Eval(context).forces                  # h + g's force elements
             threshold, bound = self._singularity_threshold, self._max_joint_acceleration
@@ -567,6 +585,20 @@ def HybridController_(T):
             solution.smallest_singular_value = sigma_min
             solution.singularity_damping = lambda_squared
             return solution
+
+        def _mechanism_compensation(self, velocity_row_acceleration):
+            """I_v a_p: the force along the velocity rows that a mechanism of inertia I_v moving with them
+            needs at the commanded acceleration a_p (None without ``velocity_row_inertia``).
+
+            The paper's constraint is massless; a handle that spins with a velocity row pushes back with
+            F_v = -I_v r-ddot_p, which slows that row's loop to (1 + M_p I_v) s + K_v (M_p: the row's
+            mobility with the constraint rows held). The law adds the wrench J^T E_p^T I_v a_p, so the
+            robot supplies that force itself, and in impedance mode counts the mechanism as part of
+            the robot (F_v + I_v a_p is the external force its K_0 compensates). With an exact I_v
+            the row closes as designed: r-ddot_p = a_p."""
+            if self._velocity_row_inertia is None:
+                return None
+            return self._velocity_row_inertia @ velocity_row_acceleration
 
         def _solution(self, context):
             return self._solution_cache.Eval(context)
