@@ -31,6 +31,9 @@ Fisher & Mujtaba 1992)
 
 Both integrate e_p (the position error along the motion rows), so they report ``mode`` as
 position-force; the force rows' e_f and the other diagnostics are those of HybridController.
+
+Size: two LeafSystems with the ports, state and caches of HybridController (shared in
+``_declare_common`` and ``_BaselineMixin``), each a docstring and a short law.
 """
 
 from dataclasses import dataclass, field
@@ -257,7 +260,7 @@ class _BaselineMixin:
 @TemplateSystem.define("JointServoHybridController_", T_list=[float, AutoDiffXd])
 def JointServoHybridController_(T):
 
-    class Impl(LeafSystem_[T], _BaselineMixin):
+    class Impl(_BaselineMixin, LeafSystem_[T]):
         """Hybrid position/force control with a joint servo: Raibert-Craig (J^-1 S) or Fisher-Mujtaba ((S J)^+ S).
 
         .. pydrake_system::
@@ -339,7 +342,7 @@ JointServoHybridController = JointServoHybridController_[None]
 @TemplateSystem.define("AxisPDOpenLoopForceController_", T_list=[float, AutoDiffXd])
 def AxisPDOpenLoopForceController_(T):
 
-    class Impl(LeafSystem_[T], _BaselineMixin):
+    class Impl(_BaselineMixin, LeafSystem_[T]):
         """Task-space PD on the motion rows, open-loop force on the force rows, gravity compensated.
 
         .. pydrake_system::

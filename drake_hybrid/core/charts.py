@@ -220,6 +220,33 @@ class PlanarChart(Chart):
         return self._selector.T @ nu
 
 
+class PlanarPointChart(PlanarChart):
+    """r = (x, y): the position of a point in a plane of the world, without its orientation (d = 2).
+
+    The chart of a planar two-link arm (issue 18: the kinematic instability of the Raibert-Craig
+    controller). The plane and its axes as in PlanarChart; ``pose`` keeps the reference rotation.
+    """
+
+    name = "planar_point"
+
+    def __init__(self, origin=(0.0, 0.0, 0.0), axis_x=(1.0, 0.0, 0.0), axis_y=(0.0, 0.0, 1.0)):
+        super().__init__(origin, axis_x, axis_y)
+        self.configuration_symbols = self.configuration_symbols[:2]
+        self.velocity_symbols = self.velocity_symbols[:2]
+        self.configuration_rate = sympy.Matrix(self.velocity_symbols)
+        self.angle = None
+        self._selector = self._selector[:2]
+
+    def configuration(self, R_WE, p_WE):
+        p = p_WE - self.origin
+        return np.array([self.axis_x @ p, self.axis_y @ p], dtype=_dtype_of(R_WE, p))
+
+    def pose(self, x):
+        x = value(x)
+        self._check_size(x, 2, "x")
+        return RigidTransform(self.reference_rotation, self.origin + self.axis_x * x[0] + self.axis_y * x[1])
+
+
 def _euler_zxz_symbolic():
     x, y, z, phi, theta, psi = sympy.symbols("x y z phi theta psi", real=True)
     velocity = sympy.symbols("xdot ydot zdot phidot thetadot psidot", real=True)
