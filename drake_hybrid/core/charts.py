@@ -23,6 +23,8 @@ Charts provided:
 
 ``PlanarChart``
     r = (x, y, theta) in a plane (Example 2.1). No singularity.
+``PlanarPointChart``
+    r = (x, y), a point in a plane without orientation (the 2R arm of issue 18).
 ``EulerZXZChart``
     r = (x, y, z, phi, theta, psi) with R = Rz(phi) Rx(theta) Rz(psi)
     exactly as (2.1-2). Singular where sin(theta) = 0 (approach vector along
@@ -35,6 +37,9 @@ Charts provided:
     rather than in angles, and the rotational velocity rows are not
     integrable, so an integrated rotational "position" error is path
     dependent (spec section 6, position error caution).
+
+Size: four charts (planar, planar point, z-x-z Euler, pose) with their symbolic and numeric maps;
+they share the base class and helpers of this module.
 """
 
 import math
