@@ -147,24 +147,34 @@ def analytic_eigenvalues(controller, q0=HINTED_CONFIGURATION, joint_gains=JOINT_
     return roots
 
 
-def simulated_growth_rate(loop, A, duration=3.0, perturbation=1e-8, samples=200):
-    """The growth rate of the loop's fastest-growing mode in simulation: start at the equilibrium
-    plus ``perturbation`` along that mode's right eigenvector, simulate, and fit log|w^T (x - x0)|
-    (w: its left eigenvector) against time over the second half of the run (s^-1)."""
+def unstable_mode_trajectory(loop, A, duration=3.0, perturbation=1e-8, samples=200):
+    """Simulate the loop from its equilibrium plus ``perturbation`` along the right eigenvector of
+    A's eigenvalue with the largest real part; returns (times, |w^T (x(t) - x0)|, that eigenvalue)
+    with w its left eigenvector: the mode's coordinate, e^(lambda t) |z(0)| while it stays linear."""
     eigenvalues, right = np.linalg.eig(A)
     index = int(np.argmax(eigenvalues.real))
     left = np.linalg.inv(right)[index]
     x0 = loop.context.get_continuous_state_vector().CopyToVector()
     context = loop.context.Clone()
-    context.SetContinuousState(x0 + perturbation * np.real(right[:, index]) / np.linalg.norm(right[:, index]))
+    direction = np.real(right[:, index])
+    context.SetContinuousState(x0 + perturbation * direction / np.linalg.norm(direction))
     simulator = Simulator(loop.diagram, context)
     simulator.get_mutable_integrator().set_target_accuracy(1e-10)
-    times, coordinates = np.linspace(duration / 2, duration, samples), []
+    times, coordinates = np.linspace(0.0, duration, samples), []
     for t in times:
         simulator.AdvanceTo(t)
         coordinates.append(abs(left @ (context.get_continuous_state_vector().CopyToVector() - x0)))
-    slope = np.polyfit(times, np.log(coordinates), 1)[0]
-    return float(slope), float(eigenvalues[index].real)
+    return times, np.array(coordinates), eigenvalues[index]
+
+
+def simulated_growth_rate(loop, A, duration=3.0, perturbation=1e-8, samples=200):
+    """The growth rate (1/s) of the loop's fastest-growing mode in simulation, a least-squares fit
+    of log|z(t)| (``unstable_mode_trajectory``) over the second half of the run, and the
+    linearization's real part of it: (simulated, linearized)."""
+    times, coordinates, eigenvalue = unstable_mode_trajectory(loop, A, duration, perturbation, samples)
+    late = times >= duration / 2
+    slope = np.polyfit(times[late], np.log(coordinates[late]), 1)[0]
+    return float(slope), float(eigenvalue.real)
 
 
 def first_order_rate(jacobian, joint_gains, mapping):
