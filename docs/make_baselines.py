@@ -29,6 +29,7 @@ from drake_hybrid.analysis import kinematic_instability as ki  # noqa: E402
 from drake_hybrid.analysis.linearization import linearize_continuous, linearize_discrete  # noqa: E402
 from drake_hybrid.experiments.simulation import simulate  # noqa: E402
 from drake_hybrid.scenario.tasks import get_task  # noqa: E402
+from drake_hybrid.viz.plotting import joint_servo_map_figure  # noqa: E402
 
 DOCS = Path(__file__).resolve().parent
 EVALUATION_TIME = 1.0         # s: the window errors are the largest after this (five of K_v = 10's time constants)
@@ -60,19 +61,9 @@ def stability_map_figure(points=121):
     """Section 2: the map; returns the unstable fraction of Raibert-Craig's regular grid points."""
     q = np.linspace(-np.pi, np.pi, points)
     maps = ki.stability_map(q, q)
-    fig, axes = plt.subplots(1, 2, figsize=(10, 4.3), sharey=True)
-    degrees = np.degrees(q)
-    for ax, name in zip(axes, ("raibert-craig", "fisher-mujtaba")):
-        data = np.clip(maps[name], -10, 10)
-        mesh = ax.pcolormesh(degrees, degrees, data, cmap="coolwarm", vmin=-10, vmax=10, shading="auto")
-        ax.contour(degrees, degrees, maps[name], levels=[0.0], colors="k", linewidths=1.0)
-        ax.plot(*np.degrees(ki.HINTED_CONFIGURATION), "k*", markersize=12)
-        ax.set_title({"raibert-craig": "Raibert-Craig (J^-1 S)", "fisher-mujtaba": "Fisher-Mujtaba ((S J)^+ S)"}[name])
-        ax.set_xlabel("q1 (deg)")
-    axes[0].set_ylabel("q2 (deg)")
-    fig.colorbar(mesh, ax=axes, label="largest real part (1/s), clipped to +-10")
-    fig.suptitle(f"2R arm, x position-controlled, z force-controlled; K_q = {ki.JOINT_GAINS} 1/s, "
-                 f"K_s = {ki.SERVO_RATE:g} 1/s (Li & Sastry: -1, -5 everywhere)", fontsize=9)
+    fig = joint_servo_map_figure(q, q, maps, marked=ki.HINTED_CONFIGURATION, title=(
+        f"2R arm, x position-controlled, z force-controlled; K_q = {ki.JOINT_GAINS} 1/s, "
+        f"K_s = {ki.SERVO_RATE:g} 1/s (Li & Sastry: -1, -5 everywhere)"))
     FIGURES.mkdir(exist_ok=True)
     fig.savefig(FIGURES / "baselines_stability_map.png", dpi=120)
     plt.close(fig)

@@ -17,7 +17,7 @@ from drake_hybrid.control.baselines import (AxisPDOpenLoopForceController, Basel
                                             joint_servo_eigenvalues, make_baseline)
 from drake_hybrid.core.errors import ConfigError, DimensionError
 from drake_hybrid.scenario.builder import build_scenario
-from drake_hybrid.scenario.config import MechanismConfig, load_config
+from drake_hybrid.scenario.config import MechanismConfig, WristSensorConfig, load_config
 from drake_hybrid.scenario.tasks import get_task
 
 CRANK = get_task("crank-turning")
@@ -200,3 +200,25 @@ def test_window_comparison_table_regenerates():
         assert row["worst_real"] < 1e-6, row              # all stable on the window
     li_sastry = rows[0]
     assert li_sastry["velocity_error_percent"] < 1.0 and li_sastry["force_error_percent"] < 1.0
+
+
+@pytest.mark.parametrize("compensate", [False, True])
+def test_wrist_sensor_reports_no_wrench_off_contact_only_with_the_tool_inertia_compensated(compensate):
+    """The window's arm swinging in free space (no contact) with arbitrary torques: the sensor's wrench is
+    the tool's inertial wrench unless compensated, then zero (to the SAP solve's accuracy)."""
+    config = get_task("window-washing").default_config()
+    config.sensor = WristSensorConfig(compensate_tool_inertia=compensate)
+    scenario = build_scenario(config, with_loggers=False, sampled_plant_outputs=False)
+    context = scenario.diagram.CreateDefaultContext()
+    plant_context = scenario.plant_context(context)
+    scenario.plant.SetPositions(plant_context, scenario.robot.arm, [-0.6, 0.4, 0.3])      # well below the pane
+    scenario.plant.SetVelocities(plant_context, scenario.robot.arm, [1.0, -2.0, 3.0])
+    controller_context = scenario.controller.GetMyMutableContextFromRoot(context)
+    state = controller_context.get_discrete_state(0).CopyToVector()
+    state[-3:] = [40.0, -20.0, 5.0]                                                        # held actuation
+    controller_context.SetDiscreteState(0, state)
+    wrench = scenario.sensor.GetOutputPort("wrench").Eval(scenario.sensor.GetMyContextFromRoot(context))
+    if compensate:
+        assert np.abs(wrench).max() < 1e-9, wrench
+    else:
+        assert np.abs(wrench[3:]).max() > 5.0             # m_t a of the 0.2 kg tool: 11 N here

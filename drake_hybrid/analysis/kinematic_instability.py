@@ -177,17 +177,12 @@ def simulated_growth_rate(loop, A, duration=3.0, perturbation=1e-8, samples=200)
     return float(slope), float(eigenvalue.real)
 
 
-def first_order_rate(jacobian, joint_gains, mapping):
-    """mu, the nonzero eigenvalue of K_q T S J for the x-selecting S on a 2R arm (negative: unstable)."""
-    E_p = np.array([[1.0, 0.0]])
-    from_rows = (np.linalg.solve(jacobian, E_p.T) if mapping == "inverse" else np.linalg.pinv(E_p @ jacobian))
-    return float(np.trace(np.diag(joint_gains) @ from_rows @ E_p @ jacobian))
-
-
 def stability_map(q1, q2, joint_gains=JOINT_GAINS, servo_rate=SERVO_RATE, singular=1e-3):
     """The largest real part of the joint-servo loop's eigenvalues over a grid of configurations.
 
-    Returns {"raibert-craig": R, "fisher-mujtaba": F} with R[i, j] at (q1[j], q2[i]) (1/s; NaN
+    The model is ``control.baselines.joint_servo_eigenvalues`` (the controllers' own T), leaving
+    out the zero rate of the unselected direction. Returns {"raibert-craig": R, "fisher-mujtaba": F}
+    with R[i, j] at (q1[j], q2[i]) (1/s; NaN
     where |det J| < ``singular``, the arm's singularity). Li & Sastry's design does not depend on
     the configuration (its eigenvalues are those of s^2 + K_v s + K_p wherever J is regular)."""
     plant, _ = two_link_plant()
@@ -195,6 +190,7 @@ def stability_map(q1, q2, joint_gains=JOINT_GAINS, servo_rate=SERVO_RATE, singul
     tip = plant.GetFrameByName("tip")
     chart = PlanarPointChart()
     kinematics = EndEffectorKinematics(plant, tip, np.zeros(3), chart)
+    E_p, E = np.array([[1.0, 0.0]]), np.eye(2)            # x selected, z force-controlled (point_task)
     maps = {name: np.full((len(q2), len(q1)), np.nan) for name in ("raibert-craig", "fisher-mujtaba")}
     for i, b in enumerate(q2):
         for j, a in enumerate(q1):
@@ -203,6 +199,7 @@ def stability_map(q1, q2, joint_gains=JOINT_GAINS, servo_rate=SERVO_RATE, singul
             if abs(np.linalg.det(J)) < singular:
                 continue
             for name, mapping in (("raibert-craig", "inverse"), ("fisher-mujtaba", "pseudoinverse")):
-                mu = first_order_rate(J, joint_gains, mapping)
-                maps[name][i, j] = float(np.max(np.roots([1.0, servo_rate, servo_rate * mu]).real))
+                mu, roots = joint_servo_eigenvalues(J, E_p, E, joint_gains, servo_rate, mapping)
+                nonzero = np.abs(mu) > 1e-12                   # rank-one S: the other mu is 0 (roots 0, -K_s)
+                maps[name][i, j] = float(np.max(roots.reshape(-1, 2)[nonzero].real))
     return maps
