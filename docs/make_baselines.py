@@ -129,7 +129,7 @@ def main():
     print(f"Raibert-Craig at q = (-160, 30) deg: linearized {rc['worst_linearized']:+.4f} 1/s, analytic "
           f"{rc['worst_analytic']:+.4f}, simulated growth {rc['simulated_growth']:+.4f} "
           f"({100 * (rc['simulated_growth'] / rc['worst_linearized'] - 1):+.3f} %)")
-    for name in ("fisher-mujtaba", "li-sastry"):
+    for name in ("fisher-mujtaba", "li-sastry", "pd-open-loop-force"):
         print(f"{name}: worst linearized real part {results['instability'][name]['worst_linearized']:+.4f} 1/s")
     print(f"unstable fraction of the regular grid: {results['unstable_fraction']}")
     print("\n| law | velocity error after 1 s (%) | force error after 1 s (%) | settling 1 % velocity / force (s) "

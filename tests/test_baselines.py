@@ -51,15 +51,16 @@ def test_raibert_craig_grows_at_the_predicted_rate_in_simulation(raibert_craig):
     assert abs(growth - predicted) < 0.10 * predicted
 
 
-@pytest.mark.parametrize("controller", ["fisher-mujtaba", "li-sastry"])
-def test_same_task_is_stable_with_fisher_mujtaba_and_li_sastry(controller):
+@pytest.mark.parametrize("controller", ["fisher-mujtaba", "li-sastry", "pd-open-loop-force"])
+def test_same_task_is_stable_with_fisher_mujtaba_li_sastry_and_the_pd(controller):
     eigenvalues, _ = ki.linearized_eigenvalues(ki.build_two_link_loop(controller))
     assert eigenvalues.real.max() < 1e-9
-    # Nonzero eigenvalues are the predicted ones: same gains (FM), same bandwidth (LS: -1, -5).
+    # Nonzero eigenvalues are the predicted ones: same gains (FM), same bandwidth (LS: -1, -5), and the
+    # PD with K = K_p, D = K_v scaled by the row's task inertia: the same design on the free row.
     analytic = ki.analytic_eigenvalues(controller)
     for root in analytic[np.abs(analytic) > 1e-9]:
         assert np.min(np.abs(eigenvalues - root)) < 1e-6 * abs(root)
-    if controller == "li-sastry":
+    if controller != "fisher-mujtaba":
         assert sorted(analytic.real) == pytest.approx([-5.0, -1.0])
 
 

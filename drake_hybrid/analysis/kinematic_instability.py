@@ -12,7 +12,9 @@ kinematic. The model is exact (the controllers' plant is the simulated one).
   the workspace; with the joint servo K_s the pair s^2 + K_s s + K_s mu = 0 then has a root in the
   right half-plane (``analytic_eigenvalues``).
 * Fisher-Mujtaba ((S J)^+ S) with the same gains, and Li & Sastry (``HybridController``,
-  position-force mode, K_v and K_p giving poles in the joint gains' range): stable.
+  position-force mode, K_v and K_p giving poles in the joint gains' range): stable. So is the
+  manipulation course's PD (``AxisPDOpenLoopForceController`` with K = K_p, D = K_v): with the
+  force direction free its x row closes as Li & Sastry's design.
 
 ``linearized_eigenvalues`` is Drake's ``Linearize`` of the whole closed loop (plant and controller
 in AutoDiffXd); ``simulated_growth_rate`` simulates it from a small perturbation and fits the growth
@@ -32,7 +34,8 @@ from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import ConstantVectorSource, Linearize
 
 from drake_hybrid.analysis.linearization import predicted_eigenvalues
-from drake_hybrid.control.baselines import JointServoHybridController, joint_servo_eigenvalues
+from drake_hybrid.control.baselines import (AxisPDOpenLoopForceController, JointServoHybridController,
+                                            joint_servo_eigenvalues)
 from drake_hybrid.control.controller import HybridController
 from drake_hybrid.control.gains import HybridGains
 from drake_hybrid.core.charts import PlanarPointChart
@@ -47,7 +50,7 @@ SERVO_RATE = 200.0                                  # K_s (1/s): the joint veloc
 # Li & Sastry in position-force mode with the same bandwidth: s^2 + 6 s + 5 = (s + 1)(s + 5), the
 # joint gains' range.
 LI_SASTRY_GAINS = HybridGains(velocity=[6.0], position=[5.0], force_proportional=[0.5], force_integral=[15.0])
-CONTROLLERS = ("raibert-craig", "fisher-mujtaba", "li-sastry")
+CONTROLLERS = ("raibert-craig", "fisher-mujtaba", "li-sastry", "pd-open-loop-force")
 
 
 @dataclass
@@ -100,6 +103,10 @@ def build_two_link_loop(controller, q0=HINTED_CONFIGURATION, joint_gains=JOINT_G
     tip = plant.GetFrameByName("tip")
     if controller == "li-sastry":
         system = HybridController(plant, tip, np.zeros(3), space, gains=li_sastry_gains, mode="position-force")
+    elif controller == "pd-open-loop-force":
+        # Row stiffness and damping K = K_p, D = K_v: Li & Sastry's position-mode design on the free x row.
+        system = AxisPDOpenLoopForceController(plant, tip, np.zeros(3), space, gains=li_sastry_gains,
+                                               stiffness=li_sastry_gains.position, damping=li_sastry_gains.velocity)
     elif controller in ("raibert-craig", "fisher-mujtaba"):
         system = JointServoHybridController(plant, tip, np.zeros(3), space, gains=li_sastry_gains,
                                             joint_gains=list(joint_gains), servo_rate=servo_rate,
@@ -131,7 +138,7 @@ def analytic_eigenvalues(controller, q0=HINTED_CONFIGURATION, joint_gains=JOINT_
     """The loop's eigenvalues from the models: the joint-servo pairs s^2 + K_s s + K_s mu (module
     docstring; the zero-mu pair is (0, -K_s)), or Li & Sastry's designed motion loop (the roots of
     s^2 + K_v s + K_p; its force loop does not act: nothing is pushed on, e_f = 0)."""
-    if controller == "li-sastry":
+    if controller in ("li-sastry", "pd-open-loop-force"):        # the PD: the same design on the free row
         validated = li_sastry_gains.matrices(1, 1, "position-force")
         return predicted_eigenvalues(validated, "position-force").velocity
     plant, _ = two_link_plant()
