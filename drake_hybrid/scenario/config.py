@@ -29,6 +29,7 @@ from pydrake.common.yaml import yaml_dump_typed, yaml_load_typed
 from pydrake.multibody.plant import MultibodyPlantConfig
 from pydrake.systems.analysis import SimulatorConfig
 
+from drake_hybrid.control.baselines import BaselineGains
 from drake_hybrid.control.gains import HybridGains
 from drake_hybrid.control.safety import SafetyConfig
 from drake_hybrid.control.supervision import SupervisionConfig
@@ -39,6 +40,8 @@ from drake_hybrid.systems.sources import Profile
 # The values Drake 1.51 accepts for the MultibodyPlantConfig fields checked here.
 CONTACT_MODELS = ("hydroelastic", "hydroelastic_with_fallback", "point")
 DISCRETE_APPROXIMATIONS = ("sap", "tamsi", "similar", "lagged")
+# The laws a scenario can close its loop with (scenario.builder): Li & Sastry's, and the baselines.
+CONTROLLERS = ("li-sastry", "raibert-craig", "fisher-mujtaba", "pd-open-loop-force")
 
 
 def default_plant_config():
@@ -112,7 +115,14 @@ class ContactSensorConfig(WrenchPathConfig):
 @dataclass
 class WristSensorConfig(WrenchPathConfig):
     """A force/torque sensor in the weld between wrist and tool: the weld's reaction force minus the
-    tool's weight (``systems.sensors.WristForceTorqueSensor``). YAML: ``sensor: !WristSensorConfig {...}``."""
+    tool's weight (``systems.sensors.WristForceTorqueSensor``). YAML: ``sensor: !WristSensorConfig {...}``.
+
+    ``compensate_tool_inertia``: also remove the tool's inertial wrench (its spatial momentum rate,
+    from the tool's model and the plant's body accelerations), so that the sensor reports the
+    contact wrench during motion too. Off by default: the static compensation of the paper's
+    setting (and of most real sensors' drivers)."""
+
+    compensate_tool_inertia: bool = False
 
 
 SensorConfig = Union[ContactSensorConfig, WristSensorConfig]
@@ -132,6 +142,35 @@ class StartConfig:
     def validate(self, prefix="start."):
         check_fields(self, prefix, positive=("tolerance", "gap"))
 
+
+
+MECHANISM_SOURCES = ("none", "given", "plant")
+
+
+@dataclass
+class MechanismConfig:
+    """The inertia of a mechanism that moves along the velocity-controlled rows (a crank's handle,
+    a valve, a door), which the paper's massless constraint leaves out (controller keyword
+    ``velocity_row_inertia``, I_v: k x k in the coordinates of E_p's rows).
+
+    source: "none" (the paper's form, default), "given" (``velocity_row_inertia``: 1, k or k*k
+        entries like the gains) or "plant" (the task reads it from the simulation plant at the start,
+        ``Task.velocity_row_inertia``; the crank does).
+    """
+
+    source: str = "none"
+    velocity_row_inertia: List[float] = field(default_factory=list)
+
+    def validate(self, prefix="mechanism."):
+        if self.source not in MECHANISM_SOURCES:
+            raise ConfigError(f"{prefix}source must be one of {list(MECHANISM_SOURCES)}, got '{self.source}'")
+        if self.source == "given" and not self.velocity_row_inertia:
+            raise ConfigError(f"{prefix}velocity_row_inertia must have 1, k or k*k entries with source 'given', "
+                              "got none")
+        if self.source != "given" and self.velocity_row_inertia:
+            raise ConfigError(f"{prefix}velocity_row_inertia is only read with source 'given', got source "
+                              f"'{self.source}'")
+        return self
 
 
 @dataclass
@@ -194,6 +233,11 @@ class ScenarioConfig:
     sensor_faults: SensorFaultConfig = field(default_factory=SensorFaultConfig)
     supervision: SupervisionConfig = field(default_factory=SupervisionConfig)
     safety: SafetyConfig = field(default_factory=SafetyConfig)
+    # The law: "li-sastry" (HybridController, default) or a baseline of control.baselines
+    # (issue 18: "raibert-craig", "fisher-mujtaba", "pd-open-loop-force"), with the same ports.
+    controller: str = "li-sastry"
+    baseline: BaselineGains = field(default_factory=BaselineGains)
+    mechanism: MechanismConfig = field(default_factory=MechanismConfig)
 
     def replace(self, **changes):
         """A copy with some top-level fields changed."""
@@ -239,6 +283,13 @@ class ScenarioConfig:
         if not self.start.in_contact and not self.supervision.approach_speed > 0:
             raise ConfigError("supervision.approach_speed must be > 0 with start.in_contact: false (the tool "
                               "would never reach the surface)")
+        self.mechanism.validate()
+        self.baseline.validate()
+        if self.controller not in CONTROLLERS:
+            raise ConfigError(f"controller must be one of {list(CONTROLLERS)}, got '{self.controller}'")
+        if self.controller != "li-sastry" and (self.mechanism.source != "none" or self.supervised):
+            raise ConfigError(f"controller '{self.controller}' is a baseline without mechanism inertia or contact "
+                              "supervision: use mechanism.source none and start in contact")
         sampled_parts = [name for name, used in (("supervision (or a start off the surface)", self.supervised),
                                                  ("sensor_faults", self.sensor_faults.active()),
                                                  ("sensor.condition", self.sensor.condition)) if used]

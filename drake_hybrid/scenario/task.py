@@ -177,6 +177,12 @@ class Task(abc.ABC):
     def constraint_space(self, config):
         """The ConstraintSpace (chart, C, E_p) of the task."""
 
+    def velocity_row_inertia(self, plant, config, constraint_space):
+        """I_v (k x k): the inertia of the task's mechanism along the velocity rows, read from the
+        simulation ``plant`` (``mechanism.source: plant``). Default: the task has no mechanism."""
+        raise ConfigError(f"mechanism.source: task '{self.name}' has no mechanism to read from the plant; "
+                          "use source 'given' with mechanism.velocity_row_inertia, or 'none'")
+
     def make_source(self, config, controller_plant, robot, constraint_space):
         """The system producing desired_velocity, desired_acceleration and desired_force.
         Default: the config's profiles."""

@@ -34,6 +34,7 @@ import numpy as np
 from pydrake.math import RigidTransform, RotationMatrix
 from pydrake.multibody.parsing import Parser
 from pydrake.multibody.plant import MultibodyPlantConfig
+from pydrake.multibody.tree import JacobianWrtVariable
 
 from drake_hybrid.control.gains import HybridGains
 from drake_hybrid.core.charts import EulerZXZChart, PoseChart
@@ -154,6 +155,29 @@ class CrankTurning(Task):
         kinematics = EndEffectorKinematics(plant, scenario.robot.end_effector_frame, np.zeros(3), PoseChart())
         alpha = self.options(scenario.config).start_angle
         return inverse_kinematics(kinematics, context, self.handle_pose(alpha), CRANK_SEED)
+
+    def velocity_row_inertia(self, plant, config, constraint_space):
+        """I_v = G^T M_c G: the crank's (arm and spinning handle) inertia along the velocity rows at
+        the start, for ``mechanism.source: plant`` (issue 18).
+
+        M_c is the crank's joint-space mass matrix (alpha, spin) in the simulation ``plant``; H maps
+        its joint rates to the velocity rows, E_p nu of the handle frame (= the pad centre, with the
+        tool's orientation) per unit joint rate, and G = H^-1 maps the rows back (along the crank
+        the constraint rows are zero, so the rows determine the crank's motion)."""
+        context = plant.CreateDefaultContext()
+        crank = plant.GetModelInstanceByName("crank")
+        plant.SetPositions(context, crank, [self.options(config).start_angle, 0.0])
+        handle = plant.GetBodyByName("handle", crank)
+        columns = plant.GetVelocitiesFromArray(crank, np.arange(plant.num_velocities())).astype(int)
+        J_spatial = plant.CalcJacobianSpatialVelocity(context, JacobianWrtVariable.kV, handle.body_frame(),
+                                                      np.zeros(3), plant.world_frame(), plant.world_frame())
+        chart = constraint_space.chart
+        x = chart.configuration_of_pose(handle.EvalPoseInWorld(context))
+        E_p = constraint_space.evaluate(x, np.zeros(chart.velocity_size)).velocity_projection
+        H = np.column_stack([E_p @ chart.task_velocity(x, J_spatial[:, j]) for j in columns])
+        G = np.linalg.inv(H)
+        M_c = plant.CalcMassMatrix(context)[np.ix_(columns, columns)]
+        return G.T @ M_c @ G
 
     def set_environment_state(self, scenario, plant_context):
         """The crank at the start angle, the handle unspun, both at rest."""
