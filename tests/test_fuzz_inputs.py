@@ -115,6 +115,7 @@ RELATIONS = [
     ("gains: 5", "5"),
     ("sensor: !NoSuchSensor {}", "NoSuchSensor"),
     ("mode: sideways", "sideways"),
+    ("duration: 1.0e9", "max_duration"),
 ]
 
 

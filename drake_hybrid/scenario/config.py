@@ -230,6 +230,7 @@ class ScenarioConfig:
     task: str = "window-washing"
     mode: str = "velocity-force"
     duration: float = 3.0
+    max_duration: float = 3600.0                 # s of simulated time a run may ask for (raise it for longer runs)
     plant: MultibodyPlantConfig = field(default_factory=default_plant_config)
     simulator: SimulatorConfig = field(default_factory=SimulatorConfig)
     control_period: float = 1.0e-3               # controller: 0 = continuous
@@ -282,6 +283,9 @@ class ScenarioConfig:
         if not self.control_period >= 0:
             raise ConfigError(f"control_period must be >= 0 (0 means continuous), got {self.control_period}")
         check_fields(self, "", positive=("duration", "log_period"))
+        if self.duration > self.max_duration:
+            raise ConfigError(f"duration ({self.duration:g} s) exceeds max_duration ({self.max_duration:g} s of "
+                              "simulated time); raise max_duration if such a long run is intended")
         for name in ("control_period", "log_period"):
             if getattr(self, name) >= self.duration:
                 raise ConfigError(f"{name} ({getattr(self, name):g} s) must be shorter than duration "
