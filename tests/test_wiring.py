@@ -2,14 +2,18 @@
 
 import dataclasses
 import math
+import os
 
 import numpy as np
 import pytest
+from distributed import LocalCluster
 
 from pydrake.multibody.parsing import Parser
 from pydrake.multibody.plant import DiscreteContactApproximation, MultibodyPlant
 
 from drake_hybrid.experiments.simulation import simulate
+from drake_hybrid.experiments.sweep import read_results, run_sweep
+from drake_hybrid.experiments.sweep_spec import load_spec
 from drake_hybrid.scenario.custom import CustomTask, add_actuators, urdf_effort_limits, weld_joints
 from drake_hybrid.scenario.tasks import TASKS, get_task, register_task
 
@@ -144,3 +148,27 @@ def test_register_task_keeps_the_built_in_tasks(custom_window):
     assert get_task("custom-window") is task
     again = register_task(task)                       # re-running a notebook cell replaces it
     assert get_task("custom-window") is again
+
+
+def test_a_custom_task_is_swept_on_a_dask_cluster_of_other_processes(custom_window, tmp_path):
+    """Workers are other processes without the registry of this one: the task travels with its points."""
+    task, config, _ = custom_window
+    spec = load_spec(text=f"""
+task: {task.name}
+base:
+  duration: 0.05
+  desired_force.value[0]: -10.0
+  desired_velocity.value[0]: 0.1
+parameters:
+  gains.force_proportional: {{values: [0.5, 1.0]}}
+linearize: {{continuous: false, discrete: false}}
+""")
+    cluster = LocalCluster(n_workers=1, threads_per_worker=1, processes=True, dashboard_address=":0",
+                           host="127.0.0.1")
+    try:
+        run = run_sweep(task.name, spec, tmp_path, scheduler=cluster.scheduler_address, progress=False)
+    finally:
+        cluster.close()
+    rows = read_results(run.results_path)
+    assert [row["error"] for row in rows] == [None, None]
+    assert all(row["worker"] and str(os.getpid()) not in row["worker"] for row in rows)   # run elsewhere

@@ -70,7 +70,7 @@ from drake_hybrid.experiments.simulation import RunStopped, simulate
 from drake_hybrid.experiments.sweep_spec import (StabilityCriteria, SweepSpecError, apply_parameters, parameters_digest,
                                                  set_config_value)
 from drake_hybrid.scenario.config import dump_config, load_config
-from drake_hybrid.scenario.tasks import get_task
+from drake_hybrid.scenario.tasks import BUILT_IN_TASKS, TASKS, get_task, register_task
 
 VERDICT_COLUMNS = ["stable", "stable_simulation", "stable_continuous", "stable_discrete"]
 METRIC_COLUMNS = [
@@ -139,8 +139,12 @@ def _stage_error(stage, error):
     return f"{stage}: {text}"
 
 
-def evaluate_point(config_yaml, criteria=None, continuous=True, discrete=True):
+def evaluate_point(config_yaml, criteria=None, continuous=True, discrete=True, task=None):
     """Evaluate one sweep point from its config YAML; returns the result columns as a dict.
+
+    ``task``: a task object that is not built in (a ``CustomTask``), registered in this process
+    first: Dask workers are other processes and do not share the registry of the one that
+    registered it, so the task is shipped with the point (pickled with cloudpickle).
 
     Each stage (simulation, continuous and discrete linearization) runs on its
     own: a failing stage leaves its columns empty and adds its error text to
@@ -150,6 +154,8 @@ def evaluate_point(config_yaml, criteria=None, continuous=True, discrete=True):
     row = {column: None for column in RESULT_COLUMNS}
     row["worker"] = f"{socket.gethostname()}:{os.getpid()}"
     errors = []
+    if task is not None and TASKS.get(task.name) is not task:
+        register_task(task)
     try:
         config = load_config(data=config_yaml)
     except Exception as error:
@@ -461,6 +467,8 @@ def _run_locked(task_name, spec, out, base, points, scheduler, workers, resume, 
     failures = sum(1 for i in done if finished[i].get("error"))
     options = {"criteria": asdict(spec.stability), "continuous": spec.linearize_continuous,
                "discrete": spec.linearize_discrete}
+    if task_name not in BUILT_IN_TASKS:
+        options["task"] = get_task(task_name)   # a registered custom task travels with its points (cloudpickle)
     start = time.perf_counter()
     bar = tqdm(total=len(points), initial=len(done), desc=f"sweep {task_name}", unit="pt", disable=not progress,
                dynamic_ncols=True)

@@ -18,6 +18,7 @@ Every config dataclass validates itself with ``validate(prefix)``, raising ``Con
 the dotted field name; ``ScenarioConfig.validate`` calls them all.
 """
 
+import copyreg
 import dataclasses
 import math
 from dataclasses import dataclass, field
@@ -54,6 +55,20 @@ def default_plant_config():
     the pad's Hunt-Crossley dissipation; "similar" or "lagged" use Hunt-Crossley
     (``ContactConfig.pad_dissipation``), like the continuous plant (docs/drake_notes.md)."""
     return MultibodyPlantConfig(time_step=1.0e-3, contact_model="hydroelastic", discrete_contact_approximation="sap")
+
+
+def _load_struct(schema, text):
+    return yaml_load_typed(schema=schema, data=text)
+
+
+def _reduce_struct(struct):
+    """Pickle Drake's config structs through their YAML (pydrake 1.51 cannot pickle them), so that a
+    ScenarioConfig, or a task holding one, can be shipped to Dask workers."""
+    return _load_struct, (type(struct), yaml_dump_typed(struct))
+
+
+for _struct in (MultibodyPlantConfig, SimulatorConfig):
+    copyreg.pickle(_struct, _reduce_struct)
 
 
 def validate_plant_config(plant, prefix="plant."):
