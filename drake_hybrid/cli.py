@@ -1,9 +1,13 @@
-"""Command line: ``drake-hybrid simulate|analyze|tasks``.
+"""drake-hybrid: hybrid velocity/force control (Li & Sastry 1987) as Drake systems.
 
-    drake-hybrid simulate window-washing [--duration S] [--out DIR] [--mode MODE] [--config FILE] [--html FILE]
-    drake-hybrid analyze window-washing [--mode MODE] [--json FILE] [--plot FILE.png] [--config FILE]
-    drake-hybrid sweep window-washing --grid SPEC.yaml [--out DIR] [--scheduler ADDRESS] [--workers N] [--resume]
-    drake-hybrid tasks
+commands:
+  drake-hybrid simulate TASK    simulate a task; writes log.npz, summary.json, config.yaml and plots
+  drake-hybrid analyze TASK     linearize the closed loop; designed vs. linearized eigenvalues
+  drake-hybrid sweep TASK --grid SPEC.yaml
+                                stability map / Monte Carlo sweep over config fields (Dask)
+  drake-hybrid tasks            list the tasks
+
+"drake-hybrid COMMAND --help" gives each command's options.
 """
 
 import argparse
@@ -125,8 +129,11 @@ def command_sweep(args):
         raise SystemExit(f"drake-hybrid sweep: {error}") from None
     rows = read_results(run.results_path)
     stable = sum(1 for row in rows if row.get("stable"))
-    print(f"{args.task}: {run.evaluated} of {run.points} points evaluated in {run.wall_time:.1f} s on {run.workers}; "
-          f"{len(rows)} in the table, {stable} stable, {run.failures} with errors")
+    if run.evaluated:
+        done = f"{run.evaluated} of {run.points} points evaluated in {run.wall_time:.1f} s ({run.workers})"
+    else:
+        done = f"nothing to run: all {run.points} points already in the table"
+    print(f"{args.task}: {done}; {len(rows)} in the table, {stable} stable, {run.failures} with errors")
     print(f"  wrote {run.results_path}")
     if args.plot:
         for path in save_sweep_plots(rows, spec, out):
@@ -140,46 +147,71 @@ def command_tasks(args):
     return 0
 
 
+def _task_options_epilog():
+    """The valid --option keys of every task (from its typed Options)."""
+    lines = ["task options (--option KEY=VALUE, repeatable):"]
+    for name, task in TASKS.items():
+        entries = task.option_help()
+        lines.append(f"  {name}:" + (" none" if not entries else ""))
+        lines += [f"    {entry}" for entry in entries]
+    return "\n".join(lines)
+
+
 def make_parser():
     parser = argparse.ArgumentParser(prog="drake-hybrid", description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
-    sub = parser.add_subparsers(dest="command", required=True)
+    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     modes = [m.value for m in ControlMode]
-    simulate = sub.add_parser("simulate", help="simulate a task (discrete 1 kHz plant and controller)")
-    simulate.add_argument("task", choices=sorted(TASKS))
-    simulate.add_argument("--duration", type=float, help="simulated time (s)")
-    simulate.add_argument("--out", help="output directory (default ./runs/<task>)")
-    simulate.add_argument("--mode", choices=modes)
-    simulate.add_argument("--config", help="YAML scenario config (on top of the task's defaults)")
+    epilog = _task_options_epilog()
+    simulate = sub.add_parser("simulate", help="simulate a task (discrete 1 kHz plant and controller)",
+                              description="Simulate a task; writes log.npz, summary.json, config.yaml and the "
+                                          "plots to --out.",
+                              epilog=epilog, formatter_class=argparse.RawDescriptionHelpFormatter)
+    simulate.add_argument("task", choices=sorted(TASKS), metavar="TASK", help=", ".join(sorted(TASKS)))
+    simulate.add_argument("--duration", type=float, metavar="S", help="simulated time (s)")
+    simulate.add_argument("--out", metavar="DIR", help="output directory (default ./runs/<task>)")
+    simulate.add_argument("--mode", choices=modes, help="control law (default: the task's)")
+    simulate.add_argument("--config", metavar="FILE.yaml", help="YAML scenario config (on top of the task's defaults)")
     simulate.add_argument("--option", action="append", metavar="KEY=VALUE",
-                          help="a task option, e.g. --option chart=euler --option path=pole (sphere-polishing), "
-                               "--option workpiece=sphere (grinding)")
-    simulate.add_argument("--html", help="also write a self-contained Meshcat animation to this file")
+                          help="a task option, repeatable; the keys of each task are listed below")
+    simulate.add_argument("--html", metavar="FILE", help="also write a self-contained Meshcat animation to this file")
     simulate.add_argument("--no-progress", action="store_true", help="no progress bar")
     simulate.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
     simulate.set_defaults(func=command_simulate)
-    analyze = sub.add_parser("analyze", help="linearize the closed loop; predicted vs. measured eigenvalues")
-    analyze.add_argument("task", choices=sorted(TASKS))
-    analyze.add_argument("--mode", choices=modes)
-    analyze.add_argument("--config", help="YAML scenario config")
-    analyze.add_argument("--option", action="append", metavar="KEY=VALUE", help="a task option (see simulate)")
-    analyze.add_argument("--json", help="write the eigenvalues to this JSON file")
-    analyze.add_argument("--plot", help="write the eigenvalue figure (predicted vs. linearized) to this PNG")
-    analyze.add_argument("--tolerance", type=float, default=0.05, help="relative tolerance of the match")
+    analyze = sub.add_parser("analyze", help="linearize the closed loop; designed vs. linearized eigenvalues",
+                             description="Linearize the closed loop at a contact equilibrium and compare its "
+                                         "eigenvalues with the ones the gains design.",
+                             epilog=epilog, formatter_class=argparse.RawDescriptionHelpFormatter)
+    analyze.add_argument("task", choices=sorted(TASKS), metavar="TASK", help=", ".join(sorted(TASKS)))
+    analyze.add_argument("--mode", choices=modes, help="control law (default: the task's)")
+    analyze.add_argument("--config", metavar="FILE.yaml", help="YAML scenario config (on top of the task's defaults)")
+    analyze.add_argument("--option", action="append", metavar="KEY=VALUE",
+                         help="a task option, repeatable; the keys of each task are listed below")
+    analyze.add_argument("--json", metavar="FILE", help="write the eigenvalues to this JSON file")
+    analyze.add_argument("--plot", metavar="FILE.png",
+                         help="write the eigenvalue figure (designed vs. linearized) to this PNG")
+    analyze.add_argument("--tolerance", type=float, default=0.05, metavar="REL",
+                         help="relative tolerance of the match (default 0.05)")
     analyze.set_defaults(func=command_analyze)
-    sweep = sub.add_parser("sweep", help="stability map / Monte Carlo sweep over config fields (Dask)")
-    sweep.add_argument("task", choices=sorted(TASKS))
-    sweep.add_argument("--grid", required=True, help="sweep spec YAML (see drake_hybrid/sweep_spec.py)")
-    sweep.add_argument("--out", help="output directory (default ./runs/sweep-<task>)")
-    sweep.add_argument("--scheduler", help="address of an existing Dask scheduler (e.g. tcp://host:8786)")
-    sweep.add_argument("--workers", type=int, default=2,
+    sweep = sub.add_parser("sweep", help="stability map / Monte Carlo sweep over config fields (Dask)",
+                           description="Evaluate a grid or Monte Carlo sample of config fields: per point a short "
+                                       "simulation, two linearizations and the verdicts, appended to "
+                                       "DIR/results.csv (docs/stability.md).")
+    sweep.add_argument("task", choices=sorted(TASKS), metavar="TASK", help=", ".join(sorted(TASKS)))
+    sweep.add_argument("--grid", required=True, metavar="SPEC.yaml",
+                       help="sweep spec: the config fields to vary and how (grid or random), the map to plot; "
+                            "format in docs/stability.md")
+    sweep.add_argument("--out", metavar="DIR", help="output directory (default ./runs/sweep-<task>)")
+    sweep.add_argument("--scheduler", metavar="ADDRESS",
+                       help="address of an existing Dask scheduler (e.g. tcp://host:8786)")
+    sweep.add_argument("--workers", type=int, default=2, metavar="N",
                        help="worker processes of the local Dask cluster (default 2; 0 = serial, no Dask)")
     sweep.add_argument("--resume", action="store_true", help="continue the table in --out: run only missing points")
     sweep.add_argument("--retry-failed", action="store_true", help="with --resume, also re-run points with errors")
-    sweep.add_argument("--plot", action="store_true", help="write the stability map / histograms (spec's map:)")
+    sweep.add_argument("--plot", action="store_true", help="write the stability map / histograms (the spec's map:)")
     sweep.add_argument("--no-progress", action="store_true", help="no progress bar")
     sweep.set_defaults(func=command_sweep)
-    tasks = sub.add_parser("tasks", help="list the tasks")
+    tasks = sub.add_parser("tasks", help="list the tasks", description="List the tasks and what each one does.")
     tasks.set_defaults(func=command_tasks)
     return parser
 

@@ -228,7 +228,7 @@ def test_resume_runs_only_the_missing_points(serial_sweep, tmp_path):
     kept = [lines[0]] + [line for line in lines[1:] if line[0] not in ("6", "9")]
     with (tmp_path / "results.csv").open("w", newline="") as f:
         csv.writer(f).writerows(kept)
-    with pytest.raises(SweepSpecError, match="exists: pass resume=True"):
+    with pytest.raises(SweepSpecError, match="exists: add --resume"):
         run_sweep(WINDOW, spec, tmp_path, workers=0, progress=False)
     run = run_sweep(WINDOW, spec, tmp_path, workers=0, resume=True, progress=False)
     assert run.evaluated == 2

@@ -298,8 +298,8 @@ def _prepare_out_dir(out, task_name, spec, base, points, resume):
     manifest_path = out / "manifest.json"
     results_path = out / RESULTS_FILE
     if results_path.exists() and not resume:
-        raise SweepSpecError(f"{results_path} exists: pass resume=True (--resume) to continue it, "
-                             "or choose another output directory")
+        raise SweepSpecError(f"{results_path} exists: add --resume to continue it (resume=True in Python), "
+                             "or choose another --out directory")
     if resume and manifest_path.exists():
         previous = json.loads(manifest_path.read_text())
         if previous.get("digest") != manifest["digest"]:

@@ -122,6 +122,19 @@ class Task(abc.ABC):
         else:
             config.task_options[name] = value
 
+    def option_help(self):
+        """One line per option for help texts: ``name=VALUE`` with its type or allowed values and default."""
+        lines = []
+        for f in dataclasses.fields(self.Options):
+            allowed = f.metadata.get("allowed")
+            kind = f.type if isinstance(f.type, type) else type(f.default)
+            if allowed:
+                value = "|".join(allowed)
+            else:
+                value = {bool: "true|false", int: "INTEGER", float: "NUMBER"}.get(kind, "WORD")
+            lines.append(f"{f.name}={value} (default {f.default})")
+        return lines
+
     def options(self, config):
         """The task's typed options from ``config.task_parameters`` and ``config.task_options``."""
         fields = {f.name: f for f in dataclasses.fields(self.Options)}

@@ -1,0 +1,67 @@
+"""The command line's help against the README's synopsis (what a newcomer reads first)."""
+
+import re
+from pathlib import Path
+
+import pytest
+
+from drake_hybrid.cli import make_parser
+from drake_hybrid.scenario.tasks import TASKS
+
+README = Path(__file__).resolve().parent.parent / "README.md"
+
+
+def _subparsers(parser):
+    (action,) = [a for a in parser._actions if a.__class__.__name__ == "_SubParsersAction"]
+    return action.choices
+
+
+def _readme_synopsis():
+    """{command: set of --options} from the README's "Command line" block."""
+    text = README.read_text()
+    block = text.split("## Command line", 1)[1].split("```", 2)[1]
+    synopsis = {}
+    for line in block.splitlines():
+        if line.startswith("drake-hybrid "):
+            command = line.split()[1]
+            synopsis[command] = set(re.findall(r"--[a-z][a-z-]*", line))
+    return synopsis
+
+
+def _help(capsys, argv):
+    with pytest.raises(SystemExit) as exit_info:
+        make_parser().parse_args(argv)
+    assert exit_info.value.code == 0
+    return capsys.readouterr().out
+
+
+def test_top_level_help_lists_every_command_without_markup(capsys):
+    text = _help(capsys, ["--help"])
+    for command in _subparsers(make_parser()):
+        assert re.search(rf"drake-hybrid {command}\b", text), command
+    assert "``" not in text and "`" not in text
+
+
+def test_readme_synopsis_has_every_command_and_option_of_the_parser():
+    synopsis = _readme_synopsis()
+    commands = _subparsers(make_parser())
+    assert set(synopsis) == set(commands)
+    for name, sub in commands.items():
+        options = {o for action in sub._actions for o in action.option_strings if o.startswith("--")} - {"--help"}
+        assert synopsis[name] == options, (name, sorted(options ^ synopsis[name]))
+
+
+@pytest.mark.parametrize("command", ["simulate", "analyze"])
+def test_option_help_lists_every_tasks_keys(capsys, command):
+    text = _help(capsys, [command, "--help"])
+    for name, task in TASKS.items():
+        assert f"{name}:" in text
+        for entry in task.option_help():
+            assert entry.split("=")[0] in text, (name, entry)
+    assert "`" not in text
+
+
+def test_help_texts_point_at_documents_not_source_files(capsys):
+    for command in _subparsers(make_parser()):
+        text = _help(capsys, [command, "--help"])
+        assert not re.search(r"\w+/\w+\.py", text), (command, text)
