@@ -53,6 +53,25 @@ def _fmt(values):
     return ", ".join(f"{v.real:.4g}{v.imag:+.4g}j" if abs(v.imag) > 1e-9 else f"{v.real:.4g}" for v in values)
 
 
+def _row_text(row):
+    """One row's errors: absolute in its units, % of its command where it has one, settling from contact."""
+    units = row["units"]
+
+    def amount(value, percent):
+        if value is None:
+            return "-"
+        return f"{value:.3g} {units}" + (f" ({percent:.2f} %)" if percent is not None else "")
+
+    command = f"command {row['command']:.3g} {units}" if row["command"] > 0 else "command 0"
+    text = (f"{command}; final error {amount(abs(row['final_error']), row['final_error_percent'])}, "
+            f"settled max {amount(row['max_error_after_5_time_constants'], row['max_error_percent_after_5_time_constants'])}")
+    settle = row["settling_time_1_percent"]
+    if settle is not None:
+        text += (f", within 1 % from {settle:.3f} s after contact on" if np.isfinite(settle)
+                 else ", not within 1 % at the end")
+    return text
+
+
 def command_simulate(args):
     config = _config(args)
     out = Path(args.out) if args.out else Path("runs") / config.task
@@ -72,10 +91,14 @@ def command_simulate(args):
           f"(real-time factor {s['real_time_factor']:.2f})")
     print(f"  designed eigenvalues: {_fmt(np.array([complex(*e) for e in s['predicted_eigenvalues']]))}"
           f" (slowest time constant {s['design_time_constant']:.3f} s)")
-    print(f"  final velocity error {s['final_velocity_error_percent']:.3f} % of the commanded speed, "
-          f"final force error {s['final_force_error_percent']:.3f} % of the commanded force")
-    print(f"  within 1 % after {s['velocity_settling_time_1_percent']:.3f} s (velocity), "
-          f"{s['force_settling_time_1_percent']:.3f} s (force); max |C(r)| {s['max_constraint_residual']:.3g}")
+    start = s["contact_time"]
+    since = "from t = 0" if start == 0 else f"from contact at t = {start:.3f} s"
+    print(f"  errors per row, in its own units and in % of its command ({since}; 'settled': after contact + 5 "
+          f"design time constants, t >= {start + 5 * s['design_time_constant']:.3f} s):")
+    for what, rows in (("velocity", s["velocity_rows"]), ("force", s["force_rows"])):
+        for row in rows:
+            print(f"    {what} {row['name']}: {_row_text(row)}")
+    print(f"  max |C(r)| {s['max_constraint_residual']:.3g}")
     print(f"  wrote {', '.join(str(f) for f in files)}")
     return 0
 

@@ -95,7 +95,7 @@ class CrankTurning(Task):
     def labels(self):
         return {"velocity": ["psi-dot (spin)", "alpha-dot (crank)"], "velocity_units": "rad/s",
                 "force": ["radial (row 1)", "vertical", "tilt torque", "tangential/yaw (row 4)"],
-                "force_units": "E_f coordinates (N, N/m, N m)", "constraint_units": "m^2 | m | 1 | m"}
+                "force_units": "N/m | N | N m | N", "constraint_units": "m^2 | m | 1 | m"}
 
     def _rows(self, config):
         return self.options(config).velocity_rows
