@@ -105,7 +105,8 @@ def test_cli_simulate_and_analyze_write_the_documented_files(tmp_path, capsys):
     assert summary["predicted_eigenvalues"] == [[-10.0, 0.0], [-8.0, 0.0], [-10.0, 0.0]]
     assert (out / "velocity_tracking.png").stat().st_size > 10_000
     assert (out / "force_tracking.png").stat().st_size > 10_000
-    assert "final velocity error" in capsys.readouterr().out
+    printed = capsys.readouterr().out
+    assert "velocity x-dot: command 0.1 m/s; final error" in printed and "velocity theta-dot: command 0;" in printed
     eigen = tmp_path / "eig.json"
     assert main(["analyze", "window-washing", "--mode", "position-force", "--json", str(eigen)]) == 0
     data = json.loads(eigen.read_text())
