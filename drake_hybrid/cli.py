@@ -22,6 +22,7 @@ from pydrake.geometry import Meshcat
 
 from drake_hybrid.analysis.linearization import linearize_continuous, linearize_discrete
 from drake_hybrid.control.gains import ControlMode
+from drake_hybrid.core.progress import Stages
 from drake_hybrid.experiments.simulation import simulate
 from drake_hybrid.experiments.sweep import read_results, run_sweep
 from drake_hybrid.experiments.sweep_spec import SweepSpecError, load_spec
@@ -81,8 +82,11 @@ def command_simulate(args):
 
         meshcat = Meshcat()
         set_task_camera(meshcat, get_task(config.task))
-    result = simulate(config, progress=not args.no_progress, meshcat=meshcat, record_html=bool(args.html))
-    files = write_run(result, out, plots=not args.no_plots)
+    stages = Stages(enabled=not args.quiet)
+    result = simulate(config, progress=not (args.no_progress or args.quiet), meshcat=meshcat,
+                      record_html=bool(args.html), stages=stages)
+    with stages(f"{config.task}: writing {out}" + ("" if args.no_plots else " (log, summary, plots)")):
+        files = write_run(result, out, plots=not args.no_plots)
     if args.html:
         Path(args.html).write_text(result.html)
         files.append(Path(args.html))
@@ -106,11 +110,12 @@ def command_simulate(args):
 def command_analyze(args):
     config = _config(args)
     task = get_task(config.task)
+    stages = Stages(enabled=not args.quiet)
     if getattr(task, "continuous_plant", True):
-        result = linearize_continuous(config, tolerance=args.tolerance)
+        result = linearize_continuous(config, tolerance=args.tolerance, stages=stages)
         how = "Linearize of the continuous closed loop"
     else:
-        result = linearize_discrete(config, tolerance=args.tolerance, settle_time=0.5)
+        result = linearize_discrete(config, tolerance=args.tolerance, settle_time=0.5, stages=stages)
         how = (f"Jacobian of the discrete closed loop's one-period map (h = {result.period * 1e3:g} ms), "
                "eigenvalues log(mu)/h,")
     match = result.match
@@ -200,6 +205,8 @@ def make_parser():
     simulate.add_argument("--html", metavar="FILE", help="also write a self-contained Meshcat animation to this file")
     simulate.add_argument("--no-progress", action="store_true", help="no progress bar")
     simulate.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
+    simulate.add_argument("--quiet", action="store_true",
+                          help="no setup stages and no progress bar on stderr (for scripts); results still printed")
     simulate.set_defaults(func=command_simulate)
     analyze = sub.add_parser("analyze", help="linearize the closed loop; designed vs. linearized eigenvalues",
                              description="Linearize the closed loop at a contact equilibrium and compare its "
@@ -215,6 +222,7 @@ def make_parser():
                          help="write the eigenvalue figure (designed vs. linearized) to this PNG")
     analyze.add_argument("--tolerance", type=float, default=0.05, metavar="REL",
                          help="relative tolerance of the match (default 0.05)")
+    analyze.add_argument("--quiet", action="store_true", help="no setup stages on stderr (for scripts)")
     analyze.set_defaults(func=command_analyze)
     sweep = sub.add_parser("sweep", help="stability map / Monte Carlo sweep over config fields (Dask)",
                            description="Evaluate a grid or Monte Carlo sample of config fields: per point a short "

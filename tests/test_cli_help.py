@@ -1,11 +1,13 @@
 """The command line's help against the README's synopsis (what a newcomer reads first)."""
 
+import io
 import re
 from pathlib import Path
 
 import pytest
 
-from drake_hybrid.cli import make_parser
+from drake_hybrid.cli import main, make_parser
+from drake_hybrid.core.progress import Stages
 from drake_hybrid.scenario.tasks import TASKS
 
 README = Path(__file__).resolve().parent.parent / "README.md"
@@ -65,3 +67,27 @@ def test_help_texts_point_at_documents_not_source_files(capsys):
     for command in _subparsers(make_parser()):
         text = _help(capsys, [command, "--help"])
         assert not re.search(r"\w+/\w+\.py", text), (command, text)
+
+
+def test_stages_print_a_line_each_with_its_time_or_nothing():
+    stream = io.StringIO()
+    stages = Stages(stream=stream)
+    with stages("building the diagram"):
+        pass
+    assert re.fullmatch(r"building the diagram \.\.\. \d+\.\d s\n", stream.getvalue())
+    silent = io.StringIO()
+    with Stages(enabled=False, stream=silent)("anything"):
+        pass
+    assert silent.getvalue() == ""
+
+
+def test_simulate_reports_its_setup_stages_and_quiet_silences_them(tmp_path, capsys):
+    argv = ["simulate", "window-washing", "--duration", "0.02", "--no-plots", "--out", str(tmp_path / "run")]
+    assert main(argv + ["--no-progress"]) == 0
+    captured = capsys.readouterr()
+    for stage in ("building the diagram", "solving the start", "writing"):
+        assert re.search(rf"{stage}.* \.\.\. \d+\.\d s", captured.err), (stage, captured.err)
+    assert "errors per row" in captured.out
+    assert main(argv + ["--quiet"]) == 0
+    captured = capsys.readouterr()
+    assert captured.err == "" and "errors per row" in captured.out

@@ -34,6 +34,7 @@ from pydrake.systems.primitives import Linearize
 from drake_hybrid.control.law import impedance_blocks
 from drake_hybrid.control.gains import ControlMode
 from drake_hybrid.control.sampling import SAMPLE_LEAD
+from drake_hybrid.core.progress import quiet
 from drake_hybrid.scenario.builder import build_scenario
 from drake_hybrid.scenario.start import set_initial_conditions
 from drake_hybrid.scenario.tasks import get_task
@@ -242,27 +243,28 @@ class Linearization:
     wall_time: float
 
 
-def linearize_continuous(config, tolerance=0.05, bandwidth_hz=200.0):
+def linearize_continuous(config, tolerance=0.05, bandwidth_hz=200.0, stages=None):
     """Linearize the continuous closed loop of ``config`` at its contact equilibrium.
 
     Builds ``equilibrium_config(config)``, sets the start, checks it is an
     equilibrium, runs Drake's ``Linearize`` (AutoDiffXd through plant,
     contact, sensor, filter and controller) and matches eig(A) against the
-    designed eigenvalues.
+    designed eigenvalues. ``stages`` (``core.progress.Stages``): one line per stage with its time.
     """
-
-
-
+    stages = stages or quiet()
     c = equilibrium_config(config, bandwidth_hz)
-    scenario = build_scenario(c, with_loggers=False)
-    context = scenario.diagram.CreateDefaultContext()
-    set_initial_conditions(scenario, context)
-    derivatives = scenario.diagram.EvalTimeDerivatives(context).CopyToVector()
+    with stages(f"{c.task}: building the continuous closed loop"):
+        scenario = build_scenario(c, with_loggers=False)
+        context = scenario.diagram.CreateDefaultContext()
+    with stages(f"{c.task}: solving the start (contact equilibrium)"):
+        set_initial_conditions(scenario, context)
+        derivatives = scenario.diagram.EvalTimeDerivatives(context).CopyToVector()
     residual = float(np.max(np.abs(derivatives)))
     if not (context.num_abstract_states() == 0 and context.has_only_continuous_state()):
         raise ValueError("linearize_continuous needs a purely continuous closed loop")
     start = time.perf_counter()
-    linear = Linearize(scenario.diagram, context, equilibrium_check_tolerance=np.inf)
+    with stages(f"{c.task}: linearizing ({context.num_continuous_states()} states, AutoDiffXd)"):
+        linear = Linearize(scenario.diagram, context, equilibrium_check_tolerance=np.inf)
     wall = time.perf_counter() - start
     A = np.asarray(linear.A())
     eigenvalues = np.linalg.eigvals(A)
@@ -299,7 +301,7 @@ class DiscreteLinearization:
     wall_time: float
 
 
-def linearize_discrete(config, tolerance=0.05, epsilon=1e-6, settle_time=0.0):
+def linearize_discrete(config, tolerance=0.05, epsilon=1e-6, settle_time=0.0, stages=None):
     """Linearize a discrete closed loop (discrete SAP plant and sampled controller) at its equilibrium.
 
     For plants that only exist in discrete time (the crank: its SAP weld constraint needs a discrete
@@ -312,26 +314,27 @@ def linearize_discrete(config, tolerance=0.05, epsilon=1e-6, settle_time=0.0):
     designed eigenvalues by about lambda^2 h / 2 (0.5 % at -10 1/s and 1 kHz).
 
     ``settle_time`` (s): first simulate the rebuilt loop at rest for this long, so that the
-    compliant constraint forces settle onto the equilibrium.
+    compliant constraint forces settle onto the equilibrium. ``stages`` (``core.progress.Stages``):
+    one line per stage with its time.
     """
-
-
-
-
+    stages = stages or quiet()
     c = at_rest_config(config)
     if not c.plant.time_step > 0:
         raise ValueError("linearize_discrete needs a discrete plant (time_step > 0)")
     c.control_period = c.plant.time_step
     c.log_period = c.plant.time_step
     c.sensor.bandwidth_hz = 0.0
-    scenario = build_scenario(c, with_loggers=False, sampled_plant_outputs=False, controller_sample_lead=False)
-    simulator = Simulator(scenario.diagram)
-    ApplySimulatorConfig(c.simulator, simulator)
-    context = simulator.get_mutable_context()
-    set_initial_conditions(scenario, context)
-    simulator.Initialize()
+    with stages(f"{c.task}: building the discrete closed loop"):
+        scenario = build_scenario(c, with_loggers=False, sampled_plant_outputs=False, controller_sample_lead=False)
+        simulator = Simulator(scenario.diagram)
+        ApplySimulatorConfig(c.simulator, simulator)
+        context = simulator.get_mutable_context()
+    with stages(f"{c.task}: solving the start"):
+        set_initial_conditions(scenario, context)
+        simulator.Initialize()
     if settle_time > 0:
-        simulator.AdvanceTo(settle_time)
+        with stages(f"{c.task}: settling at rest for {settle_time:g} s"):
+            simulator.AdvanceTo(settle_time)
     if context.num_abstract_states() != 0 or context.num_continuous_states() != 0:
         raise ValueError("linearize_discrete needs a closed loop with discrete state only")
     diagram = scenario.diagram
@@ -354,7 +357,9 @@ def linearize_discrete(config, tolerance=0.05, epsilon=1e-6, settle_time=0.0):
         return np.concatenate([update.get_vector(i).CopyToVector() for i in range(update.num_groups())])
 
     start = time.perf_counter()
-    A, residual = _one_period_jacobian(step, state_vector(context), epsilon)
+    x0 = state_vector(context)
+    with stages(f"{c.task}: linearizing (one-period map, {x0.size} states, {2 * x0.size} steps)"):
+        A, residual = _one_period_jacobian(step, x0, epsilon)
     wall = time.perf_counter() - start
     multipliers = np.linalg.eigvals(A)
     h = c.plant.time_step

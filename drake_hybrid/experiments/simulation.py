@@ -19,6 +19,7 @@ from pydrake.systems.analysis import ApplySimulatorConfig, Simulator
 
 from drake_hybrid.analysis.linearization import controller_prediction, design_time_constant, predicted_errors
 from drake_hybrid.control.phases import ContactPhase
+from drake_hybrid.core.progress import quiet
 from drake_hybrid.scenario.builder import build_scenario
 from drake_hybrid.scenario.config import dump_config
 from drake_hybrid.scenario.start import set_initial_conditions
@@ -105,16 +106,23 @@ def _worst(rows, key):
     return max(values) if values else None
 
 
-def simulate(config, progress=False, meshcat=None, record_html=False):
-    """Simulate ``config``; returns a SimulationResult (log arrays and summary)."""
-    scenario = build_scenario(config, meshcat=meshcat)
-    simulator = Simulator(scenario.diagram)
-    ApplySimulatorConfig(config.simulator, simulator)
-    context = simulator.get_mutable_context()
-    set_initial_conditions(scenario, context)
+def simulate(config, progress=False, meshcat=None, record_html=False, stages=None):
+    """Simulate ``config``; returns a SimulationResult (log arrays and summary).
+
+    ``progress``: a progress bar while simulating; ``stages`` (``core.progress.Stages``): one line per
+    setup stage with its time, printed before the bar (default: silent)."""
+    stages = stages or quiet()
+    with stages(f"{config.task}: building the diagram (plant, constraint, controller)"):
+        scenario = build_scenario(config, meshcat=meshcat)
+        simulator = Simulator(scenario.diagram)
+        ApplySimulatorConfig(config.simulator, simulator)
+        context = simulator.get_mutable_context()
+    with stages(f"{config.task}: solving the start (inverse kinematics, contact equilibrium)"):
+        set_initial_conditions(scenario, context)
     if meshcat is not None and record_html:
         meshcat.StartRecording(set_visualizations_while_recording=False)
-    simulator.Initialize()
+    with stages(f"{config.task}: initializing the simulator"):
+        simulator.Initialize()
     start = time.perf_counter()
     duration = float(config.duration)
     if progress:
