@@ -107,6 +107,17 @@ def command_simulate(args):
     return 0
 
 
+def _shift_indices(designed, shifts):
+    """{index in ``designed``: EigenvalueShift} (each shift takes one equal designed eigenvalue)."""
+    taken = {}
+    for shift in shifts:
+        for i, value in enumerate(designed):
+            if i not in taken and abs(value - shift.designed) <= 1e-9 * max(1.0, abs(shift.designed)):
+                taken[i] = shift
+                break
+    return taken
+
+
 def command_analyze(args):
     config = _config(args)
     task = get_task(config.task)
@@ -124,13 +135,36 @@ def command_analyze(args):
     k, m = space.velocity_size, space.force_size
     print(f"{config.task} ({controller_mode.value}): {how} at a contact equilibrium "
           f"(residual {result.equilibrium_residual:.2g}) in {result.wall_time:.2f} s")
-    print(f"  {'predicted':>22}  {'linearized':>22}  rel. error")
-    for p, q, e in zip(match.predicted, match.partner, match.relative_error):
-        print(f"  {_fmt([p]):>22}  {_fmt([q]):>22}  {100 * e:8.3f} %")
+    # With the task's predicted shifts (physics the paper's model leaves out), pair against those.
+    shown = result.shifted_match or match
+    shifted = {i: shift for i, shift in _shift_indices(match.predicted, result.shifts).items()}
+    print(f"  {'designed':>22}  {'linearized':>22}  rel. error")
+    for i, (p, q) in enumerate(zip(match.predicted, shown.partner)):
+        error = abs(q - p) / abs(p)
+        line = f"  {_fmt([p]):>22}  {_fmt([q]):>22}  {100 * error:8.3f} %"
+        if i in shifted and error > args.tolerance:
+            line += (f"  missed; predicted {_fmt([shifted[i].predicted])} "
+                     f"({100 * shown.relative_error[i]:.2f} % from it): see [{sorted(shifted).index(i) + 1}]")
+        print(line)
+    for n, i in enumerate(sorted(shifted)):
+        print(f"  [{n + 1}] {_fmt([shifted[i].designed])} -> {_fmt([shifted[i].predicted])}: {shifted[i].reason}")
     print(f"  marginal (theory: {len(match.marginal_partners)} x 0, unregulated positions): "
           f"{_fmt(match.marginal_partners)}")
     print(f"  other modes (contact, filter, sampling, joint space): {_fmt(np.sort_complex(match.extra))}")
-    print(f"  matched within {100 * args.tolerance:.0f} % and no other mode unstable: {match.matched}")
+    tolerance = f"{100 * args.tolerance:g} %"
+    if match.matched:
+        verdict, code = f"every designed eigenvalue within {tolerance}, no other mode unstable: matched", 0
+    elif result.shifted_match is not None and result.shifted_match.matched:
+        missed = int(np.sum(match.relative_error > args.tolerance))
+        verdict = (f"{missed} designed eigenvalue(s) missed by more than {tolerance}, each within {tolerance} of "
+                   f"the task's prediction for it, no other mode unstable: matched as predicted")
+        code = 1 if args.strict else 0
+        if args.strict:
+            verdict += " (--strict: counted as a miss)"
+    else:
+        unexplained = "unstable modes" if match.unstable_extra.size else f"misses beyond {tolerance} not predicted"
+        verdict, code = f"not matched: {unexplained}", 1
+    print(f"  {verdict}")
     if args.plot:
         figure = eigenvalue_figure(match, title=f"{config.task}, {controller_mode.value}")
         figure.savefig(args.plot, dpi=110)
@@ -138,13 +172,18 @@ def command_analyze(args):
         print(f"  wrote {args.plot}")
     if args.json:
         payload = match.as_dict()
+        payload["predicted_shifts"] = [{"designed": [float(np.real(x.designed)), float(np.imag(x.designed))],
+                                        "predicted": [float(np.real(x.predicted)), float(np.imag(x.predicted))],
+                                        "reason": x.reason} for x in result.shifts]
+        payload["matched_as_predicted"] = bool(match.matched or (result.shifted_match is not None
+                                                                 and result.shifted_match.matched))
         payload.update({"gains": config.gains.as_lists(k, m, controller_mode), "mode": controller_mode.value,
                         "method": "continuous" if getattr(task, "continuous_plant", True) else "discrete",
                         "velocity_dim": k, "force_dim": m, "task": config.task,
                         "equilibrium_residual": result.equilibrium_residual, "wall_time": result.wall_time})
         Path(args.json).write_text(json.dumps(payload, indent=2))
         print(f"  wrote {args.json}")
-    return 0 if match.matched else 1
+    return code
 
 
 def command_sweep(args):
@@ -222,6 +261,9 @@ def make_parser():
                          help="write the eigenvalue figure (designed vs. linearized) to this PNG")
     analyze.add_argument("--tolerance", type=float, default=0.05, metavar="REL",
                          help="relative tolerance of the match (default 0.05)")
+    analyze.add_argument("--strict", action="store_true",
+                         help="exit 1 on any designed eigenvalue missed, also where the task predicts the miss "
+                              "(default: exit 0 when every miss is within --tolerance of its prediction)")
     analyze.add_argument("--quiet", action="store_true", help="no setup stages on stderr (for scripts)")
     analyze.set_defaults(func=command_analyze)
     sweep = sub.add_parser("sweep", help="stability map / Monte Carlo sweep over config fields (Dask)",

@@ -193,6 +193,32 @@ def match_eigenvalues(designed, measured, tolerance=0.05, marginal=0, marginal_r
                            marginal_partners=marginal_partners)
 
 
+def shifted_design(designed, shifts):
+    """The designed eigenvalues with, for each ``scenario.task.EigenvalueShift``, one equal designed
+    eigenvalue replaced by the shift's prediction (order kept)."""
+    designed = np.asarray(designed, dtype=complex)
+    corrected = designed.copy()
+    used = np.zeros(designed.size, dtype=bool)
+    for shift in shifts:
+        same = ~used & (np.abs(designed - shift.designed) <= 1e-9 * max(1.0, abs(shift.designed)))
+        if not same.any():
+            raise ValueError(f"a predicted shift of {shift.designed} matches no designed eigenvalue {designed}")
+        index = int(np.argmax(same))
+        corrected[index], used[index] = shift.predicted, True
+    return corrected
+
+
+def _task_shifts(task_name, scenario, root_context, predicted, measured, tolerance):
+    """The task's predicted shifts and the match against the shifted design (the plain match's
+    inputs when the task predicts none)."""
+    shifts = get_task(task_name).eigenvalue_shifts(scenario, root_context)
+    if not shifts:
+        return [], None
+    match = match_eigenvalues(shifted_design(predicted.designed, shifts), measured, tolerance=tolerance,
+                              marginal=predicted.marginal)
+    return shifts, match
+
+
 # ------------------------------------------------------------------------------------------------
 # Linearization of a scenario's closed loop
 # ------------------------------------------------------------------------------------------------
@@ -241,6 +267,8 @@ class Linearization:
     predicted: PredictedEigenvalues
     match: EigenvalueMatch
     wall_time: float
+    shifts: list = field(default_factory=list)       # the task's EigenvalueShift predictions
+    shifted_match: EigenvalueMatch = None            # the match against the design with those shifts
 
 
 def linearize_continuous(config, tolerance=0.05, bandwidth_hz=200.0, stages=None):
@@ -270,8 +298,9 @@ def linearize_continuous(config, tolerance=0.05, bandwidth_hz=200.0, stages=None
     eigenvalues = np.linalg.eigvals(A)
     predicted = controller_prediction(scenario.controller)
     match = match_eigenvalues(predicted.designed, eigenvalues, tolerance=tolerance, marginal=predicted.marginal)
+    shifts, shifted_match = _task_shifts(c.task, scenario, context, predicted, eigenvalues, tolerance)
     return Linearization(A=A, eigenvalues=eigenvalues, equilibrium_residual=residual, predicted=predicted,
-                         match=match, wall_time=wall)
+                         match=match, wall_time=wall, shifts=shifts, shifted_match=shifted_match)
 
 
 # ------------------------------------------------------------------------------------------------
@@ -299,6 +328,8 @@ class DiscreteLinearization:
     predicted: PredictedEigenvalues
     match: EigenvalueMatch
     wall_time: float
+    shifts: list = field(default_factory=list)       # the task's EigenvalueShift predictions
+    shifted_match: EigenvalueMatch = None            # the match against the design with those shifts
 
 
 def linearize_discrete(config, tolerance=0.05, epsilon=1e-6, settle_time=0.0, stages=None):
@@ -368,8 +399,10 @@ def linearize_discrete(config, tolerance=0.05, epsilon=1e-6, settle_time=0.0, st
     eigenvalues = np.log(multipliers[keep].astype(complex)) / h
     predicted = controller_prediction(scenario.controller)
     match = match_eigenvalues(predicted.designed, eigenvalues, tolerance=tolerance, marginal=predicted.marginal)
+    shifts, shifted_match = _task_shifts(c.task, scenario, context, predicted, eigenvalues, tolerance)
     return DiscreteLinearization(A=A, multipliers=multipliers, eigenvalues=eigenvalues, period=h,
-                                 equilibrium_residual=residual, predicted=predicted, match=match, wall_time=wall)
+                                 equilibrium_residual=residual, predicted=predicted, match=match, wall_time=wall,
+                                 shifts=shifts, shifted_match=shifted_match)
 
 
 def impedance_realization(scenario, log):

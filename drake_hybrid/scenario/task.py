@@ -29,6 +29,16 @@ from drake_hybrid.scenario.config import ScenarioConfig
 from drake_hybrid.systems.sources import Profile, ProfileSource
 
 
+@dataclass
+class EigenvalueShift:
+    """A designed eigenvalue that the task's physics moves, and where it predicts it: the paper's model
+    leaves something out (e.g. a massless constraint), the task knows what and by how much."""
+
+    designed: complex       # the eigenvalue the gains design
+    predicted: complex      # where the task's physics puts it
+    reason: str             # one line: what moves it, and the formula
+
+
 def choice(default, allowed):
     """A string option whose value must be one of ``allowed``."""
     return dataclasses.field(default=default, metadata={"allowed": tuple(allowed)})
@@ -146,6 +156,11 @@ class Task(abc.ABC):
                                       f"{sorted(fields) or 'none'}")
                 values[name] = _coerce(self.name, fields[name], raw)
         return self.Options(**values)
+
+    def eigenvalue_shifts(self, scenario, root_context):
+        """Designed eigenvalues this task's physics moves (``EigenvalueShift``), at the linearization
+        point ``root_context`` of ``scenario``. Default: none (the paper's model is the plant's)."""
+        return []
 
     def labels(self):
         """Plot labels of the velocity- and force-controlled coordinates."""

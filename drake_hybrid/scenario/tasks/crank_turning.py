@@ -43,7 +43,7 @@ from drake_hybrid.core.kinematics import EndEffectorKinematics, inverse_kinemati
 from drake_hybrid.core.projections import ConstraintSpace, crank_paper_projection, crank_true_velocity_projection
 from drake_hybrid.scenario.config import ScenarioConfig, StartConfig, WristSensorConfig
 from drake_hybrid.scenario.parsing import ConfigureParser, model_url
-from drake_hybrid.scenario.task import Task, choice
+from drake_hybrid.scenario.task import EigenvalueShift, Task, choice
 from drake_hybrid.scenario.tasks.robots import PAD_CENTER_IN_TOOL, add_ur5e_with_pad
 from drake_hybrid.systems.sources import Profile, PseudoVelocitySource
 
@@ -154,6 +154,51 @@ class CrankTurning(Task):
         kinematics = EndEffectorKinematics(plant, scenario.robot.end_effector_frame, np.zeros(3), PoseChart())
         alpha = self.options(scenario.config).start_angle
         return inverse_kinematics(kinematics, context, self.handle_pose(alpha), CRANK_SEED)
+
+    # -- what the paper's massless crank leaves out --------------------------------------------------
+    def eigenvalue_shifts(self, scenario, root_context):
+        """The spin row's designed eigenvalues, moved by the handle's spin inertia I_h (the paper's
+        constraint is massless; tests/test_six_dof.py checks these predictions within 2 %).
+
+        With M_p the spin row's mobility (E J M^-1 J^T E^T): velocity/force has -K_v / (1 + M_p I_h)
+        instead of -K_v; position/force has the roots of (1 + M_p I_h) s^2 + K_v s + K_p; in
+        impedance/force the wrist sensor also reports the tool's own spin inertia I_t, which the law
+        feeds forward: (1 + I_h + I_t - M_p I_t) s^2 + K_v s + K_p (M_p with the constraint rows held).
+        """
+        controller = scenario.controller
+        plant = scenario.controller_plant
+        context = plant.CreateDefaultContext()
+        arm_positions = scenario.plant.GetPositions(scenario.plant.GetMyContextFromRoot(root_context),
+                                                    scenario.robot.arm)
+        plant.SetPositions(context, arm_positions)
+        task = controller.kinematics.evaluate(context)
+        values = scenario.constraint_space.evaluate(task.configuration, task.velocity)
+        mobility = task.jacobian @ np.linalg.solve(plant.CalcMassMatrix(context), task.jacobian.T)
+        I_h = scenario.plant.GetBodyByName("handle").default_rotational_inertia().get_moments()[2]
+        gains = controller.validated_gains()
+        K_v = float(gains.velocity[0, 0])
+        if not controller.mode.integrates_position:
+            M_p = float((values.velocity_projection @ mobility @ values.velocity_projection.T)[0, 0])
+            return [EigenvalueShift(-K_v, -K_v / (1.0 + M_p * I_h),
+                                    f"spin row slowed by the handle's spin inertia I_h = {I_h:.3g} kg m^2 "
+                                    f"(massless in the paper): -K_v / (1 + M_p I_h), M_p = {M_p:.3g}")]
+        A = values.matrix @ mobility @ values.matrix.T
+        k = scenario.constraint_space.velocity_size
+        M_p = float((A[:k, :k] - A[:k, k:] @ np.linalg.solve(A[k:, k:], A[k:, :k]))[0, 0])
+        K_p = float(gains.position[0, 0])
+        if controller.mode.value == "position-force":
+            factor = 1.0 + M_p * I_h
+            reason = (f"spin pair moved by the handle's spin inertia I_h = {I_h:.3g} kg m^2 (massless in the "
+                      f"paper): roots of (1 + M_p I_h) s^2 + K_v s + K_p, M_p = {M_p:.3g}")
+        else:
+            I_t = scenario.plant.GetBodyByName("tool").default_rotational_inertia().get_moments()[2]
+            factor = 1.0 + I_h + I_t - M_p * I_t
+            reason = (f"spin pair moved by the handle's inertia I_h = {I_h:.3g} and the tool's I_t = {I_t:.3g} "
+                      f"kg m^2 in the wrist sensor's reading, fed forward: roots of (1 + I_h + I_t - M_p I_t) s^2 "
+                      f"+ K_v s + K_p, M_p = {M_p:.3g}")
+        designed = np.sort_complex(np.roots([1.0, K_v, K_p]).astype(complex))
+        predicted = np.sort_complex(np.roots([factor, K_v, K_p]).astype(complex))
+        return [EigenvalueShift(d, p, reason) for d, p in zip(designed, predicted)]
 
     def set_environment_state(self, scenario, plant_context):
         """The crank at the start angle, the handle unspun, both at rest."""
