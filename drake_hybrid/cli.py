@@ -103,6 +103,8 @@ def command_simulate(args):
         for row in rows:
             print(f"    {what} {row['name']}: {_row_text(row)}")
     print(f"  max |C(r)| {s['max_constraint_residual']:.3g}")
+    for note in s.get("notes", []):
+        print(f"  note: {note}")
     print(f"  wrote {', '.join(str(f) for f in files)}")
     return 0
 

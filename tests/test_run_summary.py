@@ -68,3 +68,14 @@ def test_an_off_surface_start_is_summarized_and_predicted_from_contact():
     at = int(np.argmax(log["t"] >= summary["contact_time"]))
     assert np.all(np.isnan(velocity[:at])) and np.all(np.isnan(force_prediction[:at]))
     np.testing.assert_allclose(velocity[at], log["velocity"][at], atol=1e-12)
+
+
+@pytest.mark.slow
+def test_the_grinding_default_says_it_ends_in_the_surge_after_the_rough_patch():
+    """The default 3 s grinding run ends 0.2 s after the pad leaves the rough patch: the summary says
+    so (and how long a run ending in steady sliding is), instead of a bare 26 % speed error."""
+    result = simulate(get_task("grinding").default_config())
+    (note,) = result.summary["notes"]
+    assert "after the pad left the rough patch" in note and "--duration 3.8" in note
+    x_dot = result.summary["velocity_rows"][0]
+    assert x_dot["units"] == "m/s" and x_dot["final_error_percent"] > 5

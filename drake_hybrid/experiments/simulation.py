@@ -223,6 +223,7 @@ def summarize(scenario, log, wall_time):
         "wall_time": float(wall_time),
         "real_time_factor": float(config.duration / wall_time) if wall_time > 0 else None,
         "command_scales": {"speed": speed_scale, "force": force_scale},
+        "notes": list(scenario.task.run_notes(scenario, log, tau)),
     }
     return summary
 

@@ -162,6 +162,11 @@ class Task(abc.ABC):
         point ``root_context`` of ``scenario``. Default: none (the paper's model is the plant's)."""
         return []
 
+    def run_notes(self, scenario, log, design_time_constant):
+        """Lines the run's summary should carry about where the run ends (e.g. in a transient the
+        task causes on purpose). Default: none."""
+        return []
+
     def labels(self):
         """Plot labels of the velocity- and force-controlled coordinates."""
         return {"velocity": [], "velocity_units": "SI", "force": [], "force_units": "SI"}

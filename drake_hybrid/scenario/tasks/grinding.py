@@ -100,6 +100,36 @@ class Grinding(Task):
     def labels(self):
         return self._window.labels()
 
+    def run_notes(self, scenario, log, design_time_constant):
+        """Where the pad is at the end relative to the rough patch (window): leaving it releases the
+        extra friction force, a transient that lasts several design time constants."""
+        config = scenario.config
+        if self._base(config) is not self._window or "q" not in log:
+            return []
+        options = self.options(config)
+        plant = scenario.controller_plant
+        context = plant.CreateDefaultContext()
+        x = []
+        for q in log["q"]:
+            plant.SetPositions(context, q)
+            x.append(scenario.controller.kinematics.evaluate(context).configuration[0])
+        x, t = np.array(x), log["t"]
+        on_patch = (x >= options.rough_start) & (x <= options.rough_end)
+        where = f"rough patch (mu = {options.rough_friction:g}, x from {options.rough_start:g} to {options.rough_end:g} m)"
+        if on_patch[-1]:
+            return [f"the run ends with the pad on the {where}"]
+        if not on_patch.any():
+            side = "before" if x[-1] < options.rough_start else "past"
+            return [f"the pad never reaches the {where}; it ends {side} it at x = {x[-1]:.3f} m"]
+        left = float(t[np.nonzero(on_patch)[0][-1] + 1])
+        after = float(t[-1]) - left
+        if after < 5 * design_time_constant:
+            steady = left + 10 * design_time_constant
+            return [f"the run ends {after:.2f} s ({after / design_time_constant:.1f} design time constants) after the pad "
+                    f"left the {where}: the released friction force is still accelerating it, so the final speed "
+                    f"error is that transient's; --duration {np.ceil(steady * 10) / 10:g} ends in steady sliding"]
+        return [f"the run ends in steady sliding, {after:.2f} s after the pad left the {where}"]
+
     # -- delegated to the base task -------------------------------------------------------------
     def add_robot(self, plant, config):
         return self._base(config).add_robot(plant, config)
