@@ -193,18 +193,26 @@ def match_eigenvalues(designed, measured, tolerance=0.05, marginal=0, marginal_r
                            marginal_partners=marginal_partners)
 
 
+def shift_indices(designed, shifts):
+    """{index in ``designed``: shift}: each ``scenario.task.EigenvalueShift`` takes one designed
+    eigenvalue equal to its ``designed``, not yet taken; ValueError if there is none."""
+    designed = np.asarray(designed, dtype=complex)
+    taken = {}
+    for shift in shifts:
+        same = [i for i, value in enumerate(designed)
+                if i not in taken and abs(value - shift.designed) <= 1e-9 * max(1.0, abs(shift.designed))]
+        if not same:
+            raise ValueError(f"a predicted shift of {shift.designed} matches no designed eigenvalue {designed}")
+        taken[same[0]] = shift
+    return taken
+
+
 def shifted_design(designed, shifts):
     """The designed eigenvalues with, for each ``scenario.task.EigenvalueShift``, one equal designed
     eigenvalue replaced by the shift's prediction (order kept)."""
-    designed = np.asarray(designed, dtype=complex)
-    corrected = designed.copy()
-    used = np.zeros(designed.size, dtype=bool)
-    for shift in shifts:
-        same = ~used & (np.abs(designed - shift.designed) <= 1e-9 * max(1.0, abs(shift.designed)))
-        if not same.any():
-            raise ValueError(f"a predicted shift of {shift.designed} matches no designed eigenvalue {designed}")
-        index = int(np.argmax(same))
-        corrected[index], used[index] = shift.predicted, True
+    corrected = np.array(designed, dtype=complex)
+    for index, shift in shift_indices(designed, shifts).items():
+        corrected[index] = shift.predicted
     return corrected
 
 
