@@ -69,6 +69,11 @@ def _tracking_axes(ax_values, ax_errors, t, actual, desired, predicted, labels, 
         command = float(np.max(np.abs(desired[:, i])))
         if command > 0:
             ax_errors.axhline(0.01 * command, color=color, lw=0.8, ls="-.", label=f"1 % of the {label} command")
+    measured = _positive(np.abs(actual - desired))
+    if np.isfinite(measured).any():
+        # The axis spans the measured errors (at most 8 decades): a designed decay far below them is cut.
+        top, bottom = np.nanmax(measured), np.nanmin(measured)
+        ax_errors.set_ylim(max(bottom, 1e-8 * top) / 2, 2 * top)
     ax_errors.set_xlabel("time t (s)")
     ax_values.grid(alpha=0.3)
     ax_errors.grid(alpha=0.3, which="both")
