@@ -102,7 +102,8 @@ def command_simulate(args):
     for what, rows in (("velocity", s["velocity_rows"]), ("force", s["force_rows"])):
         for row in rows:
             print(f"    {what} {row['name']}: {_row_text(row)}")
-    print(f"  max |C(r)| {s['max_constraint_residual']:.3g}")
+    residual = s["max_constraint_residual_after_contact"]
+    print(f"  max |C(r)| after contact {residual:.3g}" if residual is not None else "  no contact made")
     for note in s.get("notes", []):
         print(f"  note: {note}")
     print(f"  wrote {', '.join(str(f) for f in files)}")

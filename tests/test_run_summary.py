@@ -64,6 +64,9 @@ def test_an_off_surface_start_is_summarized_and_predicted_from_contact():
     # The designed force loop settles to 1 % within 5 time constants of contact, not of t = 0.
     assert force["settling_time_1_percent"] < 5 * summary["design_time_constant"]
     assert summary["max_force_error_percent_after_5_time_constants"] < 1.0
+    # C(r) before contact is the 10 mm gap; after it, the pad's compression (about 1 mm).
+    assert summary["max_constraint_residual"] == pytest.approx(0.01, rel=0.05)
+    assert summary["max_constraint_residual_after_contact"] < 2e-3
     velocity, force_prediction = predicted_tracking(result.scenario, config, log)
     at = int(np.argmax(log["t"] >= summary["contact_time"]))
     assert np.all(np.isnan(velocity[:at])) and np.all(np.isnan(force_prediction[:at]))

@@ -219,6 +219,9 @@ def summarize(scenario, log, wall_time):
         "velocity_rows": velocity_rows,
         "force_rows": force_rows,
         "max_constraint_residual": float(np.max(np.abs(log["constraint"]))),
+        # From contact on: before it, C is the start's gap, not a residual.
+        "max_constraint_residual_after_contact":
+            float(np.max(np.abs(log["constraint"][t >= start]))) if np.any(t >= start) else None,
         "max_torque_to_effort_limit": torque_ratio.tolist(),
         "wall_time": float(wall_time),
         "real_time_factor": float(config.duration / wall_time) if wall_time > 0 else None,
