@@ -1,6 +1,7 @@
 """What a run reports: per-row errors in each row's units, settling and predictions from contact."""
 
 import math
+import re
 
 import numpy as np
 import pytest
@@ -82,3 +83,17 @@ def test_the_grinding_default_says_it_ends_in_the_surge_after_the_rough_patch():
     assert "after the pad left the rough patch" in note and "--duration 3.8" in note
     x_dot = result.summary["velocity_rows"][0]
     assert x_dot["units"] == "m/s" and x_dot["final_error_percent"] > 5
+
+
+@pytest.mark.slow
+def test_the_crank_summary_prints_the_true_crank_rates_deviation_for_both_velocity_rows():
+    """The README's 3.1 times: each crank run's note gives the true crank rate's deviation from the
+    designed exponential, for Option A and for the paper's naive pseudo-velocity."""
+    deviations = {}
+    for rows in ("true", "paper"):
+        config = get_task("crank-turning").default_config({"velocity_rows": rows})
+        config.duration = 0.6
+        (note,) = simulate(config).summary["notes"]
+        deviations[rows] = float(re.search(r"deviates at most ([0-9.e+-]+) rad/s", note).group(1))
+    assert deviations["true"] < 0.01 * 0.5
+    assert deviations["paper"] > 3.0 * deviations["true"]

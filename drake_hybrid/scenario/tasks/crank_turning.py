@@ -200,6 +200,31 @@ class CrankTurning(Task):
         predicted = np.sort_complex(np.roots([factor, K_v, K_p]).astype(complex))
         return [EigenvalueShift(d, p, reason) for d, p in zip(designed, predicted)]
 
+    def run_notes(self, scenario, log, design_time_constant):
+        """The true crank rate's deviation from the designed e^(-K_v t) (docs/theory.md §6): with the
+        paper's E_p (``velocity_rows=paper``) the controlled rows are pseudo-velocities, so the summary's
+        rows do not show what the crank itself does; this figure compares the two options."""
+        true_rows = crank_true_velocity_projection(scenario.constraint_space.chart, center=CRANK_CENTER,
+                                                   radius=CRANK_RADIUS)
+        plant = scenario.controller_plant
+        context = plant.CreateDefaultContext()
+        rates = []
+        for q, v in zip(log["q"], log["v"]):
+            plant.SetPositions(context, q)
+            plant.SetVelocities(context, v)
+            task = scenario.controller.kinematics.evaluate(context)
+            rates.append((true_rows.matrix(task.configuration) @ task.velocity)[1])
+        t = log["t"]
+        # The true-velocity command (the paper's rows get it converted to a pseudo-velocity).
+        command = np.array([scenario.config.desired_velocity.evaluate(float(time))[0][1] for time in t])
+        error = np.array(rates) - command
+        K_v = float(scenario.controller.validated_gains().velocity[1, 1])
+        deviation = float(np.max(np.abs(error - np.exp(-K_v * (t - t[0])) * error[0])))
+        rows = "true-velocity rows (Option A)" if self._rows(scenario.config) == "true" else \
+            "the paper's E_p with its pseudo-velocity (naive)"
+        return [f"with {rows}, the true crank rate's error deviates at most {deviation:.2e} rad/s from the designed "
+                f"e^(-K_v t) (compare --option velocity_rows={'paper' if rows.startswith('true') else 'true'})"]
+
     def set_environment_state(self, scenario, plant_context):
         """The crank at the start angle, the handle unspun, both at rest."""
         plant = scenario.plant

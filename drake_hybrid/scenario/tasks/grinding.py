@@ -114,21 +114,30 @@ class Grinding(Task):
             plant.SetPositions(context, q)
             x.append(scenario.controller.kinematics.evaluate(context).configuration[0])
         x, t = np.array(x), log["t"]
+        notes = []
+        late = t >= t[-1] - min(1.0, 0.5 * t[-1])
+        command = float(np.mean(log["desired_velocity"][late, 0]))
+        speed = float(np.mean(log["velocity"][late, 0]))
+        if scenario.controller.mode.value == "velocity-force" and command > 0 and speed < 0.5 * command:
+            notes.append(f"the pad sticks (mean x-dot {100 * speed / command:.0f} % of the command over the last "
+                         f"{t[-1] - t[late][0]:.1f} s): velocity/force with this K_v would need a velocity error "
+                         "larger than the command to build the friction force mu F_n, and stalls; impedance/force "
+                         "(the default mode) slides (docs/impedance.md)")
         on_patch = (x >= options.rough_start) & (x <= options.rough_end)
         where = f"rough patch (mu = {options.rough_friction:g}, x from {options.rough_start:g} to {options.rough_end:g} m)"
         if on_patch[-1]:
-            return [f"the run ends with the pad on the {where}"]
+            return notes + [f"the run ends with the pad on the {where}"]
         if not on_patch.any():
             side = "before" if x[-1] < options.rough_start else "past"
-            return [f"the pad never reaches the {where}; it ends {side} it at x = {x[-1]:.3f} m"]
+            return notes + [f"the pad never reaches the {where}; it ends {side} it at x = {x[-1]:.3f} m"]
         left = float(t[np.nonzero(on_patch)[0][-1] + 1])
         after = float(t[-1]) - left
         if after < 5 * design_time_constant:
             steady = left + 10 * design_time_constant
-            return [f"the run ends {after:.2f} s ({after / design_time_constant:.1f} design time constants) after the pad "
+            return notes + [f"the run ends {after:.2f} s ({after / design_time_constant:.1f} design time constants) after the pad "
                     f"left the {where}: the released friction force is still accelerating it, so the final speed "
                     f"error is that transient's; --duration {np.ceil(steady * 10) / 10:g} ends in steady sliding"]
-        return [f"the run ends in steady sliding, {after:.2f} s after the pad left the {where}"]
+        return notes + [f"the run ends in steady sliding, {after:.2f} s after the pad left the {where}"]
 
     # -- delegated to the base task -------------------------------------------------------------
     def add_robot(self, plant, config):
