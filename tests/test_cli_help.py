@@ -6,8 +6,10 @@ from pathlib import Path
 
 import pytest
 
+import drake_hybrid.cli as cli
 from drake_hybrid.cli import main, make_parser
 from drake_hybrid.core.progress import Stages
+from drake_hybrid.experiments.sweep import SweepRun
 from drake_hybrid.scenario.tasks import TASKS
 
 README = Path(__file__).resolve().parent.parent / "README.md"
@@ -91,3 +93,15 @@ def test_simulate_reports_its_setup_stages_and_quiet_silences_them(tmp_path, cap
     assert main(argv + ["--quiet"]) == 0
     captured = capsys.readouterr()
     assert captured.err == "" and "errors per row" in captured.out
+
+
+def test_a_resumed_sweep_with_nothing_left_says_so(tmp_path, monkeypatch, capsys):
+    """Not "evaluated in 0.0 s on nothing to run"."""
+    done = SweepRun(out_dir=tmp_path, results_path=tmp_path / "results.csv", points=12, evaluated=0, failures=0,
+                    wall_time=0.0, workers="serial")
+    monkeypatch.setattr(cli, "load_spec", lambda path: object())
+    monkeypatch.setattr(cli, "run_sweep", lambda *args, **kwargs: done)
+    monkeypatch.setattr(cli, "read_results", lambda path: [{"stable": True}] * 12)
+    assert main(["sweep", "window-washing", "--grid", "spec.yaml", "--resume", "--out", str(tmp_path)]) == 0
+    out = capsys.readouterr().out
+    assert "nothing to run: all 12 points already in the table" in out and "0.0 s" not in out
