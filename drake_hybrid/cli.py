@@ -8,10 +8,17 @@ commands:
   drake-hybrid tasks            list the tasks
 
 "drake-hybrid COMMAND --help" gives each command's options.
+
+Bad input (a config field, a flag, a file) prints one line naming it and exits 2; a run that
+stops early (sensor fault, an error inside the simulation, Ctrl-C) writes what it logged up to
+the stop, prints why and exits 1. --traceback (or DRAKE_HYBRID_TRACEBACK=1) shows the full
+Python traceback instead.
 """
 
 import argparse
 import json
+import math
+import os
 import sys
 from pathlib import Path
 
@@ -23,7 +30,7 @@ from pydrake.geometry import Meshcat
 from drake_hybrid.analysis.linearization import linearize_continuous, linearize_discrete, shift_indices
 from drake_hybrid.control.gains import ControlMode
 from drake_hybrid.core.progress import Stages
-from drake_hybrid.experiments.simulation import simulate
+from drake_hybrid.experiments.simulation import RunStopped, simulate
 from drake_hybrid.experiments.sweep import read_results, run_sweep
 from drake_hybrid.experiments.sweep_spec import SweepSpecError, load_spec
 from drake_hybrid.scenario.config import load_config
@@ -33,19 +40,63 @@ from drake_hybrid.viz.outputs import write_run
 from drake_hybrid.viz.plotting import eigenvalue_figure, save_sweep_plots
 
 
+class UsageError(ValueError):
+    """Bad command-line input (printed as one line, exit code 2)."""
+
+
+def _options(args):
+    """--option KEY=VALUE pairs as a dict (UsageError for an entry without '=')."""
+    options = {}
+    for option in getattr(args, "option", None) or []:
+        if "=" not in option:
+            raise UsageError(f"--option takes KEY=VALUE, got '{option}'")
+        key, value = option.split("=", 1)
+        options[key] = value
+    return options
+
+
+def _check_output_paths(args):
+    """Refuse, before anything runs, output paths that cannot be written (UsageError naming the flag)."""
+    for flag in ("out",):
+        value = getattr(args, flag, None)
+        if value and Path(value).exists() and not Path(value).is_dir():
+            raise UsageError(f"--{flag} '{value}' exists and is not a directory")
+        if value and not os.access(_existing_ancestor(Path(value)), os.W_OK):
+            raise UsageError(f"--{flag} '{value}' cannot be created (no write permission)")
+    for flag in ("html", "json", "plot"):
+        value = getattr(args, flag, None)
+        if not value or isinstance(value, bool):
+            continue
+        path = Path(value)
+        if path.is_dir():
+            raise UsageError(f"--{flag} '{value}' is a directory; give a file name")
+        if not path.parent.is_dir():
+            raise UsageError(f"--{flag} '{value}': the folder '{path.parent}' does not exist")
+        if not os.access(path.parent, os.W_OK) or (path.exists() and not os.access(path, os.W_OK)):
+            raise UsageError(f"--{flag} '{value}' is not writable")
+
+
+def _existing_ancestor(path):
+    path = path.absolute()
+    while not path.exists():
+        path = path.parent
+    return path
+
+
 def _config(args):
+    _check_output_paths(args)
     task = get_task(args.task)
-    options = dict(option.split("=", 1) for option in (getattr(args, "option", None) or []))
+    options = _options(args)
     config = task.default_config(options) if options else task.default_config()
     if getattr(args, "config", None):
         config = load_config(path=args.config, defaults=config)
         if config.task != task.name:
-            raise SystemExit(f"--config is for task '{config.task}', not '{task.name}'")
+            raise UsageError(f"--config is for task '{config.task}', not '{task.name}'")
     if getattr(args, "mode", None):
         config.mode = args.mode
     if getattr(args, "duration", None) is not None:
-        if not args.duration > 0:
-            raise SystemExit(f"--duration must be positive, got {args.duration}")
+        if not 0 < args.duration < math.inf:
+            raise UsageError(f"--duration must be positive and finite (s), got {args.duration}")
         config.duration = args.duration
     return config
 
@@ -64,8 +115,9 @@ def _row_text(row):
         return f"{value:.3g} {units}" + (f" ({percent:.2f} %)" if percent is not None else "")
 
     command = f"command {row['command']:.3g} {units}" if row["command"] > 0 else "command 0"
-    text = (f"{command}; final error {amount(abs(row['final_error']), row['final_error_percent'])}, "
-            f"settled max {amount(row['max_error_after_5_time_constants'], row['max_error_percent_after_5_time_constants'])}")
+    final = None if row["final_error"] is None else abs(row["final_error"])
+    settled = amount(row["max_error_after_5_time_constants"], row["max_error_percent_after_5_time_constants"])
+    text = f"{command}; final error {amount(final, row['final_error_percent'])}, settled max {settled}"
     settle = row["settling_time_1_percent"]
     if settle is not None:
         text += (f", within 1 % from {settle:.3f} s after contact on" if np.isfinite(settle)
@@ -83,14 +135,21 @@ def command_simulate(args):
         meshcat = Meshcat()
         set_task_camera(meshcat, get_task(config.task))
     stages = Stages(enabled=not args.quiet)
-    result = simulate(config, progress=not (args.no_progress or args.quiet), meshcat=meshcat,
-                      record_html=bool(args.html), stages=stages)
+    try:
+        result, stopped = simulate(config, progress=not (args.no_progress or args.quiet), meshcat=meshcat,
+                                   record_html=bool(args.html), stages=stages), None
+    except RunStopped as error:
+        result, stopped = error.result, error
     with stages(f"{config.task}: writing {out}" + ("" if args.no_plots else " (log, summary, plots)")):
         files = write_run(result, out, plots=not args.no_plots)
-    if args.html:
+    if args.html and result.html:
         Path(args.html).write_text(result.html)
         files.append(Path(args.html))
     s = result.summary
+    if stopped is not None:
+        print(f"{s['task']}: {stopped}", file=sys.stderr)
+        print(f"  wrote what was logged up to the stop: {', '.join(str(f) for f in files)}", file=sys.stderr)
+        return 1
     print(f"{s['task']} ({s['mode']}), {s['duration']:.2f} s simulated in {s['wall_time']:.1f} s "
           f"(real-time factor {s['real_time_factor']:.2f})")
     print(f"  designed eigenvalues: {_fmt(np.array([complex(*e) for e in s['predicted_eigenvalues']]))}"
@@ -179,13 +238,15 @@ def command_analyze(args):
 
 
 def command_sweep(args):
+    _check_output_paths(args)
     out = Path(args.out) if args.out else Path("runs") / f"sweep-{args.task}"
     try:
         spec = load_spec(path=args.grid)
         run = run_sweep(args.task, spec, out, scheduler=args.scheduler, workers=args.workers, resume=args.resume,
                         retry_failed=args.retry_failed, progress=not args.no_progress)
     except (SweepSpecError, ValueError) as error:
-        raise SystemExit(f"drake-hybrid sweep: {error}") from None
+        print(f"drake-hybrid sweep: {_one_line(error)}", file=sys.stderr)
+        return 2
     rows = read_results(run.results_path)
     stable = sum(1 for row in rows if row.get("stable"))
     if run.evaluated:
@@ -220,9 +281,13 @@ def make_parser():
     parser = argparse.ArgumentParser(prog="drake-hybrid", description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    common = argparse.ArgumentParser(add_help=False)
+    common.add_argument("--traceback", action="store_true",
+                        help="show the full Python traceback of an error (also DRAKE_HYBRID_TRACEBACK=1)")
     modes = [m.value for m in ControlMode]
     epilog = _task_options_epilog()
-    simulate = sub.add_parser("simulate", help="simulate a task (discrete 1 kHz plant and controller)",
+    simulate = sub.add_parser("simulate", parents=[common],
+                              help="simulate a task (discrete 1 kHz plant and controller)",
                               description="Simulate a task; writes log.npz, summary.json, config.yaml and the "
                                           "plots to --out.",
                               epilog=epilog, formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -239,7 +304,8 @@ def make_parser():
     simulate.add_argument("--quiet", action="store_true",
                           help="no setup stages and no progress bar on stderr (for scripts); results still printed")
     simulate.set_defaults(func=command_simulate)
-    analyze = sub.add_parser("analyze", help="linearize the closed loop; designed vs. linearized eigenvalues",
+    analyze = sub.add_parser("analyze", parents=[common],
+                             help="linearize the closed loop; designed vs. linearized eigenvalues",
                              description="Linearize the closed loop at a contact equilibrium and compare its "
                                          "eigenvalues with the ones the gains design.",
                              epilog=epilog, formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -258,7 +324,8 @@ def make_parser():
                               "(default: exit 0 when every miss is within --tolerance of its prediction)")
     analyze.add_argument("--quiet", action="store_true", help="no setup stages on stderr (for scripts)")
     analyze.set_defaults(func=command_analyze)
-    sweep = sub.add_parser("sweep", help="stability map / Monte Carlo sweep over config fields (Dask)",
+    sweep = sub.add_parser("sweep", parents=[common],
+                           help="stability map / Monte Carlo sweep over config fields (Dask)",
                            description="Evaluate a grid or Monte Carlo sample of config fields: per point a short "
                                        "simulation, two linearizations and the verdicts, appended to "
                                        "DIR/results.csv (docs/stability.md).")
@@ -276,14 +343,38 @@ def make_parser():
     sweep.add_argument("--plot", action="store_true", help="write the stability map / histograms (the spec's map:)")
     sweep.add_argument("--no-progress", action="store_true", help="no progress bar")
     sweep.set_defaults(func=command_sweep)
-    tasks = sub.add_parser("tasks", help="list the tasks", description="List the tasks and what each one does.")
+    tasks = sub.add_parser("tasks", parents=[common], help="list the tasks",
+                           description="List the tasks and what each one does.")
     tasks.set_defaults(func=command_tasks)
     return parser
 
 
 def main(argv=None):
     args = make_parser().parse_args(argv)
-    return args.func(args)
+    if args.traceback or os.environ.get("DRAKE_HYBRID_TRACEBACK", "") not in ("", "0"):
+        return args.func(args)
+    try:
+        return args.func(args)
+    except SystemExit:
+        raise
+    except KeyboardInterrupt:
+        print(f"drake-hybrid {args.command}: interrupted", file=sys.stderr)
+        return 130
+    except (ValueError, TypeError, KeyError, FileNotFoundError) as error:   # bad input: config, flags, files
+        print(f"drake-hybrid {args.command}: {_one_line(error)}", file=sys.stderr)
+        return 2
+    except Exception as error:   # noqa: BLE001 -- anything else: one line, with the way to see more
+        print(f"drake-hybrid {args.command}: {type(error).__name__}: {_one_line(error)} "
+              "(run with --traceback for details)", file=sys.stderr)
+        return 1
+
+
+def _one_line(error):
+    """The first line of an error's message (its type's name if it has none)."""
+    text = str(error).strip()
+    if isinstance(error, KeyError) and len(error.args) == 1:
+        text = str(error.args[0])
+    return text.splitlines()[0] if text else type(error).__name__
 
 
 if __name__ == "__main__":

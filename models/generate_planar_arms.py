@@ -1,4 +1,4 @@
-"""Generate planar_3r.sdf and planar_4r.sdf (uniform rods, SI units).
+"""Generate planar_2r.sdf, planar_3r.sdf and planar_4r.sdf (uniform rods, SI units).
 
     python models/generate_planar_arms.py
 
@@ -7,12 +7,15 @@ The 3R arm is the reference arm of docs/theory.md §9: links 1.0, 0.8,
 docs/theory.md §8 (0.8, 0.7, 0.5, 0.2 m; 2.0, 1.5, 1.0, 0.3 kg). Both move in the
 world x-z plane with every joint turning about -y, so the absolute angle of
 the last link is the sum of the joint angles (PlanarChart's theta) and gravity
-acts along the chart's -y. A frame "tip" marks the end of the last link.
+acts along the chart's -y. A frame "tip" marks the end of the last link. The 2R arm (1.0, 0.8 m;
+2.0, 1.5 kg) is the arm of the kinematic instability of the Raibert-Craig hybrid controller
+(issue 18, analysis.kinematic_instability).
 """
 
 from pathlib import Path
 
 ARMS = {
+    "planar_2r": dict(lengths=[1.0, 0.8], masses=[2.0, 1.5], efforts=[150.0, 80.0]),
     "planar_3r": dict(lengths=[1.0, 0.8, 0.3], masses=[2.0, 1.5, 0.5], efforts=[150.0, 80.0, 30.0]),
     "planar_4r": dict(lengths=[0.8, 0.7, 0.5, 0.2], masses=[2.0, 1.5, 1.0, 0.3], efforts=[150.0, 100.0, 50.0, 20.0]),
 }

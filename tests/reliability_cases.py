@@ -297,6 +297,10 @@ def case_dropouts(quick=False):
         config.desired_force = _force_step()
         config.sensor_faults = faults
         config.sensor.condition = condition
+        # The conditioner turns a stale sensor into NaN after max_hold_time; riding through the
+        # 200 ms outage needs sensor.fault_time above it (with the default 50 ms the run stops as
+        # a sensor fault, keeping its log: tests/test_run_faults.py).
+        config.sensor.fault_time = 0.3
         result = simulate(config)
         log = result.log
         after = log["t"] >= 0.4

@@ -11,7 +11,7 @@ from drake_hybrid import (BranchError, ChartSingularityError, EulerZXZChart, Pos
 from drake_hybrid.analysis.linearization import linearize_continuous, linearize_discrete
 from drake_hybrid.core.kinematics import EndEffectorKinematics, inverse_kinematics
 from drake_hybrid.core.projections import ConstraintSpace
-from drake_hybrid.experiments.simulation import simulate
+from drake_hybrid.experiments.simulation import RunStopped, simulate
 from drake_hybrid.scenario.builder import build_scenario
 from drake_hybrid.scenario.config import WristSensorConfig
 from drake_hybrid.scenario.plant import build_controller_plant
@@ -58,8 +58,12 @@ def test_pole_crossing_fails_loudly_with_euler_angles_and_succeeds_with_the_pose
     config.task_options.update(path="pole", chart="euler")
     config.task_parameters["start_angle"] = 0.35          # the pole is 0.15 rad (0.5 s) ahead
     config.duration = 1.0
-    with pytest.raises(ChartSingularityError, match="Euler|euler_zxz"):
+    with pytest.raises(RunStopped, match="ChartSingularityError.*(Euler|euler_zxz)") as stopped:
         simulate(config)
+    assert isinstance(stopped.value.__cause__, ChartSingularityError)
+    summary, log = stopped.value.result.summary, stopped.value.result.log
+    assert summary["status"] == "error" and 0 < summary["stop_time"] < 1.0   # the log up to the stop is kept
+    assert len(log["t"]) > 10 and log["t"][-1] <= summary["stop_time"]
     config.task_options["chart"] = "pose"
     config.duration = 1.5
     result = simulate(config)

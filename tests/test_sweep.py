@@ -2,6 +2,11 @@
 a local Dask cluster checked against the same points run serially."""
 
 import csv
+import re
+import signal
+import subprocess
+import sys
+import time
 
 import numpy as np
 import pytest
@@ -228,7 +233,7 @@ def test_resume_runs_only_the_missing_points(serial_sweep, tmp_path):
     kept = [lines[0]] + [line for line in lines[1:] if line[0] not in ("6", "9")]
     with (tmp_path / "results.csv").open("w", newline="") as f:
         csv.writer(f).writerows(kept)
-    with pytest.raises(SweepSpecError, match="exists: add --resume"):
+    with pytest.raises(SweepSpecError, match="exists: pass --resume"):
         run_sweep(WINDOW, spec, tmp_path, workers=0, progress=False)
     run = run_sweep(WINDOW, spec, tmp_path, workers=0, resume=True, progress=False)
     assert run.evaluated == 2
@@ -258,3 +263,92 @@ def test_cli_parses_the_sweep_command():
     assert (args.grid, args.workers, args.resume, args.scheduler) == ("spec.yaml", 3, True, "tcp://127.0.0.1:8786")
     with pytest.raises(SystemExit):
         make_parser().parse_args(["sweep", WINDOW])            # --grid is required
+
+
+# -- a sweep is safe by construction: lock, torn rows, manifest, digest, row checks ----------------
+
+FAST_SWEEP = """
+task: window-washing
+base: {duration: 0.06}
+parameters:
+  gains.force_proportional: {values: [0.5, 1.0, 1.5, 2.0, 2.5, 3.0]}
+linearize: {continuous: false, discrete: false}
+"""
+
+
+def _rows_per_point(path):
+    with (path / "results.csv").open(newline="") as f:
+        points = [line[0] for line in list(csv.reader(f))[1:]]
+    return {point: points.count(point) for point in points}
+
+
+def test_a_sweep_killed_mid_run_resumes_with_every_point_once(tmp_path):
+    spec_path = tmp_path / "spec.yaml"
+    spec_path.write_text(FAST_SWEEP)
+    out = tmp_path / "out"
+    script = ("from drake_hybrid.experiments.sweep import run_sweep\n"
+              "from drake_hybrid.experiments.sweep_spec import load_spec\n"
+              f"run_sweep('{WINDOW}', load_spec(path='{spec_path}'), '{out}', workers=0, progress=False)\n")
+    process = subprocess.Popen([sys.executable, "-c", script])
+    deadline = time.monotonic() + 120
+    while time.monotonic() < deadline and len(_rows_per_point(out) if (out / "results.csv").exists() else {}) < 2:
+        time.sleep(0.05)
+    process.send_signal(signal.SIGKILL)
+    process.wait()
+    finished = _rows_per_point(out)
+    assert 2 <= len(finished) < 6 and (out / ".lock").exists()         # killed mid-sweep, its lock left behind
+    with (out / "results.csv").open("a") as f:
+        f.write("5,3.0,Tr")                                              # and a torn last line
+    run = run_sweep(WINDOW, load_spec(text=FAST_SWEEP), out, workers=0, resume=True, progress=False)
+    assert run.evaluated == 6 - len(finished)
+    assert _rows_per_point(out) == {str(i): 1 for i in range(6)}         # every point exactly once
+    assert not (out / ".lock").exists()
+
+
+def test_a_live_lock_refuses_a_second_writer(tmp_path):
+    holder = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(60)"])
+    try:
+        tmp_path.mkdir(exist_ok=True)
+        (tmp_path / ".lock").write_text(str(holder.pid))
+        with pytest.raises(SweepSpecError, match=f"being written by another sweep \\(process {holder.pid}\\)"):
+            run_sweep(WINDOW, load_spec(text=FAST_SWEEP), tmp_path, workers=0, progress=False)
+        assert not (tmp_path / "results.csv").exists()
+    finally:
+        holder.kill()
+        holder.wait()
+
+
+def test_resume_refuses_changed_settings_missing_manifest_and_foreign_rows(tmp_path):
+    run_sweep(WINDOW, load_spec(text=FAST_SWEEP.replace("[0.5, 1.0, 1.5, 2.0, 2.5, 3.0]", "[0.5]")), tmp_path,
+              workers=0, progress=False)
+    one_point = FAST_SWEEP.replace("[0.5, 1.0, 1.5, 2.0, 2.5, 3.0]", "[0.5]")
+    changed = load_spec(text=one_point + "stability: {steady_tolerance: 0.2}\n")
+    with pytest.raises(SweepSpecError, match="holds a different sweep"):                # verdict settings changed
+        run_sweep(WINDOW, changed, tmp_path, workers=0, resume=True, progress=False)
+    manifest = (tmp_path / "manifest.json").read_text()
+    (tmp_path / "manifest.json").unlink()
+    with pytest.raises(SweepSpecError, match="no manifest.json"):
+        run_sweep(WINDOW, load_spec(text=one_point), tmp_path, workers=0, resume=True, progress=False)
+    (tmp_path / "manifest.json").write_text(manifest)
+    text = (tmp_path / "results.csv").read_text().replace("\n0,0.5,", "\n0,0.75,")   # a row from another sweep
+    (tmp_path / "results.csv").write_text(text)
+    with pytest.raises(SweepSpecError, match="the row of point 0 has parameters"):
+        run_sweep(WINDOW, load_spec(text=one_point), tmp_path, workers=0, resume=True, progress=False)
+
+
+@pytest.mark.parametrize("text, message", [
+    ("parameters:\n  gains.velocity: {values: [1]}\n  gains.velocity[0]: {values: [2]}", "set the same field"),
+    ("base:\n  gains.velocity[0]: 3\nparameters:\n  gains.velocity: {values: [1]}", "overlaps a field set in 'base'"),
+    ("parameters: {duration: {linspace: [1, 2, 20000]}}", "20000 points, more than max_points = 10000"),
+    ("parameters: {duration: {values: [1]}}\nlinearize: {continuous: maybe}", "continuous"),
+])
+def test_overlaps_counts_and_strict_booleans_are_refused(text, message):
+    with pytest.raises(SweepSpecError, match=re.escape(message)):
+        load_spec(text=text)
+
+
+def test_an_unreachable_scheduler_leaves_nothing_behind(tmp_path):
+    with pytest.raises(SweepSpecError, match="no Dask scheduler answers there"):
+        run_sweep(WINDOW, load_spec(text=FAST_SWEEP), tmp_path / "out", scheduler="tcp://127.0.0.1:1",
+                  progress=False)
+    assert not (tmp_path / "out").exists()

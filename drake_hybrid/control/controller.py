@@ -198,11 +198,14 @@ def HybridController_(T):
                 changed the integrals (which runs the law twice per period).
                 Off by default: the stored copy adds states with zero
                 multipliers to a discrete-time linearization.
+            velocity_row_inertia: None (the paper's massless constraint, default) or I_v (k x k): the
+                inertia of a mechanism that moves along the velocity rows (a crank's handle). See
+                ``law.mechanism_force``.
         """
 
         def _construct(self, plant, end_effector_frame, end_effector_point, constraint_space, gains=None,
                        mode=ControlMode.VELOCITY_FORCE, control_period=None, sample_lead=True, safety=None,
-                       guarded_move=None, sampled_diagnostics=False, converter=None):
+                       guarded_move=None, sampled_diagnostics=False, velocity_row_inertia=None, converter=None):
             # Every argument as given, for scalar conversion (_construct_copy): one added later cannot
             # be forgotten there.
             arguments = locals()
@@ -258,10 +261,17 @@ def HybridController_(T):
                     raise ValueError(f"HybridController: approach_speed must be >= 0, got {speed}")
                 if not gain > 0:
                     raise ValueError(f"HybridController: approach_gain must be positive, got {gain}")
+            # The mechanism's inertia along the velocity rows (None: the paper's massless constraint).
+            I_v = None
+            if velocity_row_inertia is not None:
+                I_v = np.asarray(velocity_row_inertia, dtype=float)
+                if I_v.shape != (k, k) or not np.all(np.isfinite(I_v)):
+                    raise DimensionError(f"HybridController: velocity_row_inertia must be a finite {k}x{k} matrix, "
+                                         f"got shape {I_v.shape}")
             zero_acceleration = np.zeros(n) if T == float else np.array([AutoDiffXd(0.0)] * n, dtype=object)
             self._law = LawConstants(self._gains, self.mode, self.kinematic_rows, m, singularity_threshold,
                                      self._max_joint_acceleration, self.effort_limits, anti_windup,
-                                     actuation_from_torque, zero_acceleration, speed, gain)
+                                     actuation_from_torque, zero_acceleration, speed, gain, I_v)
 
             # -- ports ------------------------------------------------------------------
             # estimated_state, the controller's own plant of this system's scalar type, its kinematics.

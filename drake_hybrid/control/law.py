@@ -11,12 +11,13 @@ force on the robot, §0; k = d - m velocity rows, m force rows)::
     e_f = F - F_d                       (0 on kinematic rows)        force_error
     a_p = r-ddot_pd - K_v e_p'                            (3.1-12)   motion_acceleration
           ... - K_p e_p                                  (Remark 3)
-          ... + K_0 F_v                                   (3.2-6)   impedance_compensation
+          ... + K_0 (F_v + F_m)                           (3.2-6)   impedance_compensation
+    F_m = I_v a_p                       (a mechanism on the velocity rows)   mechanism_force
     a_f = -3 w_c C-dot - 2 w_c^2 C      (kinematic rows)             held_row_acceleration
     a_f = -K_a (C-dot - s n_C)          (off the surface)            guarded_acceleration
     r-ddot* = E^-1 ([a_p; a_f] - E-dot r-dot)             (3.0-11)   ConstraintSpace.task_acceleration
     u_f = -F_d + K_fp e_f + K_fi xi                       (3.1-12)   force_command
-    tau_f = J^T E_f^T u_f                                            force_torque
+    tau_f = J^T (E_f^T u_f + E_p^T F_m)                              force_torque
     tau = ID(q, q-dot, J^-1 (r-ddot* - J-dot q-dot)) + tau_f   (n = d)   joint_torque
     tau = h + g + J^T Lambda (r-ddot* - J-dot q-dot) + tau_f
           - N^T M K_n q-dot,  Lambda = (J M^-1 J^T)^-1          (n > d)   joint_torque
@@ -45,16 +46,17 @@ class LawConstants:
     ones; singularity_threshold, max_joint_acceleration, effort_limits, anti_windup: from
     SafetyConfig; actuation_from_torque: B^-1; zero_acceleration: a zero joint acceleration of the
     controller's scalar type (for h + g by inverse dynamics); approach_speed, approach_gain: the guarded move's s
-    and K_a (None without a guarded move).
+    and K_a (None without a guarded move); velocity_row_inertia: I_v of a mechanism moving with the
+    velocity rows (None: the paper's massless constraint).
     """
 
     __slots__ = ("gains", "mode", "kinematic_rows", "force_controlled", "singularity_threshold",
                  "max_joint_acceleration", "effort_limits", "anti_windup", "actuation_from_torque",
-                 "zero_acceleration", "approach_speed", "approach_gain")
+                 "zero_acceleration", "approach_speed", "approach_gain", "velocity_row_inertia")
 
     def __init__(self, gains, mode, kinematic_rows, force_size, singularity_threshold, max_joint_acceleration,
                  effort_limits, anti_windup, actuation_from_torque, zero_acceleration, approach_speed=None,
-                 approach_gain=None):
+                 approach_gain=None, velocity_row_inertia=None):
         self.gains, self.mode = gains, mode
         self.kinematic_rows = tuple(kinematic_rows)
         self.force_controlled = np.ones(force_size)
@@ -63,6 +65,7 @@ class LawConstants:
         self.effort_limits, self.anti_windup = effort_limits, anti_windup
         self.actuation_from_torque, self.zero_acceleration = actuation_from_torque, zero_acceleration
         self.approach_speed, self.approach_gain = approach_speed, approach_gain
+        self.velocity_row_inertia = velocity_row_inertia
 
 
 class ControlSolution:
@@ -107,6 +110,22 @@ def motion_acceleration(desired_acceleration, gains, velocity_error, position_er
     if mode.integrates_position:
         acceleration = acceleration - gains.position @ position_error
     return acceleration
+
+
+def mechanism_force(velocity_row_inertia, motion_acceleration):
+    """F_m = I_v a_p: the force along the velocity rows that a mechanism of inertia I_v moving with
+    them needs at the commanded acceleration a_p (None without I_v: the paper's form).
+
+    The paper's constraint is massless; a handle that spins with a velocity row pushes back with
+    F_v = -I_v r-ddot_p, which slows that row's loop to (1 + M_p I_v) s + K_v (M_p: the row's
+    mobility with the constraint rows held). The law adds the wrench J^T E_p^T F_m, so the robot
+    supplies that force itself, and in impedance mode counts the mechanism as part of the robot
+    (F_v + F_m is the external force its K_0 compensates). With an exact I_v the row closes as
+    designed: r-ddot_p = a_p.
+    """
+    if velocity_row_inertia is None:
+        return None
+    return velocity_row_inertia @ motion_acceleration
 
 
 def impedance_blocks(velocity_projection, force_projection, task_mobility, kinematic_rows=()):
@@ -185,9 +204,12 @@ def force_command(desired_force, gains, force_error, force_integral, force_contr
     return command if in_contact else command * (1.0 - force_controlled)
 
 
-def force_torque(jacobian, force_projection, command):
-    """tau_f = J^T E_f^T u_f."""
-    return jacobian.T @ (force_projection.T @ command)
+def force_torque(jacobian, force_projection, command, velocity_projection=None, mechanism=None):
+    """tau_f = J^T E_f^T u_f, plus J^T E_p^T F_m with a mechanism force F_m."""
+    wrench = force_projection.T @ command
+    if mechanism is not None:
+        wrench = wrench + velocity_projection.T @ mechanism
+    return jacobian.T @ wrench
 
 
 def joint_torque(plant, plant_context, forces, jacobian, task_rhs, tau_f, constants, dynamics=None):
@@ -251,6 +273,7 @@ def evaluate_law(constants, space, kinematics, plant, plant_context, forces, int
     e_f = force_error(force, desired_force, mask)
 
     a_p = motion_acceleration(desired_acceleration, gains, e_p_dot, e_p, mode)
+    F_m = mechanism_force(constants.velocity_row_inertia, a_p)
     C_dot = values.force_projection @ nu
     a_f = held_row_acceleration(values.constraint_value, C_dot, gains.constraint_frequency, mask)
     n, d = J.shape[1], J.shape[0]
@@ -261,7 +284,8 @@ def evaluate_law(constants, space, kinematics, plant, plant_context, forces, int
         task_mobility = J @ M_inverse @ J.T                               # J M^-1 J^T = Lambda^-1
         dynamics = (M, M_inverse, task_mobility)
     if mode is ControlMode.IMPEDANCE_FORCE:
-        on_velocity_rows, on_force_rows = impedance_compensation(values, task_mobility, tangential_force, force,
+        external = tangential_force if F_m is None else tangential_force + F_m
+        on_velocity_rows, on_force_rows = impedance_compensation(values, task_mobility, external, force,
                                                                  constants.kinematic_rows)
         a_p = a_p + on_velocity_rows
         a_f = a_f + on_force_rows
@@ -271,7 +295,7 @@ def evaluate_law(constants, space, kinematics, plant, plant_context, forces, int
     task_acceleration = space.task_acceleration(values, a_p, a_f)       # (3.0-11)
 
     u_f = force_command(desired_force, gains, e_f, xi, mask, in_contact)
-    tau_f = force_torque(J, values.force_projection, u_f)
+    tau_f = force_torque(J, values.force_projection, u_f, values.velocity_projection, F_m)
     torque, base_torque, sigma_min, lambda_squared = joint_torque(
         plant, plant_context, forces, J, task_acceleration - kinematics.bias, tau_f, constants, dynamics)
 

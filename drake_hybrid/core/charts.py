@@ -23,6 +23,8 @@ Charts provided:
 
 ``PlanarChart``
     r = (x, y, theta) in a plane (Example 2.1). No singularity.
+``PlanarPointChart``
+    r = (x, y), a point in a plane without orientation (the 2R arm of issue 18).
 ``EulerZXZChart``
     r = (x, y, z, phi, theta, psi) with R = Rz(phi) Rx(theta) Rz(psi)
     exactly as (2.1-2). Singular where sin(theta) = 0 (approach vector along
@@ -35,6 +37,9 @@ Charts provided:
     rather than in angles, and the rotational velocity rows are not
     integrable, so an integrated rotational "position" error is path
     dependent (docs/theory.md §6, position errors).
+
+Size: four charts (planar, planar point, z-x-z Euler, pose) with their symbolic and numeric maps;
+they share the base class and helpers of this module.
 """
 
 import math
@@ -218,6 +223,33 @@ class PlanarChart(Chart):
 
     def spatial_velocity(self, x, nu):
         return self._selector.T @ nu
+
+
+class PlanarPointChart(PlanarChart):
+    """r = (x, y): the position of a point in a plane of the world, without its orientation (d = 2).
+
+    The chart of a planar two-link arm (issue 18: the kinematic instability of the Raibert-Craig
+    controller). The plane and its axes as in PlanarChart; ``pose`` keeps the reference rotation.
+    """
+
+    name = "planar_point"
+
+    def __init__(self, origin=(0.0, 0.0, 0.0), axis_x=(1.0, 0.0, 0.0), axis_y=(0.0, 0.0, 1.0)):
+        super().__init__(origin, axis_x, axis_y)
+        self.configuration_symbols = self.configuration_symbols[:2]
+        self.velocity_symbols = self.velocity_symbols[:2]
+        self.configuration_rate = sympy.Matrix(self.velocity_symbols)
+        self.angle = None
+        self._selector = self._selector[:2]
+
+    def configuration(self, R_WE, p_WE):
+        p = p_WE - self.origin
+        return np.array([self.axis_x @ p, self.axis_y @ p], dtype=_dtype_of(R_WE, p))
+
+    def pose(self, x):
+        x = value(x)
+        self._check_size(x, 2, "x")
+        return RigidTransform(self.reference_rotation, self.origin + self.axis_x * x[0] + self.axis_y * x[1])
 
 
 def _euler_zxz_symbolic():

@@ -26,7 +26,6 @@ Writing your own::
     table = Constraint(chart, [z - 0.8, sympy.cos(theta) + 1], name="table")
 """
 
-import math
 
 import numpy as np
 import sympy

@@ -5,6 +5,9 @@ kind can catch ``ValueError``; tests and users that do care can catch the
 specific type. Messages always name the offending object and the numbers.
 """
 
+import dataclasses
+import math
+
 
 class DrakeHybridError(ValueError):
     """Base class of every error raised on purpose by drake_hybrid."""
@@ -54,6 +57,21 @@ class OffConstraintError(DrakeHybridError):
     configuration off the constraint)."""
 
 
+class UnknownFrameError(DrakeHybridError):
+    """A frame named by the user (a flange, a tool frame) is not in the model; the message lists
+    the model's frames."""
+
+
+class UnreachablePoseError(DrakeHybridError):
+    """No joint positions within the joint limits put the end effector at the requested pose."""
+
+
+class ForceSignError(DrakeHybridError):
+    """The desired force pulls on the workpiece: F_d is the force ON the robot in E_f's coordinates,
+    and a contact can only push, so along the pressing direction -sum_i F_d,i grad C_i the pad must
+    go into the workpiece."""
+
+
 def check_fields(owner, prefix, positive=(), nonnegative=(), error=ConfigError):
     """Raise ``error`` (ConfigError) naming ``prefix.field`` if a field of ``owner`` (a config dataclass)
     listed in ``positive`` is not > 0 or one in ``nonnegative`` is not >= 0 (NaN fails both)."""
@@ -62,4 +80,30 @@ def check_fields(owner, prefix, positive=(), nonnegative=(), error=ConfigError):
             number = getattr(owner, name)
             if not test(float(number)):
                 raise error(f"{prefix}{name} must be {words}, got {number}")
+    return owner
+
+
+def check_finite(owner, prefix="", allow_infinite=()):
+    """Raise ConfigError naming the field for a NaN anywhere among the numbers of a config
+    dataclass (its fields, lists, dicts and nested config dataclasses), and for +-inf except in the
+    fields named (dotted, relative to ``owner``) in ``allow_infinite``. Other objects (e.g. Drake's
+    config structs, checked by their own validators) are skipped."""
+    def walk(value, name):
+        if isinstance(value, bool) or value is None:
+            return
+        if isinstance(value, (int, float)):
+            if math.isnan(value) or (math.isinf(value) and name.split("[")[0] not in allow_infinite):
+                allowed = "a finite number" + (" or inf" if name.split("[")[0] in allow_infinite else "")
+                raise ConfigError(f"{prefix}{name} must be {allowed}, got {value}")
+        elif isinstance(value, (list, tuple)):
+            for index, item in enumerate(value):
+                walk(item, f"{name}[{index}]")
+        elif isinstance(value, dict):
+            for key, item in value.items():
+                walk(item, f"{name}.{key}")
+        elif dataclasses.is_dataclass(value):
+            for item in dataclasses.fields(value):
+                walk(getattr(value, item.name), f"{name}.{item.name}" if name else item.name)
+
+    walk(owner, "")
     return owner

@@ -24,7 +24,7 @@ import sympy
 
 from drake_hybrid.core.charts import EulerZXZChart
 from drake_hybrid.core.errors import ChartSingularityError, ConstraintRankError, DimensionError
-from drake_hybrid.core.linalg import LUFactorization, cholesky, inv, rank_margin_from_cholesky, value
+from drake_hybrid.core.linalg import LUFactorization, cholesky, inv, rank_margin_from_cholesky
 from drake_hybrid.core.symbolic import CompiledFunction, compiled_time_derivative, to_sympy_matrix
 
 

@@ -5,23 +5,44 @@ Simulator (with an optional progress bar and Meshcat recording) and returns a
 ``SimulationResult`` with the log (arrays keyed as in ``log.npz``) and the
 summary (as in ``summary.json``); ``viz.outputs.write_run(result, out_dir)`` writes both
 plus the tracking plots.
+
+A run that stops early is never reported as a success: a sensor fault (the measured wrench
+non-finite for longer than ``sensor.fault_time``), an error raised inside the simulation, or an
+interrupt (Ctrl-C) ends it at that time and ``simulate`` raises ``RunStopped``, whose ``result``
+holds the log up to the stop and a summary with ``status`` ("fault", "error" or "interrupted"),
+``stop_time`` and ``stop_reason`` (a completed run has ``status`` "completed").
+
+The result also holds the built ``scenario`` (its ``diagram``, ``plant``, ``controller``, ...),
+the ``simulator`` and its root ``context`` after the run. To act during the run (a monitor, a
+visualizer, a changed parameter), pass ``setup``: it is called as ``setup(scenario, simulator,
+context)`` after the start is set and before ``Simulator.Initialize``::
+
+    def watch(scenario, simulator, context):        # stop the run if the force gets too large
+        force = scenario.controller.GetOutputPort("force")
+        simulator.set_monitor(lambda root: EventStatus.ReachedTermination(None, "too hard")
+                              if abs(force.Eval(scenario.controller.GetMyContextFromRoot(root))[0]) > 50
+                              else EventStatus.Succeeded())
+
+    result = simulate(config, setup=watch)
+
+A monitor set in ``setup`` runs after the sensor-fault monitor (both are kept; a termination
+the user's monitor asks for ends the run as a completed run, at that time).
 """
 
 import math
 import time
 from dataclasses import dataclass, field
-from pathlib import Path
 
 import numpy as np
 from tqdm import tqdm
 
 from pydrake.systems.analysis import ApplySimulatorConfig, Simulator
+from pydrake.systems.framework import EventStatus
 
 from drake_hybrid.analysis.linearization import controller_prediction, design_time_constant, predicted_errors
 from drake_hybrid.control.phases import ContactPhase
 from drake_hybrid.core.progress import quiet
 from drake_hybrid.scenario.builder import build_scenario
-from drake_hybrid.scenario.config import dump_config
 from drake_hybrid.scenario.start import set_initial_conditions
 
 
@@ -30,9 +51,58 @@ class SimulationResult:
     config: object
     log: dict
     summary: dict
-    scenario: object = None
+    scenario: object = None                      # the built Scenario: diagram, plant, controller, ...
     html: str = None
     extra: dict = field(default_factory=dict)
+    simulator: object = None                     # Drake's Simulator after the run
+    context: object = None                       # its root context (the diagram's) at the end
+
+
+class RunStopped(RuntimeError):
+    """The run stopped before its duration; ``result`` holds its log and summary up to the stop
+    (an error raised inside the run is the ``__cause__``)."""
+
+    def __init__(self, result):
+        summary = result.summary
+        super().__init__(f"the run stopped at t = {summary['stop_time']:.4g} s ({summary['status']}): "
+                         f"{summary['stop_reason']}")
+        self.result = result
+
+
+def sensor_fault_monitor(scenario, fault_time, stop):
+    """A Simulator monitor that ends the run when the wrench the controller reads has been
+    non-finite for longer than ``fault_time`` (s); it fills ``stop`` (status, time, reason)."""
+    controller = scenario.controller
+    port = controller.get_measured_wrench_input_port()
+    invalid_since = [None]
+
+    def monitor(root_context):
+        time_now = root_context.get_time()
+        if np.all(np.isfinite(port.Eval(controller.GetMyContextFromRoot(root_context)))):
+            invalid_since[0] = None
+            return EventStatus.Succeeded()
+        if invalid_since[0] is None:
+            invalid_since[0] = time_now
+        if time_now - invalid_since[0] > fault_time:
+            stop.update(status="fault", time=time_now, reason=(
+                f"sensor fault: the measured wrench has been non-finite since t = {invalid_since[0]:.4g} s, longer "
+                f"than sensor.fault_time = {fault_time:g} s"))
+            return EventStatus.ReachedTermination(controller, stop["reason"])
+        return EventStatus.Succeeded()
+
+    return monitor
+
+
+def chain_monitors(first, second):
+    """A monitor that runs ``first`` and, unless it ends the run, ``second`` (None: only ``first``)."""
+    if second is None:
+        return first
+
+    def monitor(root_context):
+        status = first(root_context)
+        return status if status.severity() != EventStatus.Severity.kSucceeded else second(root_context)
+
+    return monitor
 
 
 def _logged(scenario, context, name):
@@ -106,11 +176,15 @@ def _worst(rows, key):
     return max(values) if values else None
 
 
-def simulate(config, progress=False, meshcat=None, record_html=False, stages=None):
-    """Simulate ``config``; returns a SimulationResult (log arrays and summary).
+def simulate(config, progress=False, meshcat=None, record_html=False, setup=None, stages=None):
+    """Simulate ``config``; returns a SimulationResult (log arrays, summary, scenario, simulator and
+    context). ``setup(scenario, simulator, context)``, if given, runs after the start is set and
+    before ``Simulator.Initialize`` (e.g. ``simulator.set_monitor``). ``progress``: a progress bar
+    while simulating; ``stages`` (``core.progress.Stages``): one line per setup stage with its time,
+    printed before the bar (default: silent).
 
-    ``progress``: a progress bar while simulating; ``stages`` (``core.progress.Stages``): one line per
-    setup stage with its time, printed before the bar (default: silent)."""
+    Raises RunStopped (with the result up to the stop) if the run ends early: see the module
+    docstring."""
     stages = stages or quiet()
     with stages(f"{config.task}: building the diagram (plant, constraint, controller)"):
         scenario = build_scenario(config, meshcat=meshcat)
@@ -119,20 +193,34 @@ def simulate(config, progress=False, meshcat=None, record_html=False, stages=Non
         context = simulator.get_mutable_context()
     with stages(f"{config.task}: solving the start (inverse kinematics, contact equilibrium)"):
         set_initial_conditions(scenario, context)
+    if setup is not None:
+        setup(scenario, simulator, context)
+    stop = {}
+    simulator.set_monitor(chain_monitors(sensor_fault_monitor(scenario, float(config.sensor.fault_time), stop),
+                                         simulator.get_monitor()))
     if meshcat is not None and record_html:
         meshcat.StartRecording(set_visualizations_while_recording=False)
     with stages(f"{config.task}: initializing the simulator"):
         simulator.Initialize()
     start = time.perf_counter()
     duration = float(config.duration)
-    if progress:
-        steps = 100
-        with tqdm(total=steps, desc=f"simulating {config.task}", unit="%", leave=False) as bar:
-            for i in range(1, steps + 1):
-                simulator.AdvanceTo(duration * i / steps)
-                bar.update(1)
-    else:
-        simulator.AdvanceTo(duration)
+    try:
+        if progress:
+            steps = 100
+            with tqdm(total=steps, desc=f"simulating {config.task}", unit="%", leave=False) as bar:
+                for i in range(1, steps + 1):
+                    simulator.AdvanceTo(duration * i / steps)
+                    bar.update(1)
+                    if stop:
+                        break
+        else:
+            simulator.AdvanceTo(duration)
+    except KeyboardInterrupt:
+        stop.update(status="interrupted", time=context.get_time(), reason="interrupted (Ctrl-C)")
+    except Exception as error:   # noqa: BLE001 -- any error inside the run: keep what was logged
+        message = str(error).strip().splitlines()[0] if str(error).strip() else ""
+        stop.update(status="error", time=context.get_time(), reason=f"{type(error).__name__}: {message}",
+                    error=error)
     wall = time.perf_counter() - start
     html = None
     if meshcat is not None and record_html:
@@ -140,8 +228,23 @@ def simulate(config, progress=False, meshcat=None, record_html=False, stages=Non
         meshcat.PublishRecording()
         html = meshcat.StaticHtml()
     log = collect_log(scenario, context)
-    summary = summarize(scenario, log, wall)
-    return SimulationResult(config=config, log=log, summary=summary, scenario=scenario, html=html)
+    if stop and len(log["t"]) < 2:
+        summary = {"task": config.task, "mode": scenario.controller.mode.value, "duration": duration}
+    else:
+        summary = summarize(scenario, log, wall)
+    summary.update(status=stop.get("status", "completed"), stop_time=float(stop.get("time", context.get_time())),
+                   stop_reason=stop.get("reason"))
+    if summary["status"] == "fault":
+        # The controller took F = F_d while the wrench was invalid: its force error is not a measurement.
+        for key in [key for key in summary if "force_error" in key or key == "force_settling_time_1_percent"]:
+            summary[key] = None
+        for row in summary.get("force_rows") or []:
+            row.update({key: None for key in row if key not in ("name", "units", "command")})
+    result = SimulationResult(config=config, log=log, summary=summary, scenario=scenario, html=html,
+                              simulator=simulator, context=context)
+    if stop:
+        raise RunStopped(result) from stop.get("error")
+    return result
 
 
 def collect_log(scenario, context):
@@ -213,7 +316,8 @@ def summarize(scenario, log, wall_time):
         "final_force_error_percent": _worst(force_rows, "final_error_percent"),
         "max_velocity_error_percent_after_5_time_constants":
             _worst(velocity_rows, "max_error_percent_after_5_time_constants"),
-        "max_force_error_percent_after_5_time_constants": _worst(force_rows, "max_error_percent_after_5_time_constants"),
+        "max_force_error_percent_after_5_time_constants":
+            _worst(force_rows, "max_error_percent_after_5_time_constants"),
         "velocity_settling_time_1_percent": _worst(velocity_rows, "settling_time_1_percent"),
         "force_settling_time_1_percent": _worst(force_rows, "settling_time_1_percent"),
         "velocity_rows": velocity_rows,

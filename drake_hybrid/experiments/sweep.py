@@ -66,7 +66,7 @@ from tqdm import tqdm
 from drake_hybrid.analysis.linearization import linearize_continuous, linearize_sampled_loop, predicted_eigenvalues
 from drake_hybrid.control.gains import ControlMode
 from drake_hybrid.core.errors import GainError
-from drake_hybrid.experiments.simulation import simulate
+from drake_hybrid.experiments.simulation import RunStopped, simulate
 from drake_hybrid.experiments.sweep_spec import (StabilityCriteria, SweepSpecError, apply_parameters, parameters_digest,
                                                  set_config_value)
 from drake_hybrid.scenario.config import dump_config, load_config
@@ -157,6 +157,9 @@ def evaluate_point(config_yaml, criteria=None, continuous=True, discrete=True):
         return row
     try:
         row.update(simulation_metrics(simulate(config), criteria))
+    except RunStopped as stopped:            # a fault or an error mid-run: never a stable point
+        row["stable_simulation"] = False
+        errors.append(f"simulation: {stopped}")
     except Exception as error:
         errors.append(_stage_error("simulation", error))
     linearization_start = time.perf_counter()
@@ -222,6 +225,7 @@ class ResultsTable:
         self.path = Path(path)
         self.columns = list(columns)
         if self.path.exists():
+            self.repair()
             with self.path.open(newline="") as f:
                 header = next(csv.reader(f), None)
             if header != self.columns:
@@ -229,6 +233,24 @@ class ResultsTable:
         else:
             with self.path.open("w", newline="") as f:
                 csv.writer(f).writerow(self.columns)
+
+    def repair(self):
+        """Drop a torn last line (a write cut off mid-row: no final newline, or too few cells); its
+        point is then missing and runs again. Returns the number of lines dropped."""
+        data = self.path.read_bytes()
+        if not data:
+            return 0
+        lines = data.split(b"\n")
+        dropped = 0
+        if lines[-1] != b"":                     # no final newline: the last row was cut off
+            lines, dropped = lines[:-1] + [b""], 1
+        if len(lines) > 2:
+            last = next(csv.reader([lines[-2].decode(errors="replace")]), [])
+            if len(last) != len(self.columns):
+                lines, dropped = lines[:-2] + [b""], dropped + 1
+        if dropped:
+            self.path.write_bytes(b"\n".join(lines))
+        return dropped
 
     def append(self, row):
         with self.path.open("a", newline="") as f:
@@ -246,6 +268,8 @@ def read_results(path):
     latest = {}
     with path.open(newline="") as f:
         for row in csv.DictReader(f):
+            if None in row or None in row.values():   # a torn row (too many or too few cells): not a result
+                continue
             row = {k: _parse_cell(k, v) for k, v in row.items()}
             latest[row["point"]] = row             # a retried point's last row wins
     return [latest[i] for i in sorted(latest)]
@@ -259,6 +283,61 @@ def column(rows, name):
 # ------------------------------------------------------------------------------------------------
 # Running a sweep
 # ------------------------------------------------------------------------------------------------
+
+class SweepLock:
+    """``out/.lock``: one sweep at a time writes a results table. A lock whose process is gone
+    (killed) is taken over; one held by a live process is a SweepSpecError naming it."""
+
+    def __init__(self, out):
+        self.path = Path(out) / ".lock"
+
+    def __enter__(self):
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        for _ in range(2):
+            try:
+                descriptor = os.open(self.path, os.O_CREAT | os.O_EXCL | os.O_WRONLY)
+            except FileExistsError:
+                holder = self._holder()
+                if holder is not None and _process_alive(holder):
+                    raise SweepSpecError(f"{self.path.parent} is being written by another sweep (process {holder}); "
+                                         "wait for it or use another output directory") from None
+                self.path.unlink(missing_ok=True)    # the holder died: take the lock over
+                continue
+            with os.fdopen(descriptor, "w") as f:
+                f.write(str(os.getpid()))
+            return self
+        raise SweepSpecError(f"could not take the lock {self.path}")
+
+    def __exit__(self, *exc):
+        self.path.unlink(missing_ok=True)
+        return False
+
+    def _holder(self):
+        try:
+            return int(self.path.read_text().strip())
+        except (OSError, ValueError):
+            return None
+
+
+def _process_alive(pid):
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True
+
+
+def _check_scheduler(address, timeout=10.0):
+    """SweepSpecError (one line) if no Dask scheduler answers at ``address`` within ``timeout`` s."""
+    try:
+        client = Client(address, timeout=timeout)
+    except (OSError, TimeoutError) as error:
+        raise SweepSpecError(f"--scheduler {address}: no Dask scheduler answers there ({type(error).__name__}); "
+                             "nothing was written") from None
+    client.close()
+
 
 @dataclass
 class SweepRun:
@@ -292,14 +371,20 @@ def sweep_points(task_name, spec):
 
 def _prepare_out_dir(out, task_name, spec, base, points, resume):
     out.mkdir(parents=True, exist_ok=True)
+    # The digest covers everything that changes a row: the task, every point's config and the verdicts' settings.
+    settings = {"stability": asdict(spec.stability), "continuous": spec.linearize_continuous,
+                "discrete": spec.linearize_discrete}
     manifest = {"task": task_name, "points": len(points),
-                "digest": parameters_digest([[p, y] for _, p, y in points]),
+                "digest": parameters_digest([task_name, settings] + [[p, y] for _, p, y in points]),
                 "parameters": spec.paths}
     manifest_path = out / "manifest.json"
     results_path = out / RESULTS_FILE
     if results_path.exists() and not resume:
-        raise SweepSpecError(f"{results_path} exists: add --resume to continue it (resume=True in Python), "
-                             "or choose another --out directory")
+        raise SweepSpecError(f"{results_path} exists: pass --resume to continue it, "
+                             "or choose another output directory")
+    if resume and results_path.exists() and not manifest_path.exists():
+        raise SweepSpecError(f"--resume: {out} has results but no manifest.json, so its sweep cannot be checked; "
+                             "use another output directory")
     if resume and manifest_path.exists():
         previous = json.loads(manifest_path.read_text())
         if previous.get("digest") != manifest["digest"]:
@@ -351,10 +436,26 @@ def run_sweep(task_name, spec, out_dir, scheduler=None, workers=2, resume=False,
         raise ValueError(f"workers must be a non-negative integer, got {workers!r}")
     out = Path(out_dir)
     base, points = sweep_points(task_name, spec)
+    if scheduler:
+        _check_scheduler(scheduler)                 # before anything is written
+    with SweepLock(out):
+        return _run_locked(task_name, spec, out, base, points, scheduler, workers, resume, retry_failed, progress,
+                           worker_memory)
+
+
+def _run_locked(task_name, spec, out, base, points, scheduler, workers, resume, retry_failed, progress,
+                worker_memory):
     results_path = _prepare_out_dir(out, task_name, spec, base, points, resume)
     columns = ["point"] + spec.paths + RESULT_COLUMNS
     table = ResultsTable(results_path, columns)
     finished = {row["point"]: row for row in read_results(results_path)}
+    expected = {index: parameters for index, parameters, _ in points}
+    for index, row in finished.items():
+        if index not in expected or any(_parse_cell(path, _cell(value)) != row.get(path)
+                                        for path, value in expected[index].items()):
+            raise SweepSpecError(f"{results_path}: the row of point {index} has parameters "
+                                 f"{ {path: row.get(path) for path in spec.paths} }, not this sweep's "
+                                 f"{expected.get(index)}; use another output directory")
     done = {i for i, row in finished.items() if not (retry_failed and row.get("error"))}
     pending = [p for p in points if p[0] not in done]
     failures = sum(1 for i in done if finished[i].get("error"))

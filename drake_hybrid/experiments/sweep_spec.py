@@ -182,6 +182,7 @@ class SweepSpecFile:
     linearize: LinearizeSpec = field(default_factory=LinearizeSpec)
     stability: StabilityCriteria = field(default_factory=StabilityCriteria)
     map: MapSpec = field(default_factory=MapSpec)
+    max_points: int = 10000          # refuse larger sweeps unless raised here (a typo in a count is costly)
 
 
 def _number(value, where):
@@ -227,14 +228,20 @@ def _axis(path, entry):
     return Axis(path=path, kind=kind, arguments=list(arguments))
 
 
+def _point_count(axes, samples):
+    """How many points the axes give (without generating them)."""
+    count = 1
+    for axis in axes:
+        if axis.is_grid:
+            count *= len(axis.arguments) if axis.kind == "values" else int(axis.arguments[2])
+    return count * (samples if any(not axis.is_grid for axis in axes) else 1)
+
+
 def parse_spec(spec_file):
     """A SweepSpec from a ``SweepSpecFile`` (checks what the types cannot: SweepSpecError naming the key)."""
     if not spec_file.parameters:
         raise SweepSpecError("the sweep spec needs 'parameters': a mapping of config paths to values or distributions")
     axes = [_axis(path, entry) for path, entry in spec_file.parameters.items()]
-    overlap = set(spec_file.base) & set(spec_file.parameters)
-    if overlap:
-        raise SweepSpecError(f"{sorted(overlap)} are both in 'base' and in 'parameters'")
     if not spec_file.samples >= 1:
         raise SweepSpecError(f"'samples' must be a positive integer, got {spec_file.samples}")
     if spec_file.samples != 1 and all(axis.is_grid for axis in axes):
@@ -248,6 +255,18 @@ def parse_spec(spec_file):
     if not stability.steady_tolerance > 0:
         raise SweepSpecError(f"stability.steady_tolerance must be positive, got {stability.steady_tolerance}")
     paths = [axis.path for axis in axes]
+    for path in paths:
+        for other in paths:
+            if other != path and (other.startswith(path + ".") or other.startswith(path + "[")):
+                raise SweepSpecError(f"parameters '{path}' and '{other}' set the same field; keep one")
+        if path in spec_file.base or any(key.startswith(path + ".") or key.startswith(path + "[")
+                                         or path.startswith(key + ".") or path.startswith(key + "[")
+                                         for key in spec_file.base):
+            raise SweepSpecError(f"parameter '{path}' overlaps a field set in 'base'; keep one")
+    count = _point_count(axes, spec_file.samples)
+    if count > spec_file.max_points:
+        raise SweepSpecError(f"the sweep has {count} points, more than max_points = {spec_file.max_points}; "
+                             "raise max_points in the spec if that is intended")
     map_data = {key: getattr(spec_file.map, key) for key in ("x", "y", "facet", "color")
                 if getattr(spec_file.map, key)}
     for key in ("x", "y", "facet"):

@@ -19,6 +19,7 @@ with named handles to every part. The same config builds the same diagram in
 a test, a notebook, the CLI or a worker process.
 """
 
+import dataclasses
 from dataclasses import dataclass, field
 from typing import Dict, Optional
 
@@ -26,8 +27,9 @@ from pydrake.geometry import MeshcatVisualizer
 from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import LogVectorOutput
 
+from drake_hybrid.control.baselines import make_baseline
 from drake_hybrid.control.controller import HybridController
-from drake_hybrid.control.gains import ControlMode
+from drake_hybrid.control.gains import ControlMode, gain_matrix
 from drake_hybrid.control.phases import ContactPhase
 from drake_hybrid.control.supervision import ContactSupervisor
 from drake_hybrid.core.errors import ConfigError
@@ -35,6 +37,7 @@ from drake_hybrid.core.kinematics import EndEffectorKinematics
 from drake_hybrid.scenario.config import ScenarioConfig, WristSensorConfig
 from drake_hybrid.scenario.plant import RobotModel, build_controller_plant, build_plant
 from drake_hybrid.scenario.start import check_start_sizes
+from drake_hybrid.scenario.task import pad_kinematic_rows
 from drake_hybrid.scenario.tasks import get_task
 from drake_hybrid.systems.faults import JointFriction, SensorFaultInjector
 from drake_hybrid.systems.sensors import ContactWrenchSensor, LowPassFilter, WrenchConditioner, WristForceTorqueSensor
@@ -68,6 +71,34 @@ class Scenario:
 
 
 
+def velocity_row_inertia(config, task, plant, constraint_space):
+    """I_v of ``config.mechanism`` (None for the paper's massless constraint): given, or the task's
+    reading of the simulation plant (``Task.velocity_row_inertia``)."""
+    source = config.mechanism.source
+    if source == "none":
+        return None
+    if source == "given":
+        return gain_matrix(config.mechanism.velocity_row_inertia, constraint_space.velocity_size,
+                           "mechanism.velocity_row_inertia", semidefinite=True)
+    return task.velocity_row_inertia(plant, config, constraint_space)
+
+
+def make_controller(config, task, plant, controller_plant, robot, constraint_space, mode, control_period,
+                    sample_lead, supervised, with_loggers):
+    """The law of ``config.controller``: Li & Sastry's HybridController or a baseline (control.baselines)."""
+    if config.controller != "li-sastry":
+        return make_baseline(config.controller, controller_plant, robot.end_effector_frame, robot.end_effector_point,
+                             constraint_space, gains=config.gains, baseline=config.baseline,
+                             control_period=control_period,
+                             sample_lead=sample_lead)
+    return HybridController(
+        controller_plant, robot.end_effector_frame, robot.end_effector_point, constraint_space,
+        gains=config.gains, mode=mode, control_period=control_period, sample_lead=sample_lead,
+        safety=config.safety, guarded_move=config.supervision if supervised else None,
+        sampled_diagnostics=with_loggers and control_period is not None,
+        velocity_row_inertia=velocity_row_inertia(config, task, plant, constraint_space))
+
+
 def build_scenario(config, meshcat=None, with_loggers=True, sampled_plant_outputs=True, controller_sample_lead=True):
     """Build the closed-loop diagram of ``config``. See the module docstring.
 
@@ -78,19 +109,20 @@ def build_scenario(config, meshcat=None, with_loggers=True, sampled_plant_output
     mode = ControlMode.parse(config.mode)
     config.validate()
     task.options(config)
+    constraint_space = task.constraint_space(config)
+    # A desired force given for the force-controlled rows only: zeros for the kinematic rows.
+    config = dataclasses.replace(config, desired_force=pad_kinematic_rows(
+        config.desired_force, constraint_space.force_size, constraint_space.constraint.kinematic_rows))
     control_period = config.control_period if config.control_period > 0 else None
     bandwidth = config.sensor.bandwidth_hz
 
     builder = DiagramBuilder()
     plant, scene_graph, robot = build_plant(task, config, builder, sampled_outputs=sampled_plant_outputs)
     controller_plant, _ = build_controller_plant(task, config)
-    constraint_space = task.constraint_space(config)
     supervised = config.supervised
-    controller = builder.AddNamedSystem("controller", HybridController(
-        controller_plant, robot.end_effector_frame, robot.end_effector_point, constraint_space,
-        gains=config.gains, mode=mode, control_period=control_period, sample_lead=controller_sample_lead,
-        safety=config.safety, guarded_move=config.supervision if supervised else None,
-        sampled_diagnostics=with_loggers and control_period is not None))
+    controller = builder.AddNamedSystem("controller", make_controller(
+        config, task, plant, controller_plant, robot, constraint_space, mode, control_period, controller_sample_lead,
+        supervised, with_loggers))
     check_start_sizes(config, controller)
 
     robot_bodies = [plant.get_body(index) for instance in robot.model_instances
@@ -100,8 +132,14 @@ def build_scenario(config, meshcat=None, with_loggers=True, sampled_plant_output
             raise ConfigError(f"sensor: task '{task.name}' has no wrist weld for a WristSensorConfig; "
                               "use !ContactSensorConfig")
         sensor = builder.AddNamedSystem("wrench_sensor", WristForceTorqueSensor(
-            plant, robot.tool_weld, robot.end_effector_frame, robot.end_effector_point))
+            plant, robot.tool_weld, robot.end_effector_frame, robot.end_effector_point,
+            compensate_tool_inertia=config.sensor.compensate_tool_inertia))
         builder.Connect(plant.get_reaction_forces_output_port(), sensor.get_input_port(0))
+        if sensor.compensate_tool_inertia:
+            builder.Connect(plant.get_body_spatial_velocities_output_port(),
+                            sensor.GetInputPort("body_spatial_velocities"))
+            builder.Connect(plant.get_body_spatial_accelerations_output_port(),
+                            sensor.GetInputPort("body_spatial_accelerations"))
     else:                                                # ContactSensorConfig (ScenarioConfig.validate)
         sensor = builder.AddNamedSystem("wrench_sensor", ContactWrenchSensor(
             plant, robot_bodies, robot.end_effector_frame, robot.end_effector_point))

@@ -20,22 +20,28 @@ the dotted field name; ``ScenarioConfig.validate`` calls them all.
 
 import dataclasses
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Dict, List, Union
+
+import yaml
 
 from pydrake.common.yaml import yaml_dump_typed, yaml_load_typed
 from pydrake.multibody.plant import MultibodyPlantConfig
 from pydrake.systems.analysis import SimulatorConfig
 
+from drake_hybrid.control.baselines import BaselineGains
 from drake_hybrid.control.gains import HybridGains
 from drake_hybrid.control.safety import SafetyConfig
 from drake_hybrid.control.supervision import SupervisionConfig
-from drake_hybrid.core.errors import ConfigError, check_fields
+from drake_hybrid.core.errors import ConfigError, check_fields, check_finite
 from drake_hybrid.systems.faults import SensorFaultConfig
 from drake_hybrid.systems.sources import Profile
 
 # The values Drake 1.51 accepts for the MultibodyPlantConfig fields checked here.
 CONTACT_MODELS = ("hydroelastic", "hydroelastic_with_fallback", "point")
 DISCRETE_APPROXIMATIONS = ("sap", "tamsi", "similar", "lagged")
+# The laws a scenario can close its loop with (scenario.builder): Li & Sastry's, and the baselines.
+CONTROLLERS = ("li-sastry", "raibert-craig", "fisher-mujtaba", "pd-open-loop-force")
 
 
 def default_plant_config():
@@ -92,9 +98,11 @@ class WrenchPathConfig:
     bandwidth_hz: float = 0.0                    # first-order low-pass; 0 = none (a continuous plant needs one)
     condition: bool = False                      # a WrenchConditioner (dropout rejection, tare, the low-pass)
     max_hold_time: float = 0.01                  # s, how long the conditioner bridges a dropout by holding
+    fault_time: float = 0.05                     # s, a wrench invalid (non-finite) this long is a sensor fault:
+                                                 # the run stops there and reports it (inf = never)
 
     def validate(self, prefix="sensor."):
-        check_fields(self, prefix, nonnegative=("bandwidth_hz", "max_hold_time"))
+        check_fields(self, prefix, nonnegative=("bandwidth_hz", "max_hold_time"), positive=("fault_time",))
 
 
 @dataclass
@@ -107,7 +115,14 @@ class ContactSensorConfig(WrenchPathConfig):
 @dataclass
 class WristSensorConfig(WrenchPathConfig):
     """A force/torque sensor in the weld between wrist and tool: the weld's reaction force minus the
-    tool's weight (``systems.sensors.WristForceTorqueSensor``). YAML: ``sensor: !WristSensorConfig {...}``."""
+    tool's weight (``systems.sensors.WristForceTorqueSensor``). YAML: ``sensor: !WristSensorConfig {...}``.
+
+    ``compensate_tool_inertia``: also remove the tool's inertial wrench (its spatial momentum rate,
+    from the tool's model and the plant's body accelerations), so that the sensor reports the
+    contact wrench during motion too. Off by default: the static compensation of the paper's
+    setting (and of most real sensors' drivers)."""
+
+    compensate_tool_inertia: bool = False
 
 
 SensorConfig = Union[ContactSensorConfig, WristSensorConfig]
@@ -127,6 +142,35 @@ class StartConfig:
     def validate(self, prefix="start."):
         check_fields(self, prefix, positive=("tolerance", "gap"))
 
+
+
+MECHANISM_SOURCES = ("none", "given", "plant")
+
+
+@dataclass
+class MechanismConfig:
+    """The inertia of a mechanism that moves along the velocity-controlled rows (a crank's handle,
+    a valve, a door), which the paper's massless constraint leaves out (controller keyword
+    ``velocity_row_inertia``, I_v: k x k in the coordinates of E_p's rows).
+
+    source: "none" (the paper's form, default), "given" (``velocity_row_inertia``: 1, k or k*k
+        entries like the gains) or "plant" (the task reads it from the simulation plant at the start,
+        ``Task.velocity_row_inertia``; the crank does).
+    """
+
+    source: str = "none"
+    velocity_row_inertia: List[float] = field(default_factory=list)
+
+    def validate(self, prefix="mechanism."):
+        if self.source not in MECHANISM_SOURCES:
+            raise ConfigError(f"{prefix}source must be one of {list(MECHANISM_SOURCES)}, got '{self.source}'")
+        if self.source == "given" and not self.velocity_row_inertia:
+            raise ConfigError(f"{prefix}velocity_row_inertia must have 1, k or k*k entries with source 'given', "
+                              "got none")
+        if self.source != "given" and self.velocity_row_inertia:
+            raise ConfigError(f"{prefix}velocity_row_inertia is only read with source 'given', got source "
+                              f"'{self.source}'")
+        return self
 
 
 @dataclass
@@ -189,6 +233,11 @@ class ScenarioConfig:
     sensor_faults: SensorFaultConfig = field(default_factory=SensorFaultConfig)
     supervision: SupervisionConfig = field(default_factory=SupervisionConfig)
     safety: SafetyConfig = field(default_factory=SafetyConfig)
+    # The law: "li-sastry" (HybridController, default) or a baseline of control.baselines
+    # (issue 18: "raibert-craig", "fisher-mujtaba", "pd-open-loop-force"), with the same ports.
+    controller: str = "li-sastry"
+    baseline: BaselineGains = field(default_factory=BaselineGains)
+    mechanism: MechanismConfig = field(default_factory=MechanismConfig)
 
     def replace(self, **changes):
         """A copy with some top-level fields changed."""
@@ -207,9 +256,14 @@ class ScenarioConfig:
         """Check every field's value, once (the types were checked by the YAML loader); ConfigError
         naming the field. The gains and profiles are checked against the task's sizes by the systems
         that use them (HybridController, ProfileSource), the start by ``scenario.start.check_start``."""
-        if self.control_period < 0:
+        check_finite(self, allow_infinite=ALLOWED_INFINITE)
+        if not self.control_period >= 0:
             raise ConfigError(f"control_period must be >= 0 (0 means continuous), got {self.control_period}")
         check_fields(self, "", positive=("duration", "log_period"))
+        for name in ("control_period", "log_period"):
+            if getattr(self, name) >= self.duration:
+                raise ConfigError(f"{name} ({getattr(self, name):g} s) must be shorter than duration "
+                                  f"({self.duration:g} s)")
         if not isinstance(self.sensor, (ContactSensorConfig, WristSensorConfig)):
             raise ConfigError(f"sensor must be a ContactSensorConfig or a WristSensorConfig (YAML tags "
                               f"!ContactSensorConfig, !WristSensorConfig), got {self.sensor!r}")
@@ -221,6 +275,21 @@ class ScenarioConfig:
         self.model_error.validate()
         self.sensor_faults.validate()
         self.supervision.validate()
+        step, period = self.plant.time_step, self.control_period
+        if step > 0 and period > 0 and step > period * (1 + 1e-9):
+            raise ConfigError(f"plant.time_step ({self.plant.time_step:g} s) must not exceed control_period "
+                              f"({self.control_period:g} s): the controller would act on states the plant has not "
+                              "stepped to")
+        if not self.start.in_contact and not self.supervision.approach_speed > 0:
+            raise ConfigError("supervision.approach_speed must be > 0 with start.in_contact: false (the tool "
+                              "would never reach the surface)")
+        self.mechanism.validate()
+        self.baseline.validate()
+        if self.controller not in CONTROLLERS:
+            raise ConfigError(f"controller must be one of {list(CONTROLLERS)}, got '{self.controller}'")
+        if self.controller != "li-sastry" and (self.mechanism.source != "none" or self.supervised):
+            raise ConfigError(f"controller '{self.controller}' is a baseline without mechanism inertia or contact "
+                              "supervision: use mechanism.source none and start in contact")
         sampled_parts = [name for name, used in (("supervision (or a start off the surface)", self.supervised),
                                                  ("sensor_faults", self.sensor_faults.active()),
                                                  ("sensor.condition", self.sensor.condition)) if used]
@@ -237,15 +306,52 @@ class ScenarioConfig:
         return self
 
 
+# Fields where inf is a meaningful value (all others must be finite numbers; NaN never).
+ALLOWED_INFINITE = ("sensor.fault_time", "safety.effort_limits", "supervision.max_travel")
+
+
 def load_config(path=None, data=None, defaults=None):
     """A ScenarioConfig from a YAML file or string, on top of ``defaults``; ConfigError (one line)
-    for an unknown key, a wrong type or an unknown sensor tag."""
+    for an unknown key, a wrong type, a repeated key or an unknown sensor tag."""
+    where = f"{path}: " if path else ""
+    if path is not None and not Path(path).is_file():
+        raise ConfigError(f"config file '{path}' does not exist")
+    check_unique_keys(Path(path).read_text() if path is not None else data, where)
     try:
         return yaml_load_typed(schema=ScenarioConfig, filename=path, data=data,
                                defaults=defaults if defaults is not None else ScenarioConfig())
+    except AssertionError as error:    # Drake's loader: a scalar or list where a section belongs
+        raise ConfigError(f"{where}expected a section (a mapping of fields) where the YAML gives {error}") from None
     except (RuntimeError, ValueError, TypeError) as error:
-        where = f"{path}: " if path else ""
         raise ConfigError(f"{where}{str(error).splitlines()[0]}") from None
+
+
+class _UniqueKeyLoader(yaml.SafeLoader):
+    """A YAML loader that refuses a key given twice in one mapping (and accepts any !Tag)."""
+
+    def construct_mapping(self, node, deep=False):
+        seen = set()
+        for key_node, _ in node.value:
+            key = self.construct_object(key_node, deep=deep)
+            if key in seen:
+                raise ConfigError(f"the key '{key}' is given twice (line {key_node.start_mark.line + 1}); "
+                                  "YAML would silently keep the last one")
+            seen.add(key)
+        return super().construct_mapping(node, deep=deep)
+
+
+_UniqueKeyLoader.add_multi_constructor("!", lambda loader, suffix, node: (
+    loader.construct_mapping(node) if isinstance(node, yaml.MappingNode) else None))
+
+
+def check_unique_keys(text, where=""):
+    """ConfigError if a mapping in the YAML ``text`` repeats a key (Drake's loader keeps the last)."""
+    try:
+        yaml.load(text, Loader=_UniqueKeyLoader)
+    except ConfigError as error:
+        raise ConfigError(f"{where}{error}") from None
+    except yaml.YAMLError as error:
+        raise ConfigError(f"{where}not valid YAML: {str(error).splitlines()[0]}") from None
 
 
 def dump_config(config):

@@ -40,10 +40,11 @@ from pydrake.multibody.parsing import Parser
 from pydrake.multibody.plant import CoulombFriction
 
 from drake_hybrid.control.gains import HybridGains
+from drake_hybrid.core.errors import OffConstraintError
 from drake_hybrid.core.kinematics import inverse_kinematics
 from drake_hybrid.scenario.config import ScenarioConfig, StartConfig
 from drake_hybrid.scenario.parsing import ConfigureParser
-from drake_hybrid.scenario.plant import RobotModel
+from drake_hybrid.scenario.plant import RobotModel, get_frame
 from drake_hybrid.scenario.start import pressing_positions
 from drake_hybrid.scenario.task import Task
 from drake_hybrid.scenario.tasks.robots import add_pad_tool
@@ -114,7 +115,7 @@ def attach_pad_tool(plant, arm, flange_frame, X_flange_tool=None):
     the arm's own collision shapes touch neither each other nor the workpiece (watch the
     animation for clearance), so only the pad makes contact."""
     parser = ConfigureParser(Parser(plant))
-    frame = plant.GetFrameByName(flange_frame, arm) if isinstance(flange_frame, str) else flange_frame
+    frame = get_frame(plant, flange_frame, arm, "flange_frame") if isinstance(flange_frame, str) else flange_frame
     tool, weld, pad = add_pad_tool(plant, parser, frame, X_flange_tool if X_flange_tool is not None
                                    else RigidTransform())
     return RobotModel(arm=arm, model_instances=[arm, tool], end_effector_frame="pad_center",
@@ -210,14 +211,18 @@ class CustomTask(Task):
                              f"of the end-effector frame, got {values}")
         return RigidTransform(RollPitchYaw(values[3:]), values[:3])
 
-    def pressing_direction(self, config, X_WE):
-        """Unit world direction in which the robot pushes the workpiece at the start:
-        -sum_i F_d,i grad_p C_i (F_d: force on the robot, in E_f's coordinates)."""
+    def _position_gradient(self, X_WE):
+        """(C(x), E_f, grad_p C: rows of C-dot for a unit world velocity of the point along x, y, z)."""
         space, chart = self.space, self.space.chart
         x = chart.configuration(X_WE.rotation().matrix(), X_WE.translation())
         E_f = space.constraint.force_projection(x)
-        # grad_p C_i: C-dot for a unit world velocity of the point along each axis (any chart).
         gradient = np.column_stack([E_f @ chart.task_velocity(x, np.r_[0, 0, 0, axis]) for axis in np.eye(3)])
+        return np.atleast_1d(space.constraint.value(x)), gradient
+
+    def pressing_direction(self, config, X_WE):
+        """Unit world direction in which the robot pushes the workpiece at the start:
+        -sum_i F_d,i grad_p C_i (F_d: force on the robot, in E_f's coordinates)."""
+        gradient = self._position_gradient(X_WE)[1]
         desired = np.asarray(config.desired_force.evaluate(0.0)[0], dtype=float)
         direction = -(desired @ gradient)
         norm = np.linalg.norm(direction)
@@ -225,6 +230,26 @@ class CustomTask(Task):
             raise ValueError(f"task '{self.name}': the desired force F_d(0) = {desired.tolist()} pushes along no "
                              "position direction of C; set a nonzero desired force on a position row")
         return direction / norm
+
+    def check_start_pose(self, config, X_WP, direction):
+        """OffConstraintError if the start pose's controlled point (X_WP) is not on C = 0 within
+        ``start.tolerance``, naming the gap or penetration along the pressing direction."""
+        value, gradient = self._position_gradient(X_WP)
+        rows = [i for i in range(len(value)) if i not in self.space.constraint.kinematic_rows]
+        residual = float(np.max(np.abs(value[rows]))) if rows else 0.0
+        if residual <= config.start.tolerance:
+            return
+        # C(p + s d) ~ C + (grad_p C d) s = 0: the distance s along the pressing direction d to the surface.
+        slope = gradient[rows] @ direction
+        distance = -float(slope @ value[rows]) / float(slope @ slope) if slope @ slope > 0 else float("nan")
+        where = (f"a gap: the surface is {distance * 1000:.1f} mm further along the pressing direction"
+                 if distance > 0 else
+                 f"a penetration: the pad centre is {-distance * 1000:.1f} mm beyond the surface along the pressing "
+                 "direction")
+        raise OffConstraintError(
+            f"task '{self.name}': the start pose is off the constraint, |C| = {residual:.4g} > start.tolerance = "
+            f"{config.start.tolerance:g} ({where} {np.round(direction, 3).tolist()}); give a start_pose with the "
+            "controlled point on C = 0, or set start.in_contact: false to approach from a gap")
 
     def start_positions(self, scenario):
         config = scenario.config
@@ -234,6 +259,8 @@ class CustomTask(Task):
         context = plant.CreateDefaultContext()
         X_EP = RigidTransform(kinematics.point_in_frame)
         direction = self.pressing_direction(config, X_WE.multiply(X_EP))
+        if config.start.in_contact:
+            self.check_start_pose(config, X_WE.multiply(X_EP), direction)
 
         def positions_at_depth(depth):
             X_target = RigidTransform(X_WE.rotation(), X_WE.multiply(X_EP).translation() + depth * direction)

@@ -15,7 +15,7 @@ from pydrake.geometry import CollisionFilterDeclaration, GeometrySet, ProximityP
 from pydrake.multibody.plant import AddMultibodyPlant, CoulombFriction, MultibodyPlant
 from pydrake.multibody.tree import SpatialInertia
 
-from drake_hybrid.core.errors import ConfigError
+from drake_hybrid.core.errors import ConfigError, UnknownFrameError
 
 
 @dataclass
@@ -31,6 +31,18 @@ class RobotModel:
     passive_geometries: list = field(default_factory=list)   # collision geometries to drop (arm links)
     only_pad_contact: bool = False               # filter every contact of the robot but the pad's
 
+
+def frame_names(plant, model_instance):
+    """The names of the frames of ``model_instance`` (bodies' frames and the model's own frames)."""
+    return sorted({plant.get_frame(index).name() for index in plant.GetFrameIndices(model_instance)})
+
+
+def get_frame(plant, name, model_instance, role="frame"):
+    """Frame ``name`` of ``model_instance``; UnknownFrameError listing the model's frames otherwise."""
+    if plant.HasFrameNamed(name, model_instance):
+        return plant.GetFrameByName(name, model_instance)
+    raise UnknownFrameError(f"{role} '{name}' is not a frame of model '{plant.GetModelInstanceName(model_instance)}'; "
+                            f"its frames: {', '.join(frame_names(plant, model_instance))}")
 
 
 def _set_contact_properties(plant, scene_graph, geometry_ids, config, pad):

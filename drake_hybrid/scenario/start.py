@@ -13,7 +13,7 @@ from scipy.optimize import brentq
 
 from pydrake.systems.framework import DiagramBuilder
 
-from drake_hybrid.core.errors import DimensionError, OffConstraintError
+from drake_hybrid.core.errors import DimensionError, ForceSignError, OffConstraintError
 from drake_hybrid.core.kinematics import EndEffectorKinematics
 from drake_hybrid.scenario.plant import apply_model_error, build_plant
 from drake_hybrid.systems.sensors import ContactWrenchSensor
@@ -167,10 +167,30 @@ def pressing_positions(scenario, positions_at_depth, max_depth=0.01):
         force = space.split_wrench(values, wrench)[1]
         return float(force @ desired) / magnitude - magnitude
 
-    if pressing_force(max_depth) < 0:
+    # Diagnose the starts root finding cannot fix: each names what is wrong (typed), not scipy's bracket.
+    at_surface = pressing_force(0.0) + magnitude
+    if at_surface > magnitude:
+        raise OffConstraintError(
+            f"task '{task.name}': at the start pose (C = 0, no penetration intended) the pad already presses with "
+            f"{at_surface:.3g} N > |F_d| = {magnitude:.3g} N: the workpiece's geometry reaches beyond the surface "
+            "that C describes (a penetration); move the workpiece or the start so that they agree")
+    deepest = pressing_force(max_depth) + magnitude
+    if deepest < magnitude:
+        tiny = 1e-9 * max(magnitude, 1.0)
+        against = deepest if deepest < -tiny else min(pressing_force(-max_depth) + magnitude, 0.0)
+        if against < -tiny:
+            raise ForceSignError(
+                f"task '{task.name}': the desired force F_d(0) = {desired.tolist()} pulls: in contact the workpiece "
+                f"pushes the pad with {against:.3g} N along F_d. F_d is the force ON the robot in E_f's coordinates "
+                "(the rows of dC/dr), and a contact only pushes: flip the sign of desired_force")
+        if abs(deepest) <= tiny:
+            raise OffConstraintError(
+                f"task '{task.name}': the pad touches nothing even {max_depth * 1000:.0f} mm beyond the start pose "
+                "along the pressing direction: the workpiece's geometry is farther than the surface C = 0 (a gap); "
+                "move the workpiece or the start so that they agree")
         raise ValueError(
-            f"task '{task.name}': even {max_depth * 1000:.0f} mm of penetration presses with less than the desired "
-            f"{magnitude:.3g} N; raise contact.pad_modulus or lower the desired force")
+            f"task '{task.name}': even {max_depth * 1000:.0f} mm of penetration presses with only {deepest:.3g} N, "
+            f"less than the desired {magnitude:.3g} N; raise contact.pad_modulus or lower the desired force")
     depth = brentq(pressing_force, 0.0, max_depth, xtol=1e-10)
     return positions_at_depth(depth)
 

@@ -78,6 +78,28 @@ def _coerce(task_name, field, raw):
     return word
 
 
+def pad_kinematic_rows(profile, force_size, kinematic_rows):
+    """``profile`` (a desired force) with zeros inserted at ``kinematic_rows`` when it gives only the
+    force-controlled rows (m - len(kinematic_rows) entries): rows held kinematically (e.g. the
+    tool's orientation rows of ``surface_constraint(normal_rows=True)``) have no force to track.
+    A profile with all m entries is returned as it is."""
+    kinematic = sorted(kinematic_rows)
+    if not kinematic or len(profile.value) != force_size - len(kinematic):
+        return profile
+    controlled = [i for i in range(force_size) if i not in kinematic]
+
+    def padded(values):
+        if len(values) != len(controlled):
+            return list(values)
+        full = [0.0] * force_size
+        for row, value in zip(controlled, values):
+            full[row] = float(value)
+        return full
+
+    return dataclasses.replace(profile, value=padded(profile.value), final_value=padded(profile.final_value),
+                               amplitude=padded(profile.amplitude))
+
+
 def as_profile(value):
     """A Profile from a Profile or a list of constant values."""
     return value if isinstance(value, Profile) else Profile(kind="constant", value=[float(v) for v in value])
@@ -187,6 +209,12 @@ class Task(abc.ABC):
     @abc.abstractmethod
     def constraint_space(self, config):
         """The ConstraintSpace (chart, C, E_p) of the task."""
+
+    def velocity_row_inertia(self, plant, config, constraint_space):
+        """I_v (k x k): the inertia of the task's mechanism along the velocity rows, read from the
+        simulation ``plant`` (``mechanism.source: plant``). Default: the task has no mechanism."""
+        raise ConfigError(f"mechanism.source: task '{self.name}' has no mechanism to read from the plant; "
+                          "use source 'given' with mechanism.velocity_row_inertia, or 'none'")
 
     def make_source(self, config, controller_plant, robot, constraint_space):
         """The system producing desired_velocity, desired_acceleration and desired_force.

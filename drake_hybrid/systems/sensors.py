@@ -35,7 +35,7 @@ from pydrake.autodiffutils import AutoDiffXd
 from pydrake.common.cpp_param import List
 from pydrake.common.value import AbstractValue, Value
 from pydrake.math import RigidTransform_
-from pydrake.multibody.math import SpatialForce_
+from pydrake.multibody.math import SpatialAcceleration_, SpatialForce_, SpatialVelocity_
 from pydrake.multibody.plant import ContactResults_
 from pydrake.systems.framework import LeafSystem_
 from pydrake.systems.scalar_conversion import TemplateSystem
@@ -187,13 +187,25 @@ def WristForceTorqueSensor_(T):
         or a discrete plant: with strict hydroelastic, continuous reaction
         forces leave out gravity (DRAKE_NOTES).
 
+        With ``compensate_tool_inertia`` (issue 18) the sensor also removes the tool's inertial
+        wrench, its spatial momentum rate from the tool's model (mass, centre of mass, rotational
+        inertia) and the plant's body velocities and accelerations (two more input ports,
+        ``body_spatial_velocities`` and ``body_spatial_accelerations``)::
+
+            wrench += [I_W alpha + omega x I_W omega; m_t a_com]   (at the centre of mass, shifted to P)
+
+        so it reports the contact wrench during motion too (the tool is exactly the model's here).
+
         Args:
             plant: simulation plant (float, finalized).
             weld_joint: the WeldJoint between wrist (parent) and tool (child).
             end_effector_frame, end_effector_point: P, as for the controller.
+            compensate_tool_inertia: remove the tool's inertial wrench too (default False: static
+                compensation, the tool's weight only).
         """
 
-        def _construct(self, plant, weld_joint, end_effector_frame, end_effector_point, converter=None):
+        def _construct(self, plant, weld_joint, end_effector_frame, end_effector_point, compensate_tool_inertia=False,
+                       converter=None):
             LeafSystem_[T].__init__(self, converter)
             if type(weld_joint).__name__ != "WeldJoint" or weld_joint.GetParentPlant() is not plant:
                 raise ValueError(f"WristForceTorqueSensor: weld_joint must be a WeldJoint of the plant, got "
@@ -215,13 +227,35 @@ def WristForceTorqueSensor_(T):
             self._point_in_body = frame.GetFixedPoseInBodyFrame().multiply(self._end_effector_point)
             self.DeclareAbstractInputPort("reaction_forces", Value[List[SpatialForce_[T]]]([]))
             self.DeclareAbstractInputPort("body_poses", Value[List[RigidTransform_[T]]]([]))
+            # Issue 18: the tool's inertial wrench, from its model (off: the paper's static compensation).
+            self.compensate_tool_inertia = bool(compensate_tool_inertia)
+            if self.compensate_tool_inertia:
+                self._tool_inertia_B = tool.default_rotational_inertia().CopyToFullMatrix3()   # about Bo, in B
+                self._velocities_port = self.DeclareAbstractInputPort("body_spatial_velocities",
+                                                                      Value[List[SpatialVelocity_[T]]]([]))
+                self._accelerations_port = self.DeclareAbstractInputPort("body_spatial_accelerations",
+                                                                         Value[List[SpatialAcceleration_[T]]]([]))
             # A function of the inputs only (not of time): a logger at the next instant reuses the value.
             self.DeclareVectorOutputPort("wrench", 6, self._calc_wrench,
                                          prerequisites_of_calc={self.all_input_ports_ticket()})
 
         def _construct_copy(self, other, converter=None):
             Impl._construct(self, other._plant, other._weld_joint, other._frame, other._end_effector_point,
-                            converter=converter)
+                            other.compensate_tool_inertia, converter=converter)
+
+        def _tool_momentum_rate(self, context, R_W_tool, p_Wcom):
+            """The tool's spatial momentum rate [torque about the centre of mass; m a_com] in world."""
+            V = self._velocities_port.Eval(context)[int(self._tool_index)]
+            A = self._accelerations_port.Eval(context)[int(self._tool_index)]
+            omega, alpha, a_Bo = V.rotational(), A.rotational(), A.translational()
+            p_BoCm_W = R_W_tool @ self._tool_com
+            a_com = a_Bo + np.cross(alpha, p_BoCm_W) + np.cross(omega, np.cross(omega, p_BoCm_W))
+            # Rotational inertia about the centre of mass (parallel-axis theorem), in world.
+            c = self._tool_com
+            I_com_B = self._tool_inertia_B - self._tool_mass * (np.dot(c, c) * np.eye(3) - np.outer(c, c))
+            I_com_W = R_W_tool @ I_com_B @ R_W_tool.T
+            torque = I_com_W @ alpha + np.cross(omega, I_com_W @ omega)
+            return np.concatenate([torque, self._tool_mass * a_com])
 
         def tool_mass(self):
             return self._tool_mass
@@ -239,6 +273,8 @@ def WristForceTorqueSensor_(T):
             p_Wcom = X_W_tool.translation() + R_W_tool @ self._tool_com
             weight = np.concatenate([np.zeros(3), self._tool_mass * self._gravity])
             wrench = -_shift(on_tool_from_wrist, p_WP - p_WJc) - _shift(weight, p_WP - p_Wcom)
+            if self.compensate_tool_inertia:
+                wrench = wrench + _shift(self._tool_momentum_rate(context, R_W_tool, p_Wcom), p_WP - p_Wcom)
             output.SetFromVector(wrench)
 
     return Impl

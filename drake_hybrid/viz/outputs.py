@@ -1,6 +1,7 @@
 """The files of a run: log.npz, summary.json, config.yaml, the plots and the animation."""
 
 import json
+import math
 from pathlib import Path
 
 import numpy as np
@@ -10,16 +11,28 @@ from drake_hybrid.scenario.config import dump_config
 from drake_hybrid.viz.plotting import save_run_plots, save_tracking_plots
 
 
+def json_safe(value):
+    """``value`` with every non-finite float (NaN, inf: "never", "undefined") replaced by None, so
+    that the file is valid JSON."""
+    if isinstance(value, dict):
+        return {key: json_safe(item) for key, item in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [json_safe(item) for item in value]
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    return value
+
+
 def write_run(result, out_dir, plots=True):
     """Write log.npz, summary.json, config.yaml and the plots (tracking, constraint residual,
     torques) to ``out_dir``."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     np.savez_compressed(out / "log.npz", **result.log)
-    (out / "summary.json").write_text(json.dumps(result.summary, indent=2))
+    (out / "summary.json").write_text(json.dumps(json_safe(result.summary), indent=2, allow_nan=False))
     (out / "config.yaml").write_text(dump_config(result.config))
     files = [out / "log.npz", out / "summary.json", out / "config.yaml"]
-    if plots:
+    if plots and len(result.log["t"]) >= 2:
         predicted_velocity, predicted_force = predicted_tracking(result.scenario, result.config, result.log)
         labels = result.scenario.task.labels()
         files += save_tracking_plots(result.log, result.summary, predicted_velocity, predicted_force, out,

@@ -10,6 +10,7 @@
   parameter (contact stiffness, a gain), against the design.
 * ``constraint_residual_figure``: |C(r)| along the run (the pad's compression).
 * ``torque_figure``: joint torques against the actuators' effort limits.
+* ``joint_servo_map_figure``: where the joint-servo hybrid controllers are unstable (issue 18).
 
 Every axis says its unit.
 
@@ -468,3 +469,26 @@ def save_sweep_plots(rows, spec, out_dir, base_config=None):
         fig.savefig(paths[-1], dpi=130)
         plt.close(fig)
     return paths
+
+
+def joint_servo_map_figure(q1, q2, maps, marked=None, title=None, clip=10.0):
+    """The largest real part of the joint-servo hybrid controllers over a 2R arm's configurations
+    (``analysis.kinematic_instability.stability_map``): one panel per controller, the stability
+    boundary in black, ``marked`` (rad) as a star. Colours clipped to +-``clip`` 1/s."""
+    plt_ = _pyplot()
+    names = {"raibert-craig": "Raibert-Craig (J^-1 S)", "fisher-mujtaba": "Fisher-Mujtaba ((S J)^+ S)"}
+    fig, axes = plt_.subplots(1, len(maps), figsize=(5 * len(maps), 4.3), sharey=True, squeeze=False)
+    x, y = np.degrees(q1), np.degrees(q2)
+    for ax, (name, data) in zip(axes[0], maps.items()):
+        mesh = ax.pcolormesh(x, y, np.clip(data, -clip, clip), cmap="coolwarm", vmin=-clip, vmax=clip, shading="auto")
+        if np.nanmax(data) > 0 > np.nanmin(data):
+            ax.contour(x, y, data, levels=[0.0], colors="k", linewidths=1.0)
+        if marked is not None:
+            ax.plot(*np.degrees(marked), "k*", markersize=12)
+        ax.set_title(names.get(name, name))
+        ax.set_xlabel("q1 (deg)")
+    axes[0][0].set_ylabel("q2 (deg)")
+    fig.colorbar(mesh, ax=list(axes[0]), label=f"largest real part (1/s), clipped to +-{clip:g}")
+    if title:
+        fig.suptitle(title, fontsize=9)
+    return fig

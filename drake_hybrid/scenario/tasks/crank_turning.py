@@ -34,6 +34,7 @@ import numpy as np
 from pydrake.math import RigidTransform, RotationMatrix
 from pydrake.multibody.parsing import Parser
 from pydrake.multibody.plant import MultibodyPlantConfig
+from pydrake.multibody.tree import JacobianWrtVariable
 
 from drake_hybrid.control.gains import HybridGains
 from drake_hybrid.core.charts import EulerZXZChart, PoseChart
@@ -155,6 +156,29 @@ class CrankTurning(Task):
         alpha = self.options(scenario.config).start_angle
         return inverse_kinematics(kinematics, context, self.handle_pose(alpha), CRANK_SEED)
 
+    def velocity_row_inertia(self, plant, config, constraint_space):
+        """I_v = G^T M_c G: the crank's (arm and spinning handle) inertia along the velocity rows at
+        the start, for ``mechanism.source: plant`` (issue 18).
+
+        M_c is the crank's joint-space mass matrix (alpha, spin) in the simulation ``plant``; H maps
+        its joint rates to the velocity rows, E_p nu of the handle frame (= the pad centre, with the
+        tool's orientation) per unit joint rate, and G = H^-1 maps the rows back (along the crank
+        the constraint rows are zero, so the rows determine the crank's motion)."""
+        context = plant.CreateDefaultContext()
+        crank = plant.GetModelInstanceByName("crank")
+        plant.SetPositions(context, crank, [self.options(config).start_angle, 0.0])
+        handle = plant.GetBodyByName("handle", crank)
+        columns = plant.GetVelocitiesFromArray(crank, np.arange(plant.num_velocities())).astype(int)
+        J_spatial = plant.CalcJacobianSpatialVelocity(context, JacobianWrtVariable.kV, handle.body_frame(),
+                                                      np.zeros(3), plant.world_frame(), plant.world_frame())
+        chart = constraint_space.chart
+        x = chart.configuration_of_pose(handle.EvalPoseInWorld(context))
+        E_p = constraint_space.evaluate(x, np.zeros(chart.velocity_size)).velocity_projection
+        H = np.column_stack([E_p @ chart.task_velocity(x, J_spatial[:, j]) for j in columns])
+        G = np.linalg.inv(H)
+        M_c = plant.CalcMassMatrix(context)[np.ix_(columns, columns)]
+        return G.T @ M_c @ G
+
     # -- what the paper's massless crank leaves out --------------------------------------------------
     def eigenvalue_shifts(self, scenario, root_context):
         """The spin row's designed eigenvalues, moved by the handle's spin inertia I_h (the paper's
@@ -164,7 +188,15 @@ class CrankTurning(Task):
         instead of -K_v; position/force has the roots of (1 + M_p I_h) s^2 + K_v s + K_p; in
         impedance/force the wrist sensor also reports the tool's own spin inertia I_t, which the law
         feeds forward: (1 + I_h + I_t - M_p I_t) s^2 + K_v s + K_p (M_p with the constraint rows held).
+        These are the paper's form (``mechanism.source: none``, the default); with the mechanism's
+        inertia in the law (``mechanism.source: plant``) or the tool's inertia compensated in the
+        sensor, the design holds (tests/test_baselines.py) or no tested prediction applies: none given.
         """
+        config = scenario.config
+        compensated = getattr(config.sensor, "compensate_tool_inertia", False)
+        if (config.controller != "li-sastry" or config.mechanism.source != "none"
+                or (compensated and config.mode == "impedance-force")):
+            return []
         controller = scenario.controller
         plant = scenario.controller_plant
         context = plant.CreateDefaultContext()
@@ -203,7 +235,10 @@ class CrankTurning(Task):
     def run_notes(self, scenario, log, design_time_constant):
         """The true crank rate's deviation from the designed e^(-K_v t) (docs/theory.md §6): with the
         paper's E_p (``velocity_rows=paper``) the controlled rows are pseudo-velocities, so the summary's
-        rows do not show what the crank itself does; this figure compares the two options."""
+        rows do not show what the crank itself does; this figure compares the two options (the
+        Li & Sastry law only: a baseline has no such design)."""
+        if scenario.config.controller != "li-sastry":
+            return []
         true_rows = crank_true_velocity_projection(scenario.constraint_space.chart, center=CRANK_CENTER,
                                                    radius=CRANK_RADIUS)
         plant = scenario.controller_plant

@@ -104,7 +104,7 @@ class Grinding(Task):
         """Where the pad is at the end relative to the rough patch (window): leaving it releases the
         extra friction force, a transient that lasts several design time constants."""
         config = scenario.config
-        if self._base(config) is not self._window or "q" not in log:
+        if self._base(config) is not self._window or "q" not in log or config.controller != "li-sastry":
             return []
         options = self.options(config)
         plant = scenario.controller_plant
@@ -124,7 +124,8 @@ class Grinding(Task):
                          "larger than the command to build the friction force mu F_n, and stalls; impedance/force "
                          "(the default mode) slides (docs/impedance.md)")
         on_patch = (x >= options.rough_start) & (x <= options.rough_end)
-        where = f"rough patch (mu = {options.rough_friction:g}, x from {options.rough_start:g} to {options.rough_end:g} m)"
+        where = (f"rough patch (mu = {options.rough_friction:g}, x from {options.rough_start:g} to "
+                 f"{options.rough_end:g} m)")
         if on_patch[-1]:
             return notes + [f"the run ends with the pad on the {where}"]
         if not on_patch.any():
@@ -134,7 +135,8 @@ class Grinding(Task):
         after = float(t[-1]) - left
         if after < 5 * design_time_constant:
             steady = left + 10 * design_time_constant
-            return notes + [f"the run ends {after:.2f} s ({after / design_time_constant:.1f} design time constants) after the pad "
+            return notes + [f"the run ends {after:.2f} s ({after / design_time_constant:.1f} design time constants) "
+                            f"after the pad "
                     f"left the {where}: the released friction force is still accelerating it, so the final speed "
                     f"error is that transient's; --duration {np.ceil(steady * 10) / 10:g} ends in steady sliding"]
         return notes + [f"the run ends in steady sliding, {after:.2f} s after the pad left the {where}"]

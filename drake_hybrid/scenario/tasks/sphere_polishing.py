@@ -43,7 +43,7 @@ from drake_hybrid.core.charts import EulerZXZChart, PoseChart
 from drake_hybrid.core.constraints import sphere_constraint
 from drake_hybrid.core.kinematics import EndEffectorKinematics, inverse_kinematics
 from drake_hybrid.core.projections import ConstraintSpace, sphere_paper_projection, sphere_true_velocity_projection
-from drake_hybrid.scenario.config import ContactConfig, ScenarioConfig, StartConfig
+from drake_hybrid.scenario.config import ScenarioConfig, StartConfig
 from drake_hybrid.scenario.parsing import ConfigureParser, model_url
 from drake_hybrid.scenario.start import pressing_positions
 from drake_hybrid.scenario.task import Task, choice
