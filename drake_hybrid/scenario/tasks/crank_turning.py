@@ -213,7 +213,7 @@ class CrankTurning(Task):
             M_p = float((values.velocity_projection @ mobility @ values.velocity_projection.T)[0, 0])
             return [EigenvalueShift(-K_v, -K_v / (1.0 + M_p * I_h),
                                     f"spin row slowed by the handle's spin inertia I_h = {I_h:.3g} kg m^2 "
-                                    f"(massless in the paper): -K_v / (1 + M_p I_h), M_p = {M_p:.3g}")]
+                                    f"(massless in the paper): -K_v / (1 + M_p I_h), M_p = {M_p:.3g}; mechanism: {{source: plant}} puts it in the law")]
         A = values.matrix @ mobility @ values.matrix.T
         k = scenario.constraint_space.velocity_size
         M_p = float((A[:k, :k] - A[:k, k:] @ np.linalg.solve(A[k:, k:], A[k:, :k]))[0, 0])
@@ -221,13 +221,13 @@ class CrankTurning(Task):
         if controller.mode.value == "position-force":
             factor = 1.0 + M_p * I_h
             reason = (f"spin pair moved by the handle's spin inertia I_h = {I_h:.3g} kg m^2 (massless in the "
-                      f"paper): roots of (1 + M_p I_h) s^2 + K_v s + K_p, M_p = {M_p:.3g}")
+                      f"paper): roots of (1 + M_p I_h) s^2 + K_v s + K_p, M_p = {M_p:.3g}; mechanism: {{source: plant}} puts it in the law")
         else:
             I_t = scenario.plant.GetBodyByName("tool").default_rotational_inertia().get_moments()[2]
             factor = 1.0 + I_h + I_t - M_p * I_t
             reason = (f"spin pair moved by the handle's inertia I_h = {I_h:.3g} and the tool's I_t = {I_t:.3g} "
                       f"kg m^2 in the wrist sensor's reading, fed forward: roots of (1 + I_h + I_t - M_p I_t) s^2 "
-                      f"+ K_v s + K_p, M_p = {M_p:.3g}")
+                      f"+ K_v s + K_p, M_p = {M_p:.3g}; mechanism: {{source: plant}} puts it in the law")
         designed = np.sort_complex(np.roots([1.0, K_v, K_p]).astype(complex))
         predicted = np.sort_complex(np.roots([factor, K_v, K_p]).astype(complex))
         return [EigenvalueShift(d, p, reason) for d, p in zip(designed, predicted)]
