@@ -51,6 +51,7 @@ import yaml
 
 from pydrake.common.yaml import yaml_dump_typed, yaml_load_typed
 
+from drake_hybrid.core.schema import check_yaml_against_schema
 from drake_hybrid.scenario.config import dump_config, load_config
 
 GRID_KINDS = ("values", "linspace", "logspace")
@@ -290,12 +291,10 @@ def load_spec(path=None, text=None):
         if not path.is_file():
             raise SweepSpecError(f"sweep spec '{path}' does not exist")
         text, where = path.read_text(), f"sweep spec '{path}'"
+    check_yaml_against_schema(text, SweepSpecFile, f"{where}: ", error=SweepSpecError)
     try:
         spec_file = yaml_load_typed(schema=SweepSpecFile, data=text)
-    except AssertionError as error:   # a bare list where a mapping belongs (e.g. path: [1, 2])
-        raise SweepSpecError(f"{where}: {error} is a list where a mapping belongs; each parameter takes one kind, "
-                             f"e.g. {{values: {error}}}") from None
-    except (RuntimeError, ValueError, TypeError) as error:
+    except (AssertionError, RuntimeError, ValueError, TypeError) as error:
         raise SweepSpecError(f"{where}: {str(error).splitlines()[0]}") from None
     except yaml.YAMLError as error:
         raise SweepSpecError(f"{where} is not valid YAML: {str(error).splitlines()[0]}") from None

@@ -19,27 +19,29 @@ the dotted field name; ``ScenarioConfig.validate`` calls them all.
 """
 
 import dataclasses
+import math
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Dict, List, Union
 
-import yaml
 
 from pydrake.common.yaml import yaml_dump_typed, yaml_load_typed
 from pydrake.multibody.plant import MultibodyPlantConfig
-from pydrake.systems.analysis import SimulatorConfig
+from pydrake.systems.analysis import GetIntegrationSchemes, SimulatorConfig
 
 from drake_hybrid.control.baselines import BaselineGains
-from drake_hybrid.control.gains import HybridGains
+from drake_hybrid.control.gains import ControlMode, HybridGains
 from drake_hybrid.control.safety import SafetyConfig
 from drake_hybrid.control.supervision import SupervisionConfig
 from drake_hybrid.core.errors import ConfigError, check_fields, check_finite
+from drake_hybrid.core.schema import check_yaml_against_schema
 from drake_hybrid.systems.faults import SensorFaultConfig
 from drake_hybrid.systems.sources import Profile
 
 # The values Drake 1.51 accepts for the MultibodyPlantConfig fields checked here.
 CONTACT_MODELS = ("hydroelastic", "hydroelastic_with_fallback", "point")
 DISCRETE_APPROXIMATIONS = ("sap", "tamsi", "similar", "lagged")
+SURFACE_REPRESENTATIONS = ("polygon", "triangle")
 # The laws a scenario can close its loop with (scenario.builder): Li & Sastry's, and the baselines.
 CONTROLLERS = ("li-sastry", "raibert-craig", "fisher-mujtaba", "pd-open-loop-force")
 
@@ -63,17 +65,31 @@ def validate_plant_config(plant, prefix="plant."):
     if plant.discrete_contact_approximation not in DISCRETE_APPROXIMATIONS + ("",):
         raise ConfigError(f"{prefix}discrete_contact_approximation must be one of {DISCRETE_APPROXIMATIONS}, "
                           f"got '{plant.discrete_contact_approximation}'")
-    if not plant.sap_near_rigid_threshold > 0:
-        raise ConfigError(f"{prefix}sap_near_rigid_threshold must be positive, got {plant.sap_near_rigid_threshold}")
+    if plant.contact_surface_representation not in SURFACE_REPRESENTATIONS:
+        raise ConfigError(f"{prefix}contact_surface_representation must be one of {SURFACE_REPRESENTATIONS}, "
+                          f"got '{plant.contact_surface_representation}'")
+    for name in ("penetration_allowance", "stiction_tolerance", "sap_near_rigid_threshold"):
+        number = getattr(plant, name)
+        if not 0 < number < math.inf:
+            raise ConfigError(f"{prefix}{name} must be positive and finite, got {number}")
+    if not plant.time_step < math.inf:
+        raise ConfigError(f"{prefix}time_step must be finite, got {plant.time_step}")
 
 
 def validate_simulator_config(simulator, prefix="simulator."):
-    if not simulator.max_step_size > 0:
-        raise ConfigError(f"{prefix}max_step_size must be positive, got {simulator.max_step_size}")
-    if not simulator.accuracy > 0:
-        raise ConfigError(f"{prefix}accuracy must be positive, got {simulator.accuracy}")
-    if not simulator.target_realtime_rate >= 0:
-        raise ConfigError(f"{prefix}target_realtime_rate must be >= 0, got {simulator.target_realtime_rate}")
+    """ConfigError naming the SimulatorConfig field Drake would reject or misuse."""
+    if simulator.integration_scheme not in GetIntegrationSchemes():
+        raise ConfigError(f"{prefix}integration_scheme must be one of {GetIntegrationSchemes()}, "
+                          f"got '{simulator.integration_scheme}'")
+    for name in ("max_step_size", "accuracy"):
+        number = getattr(simulator, name)
+        if not 0 < number < math.inf:
+            raise ConfigError(f"{prefix}{name} must be positive and finite, got {number}")
+    if not 0 <= simulator.target_realtime_rate < math.inf:
+        raise ConfigError(f"{prefix}target_realtime_rate must be >= 0 and finite (0: as fast as possible), got "
+                          f"{simulator.target_realtime_rate}")
+    if not simulator.start_time == 0:
+        raise ConfigError(f"{prefix}start_time must be 0 (runs start at t = 0), got {simulator.start_time}")
 
 
 @dataclass
@@ -214,6 +230,7 @@ class ScenarioConfig:
     task: str = "window-washing"
     mode: str = "velocity-force"
     duration: float = 3.0
+    max_duration: float = 3600.0                 # s of simulated time a run may ask for (raise it for longer runs)
     plant: MultibodyPlantConfig = field(default_factory=default_plant_config)
     simulator: SimulatorConfig = field(default_factory=SimulatorConfig)
     control_period: float = 1.0e-3               # controller: 0 = continuous
@@ -257,9 +274,18 @@ class ScenarioConfig:
         naming the field. The gains and profiles are checked against the task's sizes by the systems
         that use them (HybridController, ProfileSource), the start by ``scenario.start.check_start``."""
         check_finite(self, allow_infinite=ALLOWED_INFINITE)
+        try:
+            ControlMode.parse(self.mode)
+        except ValueError:
+            raise ConfigError(f"mode must be one of {[m.value for m in ControlMode]}, got '{self.mode}'") from None
+        self.desired_velocity.check_kind("desired_velocity")
+        self.desired_force.check_kind("desired_force")
         if not self.control_period >= 0:
             raise ConfigError(f"control_period must be >= 0 (0 means continuous), got {self.control_period}")
         check_fields(self, "", positive=("duration", "log_period"))
+        if self.duration > self.max_duration:
+            raise ConfigError(f"duration ({self.duration:g} s) exceeds max_duration ({self.max_duration:g} s of "
+                              "simulated time); raise max_duration if such a long run is intended")
         for name in ("control_period", "log_period"):
             if getattr(self, name) >= self.duration:
                 raise ConfigError(f"{name} ({getattr(self, name):g} s) must be shorter than duration "
@@ -316,42 +342,13 @@ def load_config(path=None, data=None, defaults=None):
     where = f"{path}: " if path else ""
     if path is not None and not Path(path).is_file():
         raise ConfigError(f"config file '{path}' does not exist")
-    check_unique_keys(Path(path).read_text() if path is not None else data, where)
+    check_yaml_against_schema(Path(path).read_text() if path is not None else data, ScenarioConfig, where)
     try:
         return yaml_load_typed(schema=ScenarioConfig, filename=path, data=data,
                                defaults=defaults if defaults is not None else ScenarioConfig())
-    except AssertionError as error:    # Drake's loader: a scalar or list where a section belongs
-        raise ConfigError(f"{where}expected a section (a mapping of fields) where the YAML gives {error}") from None
-    except (RuntimeError, ValueError, TypeError) as error:
+    except (AssertionError, RuntimeError, ValueError, TypeError) as error:
         raise ConfigError(f"{where}{str(error).splitlines()[0]}") from None
 
-
-class _UniqueKeyLoader(yaml.SafeLoader):
-    """A YAML loader that refuses a key given twice in one mapping (and accepts any !Tag)."""
-
-    def construct_mapping(self, node, deep=False):
-        seen = set()
-        for key_node, _ in node.value:
-            key = self.construct_object(key_node, deep=deep)
-            if key in seen:
-                raise ConfigError(f"the key '{key}' is given twice (line {key_node.start_mark.line + 1}); "
-                                  "YAML would silently keep the last one")
-            seen.add(key)
-        return super().construct_mapping(node, deep=deep)
-
-
-_UniqueKeyLoader.add_multi_constructor("!", lambda loader, suffix, node: (
-    loader.construct_mapping(node) if isinstance(node, yaml.MappingNode) else None))
-
-
-def check_unique_keys(text, where=""):
-    """ConfigError if a mapping in the YAML ``text`` repeats a key (Drake's loader keeps the last)."""
-    try:
-        yaml.load(text, Loader=_UniqueKeyLoader)
-    except ConfigError as error:
-        raise ConfigError(f"{where}{error}") from None
-    except yaml.YAMLError as error:
-        raise ConfigError(f"{where}not valid YAML: {str(error).splitlines()[0]}") from None
 
 
 def dump_config(config):

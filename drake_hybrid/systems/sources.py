@@ -27,7 +27,7 @@ from pydrake.autodiffutils import AutoDiffXd
 from pydrake.systems.framework import LeafSystem_
 from pydrake.systems.scalar_conversion import TemplateSystem
 
-from drake_hybrid.core.errors import DimensionError
+from drake_hybrid.core.errors import ConfigError, DimensionError
 from drake_hybrid.core.kinematics import declare_cached_value, declare_task_input
 from drake_hybrid.core.linalg import value
 from drake_hybrid.core.projections import pseudo_desired_velocity
@@ -53,9 +53,15 @@ class Profile:
     start_time: float = 0.0
     duration: float = 1.0
 
+    KINDS = ("constant", "smooth_step", "sine")
+
+    def check_kind(self, what):
+        """ConfigError naming ``what``.kind if it is not one of KINDS (the sizes are checked by ``validate``)."""
+        if self.kind not in self.KINDS:
+            raise ConfigError(f"{what}.kind must be one of {list(self.KINDS)}, got '{self.kind}'")
+
     def validate(self, size, what):
-        if self.kind not in ("constant", "smooth_step", "sine"):
-            raise ValueError(f"{what}: unknown profile kind '{self.kind}' (use constant, smooth_step or sine)")
+        self.check_kind(what)
         if len(self.value) != size:
             raise DimensionError(f"{what}: value must have {size} entries, got {len(self.value)}")
         if self.kind == "smooth_step" and len(self.final_value) != size:
