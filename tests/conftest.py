@@ -60,3 +60,4 @@ def planar_arm():
         parent = body.body_frame()
     plant.Finalize()
     return plant, parent, np.array([lengths[-1], 0.0, 0.0])
+

@@ -19,10 +19,54 @@ def _labels(fig):
 
 
 def test_constraint_residual_figure(log):
+    """One row (a pad's compression): signed, on a linear axis. Rows of sizes four decades apart: |C| on
+    a log axis, without a numeric floor."""
     fig = plotting.constraint_residual_figure(log, units="m", labels=["C = y - h"])
     ax = fig.axes[0]
-    assert ax.get_yscale() == "log" and ax.get_xlabel() == "time t (s)" and ax.get_ylabel() == "|C(r)| (m)"
-    assert np.allclose(ax.lines[0].get_ydata(), np.abs(log["constraint"][:, 0]), rtol=1e-9)
+    assert ax.get_yscale() == "linear" and ax.get_xlabel() == "time t (s)" and ax.get_ylabel() == "C(r) (m)"
+    assert np.allclose(ax.lines[0].get_ydata(), log["constraint"][:, 0], rtol=1e-9)
+    assert "compression" in ax.get_title()
+    rows = dict(log, constraint=np.column_stack([log["constraint"][:, 0], 1e-7 * np.sin(10 * log["t"])]))
+    ax = plotting.constraint_residual_figure(rows, units="m^2 | m").axes[0]
+    assert ax.get_yscale() == "log" and ax.get_ylabel() == "|C(r)| (m^2 | m)"
+    assert np.isnan(ax.lines[1].get_ydata()[0])                      # C = 0 at t = 0 is not drawn at a floor
+
+
+def test_tracking_figure_has_every_line_in_a_legend_and_no_floor():
+    """Per-row 1 % lines (only for rows with a command), the settling marker and the designed response in
+    the legends; a zero error or a zero designed prediction is not drawn (no 1e-12 floor)."""
+    t = np.linspace(0.0, 1.0, 101)
+    desired = np.column_stack([np.full_like(t, 0.1), np.zeros_like(t)])
+    actual = desired + np.column_stack([0.1 * np.exp(-10 * t), np.zeros_like(t)])
+    actual[0, 0] = desired[0, 0]                                      # first sample equals the command
+    log = {"t": t, "velocity": actual, "desired_velocity": desired}
+    predicted = desired + np.column_stack([0.1 * np.exp(-10 * t), np.zeros_like(t)])
+    summary = {"task": "test", "mode": "velocity-force", "design_time_constant": 0.1, "contact_time": 0.0}
+    fig = plotting.tracking_figure(log, summary, predicted, "velocity", labels=["x-dot", "theta-dot"],
+                                   units="m/s | rad/s")
+    ax_values, ax_errors = fig.axes
+    for ax in (ax_values, ax_errors):
+        legend = {text.get_text() for text in ax.get_legend().get_texts()}
+        labeled = [line for line in ax.lines if not line.get_label().startswith("_")]
+        assert {line.get_label() for line in labeled} == legend
+        styles = {(line.get_color(), line.get_linestyle()) for line in labeled}
+        for line in ax.lines:        # an unlabeled line repeats the style of one in the legend
+            assert (line.get_color(), line.get_linestyle()) in styles, f"a line not in the legend: {ax.get_ylabel()}"
+    legend = {text.get_text() for text in ax_errors.get_legend().get_texts()}
+    assert "1 % of the x-dot command" in legend and "1 % of the theta-dot command" not in legend
+    assert "5 design time constants" in legend and "|error| x-dot (m/s)" in legend
+    assert ax_errors.get_ylabel() == "|velocity error| (m/s | rad/s)"
+    for line in ax_errors.lines:
+        if np.ptp(np.asarray(line.get_xdata(), dtype=float)) == 0:
+            continue                                                  # a vertical marker (axes coordinates)
+        y = np.asarray(line.get_ydata(), dtype=float)
+        assert not np.any(y[np.isfinite(y)] < 1e-11), line.get_label()
+
+
+@pytest.mark.parametrize("values", [[1e5, 5e5, 9e5], [0.001, 0.002, 0.004]])
+def test_stability_map_cells_of_a_positive_parameter_stay_positive(values):
+    edges, _ = plotting._cell_edges(values)
+    assert np.all(edges > 0)
 
 
 def test_torque_figure_draws_the_limits(log):

@@ -34,6 +34,7 @@ from pydrake.systems.primitives import Linearize
 from drake_hybrid.control.law import impedance_blocks
 from drake_hybrid.control.gains import ControlMode
 from drake_hybrid.control.sampling import SAMPLE_LEAD
+from drake_hybrid.core.progress import quiet
 from drake_hybrid.scenario.builder import build_scenario
 from drake_hybrid.scenario.start import set_initial_conditions
 from drake_hybrid.scenario.tasks import get_task
@@ -192,6 +193,40 @@ def match_eigenvalues(designed, measured, tolerance=0.05, marginal=0, marginal_r
                            marginal_partners=marginal_partners)
 
 
+def shift_indices(designed, shifts):
+    """{index in ``designed``: shift}: each ``scenario.task.EigenvalueShift`` takes one designed
+    eigenvalue equal to its ``designed``, not yet taken; ValueError if there is none."""
+    designed = np.asarray(designed, dtype=complex)
+    taken = {}
+    for shift in shifts:
+        same = [i for i, value in enumerate(designed)
+                if i not in taken and abs(value - shift.designed) <= 1e-9 * max(1.0, abs(shift.designed))]
+        if not same:
+            raise ValueError(f"a predicted shift of {shift.designed} matches no designed eigenvalue {designed}")
+        taken[same[0]] = shift
+    return taken
+
+
+def shifted_design(designed, shifts):
+    """The designed eigenvalues with, for each ``scenario.task.EigenvalueShift``, one equal designed
+    eigenvalue replaced by the shift's prediction (order kept)."""
+    corrected = np.array(designed, dtype=complex)
+    for index, shift in shift_indices(designed, shifts).items():
+        corrected[index] = shift.predicted
+    return corrected
+
+
+def _task_shifts(task_name, scenario, root_context, predicted, measured, tolerance):
+    """The task's predicted shifts and the match against the shifted design (the plain match's
+    inputs when the task predicts none)."""
+    shifts = get_task(task_name).eigenvalue_shifts(scenario, root_context)
+    if not shifts:
+        return [], None
+    match = match_eigenvalues(shifted_design(predicted.designed, shifts), measured, tolerance=tolerance,
+                              marginal=predicted.marginal)
+    return shifts, match
+
+
 # ------------------------------------------------------------------------------------------------
 # Linearization of a scenario's closed loop
 # ------------------------------------------------------------------------------------------------
@@ -240,36 +275,40 @@ class Linearization:
     predicted: PredictedEigenvalues
     match: EigenvalueMatch
     wall_time: float
+    shifts: list = field(default_factory=list)       # the task's EigenvalueShift predictions
+    shifted_match: EigenvalueMatch = None            # the match against the design with those shifts
 
 
-def linearize_continuous(config, tolerance=0.05, bandwidth_hz=200.0):
+def linearize_continuous(config, tolerance=0.05, bandwidth_hz=200.0, stages=None):
     """Linearize the continuous closed loop of ``config`` at its contact equilibrium.
 
     Builds ``equilibrium_config(config)``, sets the start, checks it is an
     equilibrium, runs Drake's ``Linearize`` (AutoDiffXd through plant,
     contact, sensor, filter and controller) and matches eig(A) against the
-    designed eigenvalues.
+    designed eigenvalues. ``stages`` (``core.progress.Stages``): one line per stage with its time.
     """
-
-
-
+    stages = stages or quiet()
     c = equilibrium_config(config, bandwidth_hz)
-    scenario = build_scenario(c, with_loggers=False)
-    context = scenario.diagram.CreateDefaultContext()
-    set_initial_conditions(scenario, context)
-    derivatives = scenario.diagram.EvalTimeDerivatives(context).CopyToVector()
+    with stages(f"{c.task}: building the continuous closed loop"):
+        scenario = build_scenario(c, with_loggers=False)
+        context = scenario.diagram.CreateDefaultContext()
+    with stages(f"{c.task}: solving the start (contact equilibrium)"):
+        set_initial_conditions(scenario, context)
+        derivatives = scenario.diagram.EvalTimeDerivatives(context).CopyToVector()
     residual = float(np.max(np.abs(derivatives)))
     if not (context.num_abstract_states() == 0 and context.has_only_continuous_state()):
         raise ValueError("linearize_continuous needs a purely continuous closed loop")
     start = time.perf_counter()
-    linear = Linearize(scenario.diagram, context, equilibrium_check_tolerance=np.inf)
+    with stages(f"{c.task}: linearizing ({context.num_continuous_states()} states, AutoDiffXd)"):
+        linear = Linearize(scenario.diagram, context, equilibrium_check_tolerance=np.inf)
     wall = time.perf_counter() - start
     A = np.asarray(linear.A())
     eigenvalues = np.linalg.eigvals(A)
     predicted = controller_prediction(scenario.controller)
     match = match_eigenvalues(predicted.designed, eigenvalues, tolerance=tolerance, marginal=predicted.marginal)
+    shifts, shifted_match = _task_shifts(c.task, scenario, context, predicted, eigenvalues, tolerance)
     return Linearization(A=A, eigenvalues=eigenvalues, equilibrium_residual=residual, predicted=predicted,
-                         match=match, wall_time=wall)
+                         match=match, wall_time=wall, shifts=shifts, shifted_match=shifted_match)
 
 
 # ------------------------------------------------------------------------------------------------
@@ -297,9 +336,11 @@ class DiscreteLinearization:
     predicted: PredictedEigenvalues
     match: EigenvalueMatch
     wall_time: float
+    shifts: list = field(default_factory=list)       # the task's EigenvalueShift predictions
+    shifted_match: EigenvalueMatch = None            # the match against the design with those shifts
 
 
-def linearize_discrete(config, tolerance=0.05, epsilon=1e-6, settle_time=0.0):
+def linearize_discrete(config, tolerance=0.05, epsilon=1e-6, settle_time=0.0, stages=None):
     """Linearize a discrete closed loop (discrete SAP plant and sampled controller) at its equilibrium.
 
     For plants that only exist in discrete time (the crank: its SAP weld constraint needs a discrete
@@ -312,26 +353,27 @@ def linearize_discrete(config, tolerance=0.05, epsilon=1e-6, settle_time=0.0):
     designed eigenvalues by about lambda^2 h / 2 (0.5 % at -10 1/s and 1 kHz).
 
     ``settle_time`` (s): first simulate the rebuilt loop at rest for this long, so that the
-    compliant constraint forces settle onto the equilibrium.
+    compliant constraint forces settle onto the equilibrium. ``stages`` (``core.progress.Stages``):
+    one line per stage with its time.
     """
-
-
-
-
+    stages = stages or quiet()
     c = at_rest_config(config)
     if not c.plant.time_step > 0:
         raise ValueError("linearize_discrete needs a discrete plant (time_step > 0)")
     c.control_period = c.plant.time_step
     c.log_period = c.plant.time_step
     c.sensor.bandwidth_hz = 0.0
-    scenario = build_scenario(c, with_loggers=False, sampled_plant_outputs=False, controller_sample_lead=False)
-    simulator = Simulator(scenario.diagram)
-    ApplySimulatorConfig(c.simulator, simulator)
-    context = simulator.get_mutable_context()
-    set_initial_conditions(scenario, context)
-    simulator.Initialize()
+    with stages(f"{c.task}: building the discrete closed loop"):
+        scenario = build_scenario(c, with_loggers=False, sampled_plant_outputs=False, controller_sample_lead=False)
+        simulator = Simulator(scenario.diagram)
+        ApplySimulatorConfig(c.simulator, simulator)
+        context = simulator.get_mutable_context()
+    with stages(f"{c.task}: solving the start"):
+        set_initial_conditions(scenario, context)
+        simulator.Initialize()
     if settle_time > 0:
-        simulator.AdvanceTo(settle_time)
+        with stages(f"{c.task}: settling at rest for {settle_time:g} s"):
+            simulator.AdvanceTo(settle_time)
     if context.num_abstract_states() != 0 or context.num_continuous_states() != 0:
         raise ValueError("linearize_discrete needs a closed loop with discrete state only")
     diagram = scenario.diagram
@@ -354,7 +396,9 @@ def linearize_discrete(config, tolerance=0.05, epsilon=1e-6, settle_time=0.0):
         return np.concatenate([update.get_vector(i).CopyToVector() for i in range(update.num_groups())])
 
     start = time.perf_counter()
-    A, residual = _one_period_jacobian(step, state_vector(context), epsilon)
+    x0 = state_vector(context)
+    with stages(f"{c.task}: linearizing (one-period map, {x0.size} states, {2 * x0.size} steps)"):
+        A, residual = _one_period_jacobian(step, x0, epsilon)
     wall = time.perf_counter() - start
     multipliers = np.linalg.eigvals(A)
     h = c.plant.time_step
@@ -363,8 +407,10 @@ def linearize_discrete(config, tolerance=0.05, epsilon=1e-6, settle_time=0.0):
     eigenvalues = np.log(multipliers[keep].astype(complex)) / h
     predicted = controller_prediction(scenario.controller)
     match = match_eigenvalues(predicted.designed, eigenvalues, tolerance=tolerance, marginal=predicted.marginal)
+    shifts, shifted_match = _task_shifts(c.task, scenario, context, predicted, eigenvalues, tolerance)
     return DiscreteLinearization(A=A, multipliers=multipliers, eigenvalues=eigenvalues, period=h,
-                                 equilibrium_residual=residual, predicted=predicted, match=match, wall_time=wall)
+                                 equilibrium_residual=residual, predicted=predicted, match=match, wall_time=wall,
+                                 shifts=shifts, shifted_match=shifted_match)
 
 
 def impedance_realization(scenario, log):

@@ -40,6 +40,8 @@ from pydrake.systems.analysis import ApplySimulatorConfig, Simulator
 from pydrake.systems.framework import EventStatus
 
 from drake_hybrid.analysis.linearization import controller_prediction, design_time_constant, predicted_errors
+from drake_hybrid.control.phases import ContactPhase
+from drake_hybrid.core.progress import quiet
 from drake_hybrid.scenario.builder import build_scenario
 from drake_hybrid.scenario.start import set_initial_conditions
 
@@ -122,18 +124,75 @@ def settling_time(times, error_norm, bound):
     return float(times[outside[-1] + 1])
 
 
-def simulate(config, progress=False, meshcat=None, record_html=False, setup=None):
+def contact_time(log, start_in_contact=True):
+    """When the hybrid law took over: the first sample in the CONTACT phase when a contact supervisor
+    ran (``contact_phase`` logged), else the first sample (a start in contact)."""
+    t = log["t"]
+    if "contact_phase" in log:
+        in_contact = np.nonzero(np.asarray(log["contact_phase"])[:, 0] == int(ContactPhase.CONTACT))[0]
+        return float(t[in_contact[0]]) if in_contact.size else math.inf
+    return float(t[0])
+
+
+def row_units(units, count):
+    """Per-row units from a task's label string ("m/s | rad/s"; one unit for every row if single)."""
+    parts = [part.strip() for part in str(units).split("|")]
+    if len(parts) == count:
+        return parts
+    return [parts[-1] if i >= len(parts) else parts[i] for i in range(count)] if len(parts) > 1 else parts * count
+
+
+def row_errors(t, error, desired, names, units, since, settle_after):
+    """Per-row error figures, each in the row's own units and in % of that row's command.
+
+    ``since``: when the law took over (contact); ``settle_after``: when the design says the
+    transient is over (contact + 5 design time constants). A row commanded to zero has no % figures
+    and no settling time (there is no scale in its units to settle to); its absolute errors are given.
+    Settling times are counted from ``since``.
+    """
+    rows = []
+    for i in range(error.shape[1]):
+        e, command = np.abs(error[:, i]), float(np.max(np.abs(desired[:, i])))
+        after = t >= settle_after
+        worst = float(np.max(e[after])) if after.any() else None
+        percent = (lambda value: None if value is None or command == 0 else 100.0 * value / command)
+        if command > 0 and np.isfinite(since):
+            active = t >= since
+            settle = settling_time(t[active], e[active], 0.01 * command) - since
+        else:
+            settle = None
+        rows.append({"name": names[i] if i < len(names) else f"row {i + 1}", "units": units[i],
+                     "command": command, "final_error": float(error[-1, i]),
+                     "final_error_percent": percent(float(e[-1])),
+                     "max_error_after_5_time_constants": worst,
+                     "max_error_percent_after_5_time_constants": percent(worst),
+                     "settling_time_1_percent": settle})
+    return rows
+
+
+def _worst(rows, key):
+    """The largest figure of ``key`` over the rows that have it (None if none has)."""
+    values = [row[key] for row in rows if row[key] is not None]
+    return max(values) if values else None
+
+
+def simulate(config, progress=False, meshcat=None, record_html=False, setup=None, stages=None):
     """Simulate ``config``; returns a SimulationResult (log arrays, summary, scenario, simulator and
     context). ``setup(scenario, simulator, context)``, if given, runs after the start is set and
-    before ``Simulator.Initialize`` (e.g. ``simulator.set_monitor``).
+    before ``Simulator.Initialize`` (e.g. ``simulator.set_monitor``). ``progress``: a progress bar
+    while simulating; ``stages`` (``core.progress.Stages``): one line per setup stage with its time,
+    printed before the bar (default: silent).
 
     Raises RunStopped (with the result up to the stop) if the run ends early: see the module
     docstring."""
-    scenario = build_scenario(config, meshcat=meshcat)
-    simulator = Simulator(scenario.diagram)
-    ApplySimulatorConfig(config.simulator, simulator)
-    context = simulator.get_mutable_context()
-    set_initial_conditions(scenario, context)
+    stages = stages or quiet()
+    with stages(f"{config.task}: building the diagram (plant, constraint, controller)"):
+        scenario = build_scenario(config, meshcat=meshcat)
+        simulator = Simulator(scenario.diagram)
+        ApplySimulatorConfig(config.simulator, simulator)
+        context = simulator.get_mutable_context()
+    with stages(f"{config.task}: solving the start (inverse kinematics, contact equilibrium)"):
+        set_initial_conditions(scenario, context)
     if setup is not None:
         setup(scenario, simulator, context)
     stop = {}
@@ -141,7 +200,8 @@ def simulate(config, progress=False, meshcat=None, record_html=False, setup=None
                                          simulator.get_monitor()))
     if meshcat is not None and record_html:
         meshcat.StartRecording(set_visualizations_while_recording=False)
-    simulator.Initialize()
+    with stages(f"{config.task}: initializing the simulator"):
+        simulator.Initialize()
     start = time.perf_counter()
     duration = float(config.duration)
     try:
@@ -178,6 +238,8 @@ def simulate(config, progress=False, meshcat=None, record_html=False, setup=None
         # The controller took F = F_d while the wrench was invalid: its force error is not a measurement.
         for key in [key for key in summary if "force_error" in key or key == "force_settling_time_1_percent"]:
             summary[key] = None
+        for row in summary.get("force_rows") or []:
+            row.update({key: None for key in row if key not in ("name", "units", "command")})
     result = SimulationResult(config=config, log=log, summary=summary, scenario=scenario, html=html,
                               simulator=simulator, context=context)
     if stop:
@@ -225,9 +287,13 @@ def summarize(scenario, log, wall_time):
     t = log["t"]
     speed_scale = float(np.max(np.linalg.norm(log["desired_velocity"], axis=1)))
     force_scale = float(np.max(np.linalg.norm(log["desired_force"], axis=1)))
-    velocity_error = np.linalg.norm(log["velocity_error"], axis=1)
-    force_error = np.linalg.norm(log["force_error"], axis=1)
-    settled = t >= 5 * tau
+    labels = scenario.task.labels()
+    start = contact_time(log)
+    settle_after = start + 5 * tau
+    velocity_rows = row_errors(t, log["velocity_error"], log["desired_velocity"], labels.get("velocity", []),
+                               row_units(labels.get("velocity_units", "SI"), k), start, settle_after)
+    force_rows = row_errors(t, log["force_error"], log["desired_force"], labels.get("force", []),
+                            row_units(labels.get("force_units", "SI"), m), start, settle_after)
     torque_ratio = np.max(np.abs(log["torque"]) / effort_limits(scenario), axis=0)
     pairs = lambda values: [[float(np.real(v)), float(np.imag(v))] for v in values]
     summary = {
@@ -243,31 +309,51 @@ def summarize(scenario, log, wall_time):
         "design_time_constant": float(tau),
         "final_velocity_error": log["velocity_error"][-1].tolist(),
         "final_force_error": log["force_error"][-1].tolist(),
-        "final_velocity_error_percent": _percent(velocity_error[-1], speed_scale),
-        "final_force_error_percent": _percent(force_error[-1], force_scale),
+        # Headline figures: the worst row, each row in % of its own command (rows commanded to zero
+        # are in velocity_rows / force_rows, in their own units); settling counted from contact.
+        "contact_time": start,
+        "final_velocity_error_percent": _worst(velocity_rows, "final_error_percent"),
+        "final_force_error_percent": _worst(force_rows, "final_error_percent"),
         "max_velocity_error_percent_after_5_time_constants":
-            _percent(float(np.max(velocity_error[settled])), speed_scale) if settled.any() else None,
+            _worst(velocity_rows, "max_error_percent_after_5_time_constants"),
         "max_force_error_percent_after_5_time_constants":
-            _percent(float(np.max(force_error[settled])), force_scale) if settled.any() else None,
-        "velocity_settling_time_1_percent": settling_time(t, velocity_error, 0.01 * speed_scale),
-        "force_settling_time_1_percent": settling_time(t, force_error, 0.01 * force_scale),
+            _worst(force_rows, "max_error_percent_after_5_time_constants"),
+        "velocity_settling_time_1_percent": _worst(velocity_rows, "settling_time_1_percent"),
+        "force_settling_time_1_percent": _worst(force_rows, "settling_time_1_percent"),
+        "velocity_rows": velocity_rows,
+        "force_rows": force_rows,
         "max_constraint_residual": float(np.max(np.abs(log["constraint"]))),
+        # From contact on: before it, C is the start's gap, not a residual.
+        "max_constraint_residual_after_contact":
+            float(np.max(np.abs(log["constraint"][t >= start]))) if np.any(t >= start) else None,
         "max_torque_to_effort_limit": torque_ratio.tolist(),
         "wall_time": float(wall_time),
         "real_time_factor": float(config.duration / wall_time) if wall_time > 0 else None,
         "command_scales": {"speed": speed_scale, "force": force_scale},
+        "notes": list(scenario.task.run_notes(scenario, log, tau)),
     }
     return summary
 
 
 def predicted_tracking(scenario_or_controller, config, log):
-    """Predicted (velocity, force) trajectories: the desired ones plus the designed error decay
-    from the logged initial velocity error and the configured initial integrals."""
+    """Predicted (velocity, force) trajectories: the desired ones plus the designed error decay from
+    contact on (``contact_time``), from the logged velocity error at contact and the configured
+    initial integrals (frozen until contact); NaN before contact, where the design predicts nothing."""
     controller = getattr(scenario_or_controller, "controller", scenario_or_controller)
     gains = controller.validated_gains()
     m = controller.force_size
     xi0 = np.asarray(config.start.force_integral, dtype=float) if config.start.force_integral else np.zeros(m)
     e_p0 = np.asarray(config.start.position_error, dtype=float) if config.start.position_error else None
-    velocity_error, force_error, _ = predicted_errors(gains, controller.mode, log["t"], log["velocity_error"][0],
-                                                      xi0, e_p0, controller.kinematic_rows)
-    return log["desired_velocity"] + velocity_error, log["desired_force"] + force_error
+    t = log["t"]
+    velocity = np.full_like(log["desired_velocity"], np.nan, dtype=float)
+    force = np.full_like(log["desired_force"], np.nan, dtype=float)
+    start = contact_time(log)
+    if np.isfinite(start):
+        after = t >= start
+        first = int(np.argmax(after))
+        velocity_error, force_error, _ = predicted_errors(gains, controller.mode, t[after] - start,
+                                                          log["velocity_error"][first], xi0, e_p0,
+                                                          controller.kinematic_rows)
+        velocity[after] = log["desired_velocity"][after] + velocity_error
+        force[after] = log["desired_force"][after] + force_error
+    return velocity, force

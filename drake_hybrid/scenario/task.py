@@ -29,6 +29,16 @@ from drake_hybrid.scenario.config import ScenarioConfig
 from drake_hybrid.systems.sources import Profile, ProfileSource
 
 
+@dataclass
+class EigenvalueShift:
+    """A designed eigenvalue that the task's physics moves, and where it predicts it: the paper's model
+    leaves something out (e.g. a massless constraint), the task knows what and by how much."""
+
+    designed: complex       # the eigenvalue the gains design
+    predicted: complex      # where the task's physics puts it
+    reason: str             # one line: what moves it, and the formula
+
+
 def choice(default, allowed):
     """A string option whose value must be one of ``allowed``."""
     return dataclasses.field(default=default, metadata={"allowed": tuple(allowed)})
@@ -144,6 +154,19 @@ class Task(abc.ABC):
         else:
             config.task_options[name] = value
 
+    def option_help(self):
+        """One line per option for help texts: ``name=VALUE`` with its type or allowed values and default."""
+        lines = []
+        for f in dataclasses.fields(self.Options):
+            allowed = f.metadata.get("allowed")
+            kind = f.type if isinstance(f.type, type) else type(f.default)
+            if allowed:
+                value = "|".join(allowed)
+            else:
+                value = {bool: "true|false", int: "INTEGER", float: "NUMBER"}.get(kind, "WORD")
+            lines.append(f"{f.name}={value} (default {f.default})")
+        return lines
+
     def options(self, config):
         """The task's typed options from ``config.task_parameters`` and ``config.task_options``."""
         fields = {f.name: f for f in dataclasses.fields(self.Options)}
@@ -155,6 +178,16 @@ class Task(abc.ABC):
                                       f"{sorted(fields) or 'none'}")
                 values[name] = _coerce(self.name, fields[name], raw)
         return self.Options(**values)
+
+    def eigenvalue_shifts(self, scenario, root_context):
+        """Designed eigenvalues this task's physics moves (``EigenvalueShift``), at the linearization
+        point ``root_context`` of ``scenario``. Default: none (the paper's model is the plant's)."""
+        return []
+
+    def run_notes(self, scenario, log, design_time_constant):
+        """Lines the run's summary should carry about where the run ends (e.g. in a transient the
+        task causes on purpose). Default: none."""
+        return []
 
     def labels(self):
         """Plot labels of the velocity- and force-controlled coordinates."""

@@ -42,35 +42,67 @@ def _pyplot():
     return plt
 
 
-def _tracking_axes(ax_values, ax_errors, t, actual, desired, predicted, labels, what):
+def _positive(values):
+    """``values`` with zeros (and negative rounding) masked as NaN: a log axis shows no numeric floor."""
+    values = np.asarray(values, dtype=float)
+    return np.where(values > 0, values, np.nan)
+
+
+def _row_units(units, count):
+    parts = [part.strip() for part in str(units).split("|")] if units else [""]
+    return parts if len(parts) == count else [parts[min(i, len(parts) - 1)] for i in range(count)]
+
+
+def _tracking_axes(ax_values, ax_errors, t, actual, desired, predicted, labels, what, units=()):
     for i in range(actual.shape[1]):
         label = labels[i] if i < len(labels) else f"{what} {i + 1}"
-        line, = ax_values.plot(t, actual[:, i], lw=1.6, label=f"{label}: measured")
-        ax_values.plot(t, desired[:, i], color=line.get_color(), ls=":", lw=1.2, label=f"{label}: commanded")
-        ax_values.plot(t, predicted[:, i], color="k", ls="--", lw=0.9, label=f"{label}: predicted" if i == 0 else None)
-        ax_errors.semilogy(t, np.abs(actual[:, i] - desired[:, i]) + 1e-12, color=line.get_color(), lw=1.4,
-                           label=f"|error| {label}")
-        ax_errors.semilogy(t, np.abs(predicted[:, i] - desired[:, i]) + 1e-12, color="k", ls="--", lw=0.9,
-                           label="predicted" if i == 0 else None)
-    ax_values.legend(fontsize=7, loc="best")
-    ax_errors.legend(fontsize=7, loc="best")
+        unit = f" ({units[i]})" if i < len(units) and units[i] else ""
+        line, = ax_values.plot(t, actual[:, i], lw=1.6, label=f"{label}{unit}: measured")
+        color = line.get_color()
+        ax_values.plot(t, desired[:, i], color=color, ls=":", lw=1.2, label=f"{label}: commanded")
+        ax_values.plot(t, predicted[:, i], color="k", ls="--", lw=0.9, label="designed response" if i == 0 else None)
+        ax_errors.semilogy(t, _positive(np.abs(actual[:, i] - desired[:, i])), color=color, lw=1.4,
+                           label=f"|error| {label}{unit}")
+        designed_error = _positive(np.abs(predicted[:, i] - desired[:, i]))
+        if np.isfinite(designed_error).any():          # a zero prediction (no error designed) is not drawn
+            ax_errors.semilogy(t, designed_error, color="k", ls="--", lw=0.9,
+                               label="designed error decay" if i == 0 else None)
+        command = float(np.max(np.abs(desired[:, i])))
+        if command > 0:
+            ax_errors.axhline(0.01 * command, color=color, lw=0.8, ls="-.", label=f"1 % of the {label} command")
+    measured = _positive(np.abs(actual - desired))
+    if np.isfinite(measured).any():
+        # The axis spans the measured errors (at most 8 decades): a designed decay far below them is cut.
+        top, bottom = np.nanmax(measured), np.nanmin(measured)
+        ax_errors.set_ylim(max(bottom, 1e-8 * top) / 2, 2 * top)
     ax_errors.set_xlabel("time t (s)")
     ax_values.grid(alpha=0.3)
     ax_errors.grid(alpha=0.3, which="both")
 
 
 def tracking_figure(log, summary, predicted, what, labels=(), units=""):
-    """Measured, commanded and predicted ``what`` ("velocity" or "force") and the error on a log scale."""
+    """Measured, commanded and designed ``what`` ("velocity" or "force") and the error on a log scale.
+
+    Every row in its own units; the designed response starts at contact (``summary["contact_time"]``);
+    dash-dot lines: 1 % of each row's command; dotted: contact + five design time constants."""
     plt = _pyplot()
     fig, (ax_values, ax_errors) = plt.subplots(2, 1, figsize=(7.5, 6.0), sharex=True)
     actual, desired = log[what], log[f"desired_{what}"]
-    _tracking_axes(ax_values, ax_errors, log["t"], actual, desired, predicted, labels, what)
-    ax_values.set_ylabel(f"{what} ({units})" if units else what)
-    ax_errors.set_ylabel(f"|{what} error| ({units})" if units else f"|{what} error|")
-    one_percent = 0.01 * summary["command_scales"]["speed" if what == "velocity" else "force"]
-    ax_errors.axhline(one_percent, color="gray", lw=0.8, ls="-.", label="1 % of command")
-    ax_errors.axvline(5 * summary["design_time_constant"], color="gray", lw=0.8, ls=":")
-    ax_values.set_title(f"{summary['task']} ({summary['mode']}): {what} tracking vs. the designed exponential")
+    row_units = _row_units(units, actual.shape[1])
+    _tracking_axes(ax_values, ax_errors, log["t"], actual, desired, predicted, labels, what, row_units)
+    unit_text = " | ".join(dict.fromkeys(u for u in row_units if u))
+    ax_values.set_ylabel(f"{what} ({unit_text})" if unit_text else what)
+    ax_errors.set_ylabel(f"|{what} error| ({unit_text})" if unit_text else f"|{what} error|")
+    contact = float(summary.get("contact_time", 0.0))
+    if contact > float(log["t"][0]) and np.isfinite(contact):
+        for ax in (ax_values, ax_errors):
+            ax.axvline(contact, color="tab:green", lw=0.9, ls="-", label="contact" if ax is ax_errors else None)
+    ax_errors.axvline(contact + 5 * summary["design_time_constant"], color="gray", lw=0.8, ls=":",
+                      label="contact + 5 design time constants" if contact > 0 else "5 design time constants")
+    ax_values.legend(fontsize=7, loc="best")
+    ax_errors.legend(fontsize=7, loc="best")
+    ax_values.set_title(f"{summary['task']} ({summary['mode']}): {what} tracking vs. the designed exponential",
+                        fontsize=10)
     fig.tight_layout()
     return fig
 
@@ -145,11 +177,20 @@ def eigenvalue_figure(match, title="closed-loop eigenvalues", zoom=None):
     ax_zoom.scatter(measured[inside].real, measured[inside].imag, s=30, color="tab:blue",
                     label="linearized closed loop")
     ax_zoom.scatter(predicted.real, predicted.imag, s=110, marker="x", color="tab:red", label="designed (gains)")
-    for p, q in zip(predicted, partner):
-        ax_zoom.plot([p.real, q.real], [p.imag, q.imag], color="gray", lw=0.8)
+    for n, (p, q) in enumerate(zip(predicted, partner)):
+        ax_zoom.annotate("", xy=(q.real, q.imag), xytext=(p.real, p.imag),
+                         arrowprops=dict(arrowstyle="->", color="0.25", lw=1.2))
+    if partner.size:
+        ax_zoom.plot([], [], color="0.25", lw=1.2, label="designed -> its linearized partner")
+        errors = np.abs(partner - predicted) / np.abs(predicted)
+        rows = [f"{p.real:.3g}{p.imag:+.3g}j -> {q.real:.4g}{q.imag:+.4g}j  ({100 * e:.1f} %)" if abs(p.imag) > 1e-9
+                else f"{p.real:.3g} -> {q.real:.4g}  ({100 * e:.1f} %)" for p, q, e in zip(predicted, partner, errors)]
+        ax_zoom.text(0.98, 0.02, "designed -> linearized (rel. error)\n" + "\n".join(rows), transform=ax_zoom.transAxes,
+                     ha="right", va="bottom", fontsize=7, family="monospace",
+                     bbox=dict(boxstyle="round", facecolor="white", alpha=0.85, edgecolor="0.7"))
     ax_zoom.set_xlim(re_min, re_max)
     ax_zoom.set_ylim(im_min, im_max)
-    _complex_axes(ax_zoom, "zoom on the designed eigenvalues (gray: matched pairs)")
+    _complex_axes(ax_zoom, "zoom on the designed eigenvalues")
     ax_zoom.legend(fontsize=8, loc="best")
     fig.tight_layout()
     return fig
@@ -192,19 +233,35 @@ def eigenvalue_sweep_figure(values, linearizations, parameter, units="", title=N
 
 
 def constraint_residual_figure(log, units="m", labels=None, title="constraint residual"):
-    """|C(r)| of every constraint row along the run (log scale). For a contact row it is the
-    compression of the compliant contact (the rigid model of the paper has C = 0)."""
+    """C(r) of every constraint row along the run. For a contact row it is the compression of the
+    compliant contact (the rigid model of the paper has C = 0): a steady offset while pressing, not an
+    error that grows; before contact, the gap. Signed on a linear axis, unless the rows' sizes differ
+    by more than two decades: then |C| on a log axis."""
     plt = _pyplot()
-    fig, ax = plt.subplots(figsize=(7.5, 3.2))
+    fig, ax = plt.subplots(figsize=(7.5, 3.4))
     residual = np.atleast_2d(np.asarray(log["constraint"]).T).T
+    sizes = np.max(np.abs(residual), axis=0)
+    sizes = sizes[sizes > 0]
+    logarithmic = sizes.size > 1 and sizes.max() / sizes.min() > 100
+    row_units = _row_units(units, residual.shape[1])
     for i in range(residual.shape[1]):
         label = labels[i] if labels and i < len(labels) else f"C_{i + 1}"
-        ax.semilogy(log["t"], np.abs(residual[:, i]) + 1e-15, lw=1.4, label=f"|{label}|")
+        unit = f" ({row_units[i]})" if row_units[i] else ""
+        if logarithmic:
+            ax.plot(log["t"], _positive(np.abs(residual[:, i])), lw=1.4, label=f"|{label}|{unit}")
+        else:
+            ax.plot(log["t"], residual[:, i], lw=1.4, label=f"{label}{unit}")
     ax.set_xlabel("time t (s)")
-    ax.set_ylabel(f"|C(r)| ({units})")
+    unit_text = " | ".join(dict.fromkeys(u for u in row_units if u))
+    name = "|C(r)|" if logarithmic else "C(r)"
+    if logarithmic:
+        ax.set_yscale("log")
+    else:
+        ax.axhline(0.0, color="k", lw=0.6)
+    ax.set_ylabel(f"{name} ({unit_text})" if unit_text else name)
     ax.grid(alpha=0.3, which="both")
     ax.legend(fontsize=8, loc="best")
-    ax.set_title(title)
+    ax.set_title(f"{title}: the compliant contact's compression (C = 0 for the paper's rigid contact)", fontsize=9)
     fig.tight_layout()
     return fig
 
@@ -278,11 +335,18 @@ def _cell_edges(values):
     values = np.asarray(values, dtype=float)
     if values.size == 1:
         return np.array([values[0] * 0.9, values[0] * 1.1]) if values[0] else np.array([-0.5, 0.5]), False
-    logarithmic = bool(np.all(values > 0) and values[-1] / values[0] > 10)
-    v = np.log10(values) if logarithmic else values
-    middle = 0.5 * (v[1:] + v[:-1])
-    edges = np.concatenate([[v[0] - (middle[0] - v[0])], middle, [v[-1] + (v[-1] - middle[-1])]])
-    return (10 ** edges if logarithmic else edges), logarithmic
+    positive = bool(np.all(values > 0))
+    logarithmic = positive and values[-1] / values[0] > 10
+
+    def edges_of(v):
+        middle = 0.5 * (v[1:] + v[:-1])
+        return np.concatenate([[v[0] - (middle[0] - v[0])], middle, [v[-1] + (v[-1] - middle[-1])]])
+
+    edges = 10 ** edges_of(np.log10(values)) if logarithmic else edges_of(values)
+    if positive and edges[0] <= 0:      # a positive parameter (a modulus, a period): no cell below zero
+        logarithmic = True
+        edges = 10 ** edges_of(np.log10(values))
+    return edges, logarithmic
 
 
 def stability_map_figure(rows, x, y, facet=None, color="worst_discrete_real", verdict="stable_simulation",

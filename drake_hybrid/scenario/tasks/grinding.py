@@ -100,6 +100,47 @@ class Grinding(Task):
     def labels(self):
         return self._window.labels()
 
+    def run_notes(self, scenario, log, design_time_constant):
+        """Where the pad is at the end relative to the rough patch (window): leaving it releases the
+        extra friction force, a transient that lasts several design time constants."""
+        config = scenario.config
+        if self._base(config) is not self._window or "q" not in log or config.controller != "li-sastry":
+            return []
+        options = self.options(config)
+        plant = scenario.controller_plant
+        context = plant.CreateDefaultContext()
+        x = []
+        for q in log["q"]:
+            plant.SetPositions(context, q)
+            x.append(scenario.controller.kinematics.evaluate(context).configuration[0])
+        x, t = np.array(x), log["t"]
+        notes = []
+        late = t >= t[-1] - min(1.0, 0.5 * t[-1])
+        command = float(np.mean(log["desired_velocity"][late, 0]))
+        speed = float(np.mean(log["velocity"][late, 0]))
+        if scenario.controller.mode.value == "velocity-force" and command > 0 and speed < 0.5 * command:
+            notes.append(f"the pad sticks (mean x-dot {100 * speed / command:.0f} % of the command over the last "
+                         f"{t[-1] - t[late][0]:.1f} s): velocity/force with this K_v would need a velocity error "
+                         "larger than the command to build the friction force mu F_n, and stalls; impedance/force "
+                         "(the default mode) slides (docs/impedance.md)")
+        on_patch = (x >= options.rough_start) & (x <= options.rough_end)
+        where = (f"rough patch (mu = {options.rough_friction:g}, x from {options.rough_start:g} to "
+                 f"{options.rough_end:g} m)")
+        if on_patch[-1]:
+            return notes + [f"the run ends with the pad on the {where}"]
+        if not on_patch.any():
+            side = "before" if x[-1] < options.rough_start else "past"
+            return notes + [f"the pad never reaches the {where}; it ends {side} it at x = {x[-1]:.3f} m"]
+        left = float(t[np.nonzero(on_patch)[0][-1] + 1])
+        after = float(t[-1]) - left
+        if after < 5 * design_time_constant:
+            steady = left + 10 * design_time_constant
+            return notes + [f"the run ends {after:.2f} s ({after / design_time_constant:.1f} design time constants) "
+                            f"after the pad "
+                    f"left the {where}: the released friction force is still accelerating it, so the final speed "
+                    f"error is that transient's; --duration {np.ceil(steady * 10) / 10:g} ends in steady sliding"]
+        return notes + [f"the run ends in steady sliding, {after:.2f} s after the pad left the {where}"]
+
     # -- delegated to the base task -------------------------------------------------------------
     def add_robot(self, plant, config):
         return self._base(config).add_robot(plant, config)

@@ -95,8 +95,8 @@ class SpherePolishing(Task):
         )
 
     def labels(self):
-        return {"velocity": ["spin about a", "t_1 . p-dot", "t_2 . p-dot"], "velocity_units": "rad/s | m/s",
-                "force": ["normal force", "orientation row 1", "orientation row 2"], "force_units": "N | -",
+        return {"velocity": ["spin about a", "t_1 . p-dot", "t_2 . p-dot"], "velocity_units": "rad/s | m/s | m/s",
+                "force": ["normal force", "orientation row 1", "orientation row 2"], "force_units": "N | N | N",
                 "constraint_units": "m"}
 
     # -- options ----------------------------------------------------------------------------------

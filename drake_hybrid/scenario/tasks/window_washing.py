@@ -90,7 +90,7 @@ class WindowWashing(Task):
     def labels(self):
         """Plot labels of the velocity-controlled and force-controlled coordinates."""
         return {"velocity": ["x-dot", "theta-dot"], "velocity_units": "m/s | rad/s",
-                "force": ["F (along E_f = [0 1 0])"], "force_units": "N", "constraint_units": "m"}
+                "force": ["F, along E_f = [0 1 0]"], "force_units": "N", "constraint_units": "m"}
 
     # -- models --------------------------------------------------------------------------------
     def _arm(self, config):

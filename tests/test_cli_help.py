@@ -1,0 +1,107 @@
+"""The command line's help against the README's synopsis (what a newcomer reads first)."""
+
+import io
+import re
+from pathlib import Path
+
+import pytest
+
+import drake_hybrid.cli as cli
+from drake_hybrid.cli import main, make_parser
+from drake_hybrid.core.progress import Stages
+from drake_hybrid.experiments.sweep import SweepRun
+from drake_hybrid.scenario.tasks import TASKS
+
+README = Path(__file__).resolve().parent.parent / "README.md"
+
+
+def _subparsers(parser):
+    (action,) = [a for a in parser._actions if a.__class__.__name__ == "_SubParsersAction"]
+    return action.choices
+
+
+def _readme_synopsis():
+    """{command: set of --options} from the README's "Command line" block."""
+    text = README.read_text()
+    block = text.split("## Command line", 1)[1].split("```", 2)[1]
+    synopsis = {}
+    for line in block.splitlines():
+        if line.startswith("drake-hybrid "):
+            command = line.split()[1]
+            synopsis[command] = set(re.findall(r"--[a-z][a-z-]*", line))
+    return synopsis
+
+
+def _help(capsys, argv):
+    with pytest.raises(SystemExit) as exit_info:
+        make_parser().parse_args(argv)
+    assert exit_info.value.code == 0
+    return capsys.readouterr().out
+
+
+def test_top_level_help_lists_every_command_without_markup(capsys):
+    text = _help(capsys, ["--help"])
+    for command in _subparsers(make_parser()):
+        assert re.search(rf"drake-hybrid {command}\b", text), command
+    assert "``" not in text and "`" not in text
+
+
+def test_readme_synopsis_has_every_command_and_option_of_the_parser():
+    synopsis = _readme_synopsis()
+    commands = _subparsers(make_parser())
+    assert set(synopsis) == set(commands)
+    for name, sub in commands.items():
+        options = {o for action in sub._actions for o in action.option_strings if o.startswith("--")} - {"--help"}
+        assert synopsis[name] == options, (name, sorted(options ^ synopsis[name]))
+
+
+@pytest.mark.parametrize("command", ["simulate", "analyze"])
+def test_option_help_lists_every_tasks_keys(capsys, command):
+    text = _help(capsys, [command, "--help"])
+    for name, task in TASKS.items():
+        assert f"{name}:" in text
+        for entry in task.option_help():
+            assert entry.split("=")[0] in text, (name, entry)
+    assert "`" not in text
+
+
+def test_help_texts_point_at_documents_not_source_files(capsys):
+    for command in _subparsers(make_parser()):
+        text = _help(capsys, [command, "--help"])
+        assert not re.search(r"\w+/\w+\.py", text), (command, text)
+
+
+def test_stages_print_a_line_each_with_its_time_or_nothing():
+    stream = io.StringIO()
+    stages = Stages(stream=stream)
+    with stages("building the diagram"):
+        pass
+    assert re.fullmatch(r"building the diagram \.\.\. \d+\.\d s\n", stream.getvalue())
+    silent = io.StringIO()
+    with Stages(enabled=False, stream=silent)("anything"):
+        pass
+    assert silent.getvalue() == ""
+
+
+def test_simulate_reports_its_setup_stages_and_quiet_silences_them(tmp_path, capsys):
+    argv = ["simulate", "window-washing", "--duration", "0.02", "--no-plots", "--out", str(tmp_path / "run")]
+    assert main(argv + ["--no-progress"]) == 0
+    captured = capsys.readouterr()
+    for stage in ("building the diagram", "solving the start", "writing"):
+        assert re.search(rf"{stage}.* \.\.\. \d+\.\d s", captured.err), (stage, captured.err)
+    assert "errors per row" in captured.out
+    assert main(argv + ["--quiet"]) == 0
+    captured = capsys.readouterr()
+    assert captured.err == "" and "errors per row" in captured.out
+
+
+def test_a_resumed_sweep_with_nothing_left_says_so(tmp_path, monkeypatch, capsys):
+    """Not "evaluated in 0.0 s on nothing to run"."""
+    done = SweepRun(out_dir=tmp_path, results_path=tmp_path / "results.csv", points=12, evaluated=0, failures=0,
+                    wall_time=0.0, workers="serial")
+    monkeypatch.setattr(cli, "load_spec", lambda path: object())
+    monkeypatch.setattr(cli, "run_sweep", lambda *args, **kwargs: done)
+    monkeypatch.setattr(cli, "read_results", lambda path: [{"stable": True}] * 12)
+    assert main(["sweep", "window-washing", "--grid", "spec.yaml", "--resume", "--out", str(tmp_path)]) == 0
+    out = capsys.readouterr().out
+    assert "nothing to run: all 12 points already in the table" in out and "0.0 s" not in out

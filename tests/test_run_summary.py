@@ -1,0 +1,99 @@
+"""What a run reports: per-row errors in each row's units, settling and predictions from contact."""
+
+import math
+import re
+
+import numpy as np
+import pytest
+
+from drake_hybrid.control.phases import ContactPhase
+from drake_hybrid.experiments.simulation import contact_time, predicted_tracking, row_errors, row_units, simulate
+from drake_hybrid.scenario.tasks import TASKS, get_task
+
+
+def test_row_units_split_a_tasks_label_per_row():
+    assert row_units("m/s | rad/s", 2) == ["m/s", "rad/s"]
+    assert row_units("N", 3) == ["N", "N", "N"]
+    for name, task in TASKS.items():
+        labels = task.labels()
+        config = task.default_config()
+        space = task.constraint_space(config)
+        for what, size in (("velocity", space.velocity_size), ("force", space.force_size)):
+            parts = [p.strip() for p in labels[f"{what}_units"].split("|")]
+            assert len(parts) in (1, size), (name, what, parts)       # one unit per row, or one for all
+            assert all("(" not in p for p in parts), (name, what, parts)
+
+
+def test_each_row_is_in_its_own_units_and_percent_of_its_own_command():
+    """A 1 mm/s error on a 0.1 m/s row is 1 %, whatever a rad/s row next to it does; a row commanded
+    to zero gets no % (no scale in its units), only its absolute error."""
+    t = np.linspace(0.0, 1.0, 101)
+    desired = np.column_stack([np.full_like(t, 0.1), np.zeros_like(t)])            # m/s, rad/s
+    error = np.column_stack([np.full_like(t, 1e-3), np.full_like(t, 0.5)])        # 1 % and 0.5 rad/s
+    rows = row_errors(t, error, desired, ["x-dot", "theta-dot"], ["m/s", "rad/s"], since=0.0, settle_after=0.5)
+    assert rows[0]["units"] == "m/s" and rows[0]["final_error_percent"] == pytest.approx(1.0)
+    assert rows[0]["max_error_percent_after_5_time_constants"] == pytest.approx(1.0)
+    assert rows[1]["units"] == "rad/s" and rows[1]["final_error"] == pytest.approx(0.5)
+    assert rows[1]["final_error_percent"] is None and rows[1]["settling_time_1_percent"] is None
+    # The old headline, |(1e-3, 0.5)| / 0.1, would have read 500 %.
+
+
+def test_settling_is_counted_from_contact():
+    """Off the surface the force error is 100 % until contact at 0.4 s, then decays as e^(-10 t')."""
+    t = np.linspace(0.0, 1.5, 1501)
+    phase = np.where(t < 0.4, int(ContactPhase.APPROACH), int(ContactPhase.CONTACT))[:, None]
+    log = {"t": t, "contact_phase": phase}
+    start = contact_time(log)
+    assert start == pytest.approx(0.4)
+    error = np.where(t < start, 10.0, 10.0 * np.exp(-10.0 * (t - start)))[:, None]
+    (row,) = row_errors(t, error, np.full((t.size, 1), 10.0), ["F"], ["N"], since=start, settle_after=start + 0.5)
+    assert row["settling_time_1_percent"] == pytest.approx(math.log(100) / 10.0, abs=2e-3)   # 0.46 s after contact
+    assert row["max_error_percent_after_5_time_constants"] == pytest.approx(100 * math.exp(-5), rel=1e-2)
+    assert contact_time({"t": t, "contact_phase": np.zeros((t.size, 1))}) == math.inf
+    assert contact_time({"t": t}) == 0.0                      # no supervisor: the run starts in contact
+
+
+def test_an_off_surface_start_is_summarized_and_predicted_from_contact():
+    """Window washing 10 mm below the pane: the summary's figures start at contact (0.54 s), and the
+    predicted exponentials start there, from the measured velocity error at contact (none before)."""
+    config = get_task("window-washing").default_config()
+    config.duration, config.start.force_integral, config.start.in_contact = 1.3, [], False
+    result = simulate(config)
+    summary, log = result.summary, result.log
+    assert 0.5 < summary["contact_time"] < 0.6
+    force = summary["force_rows"][0]
+    # The designed force loop settles to 1 % within 5 time constants of contact, not of t = 0.
+    assert force["settling_time_1_percent"] < 5 * summary["design_time_constant"]
+    assert summary["max_force_error_percent_after_5_time_constants"] < 1.0
+    # C(r) before contact is the 10 mm gap; after it, the pad's compression (about 1 mm).
+    assert summary["max_constraint_residual"] == pytest.approx(0.01, rel=0.05)
+    assert summary["max_constraint_residual_after_contact"] < 2e-3
+    velocity, force_prediction = predicted_tracking(result.scenario, config, log)
+    at = int(np.argmax(log["t"] >= summary["contact_time"]))
+    assert np.all(np.isnan(velocity[:at])) and np.all(np.isnan(force_prediction[:at]))
+    np.testing.assert_allclose(velocity[at], log["velocity"][at], atol=1e-12)
+
+
+@pytest.mark.slow
+def test_the_grinding_default_says_it_ends_in_the_surge_after_the_rough_patch():
+    """The default 3 s grinding run ends 0.2 s after the pad leaves the rough patch: the summary says
+    so (and how long a run ending in steady sliding is), instead of a bare 26 % speed error."""
+    result = simulate(get_task("grinding").default_config())
+    (note,) = result.summary["notes"]
+    assert "after the pad left the rough patch" in note and "--duration 3.8" in note
+    x_dot = result.summary["velocity_rows"][0]
+    assert x_dot["units"] == "m/s" and x_dot["final_error_percent"] > 5
+
+
+@pytest.mark.slow
+def test_the_crank_summary_prints_the_true_crank_rates_deviation_for_both_velocity_rows():
+    """The README's 3.1 times: each crank run's note gives the true crank rate's deviation from the
+    designed exponential, for Option A and for the paper's naive pseudo-velocity."""
+    deviations = {}
+    for rows in ("true", "paper"):
+        config = get_task("crank-turning").default_config({"velocity_rows": rows})
+        config.duration = 0.6
+        (note,) = simulate(config).summary["notes"]
+        deviations[rows] = float(re.search(r"deviates at most ([0-9.e+-]+) rad/s", note).group(1))
+    assert deviations["true"] < 0.01 * 0.5
+    assert deviations["paper"] > 3.0 * deviations["true"]
