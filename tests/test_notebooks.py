@@ -65,6 +65,7 @@ def test_readme_links_every_tutorial():
 
 
 @pytest.mark.notebook
+@pytest.mark.slow         # each notebook runs for up to two minutes: not in the fast loop
 @pytest.mark.parametrize("path", NOTEBOOKS, ids=_ids)
 def test_notebook_runs(path, tmp_path, monkeypatch):
     """Execute every cell in a fresh kernel (working directory: a temporary folder); any cell
