@@ -99,6 +99,9 @@ def command_analyze(args):
           f"{_fmt(match.marginal_partners)}")
     print(f"  other modes (contact, filter, sampling, joint space): {_fmt(np.sort_complex(match.extra))}")
     print(f"  matched within {100 * args.tolerance:.0f} % and no other mode unstable: {match.matched}")
+    check = getattr(result, "jacobian_check", None)
+    print(f"  {check.summary()}" if check is not None else
+          "  Jacobian: central differences of the one-period map (no AutoDiffXd to check)")
     if args.plot:
         figure = eigenvalue_figure(match, title=f"{config.task}, {controller_mode.value}")
         figure.savefig(args.plot, dpi=110)
@@ -109,7 +112,8 @@ def command_analyze(args):
         payload.update({"gains": config.gains.as_lists(k, m, controller_mode), "mode": controller_mode.value,
                         "method": "continuous" if getattr(task, "continuous_plant", True) else "discrete",
                         "velocity_dim": k, "force_dim": m, "task": config.task,
-                        "equilibrium_residual": result.equilibrium_residual, "wall_time": result.wall_time})
+                        "equilibrium_residual": result.equilibrium_residual, "wall_time": result.wall_time,
+                        "jacobian_check": check.as_dict() if check is not None else {"used": "central differences"}})
         Path(args.json).write_text(json.dumps(payload, indent=2))
         print(f"  wrote {args.json}")
     return 0 if match.matched else 1

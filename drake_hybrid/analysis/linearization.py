@@ -31,6 +31,7 @@ from scipy.optimize import linear_sum_assignment
 from pydrake.systems.analysis import ApplySimulatorConfig, InitializeParams, Simulator
 from pydrake.systems.primitives import Linearize
 
+from drake_hybrid.analysis.derivatives import JACOBIAN_TOLERANCE, JacobianCheck, checked_state_jacobian
 from drake_hybrid.control.controller import impedance_blocks
 from drake_hybrid.control.gains import ControlMode
 from drake_hybrid.control.sampling import SAMPLE_LEAD
@@ -240,15 +241,20 @@ class Linearization:
     predicted: PredictedEigenvalues
     match: EigenvalueMatch
     wall_time: float
+    jacobian_check: JacobianCheck = None   # AutoDiffXd against central differences; which A is used
 
 
-def linearize_continuous(config, tolerance=0.05, bandwidth_hz=200.0):
+def linearize_continuous(config, tolerance=0.05, bandwidth_hz=200.0, jacobian_tolerance=JACOBIAN_TOLERANCE):
     """Linearize the continuous closed loop of ``config`` at its contact equilibrium.
 
     Builds ``equilibrium_config(config)``, sets the start, checks it is an
     equilibrium, runs Drake's ``Linearize`` (AutoDiffXd through plant,
-    contact, sensor, filter and controller) and matches eig(A) against the
-    designed eigenvalues.
+    contact, sensor, filter and controller), checks its A against central
+    differences of the time derivatives, every column (``analysis.derivatives``:
+    where they disagree beyond ``jacobian_tolerance``, relative per column, the
+    central-difference A is used, ``jacobian_check.used`` says so and a
+    ``DerivativeMismatchWarning`` is issued), and matches eig(A) against the
+    designed eigenvalues. ``wall_time`` covers both derivatives.
     """
 
 
@@ -263,13 +269,14 @@ def linearize_continuous(config, tolerance=0.05, bandwidth_hz=200.0):
         raise ValueError("linearize_continuous needs a purely continuous closed loop")
     start = time.perf_counter()
     linear = Linearize(scenario.diagram, context, equilibrium_check_tolerance=np.inf)
+    A, check = checked_state_jacobian(scenario.diagram, context, linear.A(), tolerance=jacobian_tolerance,
+                                      what=f"linearize_continuous({c.task})")
     wall = time.perf_counter() - start
-    A = np.asarray(linear.A())
     eigenvalues = np.linalg.eigvals(A)
     predicted = controller_prediction(scenario.controller)
     match = match_eigenvalues(predicted.designed, eigenvalues, tolerance=tolerance, marginal=predicted.marginal)
     return Linearization(A=A, eigenvalues=eigenvalues, equilibrium_residual=residual, predicted=predicted,
-                         match=match, wall_time=wall)
+                         match=match, wall_time=wall, jacobian_check=check)
 
 
 # ------------------------------------------------------------------------------------------------
