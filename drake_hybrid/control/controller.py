@@ -26,6 +26,7 @@ from pydrake.multibody.tree import MultibodyForces_
 from pydrake.systems.framework import BasicVector_, LeafSystem_, ValueProducer
 from pydrake.systems.scalar_conversion import TemplateSystem
 
+from drake_hybrid.control.damping import damping_compensation, joint_damping, warn_damped_joints
 from drake_hybrid.control.gains import ControlMode, HybridGains
 from drake_hybrid.control.phases import ContactPhase
 from drake_hybrid.control.sampling import SAMPLE_LEAD
@@ -221,6 +222,10 @@ def HybridController_(T):
                 per second, >= 0) and ``approach_gain`` (K_a, 1/s), e.g. a
                 ``supervision.SupervisionConfig``: declares the ``contact_phase``
                 input and the guarded move off the surface.
+            plant_time_step: the simulated plant's step h (0: continuous). On a discrete plant the
+                model's joint damping B is compensated on the predicted end-of-step velocity,
+                B (v + h a*), as the solver applies it implicitly (``control.damping``); a
+                ``JointDampingWarning`` names joints with b h / M > 1.
             sampled_diagnostics: with a control period, also store the
                 diagnostics (velocity_error, force_error, constraint_value,
                 projected_velocity, force, tangential_force) computed at each
@@ -235,7 +240,7 @@ def HybridController_(T):
 
         def _construct(self, plant, end_effector_frame, end_effector_point, constraint_space, gains=None,
                        mode=ControlMode.VELOCITY_FORCE, control_period=None, sample_lead=True, safety=None,
-                       guarded_move=None, sampled_diagnostics=False, converter=None):
+                       guarded_move=None, sampled_diagnostics=False, plant_time_step=0.0, converter=None):
             # Every argument as given, for scalar conversion (_construct_copy): one added later cannot
             # be forgotten there.
             arguments = locals()
@@ -268,6 +273,11 @@ def HybridController_(T):
                     f"only n = {n} joints; the law needs n >= d")
             if control_period is not None and not float(control_period) > 0:
                 raise ValueError(f"HybridController: control_period must be positive or None, got {control_period}")
+            # Joint damping of the model, compensated at the simulated plant's step (control.damping).
+            self.plant_time_step = float(plant_time_step)
+            self._damping = joint_damping(plant)
+            if T == float:                        # once, not again for the AutoDiffXd copy
+                warn_damped_joints(plant, self.plant_time_step)
             self.sampled_diagnostics = bool(sampled_diagnostics)
             if self.sampled_diagnostics and control_period is None:
                 raise ValueError("HybridController: sampled_diagnostics needs a control_period (a sampled controller)")
@@ -532,9 +542,12 @@ def HybridController_(T):
                 J_bar = M_inverse @ J.T @ Lambda
                 null_space_transpose = np.eye(n) - J.T @ J_bar.T
                 base_torque = plant.CalcInverseDynamics(plant_context, self._zero_acceleration, forces)
-                torque = (base_torque
-                          + J.T @ (Lambda @ (task_acceleration - bias)) + force_torque
-                          - null_space_transpose @ (M @ (gains.null_space_damping * v)))
+                motion_torque = (J.T @ (Lambda @ (task_acceleration - bias))
+                                 - null_space_transpose @ (M @ (gains.null_space_damping * v)))
+                joint_acceleration = M_inverse @ motion_torque
+                torque = base_torque + motion_torque + force_torque
+            # A discrete plant damps at the end-of-step velocity: B (v + h a*), not B v (control.damping).
+            torque = torque + damping_compensation(self._damping, joint_acceleration, self.plant_time_step)
             if lambda_squared > 0:
                 warn_singularity(self, sigma_min, bound)
 

@@ -90,7 +90,7 @@ def build_scenario(config, meshcat=None, with_loggers=True, sampled_plant_output
         controller_plant, robot.end_effector_frame, robot.end_effector_point, constraint_space,
         gains=config.gains, mode=mode, control_period=control_period, sample_lead=controller_sample_lead,
         safety=config.safety, guarded_move=config.supervision if supervised else None,
-        sampled_diagnostics=with_loggers and control_period is not None))
+        sampled_diagnostics=with_loggers and control_period is not None, plant_time_step=plant.time_step()))
     check_start_sizes(config, controller)
 
     robot_bodies = [plant.get_body(index) for instance in robot.model_instances
