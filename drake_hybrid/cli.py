@@ -99,6 +99,8 @@ def command_analyze(args):
           f"{_fmt(match.marginal_partners)}")
     print(f"  other modes (contact, filter, sampling, joint space): {_fmt(np.sort_complex(match.extra))}")
     print(f"  matched within {100 * args.tolerance:.0f} % and no other mode unstable: {match.matched}")
+    for diagnosis in getattr(result, "unstable_modes", []):
+        print(f"  {diagnosis.summary()}")
     check = getattr(result, "jacobian_check", None)
     print(f"  {check.summary()}" if check is not None else
           "  Jacobian: central differences of the one-period map (no AutoDiffXd to check)")
@@ -113,7 +115,8 @@ def command_analyze(args):
                         "method": "continuous" if getattr(task, "continuous_plant", True) else "discrete",
                         "velocity_dim": k, "force_dim": m, "task": config.task,
                         "equilibrium_residual": result.equilibrium_residual, "wall_time": result.wall_time,
-                        "jacobian_check": check.as_dict() if check is not None else {"used": "central differences"}})
+                        "jacobian_check": check.as_dict() if check is not None else {"used": "central differences"},
+                        "unstable_modes": [d.as_dict() for d in getattr(result, "unstable_modes", [])]})
         Path(args.json).write_text(json.dumps(payload, indent=2))
         print(f"  wrote {args.json}")
     return 0 if match.matched else 1

@@ -32,6 +32,7 @@ from pydrake.systems.analysis import ApplySimulatorConfig, InitializeParams, Sim
 from pydrake.systems.primitives import Linearize
 
 from drake_hybrid.analysis.derivatives import JACOBIAN_TOLERANCE, JacobianCheck, checked_state_jacobian
+from drake_hybrid.analysis.modes import diagnose_unstable_modes
 from drake_hybrid.control.controller import impedance_blocks
 from drake_hybrid.control.gains import ControlMode
 from drake_hybrid.control.sampling import SAMPLE_LEAD
@@ -242,6 +243,7 @@ class Linearization:
     match: EigenvalueMatch
     wall_time: float
     jacobian_check: JacobianCheck = None   # AutoDiffXd against central differences; which A is used
+    unstable_modes: list = field(default_factory=list)   # analysis.modes.ModeDiagnosis, real part > 0.01 1/s
 
 
 def linearize_continuous(config, tolerance=0.05, bandwidth_hz=200.0, jacobian_tolerance=JACOBIAN_TOLERANCE):
@@ -254,7 +256,8 @@ def linearize_continuous(config, tolerance=0.05, bandwidth_hz=200.0, jacobian_to
     where they disagree beyond ``jacobian_tolerance``, relative per column, the
     central-difference A is used, ``jacobian_check.used`` says so and a
     ``DerivativeMismatchWarning`` is issued), and matches eig(A) against the
-    designed eigenvalues. ``wall_time`` covers both derivatives.
+    designed eigenvalues. ``wall_time`` covers both derivatives. Every mode with real part
+    above 0.01 1/s is named with its likely cause (``unstable_modes``, ``analysis.modes``).
     """
 
 
@@ -275,8 +278,9 @@ def linearize_continuous(config, tolerance=0.05, bandwidth_hz=200.0, jacobian_to
     eigenvalues = np.linalg.eigvals(A)
     predicted = controller_prediction(scenario.controller)
     match = match_eigenvalues(predicted.designed, eigenvalues, tolerance=tolerance, marginal=predicted.marginal)
+    modes = diagnose_unstable_modes(scenario, context, A, scenario.controller.mode, predicted.designed)
     return Linearization(A=A, eigenvalues=eigenvalues, equilibrium_residual=residual, predicted=predicted,
-                         match=match, wall_time=wall, jacobian_check=check)
+                         match=match, wall_time=wall, jacobian_check=check, unstable_modes=modes)
 
 
 # ------------------------------------------------------------------------------------------------
