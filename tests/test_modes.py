@@ -44,8 +44,8 @@ def add_panda(plant):
 
 
 def add_small_drum(plant):
-    return add_rigid_workpiece(plant, Cylinder(RADIUS, 0.6), RigidTransform(RotationMatrix.MakeXRotation(np.pi / 2), AXIS),
-                               name="small_drum")
+    X_WDrum = RigidTransform(RotationMatrix.MakeXRotation(np.pi / 2), AXIS)      # axis along world y
+    return add_rigid_workpiece(plant, Cylinder(RADIUS, 0.6), X_WDrum, name="small_drum")
 
 
 @pytest.fixture(scope="module")
