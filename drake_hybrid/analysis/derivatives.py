@@ -9,10 +9,12 @@ the one to trust:
 * column error e_j = max_i |A_ad[i, j] - A_cd[i, j]| (absolute) and
   e_j / max(max_i |A_ad[i, j]|, max_i |A_cd[i, j]|, 1e-8 max |A_cd|) (relative to the
   column's scale);
-* the AutoDiffXd Jacobian is used when every relative column error is within
-  ``JACOBIAN_TOLERANCE``; otherwise the central-difference one is, the result says so
-  (``JacobianCheck.used = "central differences"``) and a ``DerivativeMismatchWarning`` names
-  the worst column.
+* a column of the AutoDiffXd Jacobian is kept when its relative error is within
+  ``JACOBIAN_TOLERANCE`` at the step or, failing that, at a tenth of it (a stiff contact can
+  make the coarse step's truncation error large); a column that disagrees at both steps while
+  the two steps agree with each other is replaced by central differences, the result says so
+  (``JacobianCheck.used``, ``replaced``) and a ``DerivativeMismatchWarning`` names the worst
+  column; a column where the two steps do not agree either is kept (``unresolved``).
 
 Why: Drake 1.51's AutoDiffXd derivative of a hydroelastic contact force is wrong in some
 geometries (docs/drake_notes.md, "AutoDiffXd derivatives of hydroelastic contact"), and a wrong
@@ -28,7 +30,7 @@ contact surface's computation); every other column agrees to 1e-7 or better. The
 """
 
 import warnings
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -52,8 +54,10 @@ class JacobianCheck:
     worst_state: str               # its name (as the diagram's state vector is laid out)
     tolerance: float
     epsilon: float
-    used: str                      # "autodiff" or "central differences"
+    used: str                      # "autodiff", "central differences" or "autodiff with k column(s) from ..."
     evaluations: int               # time-derivative evaluations spent on the check
+    replaced: list = field(default_factory=list)     # states whose column came from central differences
+    unresolved: list = field(default_factory=list)   # disagreeing columns where the two steps disagree too
 
     @property
     def agrees(self):
@@ -62,32 +66,35 @@ class JacobianCheck:
     def summary(self):
         """One line for reports: the agreement and the Jacobian used."""
         verdict = "agree" if self.agrees else "DISAGREE"
+        unresolved = (f"; {len(self.unresolved)} column(s) unresolved (central differences not converged), "
+                      "AutoDiffXd kept there" if self.unresolved else "")
         return (f"Jacobian check: AutoDiffXd and central differences {verdict} (max column error "
                 f"{self.max_relative_error:.2g} relative, {self.max_absolute_error:.2g} absolute, worst "
-                f"column {self.worst_state}; tolerance {self.tolerance:g}); using {self.used}")
+                f"column {self.worst_state}; tolerance {self.tolerance:g}){unresolved}; using {self.used}")
 
     def as_dict(self):
         return {"max_relative_error": self.max_relative_error, "max_absolute_error": self.max_absolute_error,
                 "worst_column": self.worst_column, "worst_state": self.worst_state, "tolerance": self.tolerance,
                 "epsilon": self.epsilon, "used": self.used, "agrees": bool(self.agrees),
-                "evaluations": self.evaluations}
+                "evaluations": self.evaluations, "replaced": self.replaced, "unresolved": self.unresolved}
 
 
-def central_difference_jacobian(diagram, context, epsilon=JACOBIAN_STEP):
+def central_difference_jacobian(diagram, context, epsilon=JACOBIAN_STEP, columns=None):
     """d(x-dot)/dx of ``diagram``'s continuous state at ``context`` by central differences
-    (step ``epsilon * max(1, |x_j|)``); ``context`` is left as it was."""
+    (step ``epsilon * max(1, |x_j|)``), for ``columns`` (default all; the others are left 0);
+    ``context`` is left as it was."""
     work = context.Clone()
     x0 = context.get_continuous_state_vector().CopyToVector()
     A = np.zeros((x0.size, x0.size))
-    for j in range(x0.size):
+    for j in (range(x0.size) if columns is None else columns):
         step = epsilon * max(1.0, abs(x0[j]))
-        columns = []
+        derivatives = []
         for sign in (1.0, -1.0):
             x = x0.copy()
             x[j] += sign * step
             work.SetContinuousState(x)
-            columns.append(diagram.EvalTimeDerivatives(work).CopyToVector())
-        A[:, j] = (columns[0] - columns[1]) / (2.0 * step)
+            derivatives.append(diagram.EvalTimeDerivatives(work).CopyToVector())
+        A[:, j] = (derivatives[0] - derivatives[1]) / (2.0 * step)
     return A
 
 
@@ -124,24 +131,60 @@ def checked_state_jacobian(diagram, context, A_autodiff, tolerance=JACOBIAN_TOLE
                            what="the closed loop"):
     """The state Jacobian to use for ``diagram`` at ``context``, and the check that chose it.
 
-    Returns (A, JacobianCheck): ``A_autodiff`` when every relative column error against central
-    differences is within ``tolerance``; else the central-difference Jacobian, with a
-    ``DerivativeMismatchWarning`` (one line: ``what``, the worst column and its errors)."""
-    A_differences = central_difference_jacobian(diagram, context, epsilon)
-    relative, absolute = column_errors(np.asarray(A_autodiff, dtype=float), A_differences)
+    Column by column: AutoDiffXd's column is kept when it agrees (relative column error within
+    ``tolerance``) with central differences at ``epsilon`` or, for the columns that do not, at
+    ``epsilon / 10`` (a step too large for a stiff contact is truncation, not a wrong
+    derivative). A column that agrees with neither, while the two steps agree with each other,
+    is wrong in AutoDiffXd: the central-difference column (``epsilon / 10``) replaces it, and a
+    ``DerivativeMismatchWarning`` (one line: ``what``, the worst column and its errors) says so.
+    A column where the two steps disagree with each other as well is left to AutoDiffXd and
+    counted as unresolved.
+
+    Returns (A, JacobianCheck)."""
+    A_autodiff = np.asarray(A_autodiff, dtype=float)
+    A_coarse = central_difference_jacobian(diagram, context, epsilon)
+    relative, absolute = column_errors(A_autodiff, A_coarse)
+    evaluations = 2 * A_coarse.shape[1]
+    doubtful = [int(j) for j in np.flatnonzero(relative > tolerance)]
+    replaced, unresolved = [], []
+    A = A_autodiff.copy()
+    if doubtful:
+        A_fine = central_difference_jacobian(diagram, context, epsilon / 10.0, columns=doubtful)
+        evaluations += 2 * len(doubtful)
+        relative_fine, absolute_fine = column_errors(A_autodiff, A_fine)
+        # The two steps against each other, on the same scale as against AutoDiffXd (a column that is
+        # about zero in central differences and large in AutoDiffXd is consistent, not noise over noise).
+        step_difference = np.max(np.abs(A_coarse - A_fine), axis=0)
+        scale = np.maximum.reduce([np.max(np.abs(M), axis=0) for M in (A_autodiff, A_coarse, A_fine)])
+        scale = np.maximum(scale, COLUMN_FLOOR * np.max(np.abs(A_coarse), initial=0.0))
+        consistency = np.divide(step_difference, scale, out=np.zeros_like(scale), where=scale > 0)
+        for j in doubtful:
+            if relative_fine[j] <= relative[j]:
+                relative[j], absolute[j] = relative_fine[j], absolute_fine[j]
+            if relative[j] <= tolerance:
+                continue                                   # truncation at the coarse step
+            if consistency[j] <= tolerance:
+                A[:, j] = A_fine[:, j]
+                replaced.append(j)
+            else:
+                unresolved.append(j)
     worst = int(np.argmax(relative)) if relative.size else 0
     names = state_names(diagram, context)
-    worst_state = names[worst] if worst < len(names) else f"x[{worst}]"
-    agrees = bool(np.all(relative <= tolerance))
+    name = lambda j: names[j] if j < len(names) else f"x[{j}]"
+    used = "autodiff"
+    if replaced:
+        used = ("central differences" if len(replaced) == A.shape[1]
+                else f"autodiff with {len(replaced)} column(s) from central differences")
     check = JacobianCheck(max_relative_error=float(relative.max(initial=0.0)),
                           max_absolute_error=float(absolute.max(initial=0.0)), worst_column=worst,
-                          worst_state=worst_state, tolerance=tolerance, epsilon=epsilon,
-                          used="autodiff" if agrees else "central differences", evaluations=2 * A_differences.shape[1])
-    if agrees:
-        return np.asarray(A_autodiff, dtype=float), check
-    warnings.warn(DerivativeMismatchWarning(
-        f"{what}: the AutoDiffXd state Jacobian disagrees with central differences (column {worst_state}: "
-        f"{check.max_relative_error:.2g} relative, {absolute[worst]:.3g} absolute, tolerance {tolerance:g}); "
-        "using the central-difference Jacobian (docs/drake_notes.md, AutoDiffXd derivatives of hydroelastic "
-        "contact)"), stacklevel=3)
-    return A_differences, check
+                          worst_state=name(worst), tolerance=tolerance, epsilon=epsilon, used=used,
+                          evaluations=evaluations, replaced=[name(j) for j in replaced],
+                          unresolved=[name(j) for j in unresolved])
+    if replaced:
+        warnings.warn(DerivativeMismatchWarning(
+            f"{what}: the AutoDiffXd state Jacobian disagrees with central differences (column {name(worst)}: "
+            f"{check.max_relative_error:.2g} relative, {absolute[worst]:.3g} absolute, tolerance {tolerance:g}; "
+            f"steps {epsilon:g} and {epsilon / 10:g} agree); using central differences for "
+            f"{', '.join(check.replaced)} (docs/drake_notes.md, AutoDiffXd derivatives of hydroelastic contact)"),
+            stacklevel=3)
+    return A, check
