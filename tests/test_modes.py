@@ -8,6 +8,7 @@ different from the geometric F/rho that the law cancels, which moves one of thos
 """
 
 import importlib.metadata
+import json
 import logging
 from pathlib import Path
 
@@ -77,6 +78,7 @@ def test_velocity_mode_drift_on_a_small_drum_is_named_with_its_cause(small_drum_
     assert "drift of the positions the velocity rows leave unregulated" in mode.likely_cause
     assert "tessellated" in mode.likely_cause and mode.stiffness > 0
     assert "unstable mode 0.759" in mode.summary()
+    assert json.loads(json.dumps(mode.as_dict()))["dominant"] == "velocity rows"
     # Every other mode is below the threshold.
     assert np.sort(dut.eigenvalues.real)[-2] < UNSTABLE_RATE
 

@@ -47,7 +47,8 @@ class ModeDiagnosis:
 
     def as_dict(self):
         return {"eigenvalue": [float(self.eigenvalue.real), float(self.eigenvalue.imag)], "shares": self.shares,
-                "dominant": self.dominant, "likely_cause": self.likely_cause, "stiffness": self.stiffness,
+                "dominant": self.dominant, "likely_cause": self.likely_cause,
+                "stiffness": None if np.isnan(self.stiffness) else self.stiffness,
                 "direction": self.direction}
 
 
