@@ -216,6 +216,11 @@ def command_analyze(args):
         unexplained = "unstable modes" if match.unstable_extra.size else f"misses beyond {tolerance} not predicted"
         verdict, code = f"not matched: {unexplained}", 1
     print(f"  {verdict}")
+    for diagnosis in getattr(result, "unstable_modes", []):
+        print(f"  {diagnosis.summary()}")
+    check = getattr(result, "jacobian_check", None)
+    print(f"  {check.summary()}" if check is not None else
+          "  Jacobian: central differences of the one-period map (no AutoDiffXd to check)")
     if args.plot:
         figure = eigenvalue_figure(match, title=f"{config.task}, {controller_mode.value}")
         figure.savefig(args.plot, dpi=110)
@@ -231,7 +236,9 @@ def command_analyze(args):
         payload.update({"gains": config.gains.as_lists(k, m, controller_mode), "mode": controller_mode.value,
                         "method": "continuous" if getattr(task, "continuous_plant", True) else "discrete",
                         "velocity_dim": k, "force_dim": m, "task": config.task,
-                        "equilibrium_residual": result.equilibrium_residual, "wall_time": result.wall_time})
+                        "equilibrium_residual": result.equilibrium_residual, "wall_time": result.wall_time,
+                        "jacobian_check": check.as_dict() if check is not None else {"used": "central differences"},
+                        "unstable_modes": [d.as_dict() for d in getattr(result, "unstable_modes", [])]})
         Path(args.json).write_text(json.dumps(payload, indent=2))
         print(f"  wrote {args.json}")
     return code

@@ -31,6 +31,8 @@ from scipy.optimize import linear_sum_assignment
 from pydrake.systems.analysis import ApplySimulatorConfig, InitializeParams, Simulator
 from pydrake.systems.primitives import Linearize
 
+from drake_hybrid.analysis.derivatives import JACOBIAN_TOLERANCE, JacobianCheck, checked_state_jacobian
+from drake_hybrid.analysis.modes import diagnose_unstable_modes
 from drake_hybrid.control.law import impedance_blocks
 from drake_hybrid.control.gains import ControlMode
 from drake_hybrid.control.sampling import SAMPLE_LEAD
@@ -277,15 +279,24 @@ class Linearization:
     wall_time: float
     shifts: list = field(default_factory=list)       # the task's EigenvalueShift predictions
     shifted_match: EigenvalueMatch = None            # the match against the design with those shifts
+    jacobian_check: JacobianCheck = None   # AutoDiffXd against central differences; which A is used
+    unstable_modes: list = field(default_factory=list)   # analysis.modes.ModeDiagnosis, real part > 0.01 1/s
 
 
-def linearize_continuous(config, tolerance=0.05, bandwidth_hz=200.0, stages=None):
+def linearize_continuous(config, tolerance=0.05, bandwidth_hz=200.0, stages=None,
+                         jacobian_tolerance=JACOBIAN_TOLERANCE):
     """Linearize the continuous closed loop of ``config`` at its contact equilibrium.
 
     Builds ``equilibrium_config(config)``, sets the start, checks it is an
     equilibrium, runs Drake's ``Linearize`` (AutoDiffXd through plant,
-    contact, sensor, filter and controller) and matches eig(A) against the
-    designed eigenvalues. ``stages`` (``core.progress.Stages``): one line per stage with its time.
+    contact, sensor, filter and controller), checks its A against central
+    differences of the time derivatives, every column (``analysis.derivatives``:
+    where they disagree beyond ``jacobian_tolerance``, relative per column, the
+    central-difference A is used, ``jacobian_check.used`` says so and a
+    ``DerivativeMismatchWarning`` is issued), and matches eig(A) against the
+    designed eigenvalues. ``wall_time`` covers both derivatives. Every mode with real part
+    above 0.01 1/s is named with its likely cause (``unstable_modes``, ``analysis.modes``).
+    ``stages`` (``core.progress.Stages``): one line per stage with its time.
     """
     stages = stages or quiet()
     c = equilibrium_config(config, bandwidth_hz)
@@ -301,14 +312,18 @@ def linearize_continuous(config, tolerance=0.05, bandwidth_hz=200.0, stages=None
     start = time.perf_counter()
     with stages(f"{c.task}: linearizing ({context.num_continuous_states()} states, AutoDiffXd)"):
         linear = Linearize(scenario.diagram, context, equilibrium_check_tolerance=np.inf)
+    with stages(f"{c.task}: checking A against central differences"):
+        A, check = checked_state_jacobian(scenario.diagram, context, linear.A(), tolerance=jacobian_tolerance,
+                                          what=f"linearize_continuous({c.task})")
     wall = time.perf_counter() - start
-    A = np.asarray(linear.A())
     eigenvalues = np.linalg.eigvals(A)
     predicted = controller_prediction(scenario.controller)
     match = match_eigenvalues(predicted.designed, eigenvalues, tolerance=tolerance, marginal=predicted.marginal)
     shifts, shifted_match = _task_shifts(c.task, scenario, context, predicted, eigenvalues, tolerance)
+    modes = diagnose_unstable_modes(scenario, context, A, scenario.controller.mode, predicted.designed)
     return Linearization(A=A, eigenvalues=eigenvalues, equilibrium_residual=residual, predicted=predicted,
-                         match=match, wall_time=wall, shifts=shifts, shifted_match=shifted_match)
+                         match=match, wall_time=wall, shifts=shifts, shifted_match=shifted_match,
+                         jacobian_check=check, unstable_modes=modes)
 
 
 # ------------------------------------------------------------------------------------------------

@@ -28,6 +28,7 @@ from pydrake.multibody.tree import MultibodyForces_
 from pydrake.systems.framework import LeafSystem_, ValueProducer
 from pydrake.systems.scalar_conversion import TemplateSystem
 
+from drake_hybrid.control.damping import joint_damping, warn_damped_joints
 from drake_hybrid.control.gains import ControlMode, HybridGains
 from drake_hybrid.control.phases import ContactPhase
 from drake_hybrid.control.sampling import SAMPLE_LEAD
@@ -188,6 +189,10 @@ def HybridController_(T):
                 per second, >= 0) and ``approach_gain`` (K_a, 1/s), e.g. a
                 ``supervision.SupervisionConfig``: declares the ``contact_phase``
                 input and the guarded move off the surface.
+            plant_time_step: the simulated plant's step h (0: continuous). On a discrete plant the
+                model's joint damping B is compensated on the predicted end-of-step velocity,
+                B (v + h a*), as the solver applies it implicitly (``control.damping``); a
+                ``JointDampingWarning`` names joints with b h / M > 1.
             sampled_diagnostics: with a control period, also store the
                 diagnostics (velocity_error, force_error, constraint_value,
                 projected_velocity, force, tangential_force) computed at each
@@ -205,7 +210,8 @@ def HybridController_(T):
 
         def _construct(self, plant, end_effector_frame, end_effector_point, constraint_space, gains=None,
                        mode=ControlMode.VELOCITY_FORCE, control_period=None, sample_lead=True, safety=None,
-                       guarded_move=None, sampled_diagnostics=False, velocity_row_inertia=None, converter=None):
+                       guarded_move=None, sampled_diagnostics=False, velocity_row_inertia=None,
+                       plant_time_step=0.0, converter=None):
             # Every argument as given, for scalar conversion (_construct_copy): one added later cannot
             # be forgotten there.
             arguments = locals()
@@ -238,6 +244,11 @@ def HybridController_(T):
                     f"only n = {n} joints; the law needs n >= d")
             if control_period is not None and not float(control_period) > 0:
                 raise ValueError(f"HybridController: control_period must be positive or None, got {control_period}")
+            # Joint damping of the model, compensated at the simulated plant's step (control.damping).
+            self.plant_time_step = float(plant_time_step)
+            self._damping = joint_damping(plant)
+            if T == float:                        # once, not again for the AutoDiffXd copy
+                warn_damped_joints(plant, self.plant_time_step)
             self.sampled_diagnostics = bool(sampled_diagnostics)
             if self.sampled_diagnostics and control_period is None:
                 raise ValueError("HybridController: sampled_diagnostics needs a control_period (a sampled controller)")
@@ -271,7 +282,8 @@ def HybridController_(T):
             zero_acceleration = np.zeros(n) if T == float else np.array([AutoDiffXd(0.0)] * n, dtype=object)
             self._law = LawConstants(self._gains, self.mode, self.kinematic_rows, m, singularity_threshold,
                                      self._max_joint_acceleration, self.effort_limits, anti_windup,
-                                     actuation_from_torque, zero_acceleration, speed, gain, I_v)
+                                     actuation_from_torque, zero_acceleration, speed, gain, I_v,
+                                     self._damping, self.plant_time_step)
 
             # -- ports ------------------------------------------------------------------
             # estimated_state, the controller's own plant of this system's scalar type, its kinematics.

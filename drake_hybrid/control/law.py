@@ -21,7 +21,8 @@ force on the robot, §0; k = d - m velocity rows, m force rows)::
     tau = ID(q, q-dot, J^-1 (r-ddot* - J-dot q-dot)) + tau_f   (n = d)   joint_torque
     tau = h + g + J^T Lambda (r-ddot* - J-dot q-dot) + tau_f
           - N^T M K_n q-dot,  Lambda = (J M^-1 J^T)^-1          (n > d)   joint_torque
-    u = saturate(B^-1 tau)                                           safety.saturate
+    tau += h B a*          (discrete plant, the model's joint damping B)   damping.damping_compensation
+    u = saturate(B_u^-1 tau)                                         safety.saturate
     xi-dot = e_f,  e_p-dot = e_p'       (frozen while saturated)     integral_rates
 
 The protections of ``safety`` (bounded inverses near singularities, graceful saturation) enter
@@ -32,6 +33,7 @@ Every function is pure except that ``joint_torque`` asks the plant for M and inv
 
 import numpy as np
 
+from drake_hybrid.control.damping import damping_compensation
 from drake_hybrid.control.gains import ControlMode
 from drake_hybrid.control.phases import ContactPhase
 from drake_hybrid.control.safety import bounded_solve, bounded_task_inertia, saturate
@@ -47,16 +49,18 @@ class LawConstants:
     SafetyConfig; actuation_from_torque: B^-1; zero_acceleration: a zero joint acceleration of the
     controller's scalar type (for h + g by inverse dynamics); approach_speed, approach_gain: the guarded move's s
     and K_a (None without a guarded move); velocity_row_inertia: I_v of a mechanism moving with the
-    velocity rows (None: the paper's massless constraint).
+    velocity rows (None: the paper's massless constraint); joint_damping, plant_time_step: the
+    model's B and the simulated plant's step h (``control.damping``; h = 0: continuous).
     """
 
     __slots__ = ("gains", "mode", "kinematic_rows", "force_controlled", "singularity_threshold",
                  "max_joint_acceleration", "effort_limits", "anti_windup", "actuation_from_torque",
-                 "zero_acceleration", "approach_speed", "approach_gain", "velocity_row_inertia")
+                 "zero_acceleration", "approach_speed", "approach_gain", "velocity_row_inertia", "joint_damping",
+                 "plant_time_step")
 
     def __init__(self, gains, mode, kinematic_rows, force_size, singularity_threshold, max_joint_acceleration,
                  effort_limits, anti_windup, actuation_from_torque, zero_acceleration, approach_speed=None,
-                 approach_gain=None, velocity_row_inertia=None):
+                 approach_gain=None, velocity_row_inertia=None, joint_damping=None, plant_time_step=0.0):
         self.gains, self.mode = gains, mode
         self.kinematic_rows = tuple(kinematic_rows)
         self.force_controlled = np.ones(force_size)
@@ -66,6 +70,7 @@ class LawConstants:
         self.actuation_from_torque, self.zero_acceleration = actuation_from_torque, zero_acceleration
         self.approach_speed, self.approach_gain = approach_speed, approach_gain
         self.velocity_row_inertia = velocity_row_inertia
+        self.joint_damping, self.plant_time_step = joint_damping, plant_time_step
 
 
 class ControlSolution:
@@ -226,17 +231,23 @@ def joint_torque(plant, plant_context, forces, jacobian, task_rhs, tau_f, consta
     d, n = jacobian.shape
     if n == d:
         joint_acceleration, sigma_min, lambda_squared = bounded_solve(jacobian, task_rhs, threshold, bound)
-        return (plant.CalcInverseDynamics(plant_context, joint_acceleration, forces) + tau_f, None, sigma_min,
-                lambda_squared)
-    M, M_inverse, task_mobility = dynamics
-    Lambda, sigma_min, lambda_squared = bounded_task_inertia(jacobian, M_inverse, task_mobility, task_rhs, threshold,
-                                                             bound)
-    J_bar = M_inverse @ jacobian.T @ Lambda
-    null_space_transpose = np.eye(n) - jacobian.T @ J_bar.T
-    base_torque = plant.CalcInverseDynamics(plant_context, constants.zero_acceleration, forces)
-    v = plant.GetVelocities(plant_context)
-    torque = (base_torque + jacobian.T @ (Lambda @ task_rhs) + tau_f
-              - null_space_transpose @ (M @ (constants.gains.null_space_damping * v)))
+        base_torque = None
+        torque = plant.CalcInverseDynamics(plant_context, joint_acceleration, forces) + tau_f
+    else:
+        M, M_inverse, task_mobility = dynamics
+        Lambda, sigma_min, lambda_squared = bounded_task_inertia(jacobian, M_inverse, task_mobility, task_rhs,
+                                                                 threshold, bound)
+        J_bar = M_inverse @ jacobian.T @ Lambda
+        null_space_transpose = np.eye(n) - jacobian.T @ J_bar.T
+        base_torque = plant.CalcInverseDynamics(plant_context, constants.zero_acceleration, forces)
+        v = plant.GetVelocities(plant_context)
+        motion_torque = (jacobian.T @ (Lambda @ task_rhs)
+                         - null_space_transpose @ (M @ (constants.gains.null_space_damping * v)))
+        joint_acceleration = M_inverse @ motion_torque
+        torque = base_torque + motion_torque + tau_f
+    if constants.joint_damping is not None:
+        # A discrete plant damps at the end-of-step velocity: B (v + h a*), not B v (control.damping).
+        torque = torque + damping_compensation(constants.joint_damping, joint_acceleration, constants.plant_time_step)
     return torque, base_torque, sigma_min, lambda_squared
 
 

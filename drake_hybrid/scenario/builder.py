@@ -96,7 +96,8 @@ def make_controller(config, task, plant, controller_plant, robot, constraint_spa
         gains=config.gains, mode=mode, control_period=control_period, sample_lead=sample_lead,
         safety=config.safety, guarded_move=config.supervision if supervised else None,
         sampled_diagnostics=with_loggers and control_period is not None,
-        velocity_row_inertia=velocity_row_inertia(config, task, plant, constraint_space))
+        velocity_row_inertia=velocity_row_inertia(config, task, plant, constraint_space),
+        plant_time_step=plant.time_step())
 
 
 def build_scenario(config, meshcat=None, with_loggers=True, sampled_plant_outputs=True, controller_sample_lead=True):
