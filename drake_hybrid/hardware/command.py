@@ -84,10 +84,13 @@ class TorqueCommandSafety(LeafSystem):
         - stop
 
     ``torque`` (input) is the command the law asks for (already in the driver's gravity
-    convention), ``watchdog_status`` the ``MessageWatchdog``'s. ``enabled`` is 0 until the first
-    valid status (the runner publishes only while it is 1); ``stop`` is [fault, time of the stop]
-    (fault 0: running). The output is a function of the inputs and of the previous command (the
-    state, stored at the control ticks), so a command computed at a tick goes out at that tick.
+    convention), ``watchdog_status`` the ``MessageWatchdog``'s. The ``torque`` output is the
+    command decided at the last tick (state): the system ticks half a lead after the controller
+    (at k h - SAMPLE_LEAD h / 2), when the controller's new actuation is out, so the command of a
+    tick goes out in that tick. ``enabled`` is 0 until the first valid status (the runner publishes
+    only while it is 1); ``stop`` is [fault, time of the stop] (fault 0: running; time NaN).
+    ``initialize_command(context)`` decides the first command at the start (after the
+    controller's initialization).
 
     Args:
         num_joints: n.
@@ -113,28 +116,37 @@ class TorqueCommandSafety(LeafSystem):
         self._torque_port = self.DeclareVectorInputPort("torque", n)
         self._state_port = self.DeclareVectorInputPort("estimated_state", 2 * n)
         self._status_port = self.DeclareVectorInputPort("watchdog_status", len(STATUS_FIELDS))
-        # State: [previous command (n); latched fault; stop time; ages and rejections at the stop (4); q at the stop (n)].
-        self._layout = {"previous": slice(0, n), "fault": n, "time": n + 1, "details": slice(n + 2, n + 6),
+        # State: [command (n); latched fault; stop time; ages and rejections at the stop (4); q at the stop (n)].
+        self._layout = {"command": slice(0, n), "fault": n, "time": n + 1, "details": slice(n + 2, n + 6),
                         "hold": slice(n + 6, 2 * n + 6)}
         self.DeclareDiscreteState(2 * n + 6)
-        self.DeclarePeriodicDiscreteUpdateEvent(self.period, tick_offset(self.period), self._update)
-        self.DeclareVectorOutputPort("torque", n, self._calc_torque)
+        offset = tick_offset(self.period) + 0.5 * (self.period - tick_offset(self.period))
+        self.DeclarePeriodicDiscreteUpdateEvent(self.period, offset, self._update)
+        self.DeclareVectorOutputPort("torque", n, self._calc_torque, prerequisites_of_calc={self.xd_ticket()})
         self.DeclareVectorOutputPort("enabled", 1, self._calc_enabled)
-        self.DeclareVectorOutputPort("stop", 2, self._calc_stop)
+        self.DeclareVectorOutputPort("stop", 2, self._calc_stop, prerequisites_of_calc={self.xd_ticket()})
 
     def set_initial_command(self, context, command):
         """The command the first one is rate-limited against (e.g. what the driver holds at the start)."""
         state = context.get_mutable_discrete_state(0).get_mutable_value()
-        state[self._layout["previous"]] = np.asarray(command, dtype=float)
+        state[self._layout["command"]] = np.asarray(command, dtype=float)
+
+    def initialize_command(self, context):
+        """Decide the command at the start from the inputs there (call after Simulator.Initialize)."""
+        state, reason = self._decide(context)
+        context.get_mutable_discrete_state(0).SetFromVector(state)
+        if reason is not None:
+            LOGGER.warning("%s", reason)
 
     def SetDefaultState(self, context, state):
         LeafSystem.SetDefaultState(self, context, state)
-        vector = np.zeros(2 * self.num_joints + 6)
-        vector[self._layout["previous"]] = self._initial_command
+        vector = np.full(2 * self.num_joints + 6, 0.0)
+        vector[self._layout["command"]] = self._initial_command
+        vector[self._layout["time"]] = np.nan
         state.get_mutable_discrete_state(0).SetFromVector(vector)
 
-    def _fault(self, context):
-        """(fault now, latched state vector after this tick's decision, new stop reason or None)."""
+    def _decide(self, context):
+        """(state after this tick, the reason of a stop that starts now or None)."""
         state = context.get_discrete_state(0).CopyToVector()
         status = self._status_port.Eval(context)
         current = HardwareFault(int(status[0]))
@@ -143,7 +155,6 @@ class TorqueCommandSafety(LeafSystem):
         stops = (HardwareFault.STATUS_STALE, HardwareFault.FORCE_TORQUE_STALE)
         escalate = latched == HardwareFault.FORCE_TORQUE_STALE and current == HardwareFault.STATUS_STALE
         if current in stops and (latched == HardwareFault.NONE or escalate):
-            state = state.copy()
             state[self._layout["fault"]] = float(current)
             state[self._layout["time"]] = context.get_time()
             state[self._layout["details"]] = status[1:5]
@@ -151,14 +162,14 @@ class TorqueCommandSafety(LeafSystem):
                 state[self._layout["hold"]] = self._state_port.Eval(context)[:self.num_joints]
             latched = current
             reason = stop_reason(state, self._layout)
-        return (latched if latched != HardwareFault.NONE else current), state, reason
+        fault = latched if latched != HardwareFault.NONE else current
+        if fault != HardwareFault.WAITING_FOR_STATUS:
+            state[self._layout["command"]] = self._command(context, fault, state)
+        return state, reason
 
-    def _command(self, context):
-        fault, state, _ = self._fault(context)
-        previous = state[self._layout["previous"]]
+    def _command(self, context, fault, state):
+        previous = state[self._layout["command"]]
         n = self.num_joints
-        if fault == HardwareFault.WAITING_FOR_STATUS:
-            return previous
         if fault == HardwareFault.NONE:
             wanted = self._torque_port.Eval(context)
         elif fault == HardwareFault.STATUS_STALE:
@@ -172,15 +183,15 @@ class TorqueCommandSafety(LeafSystem):
         return np.clip(wanted, previous - self.max_step, previous + self.max_step)
 
     def _calc_torque(self, context, output):
-        output.SetFromVector(self._command(context))
+        output.SetFromVector(context.get_discrete_state(0).get_value()[self._layout["command"]])
 
     def _calc_enabled(self, context, output):
-        output.SetFromVector([0.0 if self._fault(context)[0] == HardwareFault.WAITING_FOR_STATUS else 1.0])
+        waiting = HardwareFault(int(self._status_port.Eval(context)[0])) == HardwareFault.WAITING_FOR_STATUS
+        output.SetFromVector([0.0 if waiting else 1.0])
 
     def _calc_stop(self, context, output):
-        fault, state, _ = self._fault(context)
-        stopped = fault in (HardwareFault.STATUS_STALE, HardwareFault.FORCE_TORQUE_STALE)
-        output.SetFromVector([float(fault) if stopped else 0.0, state[self._layout["time"]] if stopped else np.nan])
+        state = context.get_discrete_state(0).get_value()
+        output.SetFromVector([state[self._layout["fault"]], state[self._layout["time"]]])
 
     def stop_reason(self, context):
         """The latched stop's reason as a sentence (None while running)."""
@@ -190,10 +201,7 @@ class TorqueCommandSafety(LeafSystem):
         return stop_reason(state, self._layout)
 
     def _update(self, context, discrete_state):
-        command = self._command(context)
-        fault, state, reason = self._fault(context)
-        if fault != HardwareFault.WAITING_FOR_STATUS:
-            state[self._layout["previous"]] = command
+        state, reason = self._decide(context)
         if reason is not None:
             LOGGER.warning("%s", reason)
         discrete_state.get_mutable_vector(0).SetFromVector(state)

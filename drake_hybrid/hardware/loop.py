@@ -27,14 +27,14 @@ from dataclasses import dataclass, field
 from typing import Callable, Dict, Optional
 
 import numpy as np
-from drake import lcmt_force_torque, lcmt_panda_status
+from drake import lcmt_force_torque, lcmt_panda_command, lcmt_panda_status
 
 from pydrake.lcm import DrakeLcm
 from pydrake.systems.analysis import ApplySimulatorConfig, Simulator
 
 from drake_hybrid.control.sampling import SAMPLE_LEAD
 from drake_hybrid.experiments.simulation import collect_log, summarize
-from drake_hybrid.hardware.controller_side import build_controller_station
+from drake_hybrid.hardware.controller_side import build_controller_station, check_hardware_config
 from drake_hybrid.hardware.messages import HardwareConfig, HardwareFault
 from drake_hybrid.hardware.robot_side import build_robot_station
 from drake_hybrid.hardware.watchdog import ARRIVAL, LATENCY
@@ -122,6 +122,7 @@ def run_hardware_loop(config, hardware=None, duration=None, lcm_url="memq://drak
     if not lcm_url.startswith("memq://"):
         raise ValueError(f"run_hardware_loop runs in one process over memq:// only, got {lcm_url!r}")
     hardware = (hardware or HardwareConfig()).validate()
+    check_hardware_config(config)
     if fault is not None and robot_hardware is None:
         robot_hardware = HardwareConfig(**{**hardware.__dict__, "status_channel": hardware.status_channel + "_ROBOT",
                                            "force_torque_channel": hardware.force_torque_channel + "_ROBOT"})
@@ -133,6 +134,9 @@ def run_hardware_loop(config, hardware=None, duration=None, lcm_url="memq://drak
     controller = build_controller_station(config, lcm, hardware, initial_positions=q0)
     robot = build_robot_station(config, lcm, robot_hardware)
     relay = MessageFaultRelay(lcm, robot_hardware, hardware, fault) if fault is not None else None
+    wire = []                                              # every command as it went out: (utime s, torques)
+    listener = lcm.Subscribe(hardware.command_channel, lambda data: wire.append(
+        (lcmt_panda_command.decode(data).utime * 1e-6, list(lcmt_panda_command.decode(data).joint_torque))))
     period = float(controller.config.control_period)
 
     # The robot at the start, held by its driver with the static torque until the first command.
@@ -149,8 +153,8 @@ def run_hardware_loop(config, hardware=None, duration=None, lcm_url="memq://drak
         robot.plant.SetPositionsAndVelocities(plant_context, plant_state)
 
     controller_context = controller.diagram.CreateDefaultContext()
-    state = controller.controller.GetMyMutableContextFromRoot(controller_context)
-    state.get_mutable_discrete_state(0).get_mutable_value()[:len(integrals)] = integrals
+    law_context = controller.controller.GetMyMutableContextFromRoot(controller_context)
+    law_context.SetDiscreteState(0, np.concatenate([integrals, held]))
     safety_context = controller.safety.GetMyMutableContextFromRoot(controller_context)
     controller.safety.set_initial_command(safety_context, hold_command)
     for part in (controller.wrench_filter, controller.conditioner):
@@ -168,6 +172,7 @@ def run_hardware_loop(config, hardware=None, duration=None, lcm_url="memq://drak
         robot.diagram.ForcedPublish(robot_context)
     pump(lcm)
     controller_simulator.Initialize()
+    controller.safety.initialize_command(controller.safety.GetMyMutableContextFromRoot(controller_context))
     if controller.publish_command(controller_context):
         published, first_command = 1, 0.0
     pump(lcm)
@@ -214,6 +219,9 @@ def run_hardware_loop(config, hardware=None, duration=None, lcm_url="memq://drak
               "wall_robot_step_s": percentiles(wall["robot"]), "wall_controller_step_s": percentiles(wall["controller"]),
               "wall_message_delivery_s": percentiles(wall["messages"]), "wall_total_s": elapsed,
               "relay": None if relay is None else {"forwarded": relay.forwarded, "dropped": relay.dropped}}
+    del listener
+    log["wire_t"] = np.array([stamp for stamp, _ in wire])
+    log["wire_command"] = np.array([torque for _, torque in wire]) if wire else np.zeros((0, controller.plant.num_actuators()))
     return HardwareRun(config=controller.config, log=log, summary=summary, controller=controller, robot=robot,
                        controller_context=controller_context, robot_context=robot_context,
                        commands_published=published, first_command_time=first_command, stop=stop, timing=timing)
