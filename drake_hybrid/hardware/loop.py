@@ -33,7 +33,7 @@ from pydrake.lcm import DrakeLcm
 from pydrake.systems.analysis import ApplySimulatorConfig, Simulator
 
 from drake_hybrid.control.sampling import SAMPLE_LEAD
-from drake_hybrid.experiments.simulation import collect_log, summarize
+from drake_hybrid.experiments.simulation import collect_log, simulate, summarize
 from drake_hybrid.hardware.controller_side import build_controller_station, check_hardware_config
 from drake_hybrid.hardware.messages import HardwareConfig, HardwareFault
 from drake_hybrid.hardware.robot_side import build_robot_station
@@ -112,7 +112,7 @@ def start_state(config):
 
 
 def run_hardware_loop(config, hardware=None, duration=None, lcm_url="memq://drake_hybrid_hil", fault=None,
-                      robot_hardware=None, connect_robot=True):
+                      robot_hardware=None, connect_robot=True, record=False):
     """Run ``config`` as controller side + simulated robot over LCM in lock step (module docstring).
 
     ``fault`` (kind, message, time) -> message or None puts a ``MessageFaultRelay`` between the
@@ -134,6 +134,9 @@ def run_hardware_loop(config, hardware=None, duration=None, lcm_url="memq://drak
     controller = build_controller_station(config, lcm, hardware, initial_positions=q0)
     robot = build_robot_station(config, lcm, robot_hardware)
     relay = MessageFaultRelay(lcm, robot_hardware, hardware, fault) if fault is not None else None
+    bucket, recorded = [], []
+    recorders = [lcm.Subscribe(channel, lambda data, channel=channel: bucket.append((channel, data)))
+                 for channel in (hardware.status_channel, hardware.force_torque_channel)] if record else []
     wire = []                                              # every command as it went out: (utime s, torques)
     listener = lcm.Subscribe(hardware.command_channel, lambda data: wire.append(
         (lcmt_panda_command.decode(data).utime * 1e-6, list(lcmt_panda_command.decode(data).joint_torque))))
@@ -171,6 +174,7 @@ def run_hardware_loop(config, hardware=None, duration=None, lcm_url="memq://drak
     if connect_robot:
         robot.diagram.ForcedPublish(robot_context)
     pump(lcm)
+    recorded.append(bucket[:]), bucket.clear()
     controller_simulator.Initialize()
     controller.safety.initialize_command(controller.safety.GetMyMutableContextFromRoot(controller_context))
     if controller.publish_command(controller_context):
@@ -188,6 +192,7 @@ def run_hardware_loop(config, hardware=None, duration=None, lcm_url="memq://drak
         t1 = time.perf_counter()
         pump(lcm)
         t2 = time.perf_counter()
+        recorded.append(bucket[:]), bucket.clear()
         controller_simulator.AdvanceTo(k * period + 0.5 * lead)
         if controller.publish_command(controller_context):
             published += 1
@@ -198,9 +203,9 @@ def run_hardware_loop(config, hardware=None, duration=None, lcm_url="memq://drak
         wall["robot"].append(t1 - t0)
         wall["controller"].append(t3 - t2)
         wall["messages"].append((t2 - t1) + (t4 - t3))
-        record = watchdog_context.get_discrete_state(0).CopyToVector()
-        if record[0] > 0 and abs(record[ARRIVAL] - (k * period - lead)) < 0.5 * period:
-            status_delay.append(record[LATENCY])
+        status_record = watchdog_context.get_discrete_state(0).CopyToVector()
+        if status_record[0] > 0 and abs(status_record[ARRIVAL] - (k * period - lead)) < 0.5 * period:
+            status_delay.append(status_record[LATENCY])
     elapsed = time.perf_counter() - start
 
     log = collect_log(controller, controller_context)
@@ -219,7 +224,9 @@ def run_hardware_loop(config, hardware=None, duration=None, lcm_url="memq://drak
               "wall_robot_step_s": percentiles(wall["robot"]), "wall_controller_step_s": percentiles(wall["controller"]),
               "wall_message_delivery_s": percentiles(wall["messages"]), "wall_total_s": elapsed,
               "relay": None if relay is None else {"forwarded": relay.forwarded, "dropped": relay.dropped}}
-    del listener
+    del listener, recorders
+    if record:
+        timing["recorded"] = recorded
     log["wire_t"] = np.array([stamp for stamp, _ in wire])
     log["wire_command"] = np.array([torque for _, torque in wire]) if wire else np.zeros((0, controller.plant.num_actuators()))
     return HardwareRun(config=controller.config, log=log, summary=summary, controller=controller, robot=robot,
@@ -229,3 +236,29 @@ def run_hardware_loop(config, hardware=None, duration=None, lcm_url="memq://drak
 
 def _logged(station, context, name):
     return station.loggers[name].FindLog(context).data().T
+
+
+SCORES = ("max_velocity_error_percent_after_5_time_constants", "max_force_error_percent_after_5_time_constants")
+
+
+def compare_with_direct(config, hardware=None):
+    """Run ``config`` directly wired and through the hardware loop; the figures of issue 19: both
+    runs' errors after five time constants (%), their differences (percentage points), the largest
+    joint and force differences over the run, the measured message delay and the stop (None)."""
+    direct = simulate(config)
+    run = run_hardware_loop(config, hardware)
+    figures = {"task": config.task, "duration": float(config.duration),
+               "wrench_source": (hardware or HardwareConfig()).wrench_source,
+               "design_time_constant": direct.summary["design_time_constant"]}
+    for score in SCORES:
+        name = score.replace("max_", "").replace("_percent_after_5_time_constants", "")
+        figures[f"{name}_direct_percent"] = direct.summary[score]
+        figures[f"{name}_hardware_loop_percent"] = run.summary[score]
+        figures[f"{name}_difference_points"] = (None if direct.summary[score] is None else
+                                                abs(run.summary[score] - direct.summary[score]))
+    figures["max_joint_difference_rad"] = float(np.max(np.abs(run.log["q"] - direct.log["q"])))
+    figures["max_force_difference_N"] = float(np.max(np.abs(run.log["force"] - direct.log["force"])))
+    figures["status_delay_simulated_s"] = run.timing["status_delay_simulated_s"]
+    figures["commands_published"] = run.commands_published
+    figures["stop"] = None if run.stop is None else run.stop["reason"]
+    return figures, direct, run

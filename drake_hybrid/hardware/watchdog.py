@@ -23,6 +23,7 @@ from pydrake.common.value import AbstractValue
 from pydrake.systems.framework import LeafSystem
 
 from drake_hybrid.control.sampling import tick_offset
+from drake_hybrid.core.kinematics import declare_cached_value
 from drake_hybrid.core.linalg import all_finite
 from drake_hybrid.hardware.messages import HardwareFault, Rejection
 
@@ -137,6 +138,10 @@ class MessageWatchdog(LeafSystem):
         self.DeclareDiscreteState(VALUES + 6)
         self.DeclarePeriodicDiscreteUpdateEvent(self.period, tick_offset(self.period), self._update)
         self.DeclareInitializationDiscreteUpdateEvent(self._update)
+        # The records as of now (state + what is on the inputs), computed once per change of either.
+        self._records = declare_cached_value(
+            self, "records", lambda context: (self._status_record_now(context), self._force_torque_record_now(context)),
+            {self.time_ticket(), self.xd_ticket(), self.all_input_ports_ticket()})
         self.DeclareVectorOutputPort("estimated_state", 2 * n, self._calc_state)
         self.DeclareVectorOutputPort("torque_external", n, self._calc_torque_external)
         self.DeclareVectorOutputPort("sensor_wrench", 6, self._calc_sensor_wrench)
@@ -150,10 +155,16 @@ class MessageWatchdog(LeafSystem):
 
     # -- the records as of now (state + what is on the inputs) -----------------------------------
     def _status_record(self, context):
+        return self._records.Eval(context)[0]
+
+    def _force_torque_record(self, context):
+        return self._records.Eval(context)[1]
+
+    def _status_record_now(self, context):
         fields = status_fields(self._status_port.Eval(context), self.num_joints)
         return accept(context.get_discrete_state(0).CopyToVector(), fields, context.get_time())
 
-    def _force_torque_record(self, context):
+    def _force_torque_record_now(self, context):
         record = context.get_discrete_state(1).CopyToVector()
         if self._force_torque_port is None:
             return record
@@ -193,5 +204,6 @@ class MessageWatchdog(LeafSystem):
                               status[REJECTION], force_torque[REJECTION]])
 
     def _update(self, context, discrete_state):
-        discrete_state.get_mutable_vector(0).SetFromVector(self._status_record(context))
-        discrete_state.get_mutable_vector(1).SetFromVector(self._force_torque_record(context))
+        status, force_torque = self._records.Eval(context)
+        discrete_state.get_mutable_vector(0).SetFromVector(status)
+        discrete_state.get_mutable_vector(1).SetFromVector(force_torque)
