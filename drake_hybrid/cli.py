@@ -217,8 +217,9 @@ def command_hardware(args):
     if args.duration is not None and not (math.isfinite(args.duration) and args.duration > 0):
         raise UsageError(f"--duration must be a positive number of seconds, got {args.duration}")
     task = HARDWARE_TASKS[args.task]()
+    speed = args.speed if args.speed is not None else (0.05 if args.mode == "hil" else 0.02)
     config = panda_config(task, duration=args.duration or {"hil": 2.0, "timing": 10.0, "run": 10.0}[args.mode],
-                          wrist_sensor=args.wrench_source == "force_torque")
+                          wrist_sensor=args.wrench_source == "force_torque", speed=speed)
     hardware = HardwareConfig(wrench_source=args.wrench_source).validate()
     if args.mode == "hil":
         figures = compare_with_direct(config, hardware)[0]
@@ -233,7 +234,7 @@ def command_hardware(args):
         station = build_controller_station(config, lcm, hardware, initial_positions=task.joint_guess,
                                            with_loggers=False)
         print(f"waiting up to {args.wait:g} s for {hardware.status_channel} on {args.lcm_url} ...", file=sys.stderr)
-        timing = run_controller(station, lcm, config.duration, first_wait=args.wait)
+        timing = run_controller(station, lcm, config.duration, first_wait=args.wait, wall_clock_stamps=True)
         if timing.summary["commands_published"] == 0:
             print(f"drake-hybrid hardware: no valid status on {hardware.status_channel}; nothing was commanded",
                   file=sys.stderr)
@@ -301,6 +302,7 @@ def make_parser():
     hardware.add_argument("--lcm-url", default="memq://drake_hybrid",
                           help="LCM URL (timing: memq:// only; run: the driver's, e.g. udpm://239.255.76.67:7667?ttl=0)")
     hardware.add_argument("--wrench-source", choices=["force_torque", "external_torque"], default="force_torque")
+    hardware.add_argument("--speed", type=float, help="m/s along the surface (default: hil 0.05, timing/run 0.02)")
     hardware.add_argument("--wait", type=float, default=5.0, help="run: seconds to wait for the first status")
     hardware.add_argument("--json", help="also write the figures to this JSON file")
     hardware.set_defaults(func=command_hardware)

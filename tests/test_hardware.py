@@ -12,15 +12,22 @@ percentage points) are marked slow.
 
 import logging
 import math
+import time
 
 import numpy as np
 import pytest
+from drake import lcmt_panda_command
 
+from pydrake.lcm import DrakeLcm
+
+from drake_hybrid.cli import main
 from drake_hybrid.core.errors import ConfigError
 from drake_hybrid.experiments.simulation import simulate
-from drake_hybrid.hardware.loop import run_hardware_loop
+from drake_hybrid.hardware.controller_side import build_controller_station
+from drake_hybrid.hardware.loop import run_hardware_loop, start_state
 from drake_hybrid.hardware.messages import HardwareConfig, HardwareFault, Rejection
 from drake_hybrid.hardware.panda import panda_config, panda_drum_task, panda_table_task
+from drake_hybrid.hardware.realtime import ReplayPacer, replay_timing, run_controller, start_controller_state
 from drake_hybrid.hardware.watchdog import accept, age, force_torque_fields
 
 pytest.importorskip("cmeel")      # example-robot-data (the Panda) is a test extra
@@ -188,3 +195,45 @@ def test_tracking_after_five_time_constants_matches_the_direct_loop(make_task, w
     assert run.stop is None
     for score in SCORES:
         assert abs(run.summary[score] - direct.summary[score]) <= 0.2, (score, run.summary[score], direct.summary[score])
+
+
+# -- real time and the command line --------------------------------------------------------------------
+
+def test_a_real_time_run_paced_by_replayed_status_reports_its_timing(drum):
+    """A short real-time run on memq: every tick gets its status, a command goes out for each; the
+    timing figures are there (their values depend on the machine's load: not asserted)."""
+    config = panda_config(drum, duration=0.2, speed=0.02)
+    timing, _ = replay_timing(config, seconds=0.2)
+    summary = timing.summary
+    assert summary["ticks"] == 201 and summary["commands_published"] == 201
+    assert summary["ticks_without_new_status"] == 0 and summary["stop"] is None
+    for name in ("period_jitter_s", "controller_cost_s", "status_to_command_s"):
+        assert set(summary[name]) == {"p50", "p99", "max"}
+    assert 0 <= summary["deadline_misses"] <= 201
+
+
+def test_wall_clock_stamps_for_a_real_driver(drum):
+    """drake-franka-driver drops commands whose utime is far from its wall clock: run_controller
+    stamps them with it when asked."""
+    config = panda_config(drum, duration=0.02, speed=0.02)
+    recorded = run_hardware_loop(config, duration=0.02, record=True).timing["recorded"]
+    lcm = DrakeLcm("memq://wall_clock_stamps")
+    start = start_state(config)
+    station = build_controller_station(config, lcm, initial_positions=start[1], with_loggers=False)
+    stamps = []
+    subscription = lcm.Subscribe(station.hardware.command_channel,
+                                 lambda data: stamps.append(lcmt_panda_command.decode(data).utime))
+    before = time.time()
+    run_controller(station, lcm, 0.02, pacer=ReplayPacer(lcm, recorded, 1e-3),
+                   initial_state=start_controller_state(config, start), wall_clock_stamps=True)
+    while lcm.HandleSubscriptions(0) > 0:
+        pass
+    del subscription
+    assert len(stamps) == 21 and all(before - 1 < stamp * 1e-6 < time.time() + 1 for stamp in stamps)
+
+
+def test_command_line_hardware(capsys):
+    assert main(["hardware", "run", "--duration", "0.02", "--wait", "0.05", "--lcm-url", "memq://cli_no_driver"]) == 1
+    assert "nothing was commanded" in capsys.readouterr().err
+    assert main(["hardware", "timing", "--lcm-url", "udpm://239.255.76.67:7667?ttl=0"]) == 2
+    assert "memq://" in capsys.readouterr().err

@@ -65,6 +65,7 @@ class ControllerStation:
     wrench_filter: Optional[object] = None
     conditioner: Optional[object] = None
     loggers: Dict[str, object] = field(default_factory=dict)
+    lcm: object = None
 
     @property
     def controller_plant(self):
@@ -74,11 +75,25 @@ class ControllerStation:
         """True once a command may be published (a valid status has arrived)."""
         return self.safety.GetOutputPort("enabled").Eval(self.safety.GetMyContextFromRoot(root_context))[0] > 0.5
 
-    def publish_command(self, root_context):
-        """Publish the command of this tick if ``enabled``; returns whether it did."""
+    def publish_command(self, root_context, utime=None):
+        """Publish the command of this tick if ``enabled``; returns whether it did.
+
+        ``utime`` (int us) stamps the message with another clock than the diagram's: a real
+        drake-franka-driver drops commands whose utime is more than --expire_sec from its
+        wall clock (epoch us), so ``run_controller(wall_clock_stamps=True)`` passes it."""
         if not self.enabled(root_context):
             return False
-        self.command_publisher.ForcedPublish(self.command_publisher.GetMyContextFromRoot(root_context))
+        if utime is None:
+            self.command_publisher.ForcedPublish(self.command_publisher.GetMyContextFromRoot(root_context))
+            return True
+        torque = self.safety.GetOutputPort("torque").Eval(self.safety.GetMyContextFromRoot(root_context))
+        message = lcmt_panda_command()
+        message.utime = int(utime)
+        message.num_joint_position = message.num_joint_velocity = 0
+        message.num_joint_torque = len(torque)
+        message.joint_torque = [float(x) for x in torque]
+        message.control_mode_expected = int(PandaControlMode.kTorque)
+        self.lcm.Publish(self.hardware.command_channel, message.encode())
         return True
 
     def stop_reason(self, root_context):
@@ -212,4 +227,4 @@ def build_controller_station(config, lcm, hardware=None, initial_positions=None,
     return ControllerStation(config=config, hardware=hardware, task=task, diagram=diagram, plant=plant, robot=robot,
                              controller=controller, watchdog=watchdog, safety=safety, command_publisher=publisher,
                              source=source, constraint_space=constraint_space, wrench_filter=wrench_filter,
-                             conditioner=conditioner, loggers=loggers)
+                             conditioner=conditioner, loggers=loggers, lcm=lcm)

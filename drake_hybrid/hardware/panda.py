@@ -105,11 +105,11 @@ def panda_table_task():
     return _registered("panda-table", make)
 
 
-def panda_config(task, duration=1.0, wrist_sensor=True):
-    """The run of the hardware tests: position-force, 0.05 m/s along the surface, 10 N, tutorial 06's
+def panda_config(task, duration=1.0, wrist_sensor=True, speed=0.05):
+    """The run of the hardware tests: position-force, ``speed`` (m/s) along the surface, 10 N, tutorial 06's
     gains, 1 kHz plant and controller; the F/T sensor in the wrist weld (``wrist_sensor``) or the
     ideal contact sensor (for the external-torque path)."""
-    velocity = [0.05, 0.0, 0.0, 0.0, 0.0] if task.name == "panda-drum" else [0.0, 0.05, 0.0, 0.0, 0.0]
+    velocity = [speed, 0.0, 0.0, 0.0, 0.0] if task.name == "panda-drum" else [0.0, speed, 0.0, 0.0, 0.0]
     config = task.default_config(
         desired_velocity=velocity, desired_force=[10.0], mode="position-force", duration=duration,
         gains=HybridGains(velocity=[16.0], position=[48.0], force_proportional=[0.5], force_integral=[15.0]))

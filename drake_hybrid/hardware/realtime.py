@@ -76,7 +76,8 @@ def _stats(values):
             "max": float(np.max(values))}
 
 
-def run_controller(station, lcm, duration, pacer=None, max_wait=None, initial_state=None, first_wait=None):
+def run_controller(station, lcm, duration, pacer=None, max_wait=None, initial_state=None, first_wait=None,
+                   wall_clock_stamps=False):
     """Run ``station`` paced by its status channel for ``duration`` s of ticks (module docstring).
 
     ``pacer(k)``, if given, is called before waiting for tick k's status (a memq stand-in for the
@@ -84,7 +85,9 @@ def run_controller(station, lcm, duration, pacer=None, max_wait=None, initial_st
     ``max_wait`` (default: the hardware config's max_status_age) runs anyway: the watchdog then
     decides (stale status: zero task torque). ``initial_state(station, context)`` may set the
     controller's states before initialization (the start's integrals and held torque).
-    ``first_wait`` (s, default ``max_wait``) bounds the wait for the first status."""
+    ``first_wait`` (s, default ``max_wait``) bounds the wait for the first status.
+    ``wall_clock_stamps``: stamp commands with the wall clock (epoch us), as drake-franka-driver
+    expects (it drops commands older than its --expire_sec)."""
     period = float(station.config.control_period)
     max_wait = float(station.hardware.max_status_age if max_wait is None else max_wait)
     arrived = [0]
@@ -119,7 +122,7 @@ def run_controller(station, lcm, duration, pacer=None, max_wait=None, initial_st
             station.safety.initialize_command(station.safety.GetMyMutableContextFromRoot(context))
         else:
             simulator.AdvanceTo(k * period + 0.5 * lead)
-        if station.publish_command(context):
+        if station.publish_command(context, utime=int(time.time() * 1e6) if wall_clock_stamps else None):
             published[k] = time.perf_counter()
         cost[k] = time.perf_counter() - arrivals[k]
     del subscription
