@@ -70,6 +70,19 @@ def test_lock_step_loop_reproduces_the_directly_wired_loop(drum, wrench_source):
     assert 0 <= delay["max"] <= 1e-6 + 1e-12
 
 
+def test_force_torque_bias_is_removed_on_the_controller_side(drum):
+    """A sensor offset on the robot side, the same bias configured on the controller side: the run is
+    the unbiased one; left uncorrected, the 2 N offset shows in the force the law sees."""
+    config = panda_config(drum, duration=0.1)
+    bias = [0.05, -0.02, 0.01, 1.0, -2.0, 0.5]
+    reference = run_hardware_loop(config, UNLIMITED_RATE)
+    corrected = run_hardware_loop(config, HardwareConfig(torque_rate_limit=1e9, force_torque_bias=bias), sensor_bias=bias)
+    assert np.max(np.abs(corrected.log["q"] - reference.log["q"])) < 1e-9
+    assert np.max(np.abs(corrected.log["force"] - reference.log["force"])) < 1e-6
+    uncorrected = run_hardware_loop(config, UNLIMITED_RATE, sensor_bias=bias)
+    assert np.max(np.abs(uncorrected.log["wrench"][0] - reference.log["wrench"][0])) > 1.0
+
+
 def test_the_hardware_loop_refuses_what_it_does_not_support(drum):
     config = panda_config(drum, duration=0.1)
     config.control_period = 0.0

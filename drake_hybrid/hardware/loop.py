@@ -112,7 +112,7 @@ def start_state(config):
 
 
 def run_hardware_loop(config, hardware=None, duration=None, lcm_url="memq://drake_hybrid_hil", fault=None,
-                      robot_hardware=None, connect_robot=True, record=False):
+                      robot_hardware=None, connect_robot=True, record=False, sensor_bias=None):
     """Run ``config`` as controller side + simulated robot over LCM in lock step (module docstring).
 
     ``fault`` (kind, message, time) -> message or None puts a ``MessageFaultRelay`` between the
@@ -132,7 +132,7 @@ def run_hardware_loop(config, hardware=None, duration=None, lcm_url="memq://drak
     plant_state, q0, held, reading, integrals = start_state(config)
 
     controller = build_controller_station(config, lcm, hardware, initial_positions=q0)
-    robot = build_robot_station(config, lcm, robot_hardware)
+    robot = build_robot_station(config, lcm, robot_hardware, sensor_bias=sensor_bias)
     relay = MessageFaultRelay(lcm, robot_hardware, hardware, fault) if fault is not None else None
     bucket, recorded = [], []
     recorders = [lcm.Subscribe(channel, lambda data, channel=channel: bucket.append((channel, data)))

@@ -134,8 +134,9 @@ class SimulatedDriver(LeafSystem):
         output.SetFromVector(torque + (self.gravity(context) if self.compensates_gravity else 0.0))
 
 
-def build_robot_station(config, lcm, hardware=None):
-    """The simulated robot of ``config`` behind LCM messages on ``lcm``. See the module docstring."""
+def build_robot_station(config, lcm, hardware=None, sensor_bias=None):
+    """The simulated robot of ``config`` behind LCM messages on ``lcm``. See the module docstring.
+    ``sensor_bias`` ([t; f], sensor frame) is added to every F/T reading (a real sensor's offset)."""
     hardware = (hardware or HardwareConfig()).validate()
     task, _, _, config = prepared(config)
     period = float(config.control_period)
@@ -176,7 +177,7 @@ def build_robot_station(config, lcm, hardware=None):
 
     force_torque = None
     if robot.tool_weld is not None:
-        force_torque = builder.AddNamedSystem("force_torque", ForceTorqueMessage(plant, robot.tool_weld))
+        force_torque = builder.AddNamedSystem("force_torque", ForceTorqueMessage(plant, robot.tool_weld, sensor_bias))
         builder.Connect(plant.get_reaction_forces_output_port(), force_torque.get_input_port(0))
         force_torque_publisher = builder.AddNamedSystem("force_torque_publisher", LcmPublisherSystem.Make(
             hardware.force_torque_channel, lcmt_force_torque, lcm, period, publish_offset=offset))
