@@ -216,6 +216,11 @@ def command_hardware(args):
     robot); run: the controller side against a real driver at --lcm-url."""
     if args.duration is not None and not (math.isfinite(args.duration) and args.duration > 0):
         raise UsageError(f"--duration must be a positive number of seconds, got {args.duration}")
+    if not (math.isfinite(args.wait) and args.wait >= 0):
+        raise UsageError(f"--wait must be a number of seconds >= 0, got {args.wait}")
+    if args.speed is not None and not math.isfinite(args.speed):
+        raise UsageError(f"--speed must be a finite number (m/s), got {args.speed}")
+    _check_output_paths(args)
     task = HARDWARE_TASKS[args.task]()
     speed = args.speed if args.speed is not None else (0.05 if args.mode == "hil" else 0.02)
     config = panda_config(task, duration=args.duration or {"hil": 2.0, "timing": 10.0, "run": 10.0}[args.mode],

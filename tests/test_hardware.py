@@ -250,3 +250,9 @@ def test_command_line_hardware(capsys):
     assert "nothing was commanded" in capsys.readouterr().err
     assert main(["hardware", "timing", "--lcm-url", "udpm://239.255.76.67:7667?ttl=0"]) == 2
     assert "memq://" in capsys.readouterr().err
+    for argv, flag in [(["--duration", "nan"], "--duration"), (["--duration", "-1"], "--duration"),
+                       (["--wait", "-1"], "--wait"), (["--speed", "inf"], "--speed"),
+                       (["--json", "/no/such/dir/a.json"], "--json")]:
+        assert main(["hardware", "hil"] + argv) == 2
+        error = capsys.readouterr().err.strip()
+        assert len(error.splitlines()) == 1 and flag in error, error

@@ -22,6 +22,7 @@ summary (keys as ``experiments.simulation``'s), the stop, and the message timing
 each phase of a tick took).
 """
 
+import dataclasses
 import time
 from dataclasses import dataclass, field
 from typing import Callable, Dict, Optional
@@ -124,8 +125,8 @@ def run_hardware_loop(config, hardware=None, duration=None, lcm_url="memq://drak
     hardware = (hardware or HardwareConfig()).validate()
     check_hardware_config(config)
     if fault is not None and robot_hardware is None:
-        robot_hardware = HardwareConfig(**{**hardware.__dict__, "status_channel": hardware.status_channel + "_ROBOT",
-                                           "force_torque_channel": hardware.force_torque_channel + "_ROBOT"})
+        robot_hardware = dataclasses.replace(hardware, status_channel=hardware.status_channel + "_ROBOT",
+                                             force_torque_channel=hardware.force_torque_channel + "_ROBOT")
     robot_hardware = robot_hardware or hardware
     duration = float(config.duration if duration is None else duration)
     lcm = DrakeLcm(lcm_url)
