@@ -21,9 +21,11 @@ from drake import lcmt_panda_command
 from pydrake.lcm import DrakeLcm
 
 from drake_hybrid.cli import main
+from drake_hybrid.control.gains import HybridGains
 from drake_hybrid.core.errors import ConfigError
 from drake_hybrid.experiments.simulation import simulate
 from drake_hybrid.hardware.controller_side import build_controller_station
+from drake_hybrid.hardware import loop as loop_module
 from drake_hybrid.hardware.loop import run_hardware_loop, start_state
 from drake_hybrid.hardware.messages import HardwareConfig, HardwareFault, Rejection
 from drake_hybrid.hardware.panda import panda_config, panda_drum_task, panda_table_task
@@ -208,6 +210,34 @@ def test_tracking_after_five_time_constants_matches_the_direct_loop(make_task, w
     assert run.stop is None
     for score in SCORES:
         assert abs(run.summary[score] - direct.summary[score]) <= 0.2, (score, run.summary[score], direct.summary[score])
+
+
+# -- gains changed at run time ---------------------------------------------------------------------------
+
+@pytest.mark.parametrize("bumpless", [True, False], ids=["bumpless", "naive"])
+def test_a_gain_change_at_run_time_does_not_jump(drum, bumpless, monkeypatch):
+    """K_v 16 -> 24, K_p 48 -> 96, K_fp 0.5 -> 1, K_fi 15 -> 30 at t = 0.2 s (position-force): with the
+    bumpless transfer the command's step at the change is no larger than the steps of the ticks
+    before it; keeping the old integrals instead (the naive switch) steps by more than 10 times that."""
+    new_gains = HybridGains(velocity=[24.0], position=[96.0], force_proportional=[1.0], force_integral=[30.0])
+    build = loop_module.build_controller_station
+
+    def station(*args, **kwargs):
+        built = build(*args, **kwargs)
+        built.bumpless = bumpless
+        return built
+
+    monkeypatch.setattr(loop_module, "build_controller_station", station)
+    run = run_hardware_loop(panda_config(drum, duration=0.25), UNLIMITED_RATE, gain_changes=[(0.2, new_gains)])
+    assert run.stop is None and [transfer["tick"] for transfer in run.controller.transfers] == [200]
+    t, command = run.log["wire_t"], run.log["wire_command"]
+    steps = np.max(np.abs(np.diff(command, axis=0)), axis=1)        # steps[i]: from command i to i + 1
+    at_change = steps[int(np.argmin(np.abs(t - 0.2))) - 1]
+    before = np.max(steps[100:198])
+    if bumpless:
+        assert at_change <= before
+    else:
+        assert at_change > 10 * before
 
 
 # -- real time and the command line --------------------------------------------------------------------

@@ -8,6 +8,7 @@
     LcmSubscriberSystem(lcmt_force_torque) ──►      │  ──sensor_wrench──► ForceTorqueConditioning ─►[filter]─┘   │
                                                     │  (or torque_external ──► ExternalTorqueWrench)              │
     ProfileSource / the task's source ──desired_*───┼────────────────────────────────────────────► (controller)  │
+                                   [with gain_changes: a HybridController per gain set ─► GainSelector ─► actuation]
                                                     └──watchdog_status──► TorqueCommandSafety ◄── DriverGravityCompensation ◄── actuation
                                                                                │ torque
                                                           PandaCommandSender(kTorque) ──► LcmPublisherSystem (forced only)
@@ -20,8 +21,9 @@ before the first valid status. Loggers carry the same names as the directly wire
 """
 
 import dataclasses
+import math
 from dataclasses import dataclass, field
-from typing import Dict, Optional
+from typing import Dict, List, Optional
 
 import numpy as np
 from drake import lcmt_force_torque, lcmt_panda_command, lcmt_panda_status
@@ -34,6 +36,7 @@ from pydrake.systems.primitives import LogVectorOutput
 from drake_hybrid.control.gains import ControlMode
 from drake_hybrid.core.errors import ConfigError
 from drake_hybrid.hardware.command import DriverGravityCompensation, TorqueCommandSafety
+from drake_hybrid.hardware.gain_change import GainSelector, bumpless_integrals
 from drake_hybrid.hardware.messages import HardwareConfig
 from drake_hybrid.hardware.watchdog import MessageWatchdog
 from drake_hybrid.hardware.wrench import ExternalTorqueWrench, ForceTorqueConditioning
@@ -66,6 +69,32 @@ class ControllerStation:
     conditioner: Optional[object] = None
     loggers: Dict[str, object] = field(default_factory=dict)
     lcm: object = None
+    controllers: List[object] = field(default_factory=list)     # one law per gain set (gain_changes)
+    gain_selector: Optional[object] = None
+    transfers: List[dict] = field(default_factory=list)          # the bumpless transfers made
+    bumpless: bool = True                                        # False: keep the integrals (for comparison)
+
+    def before_tick(self, root_context, tick):
+        """Make the bumpless transfer to the law that becomes active at ``tick`` (call before the
+        controller advances to it; a no-op without gain changes)."""
+        if self.gain_selector is None or tick not in self.gain_selector.change_ticks:
+            return
+        index = self.gain_selector.change_ticks.index(tick) + 1
+        old, new = self.controllers[index - 1], self.controllers[index]
+        old_context = old.GetMyContextFromRoot(root_context)
+        new_context = new.GetMyMutableContextFromRoot(root_context)
+        state = old_context.get_discrete_state(0).CopyToVector()
+        xi_slice, e_p_slice = old.integral_state_slices()
+        errors = {name: old.GetOutputPort(name).Eval(old_context) for name in ("velocity_error", "force_error")}
+        if self.bumpless:
+            xi, e_p = bumpless_integrals(old.validated_gains(), new.validated_gains(), state[xi_slice],
+                                         state[e_p_slice], errors["force_error"], errors["velocity_error"],
+                                         old.mode.integrates_position)
+        else:                                          # the naive switch: the old integrals as they are
+            xi, e_p = state[xi_slice], state[e_p_slice]
+        new_context.SetDiscreteState(0, np.concatenate([xi, e_p, state[e_p_slice.stop:]]))
+        self.transfers.append({"tick": tick, "time": tick * float(self.config.control_period), "xi": xi.tolist(),
+                               "position_error": e_p.tolist()})
 
     @property
     def controller_plant(self):
@@ -130,8 +159,11 @@ def prepared(config):
     return task, mode, constraint_space, config
 
 
-def build_controller_station(config, lcm, hardware=None, initial_positions=None, with_loggers=True):
-    """The controller's side of ``config`` on ``lcm`` (a DrakeLcm). See the module docstring."""
+def build_controller_station(config, lcm, hardware=None, initial_positions=None, with_loggers=True, gain_changes=()):
+    """The controller's side of ``config`` on ``lcm`` (a DrakeLcm). See the module docstring.
+
+    ``gain_changes``: [(time s, HybridGains), ...] in increasing time: a law per gain set, the
+    actuation taken from the one active at each tick, switched bumplessly (``gain_change``)."""
     hardware = (hardware or HardwareConfig()).validate()
     task, mode, constraint_space, config = prepared(config)
     period = float(config.control_period)
@@ -185,7 +217,26 @@ def build_controller_station(config, lcm, hardware=None, initial_positions=None,
     for name in ("desired_velocity", "desired_acceleration", "desired_force"):
         builder.Connect(source.GetOutputPort(name), controller.GetInputPort(name))
 
+    controllers, selector = [controller], None
     torque = controller.GetOutputPort("actuation")
+    if gain_changes:
+        times = [float(time) for time, _ in gain_changes]
+        if not all(time > 0 and math.isfinite(time) for time in times) or times != sorted(set(times)):
+            raise ConfigError(f"gain_changes: times must be positive, finite and increasing, got {times}")
+        selector = builder.AddNamedSystem("gain_selector", GainSelector(n, period, [round(t / period) for t in times]))
+        builder.Connect(torque, selector.GetInputPort("actuation_0"))
+        for index, (_, gains) in enumerate(gain_changes, start=1):
+            law = builder.AddNamedSystem(f"controller_{index}", make_controller(
+                dataclasses.replace(config, gains=gains), task, plant, plant, robot, constraint_space, mode, period,
+                True, False, False))
+            builder.Connect(wrench_output, law.get_measured_wrench_input_port())
+            builder.Connect(state, law.get_estimated_state_input_port())
+            for name in ("desired_velocity", "desired_acceleration", "desired_force"):
+                builder.Connect(source.GetOutputPort(name), law.GetInputPort(name))
+            builder.Connect(law.GetOutputPort("actuation"), selector.GetInputPort(f"actuation_{index}"))
+            controllers.append(law)
+        torque = selector.GetOutputPort("actuation")
+    actuation = torque
     if hardware.driver_compensates_gravity:
         gravity = builder.AddNamedSystem("driver_gravity", DriverGravityCompensation(plant, -1))
         builder.Connect(torque, gravity.GetInputPort("torque"))
@@ -213,8 +264,8 @@ def build_controller_station(config, lcm, hardware=None, initial_positions=None,
         diagnostics = LogVectorOutput(controller.GetOutputPort("diagnostics"), builder, log_period)
         for name, columns in controller.diagnostic_slices().items():
             loggers[name] = (diagnostics, columns)
-        for name in ("position_error", "actuation"):
-            loggers[name] = LogVectorOutput(controller.GetOutputPort(name), builder, log_period)
+        loggers["position_error"] = LogVectorOutput(controller.GetOutputPort("position_error"), builder, log_period)
+        loggers["actuation"] = LogVectorOutput(actuation, builder, log_period)
         for name in ("desired_velocity", "desired_force"):
             loggers[name] = LogVectorOutput(source.GetOutputPort(name), builder, log_period)
         loggers["state"] = LogVectorOutput(state, builder, log_period)
@@ -227,4 +278,5 @@ def build_controller_station(config, lcm, hardware=None, initial_positions=None,
     return ControllerStation(config=config, hardware=hardware, task=task, diagram=diagram, plant=plant, robot=robot,
                              controller=controller, watchdog=watchdog, safety=safety, command_publisher=publisher,
                              source=source, constraint_space=constraint_space, wrench_filter=wrench_filter,
-                             conditioner=conditioner, loggers=loggers, lcm=lcm)
+                             conditioner=conditioner, loggers=loggers, lcm=lcm, controllers=controllers,
+                             gain_selector=selector)

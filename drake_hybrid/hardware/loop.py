@@ -113,7 +113,7 @@ def start_state(config):
 
 
 def run_hardware_loop(config, hardware=None, duration=None, lcm_url="memq://drake_hybrid_hil", fault=None,
-                      robot_hardware=None, connect_robot=True, record=False, sensor_bias=None):
+                      robot_hardware=None, connect_robot=True, record=False, sensor_bias=None, gain_changes=()):
     """Run ``config`` as controller side + simulated robot over LCM in lock step (module docstring).
 
     ``fault`` (kind, message, time) -> message or None puts a ``MessageFaultRelay`` between the
@@ -132,7 +132,7 @@ def run_hardware_loop(config, hardware=None, duration=None, lcm_url="memq://drak
     lcm = DrakeLcm(lcm_url)
     plant_state, q0, held, reading, integrals = start_state(config)
 
-    controller = build_controller_station(config, lcm, hardware, initial_positions=q0)
+    controller = build_controller_station(config, lcm, hardware, initial_positions=q0, gain_changes=gain_changes)
     robot = build_robot_station(config, lcm, robot_hardware, sensor_bias=sensor_bias)
     relay = MessageFaultRelay(lcm, robot_hardware, hardware, fault) if fault is not None else None
     bucket, recorded = [], []
@@ -194,6 +194,7 @@ def run_hardware_loop(config, hardware=None, duration=None, lcm_url="memq://drak
         pump(lcm)
         t2 = time.perf_counter()
         recorded.append(bucket[:]), bucket.clear()
+        controller.before_tick(controller_context, k)
         controller_simulator.AdvanceTo(k * period + 0.5 * lead)
         if controller.publish_command(controller_context):
             published += 1

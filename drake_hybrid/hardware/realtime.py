@@ -121,6 +121,7 @@ def run_controller(station, lcm, duration, pacer=None, max_wait=None, initial_st
             simulator.Initialize()
             station.safety.initialize_command(station.safety.GetMyMutableContextFromRoot(context))
         else:
+            station.before_tick(context, k)
             simulator.AdvanceTo(k * period + 0.5 * lead)
         if station.publish_command(context, utime=int(time.time() * 1e6) if wall_clock_stamps else None):
             published[k] = time.perf_counter()
