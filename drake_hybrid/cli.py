@@ -6,6 +6,8 @@ commands:
   drake-hybrid sweep TASK --grid SPEC.yaml
                                 stability map / Monte Carlo sweep over config fields (Dask)
   drake-hybrid tasks            list the tasks
+  drake-hybrid hardware hil|timing|run
+                                the controller over Drake's Panda LCM messages (memq:// in tests)
 
 "drake-hybrid COMMAND --help" gives each command's options.
 
@@ -13,6 +15,9 @@ Bad input (a config field, a flag, a file) prints one line naming it and exits 2
 stops early (sensor fault, an error inside the simulation, Ctrl-C) writes what it logged up to
 the stop, prints why and exits 1. --traceback (or DRAKE_HYBRID_TRACEBACK=1) shows the full
 Python traceback instead.
+
+Size: one command per function (simulate, analyze, sweep, tasks, hardware) and the parser whose
+help the README's synopsis mirrors (tests/test_cli_help.py).
 """
 
 import argparse
@@ -26,6 +31,7 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 from pydrake.geometry import Meshcat
+from pydrake.lcm import DrakeLcm
 
 from drake_hybrid.analysis.linearization import linearize_continuous, linearize_discrete, shift_indices
 from drake_hybrid.control.gains import ControlMode
@@ -33,6 +39,11 @@ from drake_hybrid.core.progress import Stages
 from drake_hybrid.experiments.simulation import RunStopped, simulate
 from drake_hybrid.experiments.sweep import read_results, run_sweep
 from drake_hybrid.experiments.sweep_spec import SweepSpecError, load_spec
+from drake_hybrid.hardware.controller_side import build_controller_station
+from drake_hybrid.hardware.loop import compare_with_direct
+from drake_hybrid.hardware.messages import HardwareConfig
+from drake_hybrid.hardware.panda import panda_config, panda_drum_task, panda_table_task
+from drake_hybrid.hardware.realtime import replay_timing, run_controller
 from drake_hybrid.scenario.config import load_config
 from drake_hybrid.scenario.tasks import TASKS, get_task
 from drake_hybrid.viz.animation import set_task_camera
@@ -284,6 +295,50 @@ def _task_options_epilog():
     return "\n".join(lines)
 
 
+HARDWARE_TASKS = {"panda-drum": panda_drum_task, "panda-table": panda_table_task}
+
+
+def command_hardware(args):
+    """hil: lock-step loop vs the directly wired one; timing: a real-time run on memq:// (replayed
+    robot); run: the controller side against a real driver at --lcm-url."""
+    if args.duration is not None and not (math.isfinite(args.duration) and args.duration > 0):
+        raise UsageError(f"--duration must be a positive number of seconds, got {args.duration}")
+    if not (math.isfinite(args.wait) and args.wait >= 0):
+        raise UsageError(f"--wait must be a number of seconds >= 0, got {args.wait}")
+    if args.speed is not None and not math.isfinite(args.speed):
+        raise UsageError(f"--speed must be a finite number (m/s), got {args.speed}")
+    _check_output_paths(args)
+    task = HARDWARE_TASKS[args.task]()
+    speed = args.speed if args.speed is not None else (0.05 if args.mode == "hil" else 0.02)
+    config = panda_config(task, duration=args.duration or {"hil": 2.0, "timing": 10.0, "run": 10.0}[args.mode],
+                          wrist_sensor=args.wrench_source == "force_torque", speed=speed)
+    hardware = HardwareConfig(wrench_source=args.wrench_source).validate()
+    if args.mode == "hil":
+        figures = compare_with_direct(config, hardware)[0]
+    elif args.mode == "timing":
+        if not args.lcm_url.startswith("memq://"):
+            raise UsageError(f"--lcm-url: the timing run replays the robot in this process over memq://, got "
+                             f"{args.lcm_url!r}; use 'run' with a real driver")
+        timing, _ = replay_timing(config, hardware, seconds=config.duration, lcm_url=args.lcm_url)
+        figures = timing.summary
+    else:
+        lcm = DrakeLcm(args.lcm_url)
+        station = build_controller_station(config, lcm, hardware, initial_positions=task.joint_guess,
+                                           with_loggers=False)
+        print(f"waiting up to {args.wait:g} s for {hardware.status_channel} on {args.lcm_url} ...", file=sys.stderr)
+        timing = run_controller(station, lcm, config.duration, first_wait=args.wait, wall_clock_stamps=True)
+        if timing.summary["commands_published"] == 0:
+            print(f"drake-hybrid hardware: no valid status on {hardware.status_channel}; nothing was commanded",
+                  file=sys.stderr)
+            return 1
+        figures = timing.summary
+    text = json.dumps(figures, indent=2, default=str)
+    print(text)
+    if args.json:
+        Path(args.json).write_text(text + "\n")
+    return 0
+
+
 def make_parser():
     parser = argparse.ArgumentParser(prog="drake-hybrid", description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -350,6 +405,20 @@ def make_parser():
     sweep.add_argument("--plot", action="store_true", help="write the stability map / histograms (the spec's map:)")
     sweep.add_argument("--no-progress", action="store_true", help="no progress bar")
     sweep.set_defaults(func=command_sweep)
+    hardware = sub.add_parser(
+        "hardware", parents=[common], help="the controller over Drake's Panda LCM messages (hil, timing, run)")
+    hardware.add_argument("mode", choices=["hil", "timing", "run"],
+                          help="hil: lock-step memq loop vs the directly wired one; timing: real-time run on memq "
+                               "(replayed robot); run: against a real driver at --lcm-url")
+    hardware.add_argument("--task", choices=sorted(HARDWARE_TASKS), default="panda-drum")
+    hardware.add_argument("--duration", type=float, help="seconds (default: hil 2, timing 10, run 10)")
+    hardware.add_argument("--lcm-url", default="memq://drake_hybrid",
+                          help="LCM URL (timing: memq:// only; run: the driver's, e.g. udpm://239.255.76.67:7667?ttl=0)")
+    hardware.add_argument("--wrench-source", choices=["force_torque", "external_torque"], default="force_torque")
+    hardware.add_argument("--speed", type=float, help="m/s along the surface (default: hil 0.05, timing/run 0.02)")
+    hardware.add_argument("--wait", type=float, default=5.0, help="run: seconds to wait for the first status")
+    hardware.add_argument("--json", help="also write the figures to this JSON file")
+    hardware.set_defaults(func=command_hardware)
     tasks = sub.add_parser("tasks", parents=[common], help="list the tasks",
                            description="List the tasks and what each one does.")
     tasks.set_defaults(func=command_tasks)

@@ -84,8 +84,10 @@ def velocity_row_inertia(config, task, plant, constraint_space):
 
 
 def make_controller(config, task, plant, controller_plant, robot, constraint_space, mode, control_period,
-                    sample_lead, supervised, with_loggers):
-    """The law of ``config.controller``: Li & Sastry's HybridController or a baseline (control.baselines)."""
+                    sample_lead, supervised, with_loggers, plant_time_step=None):
+    """The law of ``config.controller``: Li & Sastry's HybridController or a baseline (control.baselines).
+    ``plant_time_step``: the step of the plant the law drives, for its joint damping (``control.damping``;
+    default ``plant.time_step()``; 0 for a real arm)."""
     if config.controller != "li-sastry":
         return make_baseline(config.controller, controller_plant, robot.end_effector_frame, robot.end_effector_point,
                              constraint_space, gains=config.gains, baseline=config.baseline,
@@ -97,7 +99,7 @@ def make_controller(config, task, plant, controller_plant, robot, constraint_spa
         safety=config.safety, guarded_move=config.supervision if supervised else None,
         sampled_diagnostics=with_loggers and control_period is not None,
         velocity_row_inertia=velocity_row_inertia(config, task, plant, constraint_space),
-        plant_time_step=plant.time_step())
+        plant_time_step=plant.time_step() if plant_time_step is None else plant_time_step)
 
 
 def build_scenario(config, meshcat=None, with_loggers=True, sampled_plant_outputs=True, controller_sample_lead=True):

@@ -59,6 +59,13 @@ def _point_in_world(body_poses, body_index, point_in_body):
     return X_WB.translation() + X_WB.rotation().matrix() @ point_in_body
 
 
+def reaction_force_slot(plant, joint):
+    """Where ``joint``'s entry is in the plant's reaction-forces output: its place among the plant's
+    joints (GetJointIndices order). Not its JointIndex: after RemoveJoint (welded gripper fingers)
+    the indices have gaps but the output has num_joints() entries."""
+    return [int(index) for index in plant.GetJointIndices()].index(int(joint.index()))
+
+
 def _point(point, owner):
     point = np.asarray(point, dtype=float)
     if point.shape != (3,):
@@ -212,7 +219,7 @@ def WristForceTorqueSensor_(T):
                                  f"{type(weld_joint).__name__}")
             self._plant = plant
             self._weld_joint = weld_joint
-            self._joint_index = int(weld_joint.index())
+            self._joint_index = reaction_force_slot(plant, weld_joint)
             tool = weld_joint.child_body()
             self._tool_index = tool.index()
             self._child_frame = weld_joint.frame_on_child()

@@ -1,0 +1,220 @@
+"""The torque command a real arm is sent: the driver's gravity convention, limits, and the stops.
+
+``DriverGravityCompensation``
+    tau_out = tau_in + sign g(q), g(q) the torque that holds the arm against gravity. The Franka
+    driver adds g(q) itself, so the controller's side sends the law's actuation minus g(q)
+    (sign -1) and the simulated driver adds it back (sign +1).
+``TorqueCommandSafety``
+    what is published: nothing before the first valid status; the command clipped to the torque
+    limits and rate-limited (|tau_k - tau_{k-1}| <= rate h); after a fault of the
+    ``MessageWatchdog`` a latched stop, logged once with its reason:
+
+    * STATUS_STALE: zero task torque (the driver's gravity compensation only), ramped at the rate
+      limit: with no fresh joint state there is nothing safe to servo on;
+    * FORCE_TORQUE_STALE: hold, a joint-space spring-damper K (q_stop - q) - D v about the
+      joints at the stop (the status is still fresh); escalates to STATUS_STALE if the status
+      goes stale too.
+"""
+
+import logging
+
+import numpy as np
+
+from pydrake.systems.framework import LeafSystem
+
+from drake_hybrid.control.sampling import tick_offset
+from drake_hybrid.core.kinematics import declare_plant_context_cache
+from drake_hybrid.hardware.messages import HardwareFault, Rejection
+from drake_hybrid.hardware.watchdog import STATUS_FIELDS
+
+LOGGER = logging.getLogger("drake_hybrid.hardware")
+
+
+class DriverGravityCompensation(LeafSystem):
+    """tau_out = tau_in + sign g(q).
+
+    .. pydrake_system::
+
+        name: DriverGravityCompensation
+        input_ports:
+        - torque
+        - estimated_state
+        output_ports:
+        - torque
+
+    g(q) = -CalcGravityGeneralizedForces (the torque that holds the arm still) of ``plant``, a
+    plant of the arm and tool only (its state is the arm's [q; v]): the controller's plant on both
+    sides (the simulated driver's own model of the arm, as the real driver has one).
+    """
+
+    def __init__(self, plant, sign):
+        LeafSystem.__init__(self)
+        if sign not in (-1, 1):
+            raise ValueError(f"DriverGravityCompensation: sign must be -1 or +1, got {sign}")
+        self._plant, self._sign = plant, float(sign)
+        n = plant.num_actuated_dofs()
+        self._torque_port = self.DeclareVectorInputPort("torque", n)
+        self._state_port = self.DeclareVectorInputPort("estimated_state", plant.num_multibody_states())
+        self._context_cache = declare_plant_context_cache(self, plant, self._state_port)
+        self._actuation_from_torque = np.linalg.inv(plant.MakeActuationMatrix())
+        self.DeclareVectorOutputPort("torque", n, self._calc)
+
+    def gravity(self, context):
+        """g(q) at the state on ``estimated_state``, in actuation order."""
+        plant_context = self._context_cache.Eval(context)
+        return self._actuation_from_torque @ -self._plant.CalcGravityGeneralizedForces(plant_context)
+
+    def _calc(self, context, output):
+        output.SetFromVector(self._torque_port.Eval(context) + self._sign * self.gravity(context))
+
+
+class TorqueCommandSafety(LeafSystem):
+    """The command that is published, and the latched stops (see the module docstring).
+
+    .. pydrake_system::
+
+        name: TorqueCommandSafety
+        input_ports:
+        - torque
+        - estimated_state
+        - watchdog_status
+        output_ports:
+        - torque
+        - enabled
+        - stop
+
+    ``torque`` (input) is the command the law asks for (already in the driver's gravity
+    convention), ``watchdog_status`` the ``MessageWatchdog``'s. The ``torque`` output is the
+    command decided at the last tick (state): the system ticks half a lead after the controller
+    (at k h - SAMPLE_LEAD h / 2), when the controller's new actuation is out, so the command of a
+    tick goes out in that tick. ``enabled`` is 0 until the first valid status (the runner publishes
+    only while it is 1); ``stop`` is [fault, time of the stop] (fault 0: running; time NaN).
+    ``initialize_command(context)`` decides the first command at the start (after the
+    controller's initialization).
+
+    Args:
+        num_joints: n.
+        period: the control period h (s).
+        torque_limits: |tau_i| bound per joint (N m).
+        torque_rate_limit: |d tau_i / dt| bound (N m / s), applied per tick as rate h.
+        hold_stiffness, hold_damping: K, D of the hold after an F/T stop.
+        initial_command: the command the first one is rate-limited against (default zeros: the
+            driver's own gravity compensation).
+    """
+
+    def __init__(self, num_joints, period, torque_limits, torque_rate_limit, hold_stiffness, hold_damping,
+                 initial_command=None):
+        LeafSystem.__init__(self)
+        self.num_joints = n = int(num_joints)
+        self.period = float(period)
+        self.torque_limits = np.asarray(torque_limits, dtype=float)
+        if self.torque_limits.shape != (n,):
+            raise ValueError(f"TorqueCommandSafety: torque_limits must have {n} entries, got {self.torque_limits.shape}")
+        self.max_step = float(torque_rate_limit) * self.period
+        self.hold_stiffness, self.hold_damping = float(hold_stiffness), float(hold_damping)
+        self._initial_command = np.zeros(n) if initial_command is None else np.asarray(initial_command, dtype=float)
+        self._torque_port = self.DeclareVectorInputPort("torque", n)
+        self._state_port = self.DeclareVectorInputPort("estimated_state", 2 * n)
+        self._status_port = self.DeclareVectorInputPort("watchdog_status", len(STATUS_FIELDS))
+        # State: [command (n); latched fault; stop time; ages and rejections at the stop (4); q at the stop (n)].
+        self._layout = {"command": slice(0, n), "fault": n, "time": n + 1, "details": slice(n + 2, n + 6),
+                        "hold": slice(n + 6, 2 * n + 6)}
+        self.DeclareDiscreteState(2 * n + 6)
+        offset = tick_offset(self.period) + 0.5 * (self.period - tick_offset(self.period))
+        self.DeclarePeriodicDiscreteUpdateEvent(self.period, offset, self._update)
+        self.DeclareVectorOutputPort("torque", n, self._calc_torque, prerequisites_of_calc={self.xd_ticket()})
+        self.DeclareVectorOutputPort("enabled", 1, self._calc_enabled)
+        self.DeclareVectorOutputPort("stop", 2, self._calc_stop, prerequisites_of_calc={self.xd_ticket()})
+
+    def set_initial_command(self, context, command):
+        """The command the first one is rate-limited against (e.g. what the driver holds at the start)."""
+        state = context.get_mutable_discrete_state(0).get_mutable_value()
+        state[self._layout["command"]] = np.asarray(command, dtype=float)
+
+    def initialize_command(self, context):
+        """Decide the command at the start from the inputs there (call after Simulator.Initialize)."""
+        state, reason = self._decide(context)
+        context.get_mutable_discrete_state(0).SetFromVector(state)
+        if reason is not None:
+            LOGGER.warning("%s", reason)
+
+    def SetDefaultState(self, context, state):
+        LeafSystem.SetDefaultState(self, context, state)
+        vector = np.full(2 * self.num_joints + 6, 0.0)
+        vector[self._layout["command"]] = self._initial_command
+        vector[self._layout["time"]] = np.nan
+        state.get_mutable_discrete_state(0).SetFromVector(vector)
+
+    def _decide(self, context):
+        """(state after this tick, the reason of a stop that starts now or None)."""
+        state = context.get_discrete_state(0).CopyToVector()
+        status = self._status_port.Eval(context)
+        current = HardwareFault(int(status[0]))
+        latched = HardwareFault(int(state[self._layout["fault"]]))
+        reason = None
+        stops = (HardwareFault.STATUS_STALE, HardwareFault.FORCE_TORQUE_STALE)
+        escalate = latched == HardwareFault.FORCE_TORQUE_STALE and current == HardwareFault.STATUS_STALE
+        if current in stops and (latched == HardwareFault.NONE or escalate):
+            state[self._layout["fault"]] = float(current)
+            state[self._layout["time"]] = context.get_time()
+            state[self._layout["details"]] = status[1:5]
+            if not escalate:
+                state[self._layout["hold"]] = self._state_port.Eval(context)[:self.num_joints]
+            latched = current
+            reason = stop_reason(state, self._layout)
+        fault = latched if latched != HardwareFault.NONE else current
+        if fault != HardwareFault.WAITING_FOR_STATUS:
+            state[self._layout["command"]] = self._command(context, fault, state)
+        return state, reason
+
+    def _command(self, context, fault, state):
+        previous = state[self._layout["command"]]
+        n = self.num_joints
+        if fault == HardwareFault.NONE:
+            wanted = self._torque_port.Eval(context)
+        elif fault == HardwareFault.STATUS_STALE:
+            wanted = np.zeros(n)
+        else:                                              # FORCE_TORQUE_STALE: hold the joints at the stop
+            x = self._state_port.Eval(context)
+            wanted = self.hold_stiffness * (state[self._layout["hold"]] - x[:n]) - self.hold_damping * x[n:]
+        if not np.all(np.isfinite(wanted)):
+            wanted = np.zeros(n)
+        wanted = np.clip(wanted, -self.torque_limits, self.torque_limits)
+        return np.clip(wanted, previous - self.max_step, previous + self.max_step)
+
+    def _calc_torque(self, context, output):
+        output.SetFromVector(context.get_discrete_state(0).get_value()[self._layout["command"]])
+
+    def _calc_enabled(self, context, output):
+        waiting = HardwareFault(int(self._status_port.Eval(context)[0])) == HardwareFault.WAITING_FOR_STATUS
+        output.SetFromVector([0.0 if waiting else 1.0])
+
+    def _calc_stop(self, context, output):
+        state = context.get_discrete_state(0).get_value()
+        output.SetFromVector([state[self._layout["fault"]], state[self._layout["time"]]])
+
+    def stop_reason(self, context):
+        """The latched stop's reason as a sentence (None while running)."""
+        state = context.get_discrete_state(0).CopyToVector()
+        if state[self._layout["fault"]] == 0:
+            return None
+        return stop_reason(state, self._layout)
+
+    def _update(self, context, discrete_state):
+        state, reason = self._decide(context)
+        if reason is not None:
+            LOGGER.warning("%s", reason)
+        discrete_state.get_mutable_vector(0).SetFromVector(state)
+
+
+def stop_reason(state, layout):
+    """The sentence that says why and when the controller stopped (from TorqueCommandSafety's state)."""
+    fault = HardwareFault(int(state[layout["fault"]]))
+    status_age, force_torque_age, status_rejection, force_torque_rejection = state[layout["details"]]
+    what = {HardwareFault.STATUS_STALE: f"robot status stale (newest valid one {status_age * 1e3:.1f} ms old); "
+                                        "sending zero task torque",
+            HardwareFault.FORCE_TORQUE_STALE: f"F/T reading stale (newest valid one {force_torque_age * 1e3:.1f} ms "
+                                              "old); holding the joints"}[fault]
+    rejected = [f"last rejected {kind} message: {Rejection(int(code)).name.lower().replace('_', ' ')}"
+                for kind, code in (("status", status_rejection), ("F/T", force_torque_rejection)) if code]
+    return f"stop at t = {state[layout['time']]:.4f} s: {what}" + (f" ({'; '.join(rejected)})" if rejected else "")

@@ -1,0 +1,209 @@
+"""The controller side's view of the robot: the newest *valid* status and F/T reading, and how old
+they are.
+
+``MessageWatchdog`` reads the raw LCM messages (``lcmt_panda_status``, ``lcmt_force_torque``, as
+Python objects from ``LcmSubscriberSystem``) and keeps, per context, the newest accepted one of each.
+A message is accepted when it is new (a timestamp other than the newest accepted one), in order
+(not older), of the arm's size and finite in every field; otherwise it is rejected (the reason is
+kept) and the held values age. A message's age is measured on the controller's clock::
+
+    age(t) = (t - arrival) + (latency - latency_0)       latency = arrival - timestamp
+
+where ``arrival`` is the controller time at which the message was accepted and ``latency_0`` the
+latency of the first accepted message (the two clocks' offset; in the lock-step loop both are the
+simulation clock and latency_0 is the publish lead, a nanosecond). So a stream that stops, a
+timestamp that stops advancing and a timestamp that falls behind all make the age grow.
+"""
+
+import math
+
+import numpy as np
+
+from pydrake.common.value import AbstractValue
+from pydrake.systems.framework import LeafSystem
+
+from drake_hybrid.control.sampling import tick_offset
+from drake_hybrid.core.kinematics import declare_cached_value
+from drake_hybrid.core.linalg import all_finite
+from drake_hybrid.hardware.messages import HardwareFault, Rejection
+
+# Record layout (one discrete state group per message kind).
+SEEN, STAMP, ARRIVAL, LATENCY, OFFSET, REJECTION, VALUES = range(7)
+# Layout of the ``watchdog_status`` output.
+STATUS_FIELDS = ("fault", "status_age", "force_torque_age", "status_rejection", "force_torque_rejection")
+
+
+def status_fields(message, n):
+    """(timestamp s, values [q; v; tau_ext], rejection) of an lcmt_panda_status; None if it is the
+    empty message a subscriber holds before the first one arrives."""
+    if message.num_joints == 0 and message.utime == 0:
+        return None
+    if message.num_joints != n or len(message.joint_position) != n:
+        return message.utime * 1e-6, None, Rejection.WRONG_SIZE
+    values = np.concatenate([message.joint_position, message.joint_velocity, message.joint_torque_external])
+    if values.shape != (3 * n,):
+        return message.utime * 1e-6, None, Rejection.WRONG_SIZE
+    if not all_finite(values):
+        return message.utime * 1e-6, None, Rejection.NON_FINITE
+    return message.utime * 1e-6, values, Rejection.NONE
+
+
+def force_torque_fields(message):
+    """(timestamp s, [tx, ty, tz, fx, fy, fz], rejection) of an lcmt_force_torque; None for the
+    all-zero message a subscriber holds before the first one arrives."""
+    values = np.array([message.tx, message.ty, message.tz, message.fx, message.fy, message.fz])
+    if message.timestamp == 0 and not np.any(values):
+        return None
+    if not all_finite(values):
+        return message.timestamp * 1e-6, None, Rejection.NON_FINITE
+    return message.timestamp * 1e-6, values, Rejection.NONE
+
+
+def accept(record, fields, now):
+    """The record after ``fields`` (status_fields / force_torque_fields) arrived at ``now``."""
+    if fields is None:
+        return record
+    stamp, values, rejection = fields
+    seen = record[SEEN] > 0
+    if seen and stamp == record[STAMP]:
+        return record                                   # the same message again: nothing new
+    record = record.copy()
+    if seen and stamp < record[STAMP]:
+        rejection = Rejection.OUT_OF_ORDER
+    if rejection != Rejection.NONE:
+        record[REJECTION] = float(rejection)
+        return record
+    latency = now - stamp
+    record[SEEN], record[STAMP], record[ARRIVAL], record[LATENCY] = 1.0, stamp, now, latency
+    record[OFFSET] = record[OFFSET] if seen else latency
+    record[VALUES:] = values
+    return record
+
+
+def age(record, now):
+    """How old the record's newest accepted message is at ``now`` (inf if none was accepted)."""
+    if record[SEEN] <= 0:
+        return math.inf
+    return (now - record[ARRIVAL]) + (record[LATENCY] - record[OFFSET])
+
+
+class MessageWatchdog(LeafSystem):
+    """The newest valid robot status and F/T reading, their ages, and the fault they imply.
+
+    .. pydrake_system::
+
+        name: MessageWatchdog
+        input_ports:
+        - lcmt_panda_status
+        - lcmt_force_torque (with use_force_torque)
+        output_ports:
+        - estimated_state
+        - torque_external
+        - sensor_wrench
+        - watchdog_status
+
+    ``estimated_state`` is [q; v] of the newest accepted status (``initial_positions`` and zero
+    velocity before the first), ``torque_external`` its external-torque estimate, ``sensor_wrench``
+    the newest accepted F/T reading [t; f] (sensor frame, as sent). ``watchdog_status`` is
+    [fault, status age, F/T age, status rejection, F/T rejection] (``STATUS_FIELDS``; fault a
+    ``HardwareFault``, rejections ``Rejection`` codes of the last rejected message). The outputs
+    take a message in the tick it arrives (they read the input ports); the periodic update at the
+    control ticks stores it.
+
+    Args:
+        num_joints: n.
+        period: the control period h (s); the watchdog ticks with the controller.
+        max_status_age, max_force_torque_age: s; an older status is STATUS_STALE, an older F/T
+            reading FORCE_TORQUE_STALE.
+        use_force_torque: whether an F/T channel is read (else no ``lcmt_force_torque`` input).
+        initial_positions: q before the first status (default zeros).
+    """
+
+    def __init__(self, num_joints, period, max_status_age, max_force_torque_age, use_force_torque=True,
+                 initial_positions=None, status_type=None, force_torque_type=None):
+        LeafSystem.__init__(self)
+        self.num_joints = n = int(num_joints)
+        self.period = float(period)
+        self.max_status_age = float(max_status_age)
+        self.max_force_torque_age = float(max_force_torque_age)
+        self.use_force_torque = bool(use_force_torque)
+        self._initial_state = np.concatenate([np.zeros(n) if initial_positions is None
+                                              else np.asarray(initial_positions, dtype=float), np.zeros(n)])
+        self._status_port = self.DeclareAbstractInputPort("lcmt_panda_status", AbstractValue.Make(status_type()))
+        self._force_torque_port = None
+        if self.use_force_torque:
+            self._force_torque_port = self.DeclareAbstractInputPort("lcmt_force_torque",
+                                                                    AbstractValue.Make(force_torque_type()))
+        self.DeclareDiscreteState(VALUES + 3 * n)
+        self.DeclareDiscreteState(VALUES + 6)
+        self.DeclarePeriodicDiscreteUpdateEvent(self.period, tick_offset(self.period), self._update)
+        self.DeclareInitializationDiscreteUpdateEvent(self._update)
+        # The records as of now (state + what is on the inputs), computed once per change of either.
+        self._records = declare_cached_value(
+            self, "records", lambda context: (self._status_record_now(context), self._force_torque_record_now(context)),
+            {self.time_ticket(), self.xd_ticket(), self.all_input_ports_ticket()})
+        self.DeclareVectorOutputPort("estimated_state", 2 * n, self._calc_state)
+        self.DeclareVectorOutputPort("torque_external", n, self._calc_torque_external)
+        self.DeclareVectorOutputPort("sensor_wrench", 6, self._calc_sensor_wrench)
+        self.DeclareVectorOutputPort("watchdog_status", len(STATUS_FIELDS), self._calc_status)
+
+    def get_status_input_port(self):
+        return self._status_port
+
+    def get_force_torque_input_port(self):
+        return self._force_torque_port
+
+    # -- the records as of now (state + what is on the inputs) -----------------------------------
+    def _status_record(self, context):
+        return self._records.Eval(context)[0]
+
+    def _force_torque_record(self, context):
+        return self._records.Eval(context)[1]
+
+    def _status_record_now(self, context):
+        fields = status_fields(self._status_port.Eval(context), self.num_joints)
+        return accept(context.get_discrete_state(0).CopyToVector(), fields, context.get_time())
+
+    def _force_torque_record_now(self, context):
+        record = context.get_discrete_state(1).CopyToVector()
+        if self._force_torque_port is None:
+            return record
+        return accept(record, force_torque_fields(self._force_torque_port.Eval(context)), context.get_time())
+
+    def status(self, context):
+        """{name: value} of ``watchdog_status`` at ``context`` (fault as a HardwareFault)."""
+        values = self.GetOutputPort("watchdog_status").Eval(context)
+        status = dict(zip(STATUS_FIELDS, values))
+        status["fault"] = HardwareFault(int(status["fault"]))
+        return status
+
+    def _calc_state(self, context, output):
+        record = self._status_record(context)
+        n = self.num_joints
+        output.SetFromVector(record[VALUES:VALUES + 2 * n] if record[SEEN] > 0 else self._initial_state)
+
+    def _calc_torque_external(self, context, output):
+        n = self.num_joints
+        output.SetFromVector(self._status_record(context)[VALUES + 2 * n:])
+
+    def _calc_sensor_wrench(self, context, output):
+        output.SetFromVector(self._force_torque_record(context)[VALUES:])
+
+    def _calc_status(self, context, output):
+        now = context.get_time()
+        status, force_torque = self._status_record(context), self._force_torque_record(context)
+        status_age, force_torque_age = age(status, now), age(force_torque, now)
+        fault = HardwareFault.NONE
+        if status[SEEN] <= 0:
+            fault = HardwareFault.WAITING_FOR_STATUS
+        elif status_age > self.max_status_age:
+            fault = HardwareFault.STATUS_STALE
+        elif self.use_force_torque and force_torque_age > self.max_force_torque_age:
+            fault = HardwareFault.FORCE_TORQUE_STALE
+        output.SetFromVector([float(fault), status_age, force_torque_age if self.use_force_torque else 0.0,
+                              status[REJECTION], force_torque[REJECTION]])
+
+    def _update(self, context, discrete_state):
+        status, force_torque = self._records.Eval(context)
+        discrete_state.get_mutable_vector(0).SetFromVector(status)
+        discrete_state.get_mutable_vector(1).SetFromVector(force_torque)
