@@ -31,6 +31,7 @@ from pydrake.systems.scalar_conversion import TemplateSystem
 from drake_hybrid.control.gains import ControlMode, HybridGains
 from drake_hybrid.control.phases import ContactPhase
 from drake_hybrid.control.sampling import SAMPLE_LEAD
+from drake_hybrid.control.fast_law import FastLaw
 from drake_hybrid.control.law import ControlSolution, LawConstants, evaluate_law
 from drake_hybrid.control.safety import SafetyConfig, warn_singularity
 from drake_hybrid.core.errors import DimensionError
@@ -198,11 +199,14 @@ def HybridController_(T):
                 changed the integrals (which runs the law twice per period).
                 Off by default: the stored copy adds states with zero
                 multipliers to a discrete-time linearization.
+            fast_law: for T = float, evaluate the law through its compiled
+                float path (``fast_law``; the same law, equal to 1e-12) when
+                numba is available; False = the generic ``law.evaluate_law``.
         """
 
         def _construct(self, plant, end_effector_frame, end_effector_point, constraint_space, gains=None,
                        mode=ControlMode.VELOCITY_FORCE, control_period=None, sample_lead=True, safety=None,
-                       guarded_move=None, sampled_diagnostics=False, converter=None):
+                       guarded_move=None, sampled_diagnostics=False, fast_law=True, converter=None):
             # Every argument as given, for scalar conversion (_construct_copy): one added later cannot
             # be forgotten there.
             arguments = locals()
@@ -320,6 +324,8 @@ def HybridController_(T):
                                              prerequisites_of_calc={self.xd_ticket()})
             self.DeclareVectorOutputPort("position_error", k, self._calc_position_error,
                                          prerequisites_of_calc={state_ticket})
+            # The float fast path (control/fast_law.py): the same law compiled; None = the generic law.
+            self.fast_law = FastLaw.build(self, self._law, constraint_space) if T == float and fast_law else None
 
         def _construct_copy(self, other, converter=None):
             Impl._construct(self, **other._arguments, converter=converter)
@@ -411,10 +417,16 @@ def HybridController_(T):
             desired_acceleration = self._acceleration_port.Eval(context)
             desired_force = self._force_port.Eval(context)
             self._check_finite_commands(desired_velocity, desired_acceleration, desired_force)
-            solution = evaluate_law(
-                self._law, self.constraint_space, self.kinematics.evaluate(plant_context), self._plant, plant_context,
-                self._forces_cache.Eval(context).forces, self._integrals(context), desired_velocity,
-                desired_acceleration, desired_force, self._wrench_port.Eval(context), self._contact_phase(context))
+            solution = None
+            if self.fast_law is not None:
+                solution = self.fast_law.evaluate(
+                    plant_context, self._forces_cache.Eval(context).forces, self._integrals(context), desired_velocity,
+                    desired_acceleration, desired_force, self._wrench_port.Eval(context), self._contact_phase(context))
+            if solution is None:
+                solution = evaluate_law(
+                    self._law, self.constraint_space, self.kinematics.evaluate(plant_context), self._plant,
+                    plant_context, self._forces_cache.Eval(context).forces, self._integrals(context), desired_velocity,
+                    desired_acceleration, desired_force, self._wrench_port.Eval(context), self._contact_phase(context))
             if solution.singularity_damping > 0:
                 warn_singularity(self, solution.smallest_singular_value, self._max_joint_acceleration)
             return solution
