@@ -496,9 +496,9 @@ def saturate(out, base_torque, reals, ints):
     scale = max(scale, 0.0)
     clipped = False
     for i in range(n):
+        clipped = clipped or abs(base[i]) > limits[i]
         value = base[i] + scale * (actuation[i] - base[i])
         if abs(value) > limits[i]:
-            clipped = True
             value = math.copysign(limits[i], value) if value != 0.0 else 0.0
         out[i] = value
     return scale, clipped
