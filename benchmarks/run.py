@@ -123,13 +123,24 @@ def markdown(results):
              f"Drake {m['drake']}, numpy {m['numpy']}. Ratios are within this run; the timed evaluations of "
              "the two controllers are interleaved sample by sample.", "",
              "## Controller tick (one fresh float evaluation of the torque output)", "",
-             "| robot | n | m | controller us (median / p95) | sampled update us | IDC us (median / p95) | ratio (median / p95) |",
-             "|---|---:|---:|---:|---:|---:|---:|"]
+             "| robot | n | m | controller us (median / p95 / p99 / max) | generic law us | sampled update us | "
+             "IDC us (median / p95) | ratio (median / p95) |",
+             "|---|---:|---:|---:|---:|---:|---:|---:|"]
     for name, r in results["robots"].items():
         c, i, u = r["controller_tick_us"], r["idc_tick_us"], r["sampled_update_us"]
-        lines.append(f"| {name} | {r['joints']} | {r['force_rows']} | {c['median_us']:.1f} / {c['p95_us']:.1f} | "
+        g = r.get("generic_tick_us", {}).get("median_us", float("nan"))
+        lines.append(f"| {name} | {r['joints']} | {r['force_rows']} | {c['median_us']:.1f} / {c['p95_us']:.1f} / "
+                     f"{c.get('p99_us', float('nan')):.1f} / {c.get('max_us', float('nan')):.0f} | {g:.1f} | "
                      f"{u['median_us']:.1f} | {i['median_us']:.1f} / {i['p95_us']:.1f} | "
                      f"{r['tick_ratio']['median']:.1f} / {r['tick_ratio']['p95']:.1f} |")
+    compile_ = results.get("compile")
+    if compile_:
+        lines += ["", "Fast path (control/fast_law.py, numba) first tick, in fresh processes: "
+                  + "; ".join(f"{run} cache: " + ", ".join(f"{name} {v['first_tick_s']:.2f} s (compile or load "
+                                                          f"{v['compile_or_load_s']:.2f} s)" for name, v in r.items())
+                              for run, r in compile_.items())
+                  + ". Cold: empty numba cache, the first controller compiles the kernels and its constraint, a "
+                  "second constraint only its generated module; cached: the same processes again."]
     lines += ["", "Robots: " + "; ".join(f"**{k}** {v['description']}" for k, v in results["robots"].items()) + ".",
               "IDC: Drake's C++ `InverseDynamicsController` (with reference acceleration) on the same plant. "
               "Sampled update: the 1 kHz controller's periodic discrete update (law + integrals), timed in its own "
@@ -220,6 +231,8 @@ def main(argv=None):
         print(f"tick {name:10s} n={r['joints']} controller {r['controller_tick_us']['median_us']:7.1f} us "
               f"(p95 {r['controller_tick_us']['p95_us']:.1f}), IDC {r['idc_tick_us']['median_us']:5.1f} us, "
               f"ratio {r['tick_ratio']['median']:.1f}")
+    results["compile"] = tick.compile_times()
+    print(f"fast-law first tick: cold {results['compile']['cold']}, cached {results['compile']['cached']}")
     for arm in ("ur5e", "panda"):
         for rows in SCALING_ROWS:
             r = tick.measure_rows(arm, rows, samples=row_samples, warmup=row_samples // 10)

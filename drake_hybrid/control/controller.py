@@ -416,13 +416,13 @@ def HybridController_(T):
             desired_velocity = self._velocity_port.Eval(context)
             desired_acceleration = self._acceleration_port.Eval(context)
             desired_force = self._force_port.Eval(context)
-            self._check_finite_commands(desired_velocity, desired_acceleration, desired_force)
             solution = None
-            if self.fast_law is not None:
+            if self.fast_law is not None:              # None: a check failed, the generic law raises (or copes)
                 solution = self.fast_law.evaluate(
                     plant_context, self._forces_cache.Eval(context).forces, self._integrals(context), desired_velocity,
                     desired_acceleration, desired_force, self._wrench_port.Eval(context), self._contact_phase(context))
             if solution is None:
+                self._check_finite_commands(desired_velocity, desired_acceleration, desired_force)
                 solution = evaluate_law(
                     self._law, self.constraint_space, self.kinematics.evaluate(plant_context), self._plant,
                     plant_context, self._forces_cache.Eval(context).forces, self._integrals(context), desired_velocity,

@@ -41,7 +41,8 @@ def compiled(function):
 I_N, I_D, I_M, I_K, I_CHART, I_POSITION, I_IMPEDANCE, I_KERNEL, I_ANTI_WINDUP, I_GUARDED = range(10)
 (I_OFFSET_KV, I_OFFSET_KP, I_OFFSET_KFP, I_OFFSET_KFI, I_OFFSET_MASK, I_OFFSET_B_INVERSE, I_OFFSET_LIMITS,
  I_OFFSET_POINT, I_OFFSET_CHART, I_OFFSET_BASIS, I_OFFSET_HALF_LOWER) = range(10, 21)
-INT_SIZE = 21
+I_CONFIGURATION = 21          # size of the chart's configuration x
+INT_SIZE = 22
 # -- scalars at the start of ``reals`` -------------------------------------------------------------
 (R_RANK_TOLERANCE, R_KERNEL_TOLERANCE, R_INVERTIBILITY_TOLERANCE, R_CHART_TOLERANCE, R_CONSTRAINT_FREQUENCY,
  R_NULL_SPACE_DAMPING, R_SINGULARITY_THRESHOLD, R_MAX_ACCELERATION, R_APPROACH_SPEED, R_APPROACH_GAIN) = range(10)
@@ -563,6 +564,8 @@ def law_kernel(x, nu, J, bias, C, E_f, curvature, E_f_dot, E_p, E_p_dot_nu, v, d
     K_fi = reals[ints[I_OFFSET_KFI]:ints[I_OFFSET_KFI] + m * m].reshape((m, m))
     in_contact = phase == PHASE_CONTACT
 
+    if not (all_finite(desired_velocity) and all_finite(desired_acceleration) and all_finite(desired_force)):
+        return FALLBACK, out                                           # the controller names the port
     # E_p, E = [E_p; E_f] and the checks of ConstraintSpace.evaluate
     if rank_margin_of_rows(E_f) < reals[R_RANK_TOLERANCE] or not all_finite(E_f):
         return FALLBACK, out
@@ -680,3 +683,78 @@ def law_kernel(x, nu, J, bias, C, E_f, curvature, E_f_dot, E_p, E_p_dot_nu, v, d
     torque = (base_torque + matvec(J_T, matvec(Lambda, task_rhs)) + tau_f
               - matvec(null_space_transpose, matvec(M, reals[R_NULL_SPACE_DAMPING] * v)))
     return finish(out, torque, base_torque, reals, ints), out
+
+
+# ------------------------------------------------------------------------------------------------
+# The hand-over between the generated constraint module and the law: one scratch vector
+# ------------------------------------------------------------------------------------------------
+# The generated module (fast_law.py) writes x, nu, J, J-dot q-dot and the constraint terms into
+# ``terms``; ``law_from_terms`` reads them. So a new constraint compiles only its own small module,
+# not the law again (numba re-optimizes everything a compiled function calls).
+
+def terms_size(ints):
+    """Size of the scratch vector (Python: called at construction)."""
+    n, d, m, k, configuration = ints[I_N], ints[I_D], ints[I_M], ints[I_K], ints[I_CONFIGURATION]
+    return configuration + d + d * n + d + m + m * d + m + m * d + k * d + k
+
+
+@compiled
+def store_terms(terms, x, nu, J, bias, C, E_f, curvature, E_f_dot, E_p, E_p_dot_nu, ints):
+    n, d, m, k, configuration = ints[I_N], ints[I_D], ints[I_M], ints[I_K], ints[I_CONFIGURATION]
+    s = 0
+    terms[s:s + configuration] = x
+    s += configuration
+    terms[s:s + d] = nu
+    s += d
+    for i in range(d):
+        for j in range(n):
+            terms[s + i * n + j] = J[i, j]
+    s += d * n
+    terms[s:s + d] = bias
+    s += d
+    terms[s:s + m] = C
+    s += m
+    for i in range(m):
+        for j in range(d):
+            terms[s + i * d + j] = E_f[i, j]
+    s += m * d
+    terms[s:s + m] = curvature
+    s += m
+    if E_f_dot.shape[0] == m:
+        for i in range(m):
+            for j in range(d):
+                terms[s + i * d + j] = E_f_dot[i, j]
+    s += m * d
+    if E_p.shape[0] == k:
+        for i in range(k):
+            for j in range(d):
+                terms[s + i * d + j] = E_p[i, j]
+        terms[s + k * d:s + k * d + k] = E_p_dot_nu
+
+
+@compiled
+def law_from_terms(terms, v, desired_velocity, desired_acceleration, desired_force, wrench, integrals, phase, M,
+                   base_torque, reals, ints):
+    """``law_kernel`` on the quantities ``store_terms`` wrote."""
+    n, d, m, k, configuration = ints[I_N], ints[I_D], ints[I_M], ints[I_K], ints[I_CONFIGURATION]
+    s = 0
+    x = terms[s:s + configuration]
+    s += configuration
+    nu = terms[s:s + d]
+    s += d
+    J = terms[s:s + d * n].reshape((d, n))
+    s += d * n
+    bias = terms[s:s + d]
+    s += d
+    C = terms[s:s + m]
+    s += m
+    E_f = terms[s:s + m * d].reshape((m, d))
+    s += m * d
+    curvature = terms[s:s + m]
+    s += m
+    E_f_dot = terms[s:s + m * d].reshape((m, d))
+    s += m * d
+    E_p = terms[s:s + k * d].reshape((k, d))
+    E_p_dot_nu = terms[s + k * d:s + k * d + k]
+    return law_kernel(x, nu, J, bias, C, E_f, curvature, E_f_dot, E_p, E_p_dot_nu, v, desired_velocity,
+                      desired_acceleration, desired_force, wrench, integrals, phase, M, base_torque, reals, ints)

@@ -35,7 +35,6 @@ import sympy
 from pydrake.multibody.tree import JacobianWrtVariable
 
 from drake_hybrid.control.gains import ControlMode
-from drake_hybrid.control.law import ControlSolution
 from drake_hybrid.core.charts import EulerZXZChart, PlanarChart, PoseChart
 from drake_hybrid.core.constraints import SelectingConstraint
 from drake_hybrid.core.projections import GivenVelocityProjection, KernelVelocityProjection
@@ -111,7 +110,7 @@ def generate_source(space):
     else:
         return None
     parts = [f"import numpy as np\nfrom math import {_FUNCTIONS}\nfrom numba import njit\n",
-             "from drake_hybrid.control.fast_kernels import law_kernel, task_kinematics\n"]
+             "from drake_hybrid.control.fast_kernels import store_terms, task_kinematics\n"]
     for i, piece in enumerate(pieces):
         parts.append(_piece_source(f"_terms_{i}", _piece_terms(piece, projection, chart), chart))
     call = "    C, E_f, curvature, E_f_dot, E_p, E_p_dot_nu = _terms_{}(x, nu)"
@@ -128,14 +127,12 @@ def generate_source(space):
         body += ["    else:", "    " + call.format(0)]
     parts.append("\n".join(
         ["@njit(cache=True)",
-         "def tick(X, J_g, A_bias, v, desired_velocity, desired_acceleration, desired_force, wrench, integrals, phase,",
-         "         M, base_torque, reals, ints):",
+         "def terms_into(terms, X, J_g, A_bias, v, reals, ints):",
          "    ok, x, nu, J, bias = task_kinematics(X, J_g, A_bias, v, reals, ints)",
          "    if not ok:",
-         "        return 1, np.zeros(1)"] + body +
-        ["    return law_kernel(x, nu, J, bias, C, E_f, curvature, E_f_dot, E_p, E_p_dot_nu, v, desired_velocity,",
-         "                      desired_acceleration, desired_force, wrench, integrals, phase, M, base_torque, reals,",
-         "                      ints)"]))
+         "        return 1"] + body +
+        ["    store_terms(terms, x, nu, J, bias, C, E_f, curvature, E_f_dot, E_p, E_p_dot_nu, ints)",
+         "    return 0"]))
     return "\n\n\n".join(parts) + "\n"
 
 
@@ -202,7 +199,8 @@ def pack_constants(controller, law, space):
     ints[:kernels.I_GUARDED + 1] = [n, d, m, k, kind, int(law.mode.integrates_position),
                                     int(law.mode is ControlMode.IMPEDANCE_FORCE), int(kernel), int(law.anti_windup),
                                     int(law.approach_speed is not None)]
-    ints[kernels.I_OFFSET_KV:] = offsets
+    ints[kernels.I_OFFSET_KV:kernels.I_OFFSET_HALF_LOWER + 1] = offsets
+    ints[kernels.I_CONFIGURATION] = chart.configuration_size
     return np.concatenate(reals), ints
 
 
@@ -224,7 +222,9 @@ class FastLaw:
     """
 
     def __init__(self, module, reals, ints, controller):
-        self._tick = module.tick
+        self._terms_into = module.terms_into
+        self._law = kernels.law_from_terms
+        self._terms = np.zeros(kernels.terms_size(ints))         # scratch, used within one evaluation only
         self._finish = kernels.finish_inverse_dynamics
         self.reals, self.ints = reals, ints
         n, d = controller.num_joints, controller.task_size
@@ -276,8 +276,11 @@ class FastLaw:
             base = plant.CalcInverseDynamics(plant_context, self._zero_acceleration, forces)
         first = self.compile_seconds is None
         start = time.perf_counter() if first else 0.0
-        status, out = self._tick(X, J_g, A_bias, v, desired_velocity, desired_acceleration, desired_force, wrench,
-                                 integrals, int(phase), M, base, self.reals, self.ints)
+        if self._terms_into(self._terms, X, J_g, A_bias, v, self.reals, self.ints) != 0:
+            self.fallbacks += 1                       # the chart's singularity: the generic law raises
+            return None
+        status, out = self._law(self._terms, v, desired_velocity, desired_acceleration, desired_force, wrench,
+                                integrals, int(phase), M, base, self.reals, self.ints)
         if first:
             self.compile_seconds = time.perf_counter() - start
         if status == kernels.NEEDS_INVERSE_DYNAMICS:
@@ -293,24 +296,41 @@ class FastLaw:
         return self._solution(out, phase)
 
     def _solution(self, out, phase):
-        (actuation, velocity_error, force_error, constraint_value, projected_velocity, force, tangential_force,
-         force_integral_rate, position_error_rate) = (out[s] for s in self._slices)
-        s = self._scalars
-        solution = ControlSolution()
-        solution.actuation = actuation
-        solution.velocity_error = velocity_error
-        solution.force_error = force_error
-        solution.constraint_value = constraint_value
-        solution.projected_velocity = projected_velocity
-        solution.force = force
-        solution.tangential_force = tangential_force
-        solution.force_integral_rate = force_integral_rate
-        solution.position_error_rate = position_error_rate
-        solution.wrench_valid = bool(out[s + kernels.S_WRENCH_VALID])
-        solution.contact_phase = int(phase)
-        solution.saturation_scale = float(out[s + kernels.S_SCALE])
-        solution.actuator_clipped = bool(out[s + kernels.S_CLIPPED])
-        sigma_min = float(out[s + kernels.S_SIGMA_MIN])
-        solution.smallest_singular_value = None if sigma_min != sigma_min else sigma_min
-        solution.singularity_damping = float(out[s + kernels.S_DAMPING])
-        return solution
+        return CompiledSolution(out, int(phase), self._slices, self._scalars)
+
+
+def _field(index):
+    return property(lambda solution: solution.out[solution.slices[index]])
+
+
+class CompiledSolution:
+    """A ControlSolution (control/law.py) read from the fast path's output vector, field by field on access."""
+
+    __slots__ = ("out", "contact_phase", "slices", "_scalars")
+
+    def __init__(self, out, contact_phase, slices, scalars):
+        self.out, self.contact_phase, self.slices, self._scalars = out, contact_phase, slices, scalars
+
+    actuation, velocity_error, force_error, constraint_value, projected_velocity, force, tangential_force, \
+        force_integral_rate, position_error_rate = (_field(i) for i in range(9))
+
+    @property
+    def wrench_valid(self):
+        return bool(self.out[self._scalars + kernels.S_WRENCH_VALID])
+
+    @property
+    def saturation_scale(self):
+        return float(self.out[self._scalars + kernels.S_SCALE])
+
+    @property
+    def actuator_clipped(self):
+        return bool(self.out[self._scalars + kernels.S_CLIPPED])
+
+    @property
+    def smallest_singular_value(self):
+        sigma_min = float(self.out[self._scalars + kernels.S_SIGMA_MIN])
+        return None if sigma_min != sigma_min else sigma_min        # NaN: not computed (None in law.py)
+
+    @property
+    def singularity_damping(self):
+        return float(self.out[self._scalars + kernels.S_DAMPING])
