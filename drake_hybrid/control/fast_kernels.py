@@ -33,8 +33,8 @@ except Exception as error:                   # not installed or broken: fast_law
 
 
 def compiled(function):
-    """numba.njit(cache=True) (compiled on first call, cached on disk); the plain function without numba."""
-    return _njit(cache=True)(function) if _njit is not None else function
+    """numba.njit (compiled on first call, cached on disk; IEEE division as numpy); the plain function without numba."""
+    return _njit(cache=True, error_model="numpy")(function) if _njit is not None else function
 
 
 # -- layout of ``ints`` ----------------------------------------------------------------------------
