@@ -7,7 +7,7 @@ import warnings
 import numpy as np
 import pytest
 
-from drake_hybrid.control import fast_kernels
+from drake_hybrid.control import fast_kernels, fast_law
 from drake_hybrid.control.controller import HybridController
 from drake_hybrid.control.gains import ControlMode
 from drake_hybrid.control.safety import SafetyConfig
@@ -148,3 +148,16 @@ def test_autodiff_keeps_the_generic_law(task):
     _, start = task
     fast, _ = _pair(start, "velocity-force")
     assert fast.ToAutoDiffXd().fast_law is None
+
+
+def test_without_numba_the_controller_warns_once_and_runs_the_generic_law(monkeypatch):
+    start = _task_start("window-washing")
+    plant, frame, point, space, gains, _ = start
+    monkeypatch.setattr(fast_kernels, "NUMBA_ERROR", ImportError("No module named 'numba'"))
+    monkeypatch.setattr(fast_law, "_WARNED", [])
+    with pytest.warns(UserWarning, match="numba unavailable") as record:
+        first = HybridController(plant, frame, point, space, gains=gains)
+        second = HybridController(plant, frame, point, space, gains=gains)
+    assert first.fast_law is None and second.fast_law is None
+    assert len([w for w in record if "numba" in str(w.message)]) == 1
+    assert "\n" not in str(record[0].message)
