@@ -1,17 +1,19 @@
-"""The float fast path of the law: everything between the Drake calls in one compiled call per tick.
+"""The float fast path of the law: all numerics between the Drake calls compiled with numba.
 
-``FastLaw.build`` is called by ``HybridController`` at construction for T == float. It compiles,
-with numba, the user's constraint (C, E_f, E_f-dot nu, E_f-dot for a kernel E_p, or a given E_p and
-E_p-dot nu; the pieces and the selector of a ``SelectingConstraint``) from its sympy expressions
-into a generated module, which calls ``fast_kernels.law_kernel`` (the rest of the law). The
-generated source is written once to a cache folder (``DRAKE_HYBRID_CACHE``, default
+``FastLaw.build`` is called by ``HybridController`` at construction for T == float. It generates,
+from the user's sympy expressions, a small module for the constraint (the chart maps, then C, E_f,
+E_f-dot nu, E_f-dot for a kernel E_p, or a given E_p and E_p-dot nu; the pieces and the selector of a
+``SelectingConstraint``), which writes them into a scratch vector; ``fast_kernels.law_from_terms``
+then runs the rest of the law. Two compiled calls per tick, not one, so that a new constraint
+compiles only its own module (about 1.5 s) and never the law again (about 40 s, once per machine).
+The generated source is written once to a cache folder (``DRAKE_HYBRID_CACHE``, default
 ``~/.cache/drake_hybrid``), keyed by its hash and the kernels' source, so numba's ``cache=True``
 keeps the machine code between runs. Nothing compiles at import; the first tick compiles (or
 loads from the cache) and records the time in ``FastLaw.compile_seconds``.
 
 Per tick (``evaluate``): the Drake calls the law needs (pose, J_g, J_g-dot v, v, and M or h + g
-where the law needs them), one compiled call, and for n = d one inverse dynamics call and a small
-compiled ``finish`` (the saturation). Any condition the generic law answers with an error (chart
+where the law needs them), the two compiled calls, and for n = d one inverse dynamics call and a
+small compiled ``finish`` (the saturation; h + g only when a limit is exceeded). Any condition the generic law answers with an error (chart
 or rank singularity, non-finite actuation) falls back to ``law.evaluate_law`` for that evaluation,
 which raises the same error; so there is one law, and ``tests/test_fast_law.py`` checks that both
 paths give every output port to 1e-12.
