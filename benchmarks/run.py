@@ -14,7 +14,7 @@ to this file (or in ``--out``):
 3. scaling: tick against the number of joints (3, 4, 6, 7) and constraint rows
    (m = 1..5 on the UR5e and the Panda).
 
-Targets (issue 7): tick <= 4x the InverseDynamicsController on the 6-DOF
+Targets (issues 7 and 14): tick <= 4x the InverseDynamicsController on the 6-DOF
 plant; closed-loop RTF >= 0.8x plant alone for every task; accuracy <= 1 %
 (planar), <= 2 % (6-DOF), eigenvalues within 5 %. The machine is shared and
 noisy: ratios are taken within one run, interleaved where possible.
@@ -136,11 +136,13 @@ def markdown(results):
     compile_ = results.get("compile")
     if compile_:
         lines += ["", "Fast path (control/fast_law.py, numba) first tick, in fresh processes: "
-                  + "; ".join(f"{run} cache: " + ", ".join(f"{name} {v['first_tick_s']:.2f} s (compile or load "
+                  + "; ".join(f"{run}: " + ", ".join(f"{name} {v['first_tick_s']:.2f} s (compile or load "
                                                           f"{v['compile_or_load_s']:.2f} s)" for name, v in r.items())
                               for run, r in compile_.items())
                   + ". Cold: empty numba cache, the first controller compiles the kernels and its constraint, a "
-                  "second constraint only its generated module; cached: the same processes again."]
+                  "second constraint only its generated module; cached: the same processes again. Generic law: the "
+                  "same controller with `fast_law=False` (control/law.py), timed in its own loop. The p99 and max "
+                  "of a shared, loaded machine are preemptions by other processes, not the law."]
     lines += ["", "Robots: " + "; ".join(f"**{k}** {v['description']}" for k, v in results["robots"].items()) + ".",
               "IDC: Drake's C++ `InverseDynamicsController` (with reference acceleration) on the same plant. "
               "Sampled update: the 1 kHz controller's periodic discrete update (law + integrals), timed in its own "
@@ -202,7 +204,7 @@ def markdown(results):
         k = t["tick"]
         lines.append(f"| {name} | {k['joints']} | {k['force_rows']} | {k['controller_tick_us']:.1f} | "
                      f"{k['idc_tick_us']:.1f} | {k['tick_ratio']:.1f} |")
-    lines += ["", "## Targets (issue 7)", "", "| target | this run | met |", "|---|---:|---|"]
+    lines += ["", "## Targets (issues 7 and 14)", "", "| target | this run | met |", "|---|---:|---|"]
     for name, v in results["targets"].items():
         met = v["met"] if v["met"] != "n/a" else f"n/a: {v['why']}"
         lines.append(f"| {name} | {_fmt(v['value'])} | {_fmt(met)} |")
