@@ -161,3 +161,21 @@ def test_without_numba_the_controller_warns_once_and_runs_the_generic_law(monkey
     assert first.fast_law is None and second.fast_law is None
     assert len([w for w in record if "numba" in str(w.message)]) == 1
     assert "\n" not in str(record[0].message)
+
+
+def test_a_constraint_that_does_not_compile_leaves_the_controller_on_the_generic_law():
+    start = _task_start("window-washing")
+    fast, generic = _pair(start, "velocity-force")
+
+    def fails(*arguments):
+        raise TypeError("cannot compile this constraint")
+
+    fast.fast_law._terms_into = fails
+    inputs = _random_inputs(fast, start[5], np.random.default_rng(1), spread=0.01)
+    context = fast.CreateDefaultContext()
+    for name, value in inputs.items():
+        fast.GetInputPort(name).FixValue(context, value)
+    with pytest.warns(UserWarning, match="could not be compiled"):
+        fast.GetOutputPort("actuation").Eval(context)
+    assert fast.fast_law.disabled
+    _compare(fast, generic, inputs, np.zeros(fast.integral_state_slices()[1].stop), "not compiled")

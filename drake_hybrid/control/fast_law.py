@@ -221,6 +221,7 @@ class FastLaw:
 
     ``compile_seconds``: the first tick's compile (or cache load) time, None before it.
     ``fallbacks``: evaluations handed to the generic law (errors, non-finite results).
+    ``disabled``: the first tick could not compile (warned once); the generic law runs.
     """
 
     def __init__(self, module, reals, ints, controller):
@@ -246,6 +247,7 @@ class FastLaw:
         self._scalars = int(starts[-1])
         self.compile_seconds = None
         self.fallbacks = 0
+        self.disabled = False
 
     @classmethod
     def build(cls, controller, law, space):
@@ -276,15 +278,28 @@ class FastLaw:
             M = plant.CalcMassMatrix(plant_context)
         if self._redundant:
             base = plant.CalcInverseDynamics(plant_context, self._zero_acceleration, forces)
-        first = self.compile_seconds is None
-        start = time.perf_counter() if first else 0.0
+        if self.compile_seconds is None:
+            # The first call compiles (or loads from the cache); a constraint numba cannot compile
+            # leaves this controller on the generic law, with a one-line warning.
+            if self.disabled:
+                return None
+            start = time.perf_counter()
+            try:
+                self._terms_into(self._terms, X, J_g, A_bias, v, self.reals, self.ints)
+                self._law(self._terms, v, desired_velocity, desired_acceleration, desired_force, wrench, integrals,
+                          int(phase), M, base, self.reals, self.ints)
+            except Exception as error:
+                self.disabled = True
+                message = " ".join(str(error).split())[:200]
+                warnings.warn(f"drake_hybrid: the fast law could not be compiled ({type(error).__name__}: "
+                              f"{message}); this controller runs the generic law", stacklevel=2)
+                return None
+            self.compile_seconds = time.perf_counter() - start
         if self._terms_into(self._terms, X, J_g, A_bias, v, self.reals, self.ints) != 0:
             self.fallbacks += 1                       # the chart's singularity: the generic law raises
             return None
         status, out = self._law(self._terms, v, desired_velocity, desired_acceleration, desired_force, wrench,
                                 integrals, int(phase), M, base, self.reals, self.ints)
-        if first:
-            self.compile_seconds = time.perf_counter() - start
         if status == kernels.NEEDS_INVERSE_DYNAMICS:
             n = self._zero_acceleration.size
             torque = plant.CalcInverseDynamics(plant_context, out[out.size - 2 * n:out.size - n], forces)
