@@ -89,12 +89,12 @@ def stage_table(robot_name, samples, rng):
     frame, point, world = kinematics.frame, kinematics.point_in_frame, plant.world_frame()
     constraint, projection = space.constraint, space.velocity_projection
     chart = space.chart
-    forces = controller._forces
+    forces = controller._solution_cache.Eval(parts.context).forces
     wrench = robot.inputs["measured_wrench"]
 
     tick, idc = interleaved([hybrid_evaluation(robot, rng), inverse_dynamics_evaluation(robot, rng)], samples,
                             samples // 10)
-    law = median_us(lambda: controller._evaluate_law(parts.context, plant_context), samples, parts.fresh_state)
+    law = median_us(lambda: controller._evaluate_law(parts.context, plant_context, forces), samples, parts.fresh_state)
 
     rows = []
 

@@ -32,20 +32,22 @@ from drake_hybrid.control.gains import ControlMode, HybridGains
 from drake_hybrid.control.phases import ContactPhase
 from drake_hybrid.control.sampling import SAMPLE_LEAD
 from drake_hybrid.control.fast_law import FastLaw
-from drake_hybrid.control.law import ControlSolution, LawConstants, evaluate_law
+from drake_hybrid.control.law import LawConstants, evaluate_law
 from drake_hybrid.control.safety import SafetyConfig, warn_singularity
 from drake_hybrid.core.errors import DimensionError
 from drake_hybrid.core.kinematics import declare_task_input, resolve_frame
 from drake_hybrid.core.linalg import all_finite, value
 
 
-class MultibodyForcesHolder:
-    """A MultibodyForces in a cache entry (a Python object, so the cache holds it by reference)."""
+class LawCache:
+    """The solution cache entry's value, one per context: the force elements' contribution (a
+    MultibodyForces allocated once per context, never shared between contexts) and the ControlSolution
+    computed from it. One cache entry, so one Python callback per evaluation of the law."""
 
-    __slots__ = ("forces",)
+    __slots__ = ("forces", "solution")
 
     def __init__(self, forces):
-        self.forces = forces
+        self.forces, self.solution = forces, None
 
 
 @TemplateSystem.define("HybridController_", T_list=[float, AutoDiffXd])
@@ -272,12 +274,6 @@ def HybridController_(T):
             _, self.kinematics, self._state_port, self._plant_context_cache = declare_task_input(
                 self, T, plant, self._float_frame, self._end_effector_point, chart)
             self._plant = self.kinematics.plant
-            # Per-context scratch: the force elements' contribution (gravity, joint damping, ...) at the
-            # context's state, in a MultibodyForces allocated once per context (never shared between contexts).
-            self._forces_cache = self.DeclareCacheEntry(
-                description="force elements",
-                value_producer=ValueProducer(allocate=self._allocate_forces, calc=self._calc_forces),
-                prerequisites_of_calc={self._plant_context_cache.ticket()})
             self._wrench_port = self.DeclareVectorInputPort("measured_wrench", 6)
             self._velocity_port = self.DeclareVectorInputPort("desired_velocity", k)
             self._acceleration_port = self.DeclareVectorInputPort("desired_acceleration", k)
@@ -300,8 +296,7 @@ def HybridController_(T):
                 state_ticket = self.xd_ticket()
             self._solution_cache = self.DeclareCacheEntry(
                 description="hybrid control law",
-                value_producer=ValueProducer(allocate=lambda: AbstractValue.Make(ControlSolution()),
-                                             calc=self._calc_solution),
+                value_producer=ValueProducer(allocate=self._allocate_law_cache, calc=self._calc_solution),
                 prerequisites_of_calc={self.all_input_ports_ticket(), state_ticket,
                                        self._plant_context_cache.ticket()})
             solution_ticket = {self._solution_cache.ticket()}
@@ -330,12 +325,8 @@ def HybridController_(T):
         def _construct_copy(self, other, converter=None):
             Impl._construct(self, **other._arguments, converter=converter)
 
-        def _allocate_forces(self):
-            return AbstractValue.Make(MultibodyForcesHolder(MultibodyForces_[T](self._plant)))
-
-        def _calc_forces(self, context, abstract_value):
-            plant_context = self._plant_context_cache.Eval(context)
-            self._plant.CalcForceElementsContribution(plant_context, abstract_value.get_mutable_value().forces)
+        def _allocate_law_cache(self):
+            return AbstractValue.Make(LawCache(MultibodyForces_[T](self._plant)))
 
         # -- public helpers ---------------------------------------------------------------
         def plant(self):
@@ -393,7 +384,10 @@ def HybridController_(T):
 
         def _calc_solution(self, context, abstract_value):
             plant_context = self._plant_context_cache.Eval(context)
-            abstract_value.set_value(self._evaluate_law(context, plant_context))
+            cache = abstract_value.get_mutable_value()
+            # The force elements (gravity, joint damping, ...) at the context's state, then the law.
+            self._plant.CalcForceElementsContribution(plant_context, cache.forces)
+            cache.solution = self._evaluate_law(context, plant_context, cache.forces)
 
         def _contact_phase(self, context):
             if self._phase_port is None:
@@ -411,7 +405,7 @@ def HybridController_(T):
                     raise ValueError(f"HybridController: input '{port.get_name()}' has non-finite entries "
                                      f"{value(command).tolist()}")
 
-        def _evaluate_law(self, context, plant_context):
+        def _evaluate_law(self, context, plant_context, forces):
             """Read each input once and run the law (control/law.py) at ``context``."""
             desired_velocity = self._velocity_port.Eval(context)
             desired_acceleration = self._acceleration_port.Eval(context)
@@ -419,20 +413,20 @@ def HybridController_(T):
             solution = None
             if self.fast_law is not None:              # None: a check failed, the generic law raises (or copes)
                 solution = self.fast_law.evaluate(
-                    plant_context, self._forces_cache.Eval(context).forces, self._integrals(context), desired_velocity,
-                    desired_acceleration, desired_force, self._wrench_port.Eval(context), self._contact_phase(context))
+                    plant_context, forces, self._integrals(context), desired_velocity, desired_acceleration,
+                    desired_force, self._wrench_port.Eval(context), self._contact_phase(context))
             if solution is None:
                 self._check_finite_commands(desired_velocity, desired_acceleration, desired_force)
                 solution = evaluate_law(
                     self._law, self.constraint_space, self.kinematics.evaluate(plant_context), self._plant,
-                    plant_context, self._forces_cache.Eval(context).forces, self._integrals(context), desired_velocity,
-                    desired_acceleration, desired_force, self._wrench_port.Eval(context), self._contact_phase(context))
+                    plant_context, forces, self._integrals(context), desired_velocity, desired_acceleration,
+                    desired_force, self._wrench_port.Eval(context), self._contact_phase(context))
             if solution.singularity_damping > 0:
                 warn_singularity(self, solution.smallest_singular_value, self._max_joint_acceleration)
             return solution
 
         def _solution(self, context):
-            return self._solution_cache.Eval(context)
+            return self._solution_cache.Eval(context).solution
 
         def _make_solution_output(self, field):
             def calc(context, output):
