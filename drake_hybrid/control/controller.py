@@ -35,19 +35,20 @@ from drake_hybrid.control.fast_law import FastLaw
 from drake_hybrid.control.law import LawConstants, evaluate_law
 from drake_hybrid.control.safety import SafetyConfig, warn_singularity
 from drake_hybrid.core.errors import DimensionError
-from drake_hybrid.core.kinematics import declare_task_input, resolve_frame
+from drake_hybrid.core.kinematics import declare_task_input, resolve_frame, set_plant_state
 from drake_hybrid.core.linalg import all_finite, value
 
 
 class LawCache:
-    """The solution cache entry's value, one per context: the force elements' contribution (a
-    MultibodyForces allocated once per context, never shared between contexts) and the ControlSolution
-    computed from it. One cache entry, so one Python callback per evaluation of the law."""
+    """The solution cache entry's value, one per context (never shared between contexts): a context
+    of the controller's plant at the estimated state, the force elements' contribution there (a
+    MultibodyForces) and the ControlSolution computed from them. One cache entry, so one Python
+    callback per evaluation of the law."""
 
-    __slots__ = ("forces", "solution")
+    __slots__ = ("plant_context", "forces", "solution")
 
-    def __init__(self, forces):
-        self.forces, self.solution = forces, None
+    def __init__(self, plant_context, forces):
+        self.plant_context, self.forces, self.solution = plant_context, forces, None
 
 
 @TemplateSystem.define("HybridController_", T_list=[float, AutoDiffXd])
@@ -271,8 +272,9 @@ def HybridController_(T):
 
             # -- ports ------------------------------------------------------------------
             # estimated_state, the controller's own plant of this system's scalar type, its kinematics.
-            _, self.kinematics, self._state_port, self._plant_context_cache = declare_task_input(
-                self, T, plant, self._float_frame, self._end_effector_point, chart)
+            # (The plant context lives in the law's cache entry, LawCache, with the force elements.)
+            _, self.kinematics, self._state_port, _ = declare_task_input(
+                self, T, plant, self._float_frame, self._end_effector_point, chart, plant_context_cache=False)
             self._plant = self.kinematics.plant
             self._wrench_port = self.DeclareVectorInputPort("measured_wrench", 6)
             self._velocity_port = self.DeclareVectorInputPort("desired_velocity", k)
@@ -297,8 +299,7 @@ def HybridController_(T):
             self._solution_cache = self.DeclareCacheEntry(
                 description="hybrid control law",
                 value_producer=ValueProducer(allocate=self._allocate_law_cache, calc=self._calc_solution),
-                prerequisites_of_calc={self.all_input_ports_ticket(), state_ticket,
-                                       self._plant_context_cache.ticket()})
+                prerequisites_of_calc={self.all_input_ports_ticket(), state_ticket})
             solution_ticket = {self._solution_cache.ticket()}
             if control_period is None:
                 self.DeclareVectorOutputPort("actuation", n, self._calc_actuation, prerequisites_of_calc=solution_ticket)
@@ -326,7 +327,7 @@ def HybridController_(T):
             Impl._construct(self, **other._arguments, converter=converter)
 
         def _allocate_law_cache(self):
-            return AbstractValue.Make(LawCache(MultibodyForces_[T](self._plant)))
+            return AbstractValue.Make(LawCache(self._plant.CreateDefaultContext(), MultibodyForces_[T](self._plant)))
 
         # -- public helpers ---------------------------------------------------------------
         def plant(self):
@@ -383,9 +384,10 @@ def HybridController_(T):
             return context.get_discrete_state(0).CopyToVector()[:self._integrated_size]
 
         def _calc_solution(self, context, abstract_value):
-            plant_context = self._plant_context_cache.Eval(context)
             cache = abstract_value.get_mutable_value()
-            # The force elements (gravity, joint damping, ...) at the context's state, then the law.
+            plant_context = cache.plant_context
+            # The plant at the estimated state, its force elements (gravity, joint damping, ...), the law.
+            set_plant_state(self, self._plant, self._state_port, context, plant_context)
             self._plant.CalcForceElementsContribution(plant_context, cache.forces)
             cache.solution = self._evaluate_law(context, plant_context, cache.forces)
 
