@@ -157,7 +157,7 @@ def measure_task(name, repeats=3, modes=MODES, tick_samples=2000, log=print):
     default = task.default_config()
     rng = np.random.default_rng(0)
     result = {"description": task.description, "duration_s": float(default.duration),
-              "time_step_s": float(default.time_step), "control_period_s": float(default.control_period),
+              "time_step_s": float(default.plant.time_step), "control_period_s": float(default.control_period),
               "default_mode": default.mode, "modes": {}}
     closed, replay, static, zero = [], [], [], []
     default_log = None

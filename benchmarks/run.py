@@ -14,7 +14,7 @@ to this file (or in ``--out``):
 3. scaling: tick against the number of joints (3, 4, 6, 7) and constraint rows
    (m = 1..5 on the UR5e and the Panda).
 
-Targets (issue 7): tick <= 4x the InverseDynamicsController on the 6-DOF
+Targets (issues 7 and 14): tick <= 4x the InverseDynamicsController on the 6-DOF
 plant; closed-loop RTF >= 0.8x plant alone for every task; accuracy <= 1 %
 (planar), <= 2 % (6-DOF), eigenvalues within 5 %. The machine is shared and
 noisy: ratios are taken within one run, interleaved where possible.
@@ -123,13 +123,26 @@ def markdown(results):
              f"Drake {m['drake']}, numpy {m['numpy']}. Ratios are within this run; the timed evaluations of "
              "the two controllers are interleaved sample by sample.", "",
              "## Controller tick (one fresh float evaluation of the torque output)", "",
-             "| robot | n | m | controller us (median / p95) | sampled update us | IDC us (median / p95) | ratio (median / p95) |",
-             "|---|---:|---:|---:|---:|---:|---:|"]
+             "| robot | n | m | controller us (median / p95 / p99 / max) | generic law us | sampled update us | "
+             "IDC us (median / p95) | ratio (median / p95) |",
+             "|---|---:|---:|---:|---:|---:|---:|---:|"]
     for name, r in results["robots"].items():
         c, i, u = r["controller_tick_us"], r["idc_tick_us"], r["sampled_update_us"]
-        lines.append(f"| {name} | {r['joints']} | {r['force_rows']} | {c['median_us']:.1f} / {c['p95_us']:.1f} | "
+        g = r.get("generic_tick_us", {}).get("median_us", float("nan"))
+        lines.append(f"| {name} | {r['joints']} | {r['force_rows']} | {c['median_us']:.1f} / {c['p95_us']:.1f} / "
+                     f"{c.get('p99_us', float('nan')):.1f} / {c.get('max_us', float('nan')):.0f} | {g:.1f} | "
                      f"{u['median_us']:.1f} | {i['median_us']:.1f} / {i['p95_us']:.1f} | "
                      f"{r['tick_ratio']['median']:.1f} / {r['tick_ratio']['p95']:.1f} |")
+    compile_ = results.get("compile")
+    if compile_:
+        lines += ["", "Fast path (control/fast_law.py, numba) first tick, in fresh processes: "
+                  + "; ".join(f"{run}: " + ", ".join(f"{name} {v['first_tick_s']:.2f} s (compile or load "
+                                                          f"{v['compile_or_load_s']:.2f} s)" for name, v in r.items())
+                              for run, r in compile_.items())
+                  + ". Cold: empty numba cache, the first controller compiles the kernels and its constraint, a "
+                  "second constraint only its generated module; cached: the same processes again. Generic law: the "
+                  "same controller with `fast_law=False` (control/law.py), timed in its own loop. The p99 and max "
+                  "of a shared, loaded machine are preemptions by other processes, not the law."]
     lines += ["", "Robots: " + "; ".join(f"**{k}** {v['description']}" for k, v in results["robots"].items()) + ".",
               "IDC: Drake's C++ `InverseDynamicsController` (with reference acceleration) on the same plant. "
               "Sampled update: the 1 kHz controller's periodic discrete update (law + integrals), timed in its own "
@@ -191,7 +204,7 @@ def markdown(results):
         k = t["tick"]
         lines.append(f"| {name} | {k['joints']} | {k['force_rows']} | {k['controller_tick_us']:.1f} | "
                      f"{k['idc_tick_us']:.1f} | {k['tick_ratio']:.1f} |")
-    lines += ["", "## Targets (issue 7)", "", "| target | this run | met |", "|---|---:|---|"]
+    lines += ["", "## Targets (issues 7 and 14)", "", "| target | this run | met |", "|---|---:|---|"]
     for name, v in results["targets"].items():
         met = v["met"] if v["met"] != "n/a" else f"n/a: {v['why']}"
         lines.append(f"| {name} | {_fmt(v['value'])} | {_fmt(met)} |")
@@ -220,6 +233,8 @@ def main(argv=None):
         print(f"tick {name:10s} n={r['joints']} controller {r['controller_tick_us']['median_us']:7.1f} us "
               f"(p95 {r['controller_tick_us']['p95_us']:.1f}), IDC {r['idc_tick_us']['median_us']:5.1f} us, "
               f"ratio {r['tick_ratio']['median']:.1f}")
+    results["compile"] = tick.compile_times()
+    print(f"fast-law first tick: cold {results['compile']['cold']}, cached {results['compile']['cached']}")
     for arm in ("ur5e", "panda"):
         for rows in SCALING_ROWS:
             r = tick.measure_rows(arm, rows, samples=row_samples, warmup=row_samples // 10)

@@ -43,6 +43,15 @@ def test_every_timed_tick_evaluates_the_law_once(control_period):
     assert len(calls) == 25
 
 
+def test_the_timed_tick_runs_the_compiled_law_without_falling_back():
+    robot = make_robot("planar-3r")
+    evaluation = hybrid_evaluation(robot, np.random.default_rng(0))
+    for _ in range(25):
+        evaluation()
+    fast_law = robot.controller.fast_law
+    assert fast_law is not None and fast_law.compile_seconds is not None and fast_law.fallbacks == 0
+
+
 def test_every_timed_idc_tick_sees_a_new_state():
     robot = make_robot("planar-3r")
     evaluation = inverse_dynamics_evaluation(robot, np.random.default_rng(0))

@@ -17,11 +17,19 @@ periodic update, which is what a discrete closed loop pays per control period
 (the law plus the integral update).
 """
 
+import json
+import os
+import subprocess
+import sys
+import tempfile
 import time
 from dataclasses import asdict, dataclass
+from pathlib import Path
 
 import numpy as np
-from robots import make_inverse_dynamics_controller, make_robot
+from robots import BenchmarkRobot, make_inverse_dynamics_controller, make_robot
+
+from drake_hybrid.control.controller import HybridController
 
 PERTURBATION = 1e-7
 
@@ -31,12 +39,15 @@ class Timing:
     median_us: float
     p95_us: float
     samples: int
+    p99_us: float = float("nan")
+    max_us: float = float("nan")
 
     @classmethod
     def of(cls, nanoseconds):
         microseconds = np.asarray(nanoseconds, dtype=float) * 1e-3
         return cls(median_us=float(np.median(microseconds)), p95_us=float(np.percentile(microseconds, 95)),
-                   samples=int(microseconds.size))
+                   samples=int(microseconds.size), p99_us=float(np.percentile(microseconds, 99)),
+                   max_us=float(microseconds.max()))
 
 
 def fix_inputs(system, context, inputs):
@@ -111,6 +122,11 @@ def measure_robot(name, samples=3000, warmup=300, seed=0, mode="velocity-force")
     controller, idc = interleaved([hybrid_evaluation(robot, rng), inverse_dynamics_evaluation(robot, rng)],
                                   samples, warmup)
     (update,) = interleaved([sampled_update_evaluation(sampled, rng)], samples, warmup)
+    # The same controller on the generic law (control/law.py), for the fast path's gain.
+    generic = BenchmarkRobot(name=robot.name, description=robot.description, plant=robot.plant,
+                             controller=HybridController(**dict(robot.controller._arguments, fast_law=False)),
+                             state=robot.state, inputs=robot.inputs)
+    (generic_tick,) = interleaved([hybrid_evaluation(generic, rng)], samples // 3, warmup // 3)
     return {
         "description": robot.description,
         "joints": robot.joints,
@@ -120,6 +136,8 @@ def measure_robot(name, samples=3000, warmup=300, seed=0, mode="velocity-force")
         "controller_tick_us": asdict(controller),
         "idc_tick_us": asdict(idc),
         "sampled_update_us": asdict(update),
+        "generic_tick_us": asdict(generic_tick),
+        "fast_law": robot.controller.fast_law is not None,
         "tick_ratio": {"median": controller.median_us / idc.median_us, "p95": controller.p95_us / idc.p95_us},
     }
 
@@ -134,3 +152,38 @@ def measure_rows(name, rows, samples=1500, warmup=150, seed=0):
                                   samples, warmup)
     return {"robot": name, "joints": robot.joints, "force_rows": rows, "controller_tick_us": asdict(controller),
             "idc_tick_us": asdict(idc), "tick_ratio": controller.median_us / idc.median_us}
+
+
+COMPILE_SCRIPT = """
+import json, sys, time
+sys.path.insert(0, {here!r})
+import numpy as np
+from robots import make_robot
+result = {{}}
+for name in {names!r}:
+    robot = make_robot(name)
+    context = robot.controller.CreateDefaultContext()
+    for port, value in robot.inputs.items():
+        robot.controller.GetInputPort(port).FixValue(context, value)
+    start = time.perf_counter()
+    robot.controller.GetOutputPort("actuation").Eval(context)
+    result[name] = {{"first_tick_s": time.perf_counter() - start,
+                    "compile_or_load_s": robot.controller.fast_law.compile_seconds}}
+print(json.dumps(result))
+"""
+
+
+def compile_times(names=("ur5e", "planar-3r")):
+    """First-tick times of the fast path in fresh processes with an empty numba cache (cold: the
+    kernels and the first constraint compile; the second constraint compiles only its generated
+    module) and again with the cache they left (cached re-run)."""
+    here = str(Path(__file__).resolve().parent)
+    script = COMPILE_SCRIPT.format(here=here, names=list(names))
+    with tempfile.TemporaryDirectory() as folder:
+        environment = dict(os.environ, NUMBA_CACHE_DIR=folder, DRAKE_HYBRID_CACHE=folder)
+        runs = []
+        for _ in range(2):
+            output = subprocess.run([sys.executable, "-c", script], env=environment, capture_output=True, text=True,
+                                    check=True).stdout
+            runs.append(json.loads(output.strip().splitlines()[-1]))
+    return {"cold": runs[0], "cached": runs[1]}

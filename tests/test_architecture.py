@@ -12,7 +12,7 @@ import pytest
 ROOT = Path(__file__).resolve().parent.parent
 PACKAGE = ROOT / "drake_hybrid"
 # Imports allowed inside functions: optional dependencies only (not installed by a plain install).
-OPTIONAL = {"playwright"}
+OPTIONAL = {"playwright", "numba"}   # numba: the fast law falls back to the generic one without it
 MAX_LINES = 400
 THEORY = ROOT / "docs" / "theory.md"
 # Files that may cite the theory: source, docs, notebooks, configuration.

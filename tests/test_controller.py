@@ -275,4 +275,7 @@ def test_scalar_conversion_keeps_every_argument_and_contexts_do_not_share_scratc
     first, second = controller.CreateDefaultContext(), controller.CreateDefaultContext()
     for context in (first, second):
         controller.get_input_port(0).FixValue(context, np.zeros(2 * controller.num_joints))
-    assert controller._forces_cache.Eval(first) is not controller._forces_cache.Eval(second)
+    def forces(context):                            # the per-context MultibodyForces in the law's cache entry
+        return controller._solution_cache.get_mutable_cache_entry_value(context).GetMutableValueOrThrow().forces
+
+    assert forces(first) is not forces(second)

@@ -32,20 +32,34 @@ from drake_hybrid.control.damping import joint_damping, warn_damped_joints
 from drake_hybrid.control.gains import ControlMode, HybridGains
 from drake_hybrid.control.phases import ContactPhase
 from drake_hybrid.control.sampling import SAMPLE_LEAD
-from drake_hybrid.control.law import ControlSolution, LawConstants, evaluate_law
+from drake_hybrid.control.fast_law import FastLaw
+from drake_hybrid.control.law import LawConstants, evaluate_law
 from drake_hybrid.control.safety import SafetyConfig, warn_singularity
 from drake_hybrid.core.errors import DimensionError
-from drake_hybrid.core.kinematics import declare_task_input, resolve_frame
+from drake_hybrid.core.kinematics import declare_task_input, resolve_frame, set_plant_state
 from drake_hybrid.core.linalg import all_finite, value
 
 
 class MultibodyForcesHolder:
-    """A MultibodyForces in a cache entry (a Python object, so the cache holds it by reference)."""
+    """A MultibodyForces in a cache entry (a Python object, so the cache holds it by reference); the
+    baselines' per-context scratch (``control.baselines``)."""
 
     __slots__ = ("forces",)
 
     def __init__(self, forces):
         self.forces = forces
+
+
+class LawCache:
+    """The solution cache entry's value, one per context (never shared between contexts): a context
+    of the controller's plant at the estimated state, the force elements' contribution there (a
+    MultibodyForces) and the ControlSolution computed from them. One cache entry, so one Python
+    callback per evaluation of the law."""
+
+    __slots__ = ("plant_context", "forces", "solution")
+
+    def __init__(self, plant_context, forces):
+        self.plant_context, self.forces, self.solution = plant_context, forces, None
 
 
 @TemplateSystem.define("HybridController_", T_list=[float, AutoDiffXd])
@@ -206,12 +220,15 @@ def HybridController_(T):
             velocity_row_inertia: None (the paper's massless constraint, default) or I_v (k x k): the
                 inertia of a mechanism that moves along the velocity rows (a crank's handle). See
                 ``law.mechanism_force``.
+            fast_law: for T = float, evaluate the law through its compiled
+                float path (``fast_law``; the same law, equal to 1e-12) when
+                numba is available; False = the generic ``law.evaluate_law``.
         """
 
         def _construct(self, plant, end_effector_frame, end_effector_point, constraint_space, gains=None,
                        mode=ControlMode.VELOCITY_FORCE, control_period=None, sample_lead=True, safety=None,
                        guarded_move=None, sampled_diagnostics=False, velocity_row_inertia=None,
-                       plant_time_step=0.0, converter=None):
+                       plant_time_step=0.0, fast_law=True, converter=None):
             # Every argument as given, for scalar conversion (_construct_copy): one added later cannot
             # be forgotten there.
             arguments = locals()
@@ -287,15 +304,10 @@ def HybridController_(T):
 
             # -- ports ------------------------------------------------------------------
             # estimated_state, the controller's own plant of this system's scalar type, its kinematics.
-            _, self.kinematics, self._state_port, self._plant_context_cache = declare_task_input(
-                self, T, plant, self._float_frame, self._end_effector_point, chart)
+            # (The plant context lives in the law's cache entry, LawCache, with the force elements.)
+            _, self.kinematics, self._state_port, _ = declare_task_input(
+                self, T, plant, self._float_frame, self._end_effector_point, chart, plant_context_cache=False)
             self._plant = self.kinematics.plant
-            # Per-context scratch: the force elements' contribution (gravity, joint damping, ...) at the
-            # context's state, in a MultibodyForces allocated once per context (never shared between contexts).
-            self._forces_cache = self.DeclareCacheEntry(
-                description="force elements",
-                value_producer=ValueProducer(allocate=self._allocate_forces, calc=self._calc_forces),
-                prerequisites_of_calc={self._plant_context_cache.ticket()})
             self._wrench_port = self.DeclareVectorInputPort("measured_wrench", 6)
             self._velocity_port = self.DeclareVectorInputPort("desired_velocity", k)
             self._acceleration_port = self.DeclareVectorInputPort("desired_acceleration", k)
@@ -318,10 +330,8 @@ def HybridController_(T):
                 state_ticket = self.xd_ticket()
             self._solution_cache = self.DeclareCacheEntry(
                 description="hybrid control law",
-                value_producer=ValueProducer(allocate=lambda: AbstractValue.Make(ControlSolution()),
-                                             calc=self._calc_solution),
-                prerequisites_of_calc={self.all_input_ports_ticket(), state_ticket,
-                                       self._plant_context_cache.ticket()})
+                value_producer=ValueProducer(allocate=self._allocate_law_cache, calc=self._calc_solution),
+                prerequisites_of_calc={self.all_input_ports_ticket(), state_ticket})
             solution_ticket = {self._solution_cache.ticket()}
             if control_period is None:
                 self.DeclareVectorOutputPort("actuation", n, self._calc_actuation, prerequisites_of_calc=solution_ticket)
@@ -342,16 +352,14 @@ def HybridController_(T):
                                              prerequisites_of_calc={self.xd_ticket()})
             self.DeclareVectorOutputPort("position_error", k, self._calc_position_error,
                                          prerequisites_of_calc={state_ticket})
+            # The float fast path (control/fast_law.py): the same law compiled; None = the generic law.
+            self.fast_law = FastLaw.build(self, self._law, constraint_space) if T == float and fast_law else None
 
         def _construct_copy(self, other, converter=None):
             Impl._construct(self, **other._arguments, converter=converter)
 
-        def _allocate_forces(self):
-            return AbstractValue.Make(MultibodyForcesHolder(MultibodyForces_[T](self._plant)))
-
-        def _calc_forces(self, context, abstract_value):
-            plant_context = self._plant_context_cache.Eval(context)
-            self._plant.CalcForceElementsContribution(plant_context, abstract_value.get_mutable_value().forces)
+        def _allocate_law_cache(self):
+            return AbstractValue.Make(LawCache(self._plant.CreateDefaultContext(), MultibodyForces_[T](self._plant)))
 
         # -- public helpers ---------------------------------------------------------------
         def plant(self):
@@ -408,8 +416,12 @@ def HybridController_(T):
             return context.get_discrete_state(0).CopyToVector()[:self._integrated_size]
 
         def _calc_solution(self, context, abstract_value):
-            plant_context = self._plant_context_cache.Eval(context)
-            abstract_value.set_value(self._evaluate_law(context, plant_context))
+            cache = abstract_value.get_mutable_value()
+            plant_context = cache.plant_context
+            # The plant at the estimated state, its force elements (gravity, joint damping, ...), the law.
+            set_plant_state(self, self._plant, self._state_port, context, plant_context)
+            self._plant.CalcForceElementsContribution(plant_context, cache.forces)
+            cache.solution = self._evaluate_law(context, plant_context, cache.forces)
 
         def _contact_phase(self, context):
             if self._phase_port is None:
@@ -427,22 +439,28 @@ def HybridController_(T):
                     raise ValueError(f"HybridController: input '{port.get_name()}' has non-finite entries "
                                      f"{value(command).tolist()}")
 
-        def _evaluate_law(self, context, plant_context):
+        def _evaluate_law(self, context, plant_context, forces):
             """Read each input once and run the law (control/law.py) at ``context``."""
             desired_velocity = self._velocity_port.Eval(context)
             desired_acceleration = self._acceleration_port.Eval(context)
             desired_force = self._force_port.Eval(context)
-            self._check_finite_commands(desired_velocity, desired_acceleration, desired_force)
-            solution = evaluate_law(
-                self._law, self.constraint_space, self.kinematics.evaluate(plant_context), self._plant, plant_context,
-                self._forces_cache.Eval(context).forces, self._integrals(context), desired_velocity,
-                desired_acceleration, desired_force, self._wrench_port.Eval(context), self._contact_phase(context))
+            solution = None
+            if self.fast_law is not None:              # None: a check failed, the generic law raises (or copes)
+                solution = self.fast_law.evaluate(
+                    plant_context, forces, self._integrals(context), desired_velocity, desired_acceleration,
+                    desired_force, self._wrench_port.Eval(context), self._contact_phase(context))
+            if solution is None:
+                self._check_finite_commands(desired_velocity, desired_acceleration, desired_force)
+                solution = evaluate_law(
+                    self._law, self.constraint_space, self.kinematics.evaluate(plant_context), self._plant,
+                    plant_context, forces, self._integrals(context), desired_velocity, desired_acceleration,
+                    desired_force, self._wrench_port.Eval(context), self._contact_phase(context))
             if solution.singularity_damping > 0:
                 warn_singularity(self, solution.smallest_singular_value, self._max_joint_acceleration)
             return solution
 
         def _solution(self, context):
-            return self._solution_cache.Eval(context)
+            return self._solution_cache.Eval(context).solution
 
         def _make_solution_output(self, field):
             def calc(context, output):

@@ -29,6 +29,10 @@ The protections of ``safety`` (bounded inverses near singularities, graceful sat
 where the law inverts J or meets the effort limits; none changes the law where it is inactive.
 Every function is pure except that ``joint_torque`` asks the plant for M and inverse dynamics
 (the only Drake calls the law needs besides the kinematics the controller evaluates).
+
+Float controllers run the same lines compiled (``fast_law``, ``fast_kernels``: numba, one call per
+tick); this module stays the law's definition and its AutoDiffXd path, and tests/test_fast_law.py
+holds the compiled path to it (every output port equal to 1e-12). A change here goes there too.
 """
 
 import numpy as np

@@ -116,8 +116,10 @@ def saturate(actuation, base_actuation, limits):
     scale = saturation_scale(base_values, values - base_values, limits)
     saturated = base + scale * (actuation - base)
     saturated_values = value(saturated)
-    clipped = bool(np.any(np.abs(saturated_values) > limits))
-    if clipped:
+    # Clipped: the base itself violates a limit (then s = 0). Entries the scale put at their limit may
+    # overshoot it by rounding; they are set to the limit too, but that is not clipping.
+    clipped = bool(np.any(np.abs(base_values) > limits))
+    if np.any(np.abs(saturated_values) > limits):
         saturated = np.array(saturated, copy=True)
         for i, (v, limit) in enumerate(zip(saturated_values, limits)):
             if abs(v) > limit:

@@ -89,6 +89,8 @@ class Constraint:
         E_f = C_dot.jacobian(nu)                          # E_f                 (3.0-2)
         curvature = C_dot.jacobian(x) * x_dot             # E_f-dot nu          (3.0-8)
         self._E_f_symbolic = E_f
+        # C, E_f and E_f-dot nu as sympy matrices (for compiled fast paths, control/fast_law.py).
+        self.symbolic_terms = (C, E_f, curvature)
         self._value = CompiledFunction(f"C[{name}]", [x], C, vector=True)
         self._force_projection = CompiledFunction(f"E_f[{name}]", [x], E_f)
         self._curvature = CompiledFunction(f"E_f-dot nu[{name}]", [x, nu], curvature, vector=True)
@@ -171,7 +173,7 @@ class SelectingConstraint:
     piece is.
     """
 
-    def __init__(self, pieces, select, name):
+    def __init__(self, pieces, select, name, selector=None):
         sizes = {piece.size for piece in pieces}
         if len(sizes) != 1:
             raise DimensionError(f"SelectingConstraint '{name}': pieces have different sizes {sorted(sizes)}")
@@ -182,6 +184,8 @@ class SelectingConstraint:
         self.size = pieces[0].size
         self.kinematic_rows = pieces[0].kinematic_rows
         self.rank_tolerance = pieces[0].rank_tolerance
+        # Optional sympy column s(x) with select(x) = argmax_i |s_i(x)| (lets control/fast_law.py compile it).
+        self.selector = selector
 
     def __repr__(self):
         return f"SelectingConstraint('{self.name}', m={self.size}, pieces={len(self.pieces)})"
@@ -327,7 +331,8 @@ def sphere_constraint(chart, center=(0.0, 0.0, 0.0), radius=0.15, form="approach
     if dropped_component == "auto":
         approach = CompiledFunction(f"a[{name}]", [chart.configuration_symbols], a, vector=True)
         pieces = [piece(1), piece(2), piece(3)]
-        return SelectingConstraint(pieces, lambda x: int(np.argmax(np.abs(value(approach(x))))), name=name)
+        return SelectingConstraint(pieces, lambda x: int(np.argmax(np.abs(value(approach(x))))), name=name,
+                                   selector=a)
     if dropped_component not in (1, 2, 3):
         raise ValueError(f"sphere_constraint: dropped_component must be 1, 2, 3 or 'auto', got {dropped_component!r}")
     return piece(dropped_component)

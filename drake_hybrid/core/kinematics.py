@@ -113,6 +113,17 @@ class EndEffectorKinematics:
         )
 
 
+def set_plant_state(system, plant, state_port, context, plant_context):
+    """Set ``plant_context``'s positions and velocities to ``state_port``'s [q; v] at ``context``;
+    ValueError naming ``system`` and the port if it is not finite."""
+    state = state_port.Eval(context)
+    if not all_finite(state):
+        # Drake's SetPositionsAndVelocities aborts on a non-finite state; say which input it was.
+        raise ValueError(f"{system.get_name() or type(system).__name__}: input '{state_port.get_name()}' has "
+                         f"non-finite entries {value(state).tolist()}")
+    plant.SetPositionsAndVelocities(plant_context, state)
+
+
 def declare_plant_context_cache(system, plant, state_port):
     """Declare, on ``system``, a cache entry holding a context of ``plant`` whose
     positions and velocities are those on ``state_port`` ([q; v]).
@@ -123,12 +134,7 @@ def declare_plant_context_cache(system, plant, state_port):
     """
 
     def calc(context, abstract_value):
-        state = state_port.Eval(context)
-        if not all_finite(state):
-            # Drake's SetPositionsAndVelocities aborts on a non-finite state; say which input it was.
-            raise ValueError(f"{system.get_name() or type(system).__name__}: input '{state_port.get_name()}' has "
-                             f"non-finite entries {value(state).tolist()}")
-        plant.SetPositionsAndVelocities(abstract_value.get_mutable_value(), state)
+        set_plant_state(system, plant, state_port, context, abstract_value.get_mutable_value())
 
     return system.DeclareCacheEntry(
         description="plant context",
@@ -146,18 +152,20 @@ def declare_cached_value(system, description, compute, prerequisites):
         prerequisites_of_calc=set(prerequisites))
 
 
-def declare_task_input(system, T, plant, end_effector_frame, end_effector_point, chart):
+def declare_task_input(system, T, plant, end_effector_frame, end_effector_point, chart, plant_context_cache=True):
     """The end-effector input of a system that reads the robot's state: declares the
-    ``estimated_state`` input ([q; v]) and the per-context plant-context cache on ``system``.
+    ``estimated_state`` input ([q; v]) and (unless ``plant_context_cache`` is False: the system keeps
+    its plant context itself, see ``set_plant_state``) the per-context plant-context cache on ``system``.
 
-    Returns (frame, kinematics, state_port, plant_context_cache): ``frame`` resolved on the float
-    ``plant``, ``kinematics`` an EndEffectorKinematics on the plant of scalar type T.
+    Returns (frame, kinematics, state_port, plant_context_cache or None): ``frame`` resolved on the
+    float ``plant``, ``kinematics`` an EndEffectorKinematics on the plant of scalar type T.
     """
     frame = resolve_frame(plant, end_effector_frame)
     plant_T = plant if T == float else plant.ToAutoDiffXd()
     kinematics = EndEffectorKinematics(plant_T, plant_T.get_frame(frame.index()), end_effector_point, chart)
     state_port = system.DeclareVectorInputPort("estimated_state", 2 * plant.num_velocities())
-    return frame, kinematics, state_port, declare_plant_context_cache(system, plant_T, state_port)
+    cache = declare_plant_context_cache(system, plant_T, state_port) if plant_context_cache else None
+    return frame, kinematics, state_port, cache
 
 
 def inverse_kinematics(kinematics, plant_context, X_target, q_guess, tolerance=1e-12, max_iterations=200):

@@ -49,6 +49,7 @@ class GivenVelocityProjection:
         self._matrix = CompiledFunction(f"E_p[{name}]", [x], E_p)
         self._rate = CompiledFunction(f"E_p-dot nu[{name}]", [x, nu], rate, vector=True)
         self._symbolic = E_p
+        self.symbolic_terms = (E_p, rate)        # E_p and E_p-dot nu as sympy (control/fast_law.py)
         self._rate_matrix = None
 
     def __repr__(self):

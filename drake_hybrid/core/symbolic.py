@@ -149,6 +149,16 @@ class CompiledFunction:
         return self._float(*arguments)
 
 
+def straight_line_program(entries):
+    """(assignments, results) of one CSE program for the sympy ``entries``, printed as Python with bare
+    function names (``sin(x)``), as the compiled functions above: ``assignments`` is a list of
+    (name, code), ``results`` the code of each entry. control/fast_law.py compiles it with numba."""
+    printer = _Printer()
+    replacements, reduced = sympy.cse(list(entries), symbols=sympy.numbered_symbols("_t"), optimizations="basic")
+    assignments = [(printer.doprint(symbol), printer.doprint(expression)) for symbol, expression in replacements]
+    return assignments, [printer.doprint(e) for e in reduced], printer
+
+
 def time_derivative(matrix, configuration_symbols, configuration_rate):
     """d/dt of a sympy matrix of the configuration x along x-dot = ``configuration_rate``:
     sum_i (d matrix / d x_i) x-dot_i."""

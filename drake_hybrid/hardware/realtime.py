@@ -18,7 +18,7 @@ controller sees the stream and the states a closed loop produced.
 
 import time
 from dataclasses import dataclass, field
-from typing import Dict, List
+from typing import Dict
 
 import numpy as np
 

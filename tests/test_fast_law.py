@@ -1,0 +1,181 @@
+"""The compiled float law (control/fast_law.py) is the law of control/law.py: every output port and
+diagnostic equal to 1e-12 on every built-in task in every mode, a redundant arm, random states,
+near the singularity bound, in saturation and in the guarded move."""
+
+import warnings
+
+import numpy as np
+import pytest
+
+from drake_hybrid.control import fast_kernels, fast_law
+from drake_hybrid.control.controller import HybridController
+from drake_hybrid.control.gains import ControlMode
+from drake_hybrid.control.safety import SafetyConfig
+from drake_hybrid.scenario.builder import build_scenario
+from drake_hybrid.scenario.tasks import BUILT_IN_TASKS, TASKS
+
+pytestmark = pytest.mark.skipif(fast_kernels.NUMBA_ERROR is not None, reason="numba not available")
+
+PORTS = ("actuation", "velocity_error", "force_error", "constraint_value", "projected_velocity", "force",
+         "tangential_force")
+DIAGNOSTICS = ("saturation_scale", "actuator_clipped", "smallest_singular_value", "singularity_damping",
+               "wrench_valid", "contact_phase")
+TOLERANCE = 1e-12
+MODES = [mode.value for mode in ControlMode]
+STATES = 25
+
+
+class Guarded:
+    approach_speed, approach_gain = 0.03, 8.0
+
+
+def _task_start(name, joints=None):
+    """(controller plant, frame, point, constraint space, gains, q0) of a task at its start."""
+    task = TASKS[name]
+    config = task.default_config()
+    if joints is not None:
+        config.task_parameters = dict(config.task_parameters, joints=joints)
+    scenario = build_scenario(config, with_loggers=False)
+    q0 = np.asarray(task.start_positions(scenario), dtype=float)
+    return (scenario.controller_plant, scenario.robot.end_effector_frame, scenario.robot.end_effector_point,
+            scenario.constraint_space, config.gains, q0)
+
+
+@pytest.fixture(scope="module", params=sorted(BUILT_IN_TASKS) + ["window-washing-4r"])
+def task(request):
+    if request.param == "window-washing-4r":                    # the redundant arm (n = 4 > d = 3)
+        return request.param, _task_start("window-washing", joints=4)
+    return request.param, _task_start(request.param)
+
+
+def _pair(start, mode, **arguments):
+    plant, frame, point, space, gains, _ = start
+    fast = HybridController(plant, frame, point, space, gains=gains, mode=mode, **arguments)
+    generic = HybridController(plant, frame, point, space, gains=gains, mode=mode, fast_law=False, **arguments)
+    assert fast.fast_law is not None and generic.fast_law is None
+    return fast, generic
+
+
+def _random_inputs(controller, q0, rng, spread):
+    n, k, m = controller.num_joints, controller.velocity_size, controller.force_size
+    wrench = rng.normal(scale=[2, 2, 2, 20, 20, 20])
+    if rng.random() < 0.1:
+        wrench[rng.integers(6)] = np.nan                         # a sensor dropout
+    inputs = {"estimated_state": np.concatenate([q0 + spread * rng.normal(size=n), rng.normal(scale=0.3, size=n)]),
+              "measured_wrench": wrench, "desired_velocity": rng.normal(scale=0.1, size=k),
+              "desired_acceleration": rng.normal(scale=0.5, size=k), "desired_force": rng.normal(-10, 5, size=m)}
+    if controller.get_contact_phase_input_port() is not None:
+        inputs["contact_phase"] = np.array([float(rng.integers(4))])
+    return inputs
+
+
+def _compare(fast, generic, inputs, integrals, what):
+    results = []
+    for system in (fast, generic):
+        context = system.CreateDefaultContext()
+        for name, value in inputs.items():
+            system.GetInputPort(name).FixValue(context, value)
+        context.SetContinuousState(integrals)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            ports = {name: system.GetOutputPort(name).Eval(context).copy() for name in PORTS}
+            ports["derivatives"] = system.EvalTimeDerivatives(context).CopyToVector()
+            diagnostics = system.diagnostics(context)
+        results.append((ports, diagnostics))
+    (fast_ports, fast_diagnostics), (generic_ports, generic_diagnostics) = results
+    for name, expected in generic_ports.items():
+        scale = max(1.0, float(np.max(np.abs(expected), initial=0.0)))
+        np.testing.assert_allclose(fast_ports[name], expected, rtol=TOLERANCE, atol=TOLERANCE * scale,
+                                   err_msg=f"{what}: port {name}")
+    for name in DIAGNOSTICS:
+        expected, actual = generic_diagnostics[name], fast_diagnostics[name]
+        if isinstance(expected, float) and isinstance(actual, float):
+            assert actual == pytest.approx(expected, rel=1e-9, abs=1e-12), f"{what}: {name}"
+        else:
+            assert actual == expected, f"{what}: {name}"
+    return generic_diagnostics
+
+
+@pytest.mark.parametrize("mode", MODES)
+def test_both_paths_give_every_output_at_random_states(task, mode, rng):
+    name, start = task
+    fast, generic = _pair(start, mode)
+    for i in range(STATES):
+        inputs = _random_inputs(fast, start[5], rng, spread=0.02)
+        integrals = rng.normal(scale=0.05, size=fast.integral_state_slices()[1].stop)
+        _compare(fast, generic, inputs, integrals, f"{name} {mode} state {i}")
+    assert fast.fast_law.fallbacks == 0
+
+
+@pytest.mark.parametrize("mode", MODES)
+def test_both_paths_agree_near_the_singularity_bound_in_saturation_and_off_the_surface(task, mode, rng):
+    """A threshold above every sigma_min and a low bound make the damped inverse active; low effort
+    limits saturate; the contact_phase input runs the guarded move in TARE, APPROACH and HOLD."""
+    name, start = task
+    plant = start[0]
+    base_limits = np.full(plant.num_actuators(), 40.0)
+    seen = {"damped": 0, "saturated": 0, "clipped": 0}
+    for limits, bound in ((base_limits, 0.5), (base_limits * 0.05, 50.0), (base_limits * 0.005, 0.2)):
+        safety = SafetyConfig(effort_limits=list(limits), singularity_threshold=10.0, max_joint_acceleration=bound)
+        fast, generic = _pair(start, mode, safety=safety, guarded_move=Guarded())
+        for i in range(8):
+            inputs = _random_inputs(fast, start[5], rng, spread=0.05)
+            integrals = rng.normal(scale=0.05, size=fast.integral_state_slices()[1].stop)
+            diagnostics = _compare(fast, generic, inputs, integrals, f"{name} {mode} limits {limits[0]} state {i}")
+            seen["damped"] += diagnostics["singularity_damping"] > 0
+            seen["saturated"] += diagnostics["saturation_scale"] < 1
+            seen["clipped"] += diagnostics["actuator_clipped"]
+        assert fast.fast_law.fallbacks == 0
+    assert all(count > 0 for count in seen.values()), seen
+
+
+def test_the_first_tick_reports_its_compile_or_cache_load_time(task):
+    _, start = task
+    fast, _ = _pair(start, "velocity-force")
+    assert fast.fast_law.compile_seconds is None               # nothing compiled at construction
+    context = fast.CreateDefaultContext()
+    plant = start[0]
+    n = plant.num_velocities()
+    fast.get_estimated_state_input_port().FixValue(context, np.concatenate([start[5], np.zeros(n)]))
+    for port, size in (("measured_wrench", 6), ("desired_velocity", fast.velocity_size),
+                       ("desired_acceleration", fast.velocity_size), ("desired_force", fast.force_size)):
+        fast.GetInputPort(port).FixValue(context, np.zeros(size))
+    fast.GetOutputPort("actuation").Eval(context)
+    assert fast.fast_law.compile_seconds is not None and fast.fast_law.compile_seconds >= 0
+
+
+def test_autodiff_keeps_the_generic_law(task):
+    _, start = task
+    fast, _ = _pair(start, "velocity-force")
+    assert fast.ToAutoDiffXd().fast_law is None
+
+
+def test_without_numba_the_controller_warns_once_and_runs_the_generic_law(monkeypatch):
+    start = _task_start("window-washing")
+    plant, frame, point, space, gains, _ = start
+    monkeypatch.setattr(fast_kernels, "NUMBA_ERROR", ImportError("No module named 'numba'"))
+    monkeypatch.setattr(fast_law, "_WARNED", [])
+    with pytest.warns(UserWarning, match="numba unavailable") as record:
+        first = HybridController(plant, frame, point, space, gains=gains)
+        second = HybridController(plant, frame, point, space, gains=gains)
+    assert first.fast_law is None and second.fast_law is None
+    assert len([w for w in record if "numba" in str(w.message)]) == 1
+    assert "\n" not in str(record[0].message)
+
+
+def test_a_constraint_that_does_not_compile_leaves_the_controller_on_the_generic_law():
+    start = _task_start("window-washing")
+    fast, generic = _pair(start, "velocity-force")
+
+    def fails(*arguments):
+        raise TypeError("cannot compile this constraint")
+
+    fast.fast_law._terms_into = fails
+    inputs = _random_inputs(fast, start[5], np.random.default_rng(1), spread=0.01)
+    context = fast.CreateDefaultContext()
+    for name, value in inputs.items():
+        fast.GetInputPort(name).FixValue(context, value)
+    with pytest.warns(UserWarning, match="could not be compiled"):
+        fast.GetOutputPort("actuation").Eval(context)
+    assert fast.fast_law.disabled
+    _compare(fast, generic, inputs, np.zeros(fast.integral_state_slices()[1].stop), "not compiled")
