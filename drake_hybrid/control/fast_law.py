@@ -222,6 +222,13 @@ def _warn_once(message):
 # The fast path
 # ------------------------------------------------------------------------------------------------
 
+def kernels_loaded():
+    """True once the law's compiled kernels are in this process (compiled, or loaded from numba's
+    disk cache); before that, the first tick loads them (about 0.4 s) or, on a first run with an
+    empty cache, compiles them (30-75 s on 2 shared cores)."""
+    return bool(getattr(kernels.law_from_terms, "signatures", True))
+
+
 class FastLaw:
     """The compiled law of one float HybridController (see the module docstring).
 

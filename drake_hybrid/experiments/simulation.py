@@ -40,6 +40,7 @@ from pydrake.systems.analysis import ApplySimulatorConfig, Simulator
 from pydrake.systems.framework import EventStatus
 
 from drake_hybrid.analysis.linearization import controller_prediction, design_time_constant, predicted_errors
+from drake_hybrid.control.fast_law import kernels_loaded
 from drake_hybrid.control.phases import ContactPhase
 from drake_hybrid.core.progress import quiet
 from drake_hybrid.scenario.builder import build_scenario
@@ -200,7 +201,10 @@ def simulate(config, progress=False, meshcat=None, record_html=False, setup=None
                                          simulator.get_monitor()))
     if meshcat is not None and record_html:
         meshcat.StartRecording(set_visualizations_while_recording=False)
-    with stages(f"{config.task}: initializing the simulator"):
+    initializing = f"{config.task}: initializing the simulator"
+    if getattr(scenario.controller, "fast_law", None) is not None and not kernels_loaded():
+        initializing += " (and the compiled law: on the first run ever, numba compiles it once, 30-75 s)"
+    with stages(initializing):
         simulator.Initialize()
     start = time.perf_counter()
     duration = float(config.duration)
