@@ -373,9 +373,9 @@ def test_loaded_kinova_tracks_on_a_plane(kinova):
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(reason="the xArm7's URDF joint damping (2-10 N m s/rad) stalls a velocity row on the discrete "
-                          "plant (issue 12, item 2); measured about 75 % velocity error", strict=False)
 def test_loaded_seven_dof_arm_with_shipped_damping_tracks_on_a_plane(cache):
+    """The xArm7's URDF joint damping (2-10 N m s/rad) as shipped: the law compensates the damping the
+    discrete solver applies implicitly (control.damping); without that, about 75 % velocity error."""
     summary = tracking(load_arm(XARM7, flange="link7", cache_dir=cache), "xarm7-plane", 0.45)
     assert summary["max_force_error_percent_after_5_time_constants"] <= 2.0
     assert summary["max_velocity_error_percent_after_5_time_constants"] <= 2.0
