@@ -70,9 +70,14 @@ def _check_output_paths(args):
     """Refuse, before anything runs, output paths that cannot be written (UsageError naming the flag)."""
     for flag in ("out",):
         value = getattr(args, flag, None)
-        if value and Path(value).exists() and not Path(value).is_dir():
+        if not value:
+            continue
+        if Path(value).exists() and not Path(value).is_dir():
             raise UsageError(f"--{flag} '{value}' exists and is not a directory")
-        if value and not os.access(_existing_ancestor(Path(value)), os.W_OK):
+        ancestor = _existing_ancestor(Path(value))
+        if not ancestor.is_dir():
+            raise UsageError(f"--{flag} '{value}' cannot be created: '{ancestor}' is a file, not a directory")
+        if not os.access(ancestor, os.W_OK):
             raise UsageError(f"--{flag} '{value}' cannot be created (no write permission)")
     for flag in ("html", "json", "plot"):
         value = getattr(args, flag, None)

@@ -97,3 +97,10 @@ def test_the_crank_summary_prints_the_true_crank_rates_deviation_for_both_veloci
         deviations[rows] = float(re.search(r"deviates at most ([0-9.e+-]+) rad/s", note).group(1))
     assert deviations["true"] < 0.01 * 0.5
     assert deviations["paper"] > 3.0 * deviations["true"]
+
+
+def test_grinding_on_the_sphere_labels_its_rows_as_the_sphere_task():
+    grinding = get_task("grinding")
+    config = grinding.default_config({"workpiece": "sphere"})
+    assert grinding.labels(config) == get_task("sphere-polishing").labels()
+    assert grinding.labels(grinding.default_config()) == get_task("window-washing").labels()

@@ -291,7 +291,7 @@ def summarize(scenario, log, wall_time):
     t = log["t"]
     speed_scale = float(np.max(np.linalg.norm(log["desired_velocity"], axis=1)))
     force_scale = float(np.max(np.linalg.norm(log["desired_force"], axis=1)))
-    labels = scenario.task.labels()
+    labels = scenario.task.labels(scenario.config)
     start = contact_time(log)
     settle_after = start + 5 * tau
     velocity_rows = row_errors(t, log["velocity_error"], log["desired_velocity"], labels.get("velocity", []),

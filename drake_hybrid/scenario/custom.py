@@ -187,7 +187,7 @@ class CustomTask(Task):
         config.plant.contact_model = "hydroelastic_with_fallback"
         return config
 
-    def labels(self):
+    def labels(self, config=None):
         return self._labels
 
     # -- the Task protocol (scenario.task) -----------------------------------------------------

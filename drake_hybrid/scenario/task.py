@@ -189,8 +189,9 @@ class Task(abc.ABC):
         task causes on purpose). Default: none."""
         return []
 
-    def labels(self):
-        """Plot labels of the velocity- and force-controlled coordinates."""
+    def labels(self, config=None):
+        """Plot labels of the velocity- and force-controlled coordinates (``config``: the run's, for a
+        task whose rows depend on its options)."""
         return {"velocity": [], "velocity_units": "SI", "force": [], "force_units": "SI"}
 
     # -- models ------------------------------------------------------------------------------------

@@ -93,7 +93,7 @@ class CrankTurning(Task):
             task_options={"velocity_rows": "true"},
         )
 
-    def labels(self):
+    def labels(self, config=None):
         return {"velocity": ["psi-dot (spin)", "alpha-dot (crank)"], "velocity_units": "rad/s",
                 "force": ["radial (row 1)", "vertical", "tilt torque", "tangential/yaw (row 4)"],
                 "force_units": "N/m | N | N m | N", "constraint_units": "m^2 | m | 1 | m"}

@@ -97,8 +97,8 @@ class Grinding(Task):
         config.task_options.update(workpiece="sphere")
         return config
 
-    def labels(self):
-        return self._window.labels()
+    def labels(self, config=None):
+        return (self._base(config) if config is not None else self._window).labels(config)
 
     def run_notes(self, scenario, log, design_time_constant):
         """Where the pad is at the end relative to the rough patch (window): leaving it releases the

@@ -94,7 +94,7 @@ class SpherePolishing(Task):
             task_options={"chart": "pose", "path": "latitude", "velocity_rows": "true"},
         )
 
-    def labels(self):
+    def labels(self, config=None):
         return {"velocity": ["spin about a", "t_1 . p-dot", "t_2 . p-dot"], "velocity_units": "rad/s | m/s | m/s",
                 "force": ["normal force", "orientation row 1", "orientation row 2"], "force_units": "N | N | N",
                 "constraint_units": "m"}

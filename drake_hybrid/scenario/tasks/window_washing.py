@@ -87,7 +87,7 @@ class WindowWashing(Task):
             task_parameters={"window_height": 1.0},
         )
 
-    def labels(self):
+    def labels(self, config=None):
         """Plot labels of the velocity-controlled and force-controlled coordinates."""
         return {"velocity": ["x-dot", "theta-dot"], "velocity_units": "m/s | rad/s",
                 "force": ["F, along E_f = [0 1 0]"], "force_units": "N", "constraint_units": "m"}
