@@ -94,7 +94,9 @@ class CrankTurning(Task):
         )
 
     def labels(self, config=None):
-        return {"velocity": ["psi-dot (spin)", "alpha-dot (crank)"], "velocity_units": "rad/s",
+        paper = config is not None and self._rows(config) == "paper"
+        crank_row = "pseudo-velocity (paper's E_p row 2, (3.3-8))" if paper else "alpha-dot (crank)"
+        return {"velocity": ["psi-dot (spin)", crank_row], "velocity_units": "rad/s",
                 "force": ["radial (row 1)", "vertical", "tilt torque", "tangential/yaw (row 4)"],
                 "force_units": "N/m | N | N m | N", "constraint_units": "m^2 | m | 1 | m"}
 
