@@ -83,7 +83,8 @@ def panda_drum_task():
                 name="drum"),
             constraint_space=_five_free_rows(chart, drum, "drum"), start_pose=start,
             joint_guess=[0.0, -0.3, 0.0, -2.2, 0.0, 1.9, 0.8],
-            labels={"velocity": ["v_x", "v_y", "w_x", "w_y", "w_z"], "velocity_units": "m/s | rad/s",
+            labels={"velocity": ["v_x", "v_y", "w_x", "w_y", "w_z"],
+                    "velocity_units": "m/s | m/s | rad/s | rad/s | rad/s",
                     "force": ["F (drum normal)"], "force_units": "N"})
     return _registered("panda-drum", make)
 
@@ -100,7 +101,8 @@ def panda_table_task():
                 plant, Box(0.6, 0.6, 0.05), RigidTransform([TABLE_X, 0.0, TABLE_TOP - 0.025]), name="table"),
             constraint_space=_five_free_rows(chart, table, "table"), start_pose=start,
             joint_guess=[0.0, -0.3, 0.0, -2.2, 0.0, 1.9, 0.8],
-            labels={"velocity": ["v_x", "v_y", "w_x", "w_y", "w_z"], "velocity_units": "m/s | rad/s",
+            labels={"velocity": ["v_x", "v_y", "w_x", "w_y", "w_z"],
+                    "velocity_units": "m/s | m/s | rad/s | rad/s | rad/s",
                     "force": ["F (table normal)"], "force_units": "N"})
     return _registered("panda-table", make)
 
