@@ -76,7 +76,7 @@ def _nesting_depth(text):
     return deepest
 
 
-def expression_to_sympy(text, symbols=(), parameters=None, where="expression"):
+def expression_to_sympy(text, symbols=(), parameters=None, where="expression", row=False):
     """The sympy expression of ``text`` (see the module docstring for the grammar).
 
     Args:
@@ -84,6 +84,7 @@ def expression_to_sympy(text, symbols=(), parameters=None, where="expression"):
         symbols: the chart's coordinates (sympy Symbols, referred to by name).
         parameters: {name: number}, substituted as sympy Floats.
         where: "file: field" for the error messages.
+        row: accept a top-level tuple "a, b, c" and return a list (``expression_row_to_sympy``).
 
     Raises ConfigError (one line: ``where``, the reason and the offending token).
     """
@@ -92,7 +93,8 @@ def expression_to_sympy(text, symbols=(), parameters=None, where="expression"):
     if isinstance(text, (int, float)):
         if not math.isfinite(text):
             _refuse(where, "numbers must be finite, got", text)
-        return sympy.Integer(text) if isinstance(text, int) else sympy.Float(text)
+        number = sympy.Integer(text) if isinstance(text, int) else sympy.Float(text)
+        return [number] if row else number
     if not isinstance(text, str):
         _refuse(where, "expected an expression (text), got", type(text).__name__)
     if len(text) > MAX_LENGTH:
@@ -113,7 +115,19 @@ def expression_to_sympy(text, symbols=(), parameters=None, where="expression"):
         _refuse(where, f"the expression has more than {MAX_NODES} terms:", text[:40] + "...")
     by_name = {str(s): s for s in symbols}
     values = {name: sympy.Float(float(number)) for name, number in (parameters or {}).items()}
-    return _Converter(text, where, by_name, values).convert(tree.body, 1)
+    converter = _Converter(text, where, by_name, values)
+    if row and isinstance(tree.body, ast.Tuple):
+        return [converter.convert(item, 2) for item in tree.body.elts]
+    return [converter.convert(tree.body, 1)] if row else converter.convert(tree.body, 1)
+
+
+def expression_row_to_sympy(text, size, symbols=(), parameters=None, where="expression"):
+    """A row of ``size`` expressions written as one text, separated by commas ("cos(theta), 0, 1"),
+    as a list of sympy expressions (the grammar of ``expression_to_sympy`` for each entry)."""
+    entries = expression_to_sympy(text, symbols, parameters, where, row=True)
+    if len(entries) != size:
+        _refuse(where, f"expected {size} comma-separated entries, got {len(entries)} in", text)
+    return entries
 
 
 class _Converter:

@@ -1,0 +1,117 @@
+"""A whole task in one YAML file (scenario/data_task.py): the window-washing task written as
+models/tasks/window_washing.yaml runs as the built-in one, and a bad file is refused naming its field."""
+
+import textwrap
+
+import numpy as np
+import pytest
+
+from drake_hybrid.analysis.linearization import linearize_continuous
+from drake_hybrid.cli import main
+from drake_hybrid.core.errors import ConfigError
+from drake_hybrid.experiments.simulation import simulate
+from drake_hybrid.scenario.data_task import load_task_file
+from drake_hybrid.scenario.parsing import models_directory
+from drake_hybrid.scenario.tasks import get_task
+
+WINDOW_FILE = models_directory() / "tasks" / "window_washing.yaml"
+
+
+@pytest.fixture(scope="module")
+def window_file_task():
+    return load_task_file(WINDOW_FILE)
+
+
+def test_window_file_loads_as_the_built_in_config(window_file_task):
+    task, config = window_file_task
+    built_in = get_task("window-washing").default_config()
+    assert config.task == task.name == "window-washing-file"
+    assert config.gains == built_in.gains and config.mode == built_in.mode
+    assert config.desired_velocity == built_in.desired_velocity and config.desired_force == built_in.desired_force
+    np.testing.assert_allclose(config.start.configuration, [0.9, 0.98, np.pi / 2])
+    assert config.start.force_integral == built_in.start.force_integral
+
+
+def test_window_file_runs_as_the_built_in_task(window_file_task):
+    """Same velocity and force errors (the logs agree to 1e-9) over 0.3 s of the discrete run."""
+    _, config = window_file_task
+    built_in = get_task("window-washing").default_config(duration=0.3)
+    file_run = simulate(config.replace(duration=0.3))
+    built_in_run = simulate(built_in)
+    for name in ("velocity_error", "force_error", "q", "constraint"):
+        np.testing.assert_allclose(file_run.log[name], built_in_run.log[name], rtol=0, atol=1e-9, err_msg=name)
+    for rows in ("velocity_rows", "force_rows"):
+        for ours, theirs in zip(file_run.summary[rows], built_in_run.summary[rows]):
+            assert ours["final_error"] == pytest.approx(theirs["final_error"], abs=1e-9)
+
+
+def test_window_file_linearizes_to_the_designed_eigenvalues(window_file_task):
+    _, config = window_file_task
+    ours = linearize_continuous(config)
+    theirs = linearize_continuous(get_task("window-washing").default_config())
+    assert ours.match.matched
+    np.testing.assert_allclose(np.sort_complex(ours.match.predicted), [-10, -10, -8])
+    np.testing.assert_allclose(np.sort_complex(ours.match.partner), np.sort_complex(theirs.match.partner),
+                               rtol=1e-6)
+
+
+def _write(tmp_path, replace=None, append=""):
+    text = WINDOW_FILE.read_text()
+    for old, new in (replace or {}).items():
+        assert old in text
+        text = text.replace(old, new)
+    path = tmp_path / "task.yaml"
+    path.write_text(text + textwrap.dedent(append))
+    return path
+
+
+@pytest.mark.parametrize("replace, match", [
+    ({'rows: ["y - (window_height - pad_radius)"]': 'rows: ["__import__(\'os\')"]'},
+     r"constraint.rows\[0\]: names starting with '_' are not allowed: '__import__'"),
+    ({'rows: ["y - (window_height - pad_radius)"]': 'rows: ["y.real"]'},
+     r"constraint.rows\[0\]: not allowed in an expression \(attribute access\): 'y.real'"),
+    ({'rows: ["y - (window_height - pad_radius)"]': 'rows: ["z - 1"]'}, r"constraint.rows\[0\]: unknown name"),
+    ({'"1, 0, 0", "0, 0, 1"': '"1, 0", "0, 0, 1"'}, r"velocity_projection.rows\[0\]: expected 3 comma-separated"),
+    ({'"pi/2"]': '"pi/2", "1"]'}, r"start.configuration must have 3 entries"),
+    ({"kind: planar}": "kind: cylindrical}"}, r"chart.kind must be one of"),
+    ({"arm: planar_3r": "arm: planar_4r"}, r"robot.arm must name a model instance"),
+    ({"flange_frame: link3": "flange_frame: link9"}, r"robot.tool.flange_frame: .*link9"),
+    ({"window_height: 1.0 ": "window_height: one "}, r"parameters.window_height: expected a number"),
+    ({"name: window-washing-file": "name: window-washing"}, r"name: 'window-washing' is a built-in task"),
+    ({"gains: {velocity": "gains: {speed"}, r"config.gains: unknown field 'speed'"),
+])
+def test_bad_files_are_refused_naming_the_field(tmp_path, replace, match):
+    path = _write(tmp_path, replace)
+    with pytest.raises(ConfigError, match=match) as error:
+        task, config = load_task_file(path)
+        # Frame and instance names are checked when the robot is added to a plant.
+        task.add_robot(__import__("pydrake.multibody.plant", fromlist=["MultibodyPlant"]).MultibodyPlant(0.0), config)
+    assert str(error.value).startswith(str(path)) and "\n" not in str(error.value)
+
+
+def test_kernel_projection_is_the_default(tmp_path):
+    """Without velocity_projection rows, E_p is a basis of ker E_f at the start: E E^T = I for the window."""
+    path = _write(tmp_path, {'rows: ["1, 0, 0", "0, 0, 1"]': "rows: []"}, "")
+    task, config = load_task_file(path, register=False)
+    E_p = task.space.velocity_projection.matrix(np.asarray(config.start.configuration))
+    np.testing.assert_allclose(np.abs(E_p @ np.array([0.0, 1.0, 0.0])), 0, atol=1e-12)
+    np.testing.assert_allclose(E_p @ E_p.T, np.eye(2), atol=1e-12)
+
+
+def test_cli_runs_a_task_file(tmp_path, capsys):
+    out = tmp_path / "run"
+    assert main(["simulate", str(WINDOW_FILE), "--duration", "0.2", "--out", str(out), "--no-progress", "--no-plots",
+                 "--quiet"]) == 0
+    assert (out / "summary.json").exists()
+    assert "window-washing-file" in capsys.readouterr().out
+    assert main(["analyze", str(WINDOW_FILE), "--quiet"]) == 0
+    assert "matched" in capsys.readouterr().out
+
+
+def test_cli_refuses_a_bad_task_file_in_one_line(tmp_path, capsys):
+    path = _write(tmp_path, {'rows: ["y - (window_height - pad_radius)"]': 'rows: ["(lambda: 0)()"]'})
+    assert main(["analyze", str(path)]) == 2
+    error = capsys.readouterr().err.strip()
+    assert "\n" not in error and "constraint.rows[0]" in error and "lambda" in error
+    assert main(["simulate", str(tmp_path / "missing.yaml")]) == 2
+    assert "does not exist" in capsys.readouterr().err
