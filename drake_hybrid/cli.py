@@ -3,6 +3,7 @@
 commands:
   drake-hybrid simulate TASK    simulate a task; writes log.npz, summary.json, config.yaml and plots
   drake-hybrid analyze TASK     linearize the closed loop; designed vs. linearized eigenvalues
+                                (TASK: a task's name or a task file FILE.yaml, scenario/data_task.py)
   drake-hybrid sweep TASK --grid SPEC.yaml
                                 stability map / Monte Carlo sweep over config fields (Dask)
   drake-hybrid tasks            list the tasks
@@ -45,6 +46,7 @@ from drake_hybrid.hardware.messages import HardwareConfig
 from drake_hybrid.hardware.panda import panda_config, panda_drum_task, panda_table_task
 from drake_hybrid.hardware.realtime import replay_timing, run_controller
 from drake_hybrid.scenario.config import load_config
+from drake_hybrid.scenario.data_task import is_task_file, load_task_file
 from drake_hybrid.scenario.tasks import TASKS, get_task
 from drake_hybrid.viz.animation import set_task_camera
 from drake_hybrid.viz.outputs import write_run
@@ -94,11 +96,24 @@ def _existing_ancestor(path):
     return path
 
 
+def _task_argument(value):
+    """The TASK argument: a task's name, or a task file (FILE.yaml, scenario/data_task.py)."""
+    if is_task_file(value) or value in TASKS:
+        return value
+    raise argparse.ArgumentTypeError(f"invalid choice: '{value}' (choose from {', '.join(sorted(TASKS))}, "
+                                     "or give a task file FILE.yaml)")
+
+
 def _config(args):
     _check_output_paths(args)
-    task = get_task(args.task)
     options = _options(args)
-    config = task.default_config(options) if options else task.default_config()
+    if is_task_file(args.task):
+        if options:
+            raise UsageError("--option: a task file has no task options; edit its parameters instead")
+        task, config = load_task_file(args.task)
+    else:
+        task = get_task(args.task)
+        config = task.default_config(options) if options else task.default_config()
     if getattr(args, "config", None):
         config = load_config(path=args.config, defaults=config)
         if config.task != task.name:
@@ -348,12 +363,13 @@ def make_parser():
                         help="show the full Python traceback of an error (also DRAKE_HYBRID_TRACEBACK=1)")
     modes = [m.value for m in ControlMode]
     epilog = _task_options_epilog()
+    task_help = ", ".join(sorted(TASKS)) + ", or a task file FILE.yaml (a whole task in one file: models/tasks/)"
     simulate = sub.add_parser("simulate", parents=[common],
                               help="simulate a task (discrete 1 kHz plant and controller)",
                               description="Simulate a task; writes log.npz, summary.json, config.yaml and the "
                                           "plots to --out.",
                               epilog=epilog, formatter_class=argparse.RawDescriptionHelpFormatter)
-    simulate.add_argument("task", choices=sorted(TASKS), metavar="TASK", help=", ".join(sorted(TASKS)))
+    simulate.add_argument("task", type=_task_argument, metavar="TASK", help=task_help)
     simulate.add_argument("--duration", type=float, metavar="S", help="simulated time (s)")
     simulate.add_argument("--out", metavar="DIR", help="output directory (default ./runs/<task>)")
     simulate.add_argument("--mode", choices=modes, help="control law (default: the task's)")
@@ -371,7 +387,7 @@ def make_parser():
                              description="Linearize the closed loop at a contact equilibrium and compare its "
                                          "eigenvalues with the ones the gains design.",
                              epilog=epilog, formatter_class=argparse.RawDescriptionHelpFormatter)
-    analyze.add_argument("task", choices=sorted(TASKS), metavar="TASK", help=", ".join(sorted(TASKS)))
+    analyze.add_argument("task", type=_task_argument, metavar="TASK", help=task_help)
     analyze.add_argument("--mode", choices=modes, help="control law (default: the task's)")
     analyze.add_argument("--config", metavar="FILE.yaml", help="YAML scenario config (on top of the task's defaults)")
     analyze.add_argument("--option", action="append", metavar="KEY=VALUE",

@@ -6,13 +6,15 @@ import textwrap
 import numpy as np
 import pytest
 
+from pydrake.multibody.plant import MultibodyPlant
+
 from drake_hybrid.analysis.linearization import linearize_continuous
 from drake_hybrid.cli import main
 from drake_hybrid.core.errors import ConfigError
 from drake_hybrid.experiments.simulation import simulate
 from drake_hybrid.scenario.data_task import load_task_file
 from drake_hybrid.scenario.parsing import models_directory
-from drake_hybrid.scenario.tasks import get_task
+from drake_hybrid.scenario.tasks import get_task, register_task
 
 WINDOW_FILE = models_directory() / "tasks" / "window_washing.yaml"
 
@@ -85,7 +87,7 @@ def test_bad_files_are_refused_naming_the_field(tmp_path, replace, match):
     with pytest.raises(ConfigError, match=match) as error:
         task, config = load_task_file(path)
         # Frame and instance names are checked when the robot is added to a plant.
-        task.add_robot(__import__("pydrake.multibody.plant", fromlist=["MultibodyPlant"]).MultibodyPlant(0.0), config)
+        task.add_robot(MultibodyPlant(0.0), config)
     assert str(error.value).startswith(str(path)) and "\n" not in str(error.value)
 
 
@@ -115,3 +117,25 @@ def test_cli_refuses_a_bad_task_file_in_one_line(tmp_path, capsys):
     assert "\n" not in error and "constraint.rows[0]" in error and "lambda" in error
     assert main(["simulate", str(tmp_path / "missing.yaml")]) == 2
     assert "does not exist" in capsys.readouterr().err
+
+
+def test_workpiece_from_the_library_shapes(tmp_path):
+    """The pane as a library box (custom.add_rigid_workpiece) instead of window.sdf: the same
+    linearized closed loop (the same rigid hydroelastic box, 3 m x 0.5 m x 20 mm, its lower face at 1 m)."""
+    path = _write(tmp_path, {
+        "  directives:\n  - add_model: {name: window,": "  shapes:\n  - {shape: box, size: [3.0, 0.5, 0.02], "
+        "X_WG: {translation: [1.0, 0.0, 1.01]}}\n  #",
+        "  - add_weld: {parent: world, child: window::pane": "  #"}, "")
+    task, config = load_task_file(path, register=False)
+    assert task.spec.workpiece.shapes[0].shape == "box" and not task.spec.workpiece.directives
+    task.name = config.task = "window-washing-box"
+    register_task(task)
+    ours = linearize_continuous(config)
+    theirs = linearize_continuous(get_task("window-washing").default_config())
+    np.testing.assert_allclose(np.sort_complex(ours.match.partner), np.sort_complex(theirs.match.partner),
+                               rtol=1e-6)
+
+
+def test_cli_refuses_options_for_a_task_file(capsys):
+    assert main(["analyze", str(WINDOW_FILE), "--option", "joints=4"]) == 2
+    assert "a task file has no task options" in capsys.readouterr().err

@@ -218,6 +218,8 @@ class _Converter:
         if not isinstance(node.func, ast.Name):
             self.refuse(f"only the functions {sorted(FUNCTIONS)} may be called, not", node.func)
         name = node.func.id
+        if name.startswith("_"):
+            self.refuse("names starting with '_' are not allowed:", node.func)
         if name not in FUNCTIONS:
             self.refuse(f"unknown function (allowed: {sorted(FUNCTIONS)}):", node.func)
         if node.keywords or any(isinstance(argument, ast.Starred) for argument in node.args):
