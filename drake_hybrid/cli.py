@@ -46,7 +46,8 @@ from drake_hybrid.hardware.messages import HardwareConfig
 from drake_hybrid.hardware.panda import panda_config, panda_drum_task, panda_table_task
 from drake_hybrid.hardware.realtime import replay_timing, run_controller
 from drake_hybrid.scenario.config import load_config
-from drake_hybrid.scenario.data_task import is_task_file, load_task_file
+from drake_hybrid.scenario.data_task import is_task_file, load_task_file, read_task_file
+from drake_hybrid.scenario.parsing import models_directory
 from drake_hybrid.scenario.tasks import TASKS, get_task
 from drake_hybrid.viz.animation import set_task_camera
 from drake_hybrid.viz.outputs import write_run
@@ -297,6 +298,11 @@ def command_sweep(args):
 def command_tasks(args):
     for name, task in TASKS.items():
         print(f"{name:18s} {task.description}")
+    files = sorted((models_directory() / "tasks").glob("*.yaml"))
+    if files:
+        print("task files (drake-hybrid simulate|analyze FILE.yaml):")
+    for path in files:
+        print(f"  {path}: {read_task_file(path).description}")
     return 0
 
 

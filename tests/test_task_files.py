@@ -139,3 +139,40 @@ def test_workpiece_from_the_library_shapes(tmp_path):
 def test_cli_refuses_options_for_a_task_file(capsys):
     assert main(["analyze", str(WINDOW_FILE), "--option", "joints=4"]) == 2
     assert "a task file has no task options" in capsys.readouterr().err
+
+
+def test_cli_tasks_lists_the_task_files(capsys):
+    assert main(["tasks"]) == 0
+    out = capsys.readouterr().out
+    assert "window_washing.yaml" in out and "from a task file" in out
+
+
+def test_robot_from_the_arm_loader(tmp_path):
+    """robot.loader (scenario.robots.load_arm) instead of directives: the planar 3R arm with the pad
+    tool at its tip along +x, so the pad centre is 0.05 m beyond the tip (end_effector_point); the
+    linearized closed loop has the designed eigenvalues."""
+    robot = textwrap.dedent(f"""\
+        robot:
+          loader: {{path: {models_directory() / "planar_3r.sdf"}, flange: link3, tool_frame: tip, tool_axis: "+x",
+                   collision: drop}}
+          end_effector_frame: tip
+          end_effector_point: [0.05, 0.0, 0.0]
+          only_pad_contact: true
+        workpiece:""")
+    text = WINDOW_FILE.read_text()
+    start, end = text.index("robot:\n"), text.index("workpiece:")
+    path = tmp_path / "loader.yaml"
+    path.write_text((text[:start] + robot + text[end + len("workpiece:"):]).replace(
+        "name: window-washing-file", "name: window-washing-loader"))
+    task, config = load_task_file(path)
+    result = linearize_continuous(config)
+    assert result.match.matched, result.match.as_dict()
+    np.testing.assert_allclose(np.sort_complex(result.match.predicted), [-10, -10, -8])
+
+
+def test_start_as_a_pose_of_the_end_effector_frame(tmp_path):
+    """start.pose (of frame E = tip) gives the same chart start as start.configuration."""
+    path = _write(tmp_path, {'configuration: ["0.9", "window_height - pad_radius", "pi/2"]':
+                             "pose: [0.9, 0.0, 0.98, 0.0, -1.5707963267948966, 0.0]"})
+    task, config = load_task_file(path, register=False)
+    np.testing.assert_allclose(config.start.configuration, [0.9, 0.98, np.pi / 2], atol=1e-12)

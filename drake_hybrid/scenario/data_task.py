@@ -27,21 +27,24 @@ FILE.yaml``) runs it as a built-in task. The file::
     velocity_projection:
       rows: ["1, 0, 0", "0, 0, 1"]         # E_p, one row per text; empty: a basis of ker E_f (kernel)
     start:
-      configuration: ["0.9", "window_height - 0.02", "pi/2"]   # chart coordinates of E, on C = 0
+      configuration: ["0.9", "window_height - 0.02", "pi/2"]   # chart coordinates of the point, on C = 0
       joint_guess: [...]                   # where inverse kinematics starts
     config: {...}                          # a ScenarioConfig (scenario/config.py): mode, gains, profiles, ...
 
+Size: one schema (the dataclasses) and the one function per section that turns it into the
+CustomTask's pieces; splitting them would put the schema and its meaning in different files.
+
 Expressions are parsed by the whitelisted grammar of ``core.expressions`` (never evaluated as
 Python): a file from someone else cannot run code. The start pose is given in the chart's
-coordinates (``start.configuration``; or ``start.pose`` = [x, y, z, roll, pitch, yaw] of E); it is
-stored in ``config.start.configuration`` as chart coordinates, and ``config.task`` is the file's name.
+coordinates of the controlled point (``start.configuration``; or ``start.pose`` = [x, y, z, roll,
+pitch, yaw] of frame E); it is stored in ``config.start.configuration`` as chart coordinates, and ``config.task`` is the file's name.
 """
 
 import dataclasses
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Dict, List, Optional
+from typing import Dict, List
 
 import numpy as np
 
@@ -99,6 +102,7 @@ class RobotSpec:
     tool: ToolSpec = field(default_factory=ToolSpec)
     loader: LoaderSpec = field(default_factory=LoaderSpec)
     end_effector_frame: str = "pad_center"       # frame E whose point the constraint is on
+    end_effector_point: List[float] = field(default_factory=lambda: [0.0, 0.0, 0.0])   # p_EP (m), in E
     only_pad_contact: bool = True                # filter every robot contact but the pad's
 
 
@@ -223,8 +227,8 @@ def _directives_adder(directives, what):
 
 class DataTask(CustomTask):
     """A CustomTask read from a task file (``load_task_file``); also keeps its ``spec`` (TaskFile)
-    and ``path``. Its start is in the chart's coordinates (``config.start.configuration`` with the
-    chart's number of coordinates; six numbers [x, y, z, roll, pitch, yaw] of E otherwise)."""
+    and ``path``. Its start is in the chart's coordinates of the controlled point (``config.start.configuration``
+    with the chart's number of coordinates; six numbers [x, y, z, roll, pitch, yaw] of E otherwise)."""
 
     def __init__(self, spec, path, **pieces):
         super().__init__(**pieces)
@@ -237,7 +241,9 @@ class DataTask(CustomTask):
     def start_pose_of(self, config):
         values = list(config.start.configuration)
         if len(values) == self.space.chart.configuration_size:
-            return self.space.chart.pose(np.asarray(values, dtype=float))
+            # The chart's coordinates are the controlled point's: X_WE = X_WP X_PE, p_PE = -p_EP.
+            X_WP = self.space.chart.pose(np.asarray(values, dtype=float))
+            return X_WP.multiply(RigidTransform(-np.asarray(self.spec.robot.end_effector_point, dtype=float)))
         return super().start_pose_of(config)
 
 
@@ -256,7 +262,7 @@ def _robot_adder(spec, path, where):
         loaded = load_arm(str(file), robot.loader.flange, tool_frame=robot.loader.tool_frame or None,
                           base_pose=robot.loader.base_pose.GetDeterministicValue(),
                           tool_axis=robot.loader.tool_axis, collision=robot.loader.collision)
-        return loaded.add_robot
+        return _with_end_effector(loaded.add_robot, robot, where)
     if not robot.directives:
         raise ConfigError(f"{where}robot: give directives (with arm and tool) or loader.path")
     add_models = _directives_adder(robot.directives, f"{where}robot")
@@ -276,11 +282,24 @@ def _robot_adder(spec, path, where):
                                     robot.tool.X_flange_tool.GetDeterministicValue())
         except UnknownFrameError as error:
             raise ConfigError(f"{where}robot.tool.flange_frame: {error}") from None
+        return model
+    return _with_end_effector(add_robot, robot, where)
+
+
+def _with_end_effector(add_robot, robot, where):
+    """``add_robot`` whose RobotModel has the file's end-effector frame and point and contact filter."""
+    point = np.asarray(robot.end_effector_point, dtype=float)
+    if point.shape != (3,) or not np.all(np.isfinite(point)):
+        raise ConfigError(f"{where}robot.end_effector_point must be 3 finite numbers (m), got "
+                          f"{robot.end_effector_point}")
+
+    def add(plant):
+        model = add_robot(plant)
         if not plant.HasFrameNamed(robot.end_effector_frame):
             raise ConfigError(f"{where}robot.end_effector_frame: no frame '{robot.end_effector_frame}' in the plant")
-        return dataclasses.replace(model, end_effector_frame=robot.end_effector_frame,
+        return dataclasses.replace(model, end_effector_frame=robot.end_effector_frame, end_effector_point=point,
                                    only_pad_contact=robot.only_pad_contact)
-    return add_robot
+    return add
 
 
 def _instance_names(plant):
@@ -361,7 +380,9 @@ def start_configuration_of(spec, chart, where):
     if len(start.pose) != 6:
         raise ConfigError(f"{where}start: give configuration (chart coordinates) or pose [x, y, z, roll, pitch, "
                           f"yaw] of the end-effector frame, got pose {start.pose}")
-    return chart.configuration_of_pose(RigidTransform(RollPitchYaw(start.pose[3:]), start.pose[:3]))
+    X_WE = RigidTransform(RollPitchYaw(start.pose[3:]), start.pose[:3])
+    return chart.configuration_of_pose(X_WE.multiply(RigidTransform(np.asarray(spec.robot.end_effector_point,
+                                                                               dtype=float))))
 
 
 def load_task_file(path, register=True):
