@@ -273,10 +273,11 @@ def command_analyze(args):
 
 def command_sweep(args):
     _check_output_paths(args)
-    out = Path(args.out) if args.out else Path("runs") / f"sweep-{args.task}"
+    task_name = load_task_file(args.task)[0].name if is_task_file(args.task) else args.task
+    out = Path(args.out) if args.out else Path("runs") / f"sweep-{task_name}"
     try:
         spec = load_spec(path=args.grid)
-        run = run_sweep(args.task, spec, out, scheduler=args.scheduler, workers=args.workers, resume=args.resume,
+        run = run_sweep(task_name, spec, out, scheduler=args.scheduler, workers=args.workers, resume=args.resume,
                         retry_failed=args.retry_failed, progress=not args.no_progress)
     except (SweepSpecError, ValueError) as error:
         print(f"drake-hybrid sweep: {_one_line(error)}", file=sys.stderr)
@@ -287,7 +288,7 @@ def command_sweep(args):
         done = f"{run.evaluated} of {run.points} points evaluated in {run.wall_time:.1f} s ({run.workers})"
     else:
         done = f"nothing to run: all {run.points} points already in the table"
-    print(f"{args.task}: {done}; {len(rows)} in the table, {stable} stable, {run.failures} with errors")
+    print(f"{task_name}: {done}; {len(rows)} in the table, {stable} stable, {run.failures} with errors")
     print(f"  wrote {run.results_path}")
     if args.plot:
         for path in save_sweep_plots(rows, spec, out):
@@ -413,7 +414,7 @@ def make_parser():
                            description="Evaluate a grid or Monte Carlo sample of config fields: per point a short "
                                        "simulation, two linearizations and the verdicts, appended to "
                                        "DIR/results.csv (docs/stability.md).")
-    sweep.add_argument("task", choices=sorted(TASKS), metavar="TASK", help=", ".join(sorted(TASKS)))
+    sweep.add_argument("task", type=_task_argument, metavar="TASK", help=task_help)
     sweep.add_argument("--grid", required=True, metavar="SPEC.yaml",
                        help="sweep spec: the config fields to vary and how (grid or random), the map to plot; "
                             "format in docs/stability.md")

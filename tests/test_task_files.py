@@ -3,6 +3,7 @@ models/tasks/window_washing.yaml runs as the built-in one, and a bad file is ref
 
 import textwrap
 
+import cloudpickle
 import numpy as np
 import pytest
 
@@ -12,6 +13,9 @@ from drake_hybrid.analysis.linearization import linearize_continuous
 from drake_hybrid.cli import main
 from drake_hybrid.core.errors import ConfigError
 from drake_hybrid.experiments.simulation import simulate
+from drake_hybrid.experiments.sweep import read_results, run_sweep
+from drake_hybrid.experiments.sweep_spec import load_spec
+from drake_hybrid.scenario.config import dump_config
 from drake_hybrid.scenario.data_task import load_task_file
 from drake_hybrid.scenario.parsing import models_directory
 from drake_hybrid.scenario.tasks import get_task, register_task
@@ -176,3 +180,64 @@ def test_start_as_a_pose_of_the_end_effector_frame(tmp_path):
                              "pose: [0.9, 0.0, 0.98, 0.0, -1.5707963267948966, 0.0]"})
     task, config = load_task_file(path, register=False)
     np.testing.assert_allclose(config.start.configuration, [0.9, 0.98, np.pi / 2], atol=1e-12)
+
+
+def test_task_file_pickles_as_its_text(window_file_task):
+    """Shipped to Dask workers by its text: the copy rebuilt from it has the same constraint space."""
+    task, config = window_file_task
+    copy = cloudpickle.loads(cloudpickle.dumps(task))
+    assert copy is not task and copy.name == task.name and copy.text == task.text
+    x, nu = np.asarray(config.start.configuration), np.array([0.1, 0.02, -0.3])
+    ours, theirs = copy.space.evaluate(x, nu), task.space.evaluate(x, nu)
+    np.testing.assert_array_equal(ours.matrix, theirs.matrix)
+    assert dump_config(copy.default_config()) == dump_config(task.default_config())
+
+
+SWEEP = """
+base:
+  duration: 0.15
+parameters:
+  gains.force_proportional: {values: [0.5, 2.0]}
+  control_period: {values: [0.001, 0.004]}
+"""
+TIMING_COLUMNS = {"wall_time", "simulation_wall_time", "linearization_wall_time", "cpu_time", "worker"}
+
+
+def _assert_same_rows(ours, theirs):
+    """The same verdicts, and the numbers to 1e-6 relative (the file's start comes from numeric
+    inverse kinematics, the built-in task's from the closed form: equal to ~1e-11)."""
+    assert len(ours) == len(theirs)
+    for a, b in zip(ours, theirs):
+        for name in a:
+            if name in TIMING_COLUMNS:
+                continue
+            if isinstance(a[name], float) and isinstance(b[name], float):
+                assert a[name] == pytest.approx(b[name], rel=1e-6, abs=1e-8), (a["point"], name)
+            else:
+                assert a[name] == b[name], (a["point"], name)
+
+
+@pytest.fixture(scope="module")
+def built_in_sweep(tmp_path_factory):
+    out = tmp_path_factory.mktemp("built_in")
+    run_sweep("window-washing", load_spec(text=SWEEP), out, workers=0, progress=False)
+    return read_results(out / "results.csv")
+
+
+def test_cli_sweeps_a_task_file_serially_as_the_built_in_task(built_in_sweep, tmp_path, capsys):
+    spec = tmp_path / "spec.yaml"
+    spec.write_text(SWEEP)
+    assert main(["sweep", str(WINDOW_FILE), "--grid", str(spec), "--out", str(tmp_path / "out"), "--workers", "0",
+                 "--no-progress"]) == 0
+    assert "4 of 4 points evaluated" in capsys.readouterr().out
+    _assert_same_rows(read_results(tmp_path / "out" / "results.csv"), built_in_sweep)
+
+
+@pytest.mark.slow
+def test_task_file_sweep_on_a_local_dask_cluster(built_in_sweep, tmp_path):
+    """The task travels to two worker processes (by its text) and gives the built-in task's results."""
+    task, _ = load_task_file(WINDOW_FILE)
+    run = run_sweep(task.name, load_spec(text=SWEEP), tmp_path, workers=2, progress=False)
+    rows = read_results(tmp_path / "results.csv")
+    assert run.workers == "local:2" and len({row["worker"] for row in rows}) == 2
+    _assert_same_rows(rows, built_in_sweep)

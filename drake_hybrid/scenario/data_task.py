@@ -183,12 +183,14 @@ def is_task_file(name):
     return str(name).endswith((".yaml", ".yml"))
 
 
-def read_task_file(path):
-    """The TaskFile of ``path`` (types checked, every field named in errors)."""
+def read_task_file(path, text=None):
+    """The TaskFile of ``path`` (or of ``text``, read as if from ``path``; types checked, every field
+    named in errors)."""
     path = Path(path)
-    if not path.is_file():
-        raise ConfigError(f"task file '{path}' does not exist")
-    text = path.read_text()
+    if text is None:
+        if not path.is_file():
+            raise ConfigError(f"task file '{path}' does not exist")
+        text = path.read_text()
     check_yaml_against_schema(text, TaskFile, f"{path}: ")
     try:
         return yaml_load_typed(schema=TaskFile, data=text, defaults=TaskFile())
@@ -230,10 +232,15 @@ class DataTask(CustomTask):
     and ``path``. Its start is in the chart's coordinates of the controlled point (``config.start.configuration``
     with the chart's number of coordinates; six numbers [x, y, z, roll, pitch, yaw] of E otherwise)."""
 
-    def __init__(self, spec, path, **pieces):
+    def __init__(self, spec, path, text, **pieces):
         super().__init__(**pieces)
-        self.spec, self.path = spec, Path(path)
+        self.spec, self.path, self.text = spec, Path(path), text
         self._config = None
+
+    def __reduce__(self):
+        """Pickled as the file's text (for Dask workers, other processes): rebuilt there by parsing it
+        again (the compiled constraint and Drake's config structs do not pickle)."""
+        return _task_from_text, (str(self.path), self.text, self.name)
 
     def base_config(self, options):
         return dataclasses.replace(self._config, start=dataclasses.replace(self._config.start))
@@ -385,11 +392,18 @@ def start_configuration_of(spec, chart, where):
                                                                                dtype=float))))
 
 
-def load_task_file(path, register=True):
+def _task_from_text(path, text, name):
+    task = load_task_file(path, register=False, text=text)[0]
+    task.name = task._config.task = name
+    return task
+
+
+def load_task_file(path, register=True, text=None):
     """(DataTask, ScenarioConfig) of the task file ``path``; the task is registered by its name
     (``register_task``: known to ``simulate``, ``linearize_continuous``, the CLI) unless ``register``
     is False. ConfigError naming the file and the field for anything the file gets wrong."""
-    spec = read_task_file(path)
+    text = Path(path).read_text() if text is None and Path(path).is_file() else text
+    spec = read_task_file(path, text)
     where = f"{path}: "
     if not spec.name:
         raise ConfigError(f"{where}name: give the task a name")
@@ -404,7 +418,7 @@ def load_task_file(path, register=True):
     k, m = space.velocity_size, space.force_size
     labels["velocity"] = labels["velocity"] or [f"r-dot_p[{i}]" for i in range(k)]
     labels["force"] = labels["force"] or [f"F[{i}]" for i in range(m)]
-    task = DataTask(spec, path, name=spec.name, add_robot=_robot_adder(spec, path, where),
+    task = DataTask(spec, path, text, name=spec.name, add_robot=_robot_adder(spec, path, where),
                     add_workpiece=_workpiece_adder(spec, where), constraint_space=space,
                     start_pose=chart.pose(start), joint_guess=spec.start.joint_guess, labels=labels,
                     description=spec.description)
