@@ -241,3 +241,8 @@ def test_task_file_sweep_on_a_local_dask_cluster(built_in_sweep, tmp_path):
     rows = read_results(tmp_path / "results.csv")
     assert run.workers == "local:2" and len({row["worker"] for row in rows}) == 2
     _assert_same_rows(rows, built_in_sweep)
+
+
+def test_readme_shows_the_task_file_as_it_is():
+    readme = (models_directory().parent / "README.md").read_text()
+    assert WINDOW_FILE.read_text().rstrip() in readme
