@@ -18,6 +18,7 @@ from drake_hybrid.experiments.sweep_spec import load_spec
 from drake_hybrid.scenario.config import dump_config
 from drake_hybrid.scenario.data_task import load_task_file
 from drake_hybrid.scenario.parsing import models_directory
+from drake_hybrid.scenario.schema_doc import schema_markdown
 from drake_hybrid.scenario.tasks import get_task, register_task
 
 WINDOW_FILE = models_directory() / "tasks" / "window_washing.yaml"
@@ -267,3 +268,11 @@ def test_a_task_that_is_not_built_in_tilted_pane_with_a_redundant_arm():
     assert turning["max_error_after_5_time_constants"] < 1e-3        # rad/s, commanded 0
     assert abs(summary["velocity_rows"][0]["final_error"]) < 0.01 * 0.05
     assert abs(summary["force_rows"][0]["final_error"]) < 0.01 * 10.0
+
+
+def test_schema_page_is_generated_from_the_types():
+    """docs/task_files.md is the output of scenario.schema_doc (regenerate it after changing a field)."""
+    page = (models_directory().parent / "docs" / "task_files.md").read_text()
+    assert page == schema_markdown()
+    assert "| `constraint.rows` | List[str] | [] | C(x), one expression per row |" in page
+    assert "`config.gains.velocity`" in page and "`workpiece.shapes[].X_WG`" in page

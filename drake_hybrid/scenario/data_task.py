@@ -77,19 +77,19 @@ class ToolSpec:
     """The pad tool (models/pad_tool.sdf) welded to ``flange_frame`` of the arm at ``X_flange_tool``
     (its +z the approach direction; the pad centre 0.05 m along it). Empty ``flange_frame``: no tool."""
 
-    flange_frame: str = ""
-    X_flange_tool: Transform = field(default_factory=Transform)
+    flange_frame: str = ""                       # frame of the arm the tool is welded to ("": no tool)
+    X_flange_tool: Transform = field(default_factory=Transform)   # the tool frame in the flange frame (m, deg)
 
 
 @dataclass
 class LoaderSpec:
     """``scenario.robots.load_arm``'s options: an arm from a URDF/SDF file (relative to the task file)."""
 
-    path: str = ""
-    flange: str = ""
+    path: str = ""                               # URDF/SDF file (absolute, or relative to the task file)
+    flange: str = ""                             # the frame (link) that ends the actuated chain
     tool_frame: str = ""                         # default: the flange
-    base_pose: Transform = field(default_factory=Transform)
-    tool_axis: str = "+z"
+    base_pose: Transform = field(default_factory=Transform)   # X_W_base, where the base is welded
+    tool_axis: str = "+z"                        # the tool frame's axis the pad points along: +-x, +-y, +-z
     collision: str = "convert"                   # "convert" or "drop"
 
 
@@ -97,10 +97,10 @@ class LoaderSpec:
 class RobotSpec:
     """The robot: Drake model directives (with ``arm`` and ``tool``), or ``loader`` (load_arm)."""
 
-    directives: List[ModelDirective] = field(default_factory=list)
+    directives: List[ModelDirective] = field(default_factory=list)   # Drake model directives of the robot
     arm: str = ""                                # model instance of the actuated arm (directives)
-    tool: ToolSpec = field(default_factory=ToolSpec)
-    loader: LoaderSpec = field(default_factory=LoaderSpec)
+    tool: ToolSpec = field(default_factory=ToolSpec)           # the pad tool (directives)
+    loader: LoaderSpec = field(default_factory=LoaderSpec)     # or the arm loader (then no directives)
     end_effector_frame: str = "pad_center"       # frame E whose point the constraint is on
     end_effector_point: List[float] = field(default_factory=lambda: [0.0, 0.0, 0.0])   # p_EP (m), in E
     only_pad_contact: bool = True                # filter every robot contact but the pad's
@@ -111,53 +111,63 @@ class ShapeSpec:
     """A rigid hydroelastic shape on the world body (``custom.add_rigid_workpiece``).
     size: box [x, y, z], sphere [r], cylinder [r, length], ellipsoid [a, b, c], capsule [r, length] (m)."""
 
-    shape: str = "box"
-    size: List[float] = field(default_factory=list)
-    X_WG: Transform = field(default_factory=Transform)
-    name: str = "workpiece"
+    shape: str = "box"                           # box, sphere, cylinder, ellipsoid or capsule
+    size: List[float] = field(default_factory=list)   # m (see the class docstring)
+    X_WG: Transform = field(default_factory=Transform)   # the shape's pose in the world (m, deg)
+    name: str = "workpiece"                      # geometry name (the index is appended)
     resolution_hint: float = 0.005               # m
 
 
 @dataclass
 class WorkpieceSpec:
-    directives: List[ModelDirective] = field(default_factory=list)
-    shapes: List[ShapeSpec] = field(default_factory=list)
+    """The workpiece: models (every collision geometry of their bodies) and library shapes."""
+
+    directives: List[ModelDirective] = field(default_factory=list)   # Drake model directives (e.g. add_weld)
+    shapes: List[ShapeSpec] = field(default_factory=list)            # rigid hydroelastic shapes on the world
 
 
 @dataclass
 class ChartSpec:
     """The chart (core/charts.py). The planar charts' plane: origin and in-plane axes (world)."""
 
-    kind: str = "planar"
-    origin: List[float] = field(default_factory=lambda: [0.0, 0.0, 0.0])
-    axis_x: List[float] = field(default_factory=lambda: [1.0, 0.0, 0.0])
-    axis_y: List[float] = field(default_factory=lambda: [0.0, 0.0, 1.0])
+    kind: str = "planar"                         # planar (x, y, theta), planar_point (x, y), euler_zxz, pose
+    origin: List[float] = field(default_factory=lambda: [0.0, 0.0, 0.0])   # m, the plane's origin (planar)
+    axis_x: List[float] = field(default_factory=lambda: [1.0, 0.0, 0.0])   # the chart's x in the world (planar)
+    axis_y: List[float] = field(default_factory=lambda: [0.0, 0.0, 1.0])   # the chart's y in the world (planar)
 
 
 @dataclass
 class ConstraintSpec:
+    """C(x) = 0 in the chart's coordinates (core/constraints.py)."""
+
     rows: List[str] = field(default_factory=list)          # C(x), one expression per row
-    kinematic_rows: List[int] = field(default_factory=list)
-    name: str = "constraint"
+    kinematic_rows: List[int] = field(default_factory=list)   # rows the controller holds itself (no force)
+    name: str = "constraint"                               # for messages
 
 
 @dataclass
 class VelocityProjectionSpec:
+    """E_p: the velocity-controlled rows (core/projections.py)."""
+
     rows: List[str] = field(default_factory=list)    # E_p's rows, "a, b, c" (d entries each); empty: kernel
 
 
 @dataclass
 class StartSpec:
-    configuration: List[str] = field(default_factory=list)  # chart coordinates of E (expressions)
-    pose: List[float] = field(default_factory=list)         # or [x, y, z, roll, pitch, yaw] of E
-    joint_guess: List[float] = field(default_factory=list)
+    """Where the run starts: the controlled point on C = 0 (pressing with F_d(0) is found from it)."""
+
+    configuration: List[str] = field(default_factory=list)  # chart coordinates of the point (expressions)
+    pose: List[float] = field(default_factory=list)         # or [x, y, z, roll, pitch, yaw] of E (m, rad)
+    joint_guess: List[float] = field(default_factory=list)  # arm joint positions IK starts from (rad, m)
 
 
 @dataclass
 class LabelsSpec:
-    velocity: List[str] = field(default_factory=list)
+    """Plot and summary labels of the velocity- and force-controlled rows."""
+
+    velocity: List[str] = field(default_factory=list)       # one per E_p row (default r-dot_p[i])
     velocity_units: str = "SI"
-    force: List[str] = field(default_factory=list)
+    force: List[str] = field(default_factory=list)          # one per C row (default F[i])
     force_units: str = "SI"
 
 
@@ -165,9 +175,9 @@ class LabelsSpec:
 class TaskFile:
     """The schema of a task file (see the module docstring)."""
 
-    name: str = ""
-    description: str = "a task from a scenario file"
-    parameters: Dict[str, float] = field(default_factory=dict)
+    name: str = ""                               # the task's name (ScenarioConfig.task; not a built-in one)
+    description: str = "a task from a scenario file"   # shown by drake-hybrid tasks
+    parameters: Dict[str, float] = field(default_factory=dict)   # named numbers the expressions may use
     robot: RobotSpec = field(default_factory=RobotSpec)
     workpiece: WorkpieceSpec = field(default_factory=WorkpieceSpec)
     chart: ChartSpec = field(default_factory=ChartSpec)
@@ -175,7 +185,7 @@ class TaskFile:
     velocity_projection: VelocityProjectionSpec = field(default_factory=VelocityProjectionSpec)
     start: StartSpec = field(default_factory=StartSpec)
     labels: LabelsSpec = field(default_factory=LabelsSpec)
-    config: ScenarioConfig = field(default_factory=ScenarioConfig)
+    config: ScenarioConfig = field(default_factory=ScenarioConfig)   # the run (task is set to name)
 
 
 def is_task_file(name):
