@@ -2,6 +2,7 @@
 models/tasks/window_washing.yaml runs as the built-in one, and a bad file is refused naming its field."""
 
 import textwrap
+import time
 
 import cloudpickle
 import numpy as np
@@ -276,3 +277,20 @@ def test_schema_page_is_generated_from_the_types():
     assert page == schema_markdown()
     assert "| `constraint.rows` | List[str] | [] | C(x), one expression per row |" in page
     assert "`config.gains.velocity`" in page and "`workpiece.shapes[].X_WG`" in page
+
+
+@pytest.mark.parametrize("text, match", [
+    ("parameters: " + "[" * 3000 + "]" * 3000, "nests too deeply"),
+    ("parameters: " + "{a: " * 3000 + "1" + "}" * 3000, "nests too deeply"),
+    ("name: x\n" + "# padding\n" * 200_000, "larger than 1000 kB"),
+    ("a: &a [x, x, x, x, x, x, x, x]\nb: &b [*a, *a, *a, *a, *a, *a, *a, *a]\nc: [*b, *b, *b, *b, *b, *b, *b, *b]",
+     "unknown field 'a'"),
+    ("constraint: {rows: &r [[y, y, y], [y, y, y]]}\nstart: {configuration: *r}", r"constraint.rows\[0\]: expected a word"),
+])
+def test_hostile_yaml_is_refused_quickly(tmp_path, text, match):
+    path = tmp_path / "hostile.yaml"
+    path.write_text(text)
+    start = time.perf_counter()
+    with pytest.raises(ConfigError, match=match):
+        load_task_file(path)
+    assert time.perf_counter() - start < 2.0

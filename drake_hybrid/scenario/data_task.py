@@ -67,6 +67,7 @@ from drake_hybrid.scenario.parsing import ConfigureParser
 from drake_hybrid.scenario.robots import TOOL_AXES, load_arm
 from drake_hybrid.scenario.tasks import register_task
 
+MAX_FILE_SIZE = 1_000_000      # characters of a task file
 CHARTS = ("planar", "planar_point", "euler_zxz", "pose")
 SHAPES = {"box": (Box, 3), "sphere": (Sphere, 1), "cylinder": (Cylinder, 2), "ellipsoid": (Ellipsoid, 3),
           "capsule": (Capsule, 2)}
@@ -201,7 +202,12 @@ def read_task_file(path, text=None):
         if not path.is_file():
             raise ConfigError(f"task file '{path}' does not exist")
         text = path.read_text()
-    check_yaml_against_schema(text, TaskFile, f"{path}: ")
+    if len(text) > MAX_FILE_SIZE:
+        raise ConfigError(f"{path}: the task file is larger than {MAX_FILE_SIZE // 1000} kB")
+    try:
+        check_yaml_against_schema(text, TaskFile, f"{path}: ")
+    except RecursionError:
+        raise ConfigError(f"{path}: the YAML nests too deeply to be a task file") from None
     try:
         return yaml_load_typed(schema=TaskFile, data=text, defaults=TaskFile())
     except (AssertionError, RuntimeError, ValueError, TypeError) as error:
