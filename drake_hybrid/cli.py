@@ -3,6 +3,7 @@
 commands:
   drake-hybrid simulate TASK    simulate a task; writes log.npz, summary.json, config.yaml and plots
   drake-hybrid analyze TASK     linearize the closed loop; designed vs. linearized eigenvalues
+                                (TASK: a task's name or a task file FILE.yaml, scenario/data_task.py)
   drake-hybrid sweep TASK --grid SPEC.yaml
                                 stability map / Monte Carlo sweep over config fields (Dask)
   drake-hybrid tasks            list the tasks
@@ -45,6 +46,8 @@ from drake_hybrid.hardware.messages import HardwareConfig
 from drake_hybrid.hardware.panda import panda_config, panda_drum_task, panda_table_task
 from drake_hybrid.hardware.realtime import replay_timing, run_controller
 from drake_hybrid.scenario.config import load_config
+from drake_hybrid.scenario.data_task import is_task_file, load_task_file, read_task_file
+from drake_hybrid.scenario.parsing import models_directory
 from drake_hybrid.scenario.tasks import TASKS, get_task
 from drake_hybrid.viz.animation import set_task_camera
 from drake_hybrid.viz.outputs import write_run
@@ -99,11 +102,24 @@ def _existing_ancestor(path):
     return path
 
 
+def _task_argument(value):
+    """The TASK argument: a task's name, or a task file (FILE.yaml, scenario/data_task.py)."""
+    if is_task_file(value) or value in TASKS:
+        return value
+    raise argparse.ArgumentTypeError(f"invalid choice: '{value}' (choose from {', '.join(sorted(TASKS))}, "
+                                     "or give a task file FILE.yaml)")
+
+
 def _config(args):
     _check_output_paths(args)
-    task = get_task(args.task)
     options = _options(args)
-    config = task.default_config(options) if options else task.default_config()
+    if is_task_file(args.task):
+        if options:
+            raise UsageError("--option: a task file has no task options; edit its parameters instead")
+        task, config = load_task_file(args.task)
+    else:
+        task = get_task(args.task)
+        config = task.default_config(options) if options else task.default_config()
     if getattr(args, "config", None):
         config = load_config(path=args.config, defaults=config)
         if config.task != task.name:
@@ -262,10 +278,11 @@ def command_analyze(args):
 
 def command_sweep(args):
     _check_output_paths(args)
-    out = Path(args.out) if args.out else Path("runs") / f"sweep-{args.task}"
+    task_name = load_task_file(args.task)[0].name if is_task_file(args.task) else args.task
+    out = Path(args.out) if args.out else Path("runs") / f"sweep-{task_name}"
     try:
         spec = load_spec(path=args.grid)
-        run = run_sweep(args.task, spec, out, scheduler=args.scheduler, workers=args.workers, resume=args.resume,
+        run = run_sweep(task_name, spec, out, scheduler=args.scheduler, workers=args.workers, resume=args.resume,
                         retry_failed=args.retry_failed, progress=not args.no_progress)
     except (SweepSpecError, ValueError) as error:
         print(f"drake-hybrid sweep: {_one_line(error)}", file=sys.stderr)
@@ -276,7 +293,7 @@ def command_sweep(args):
         done = f"{run.evaluated} of {run.points} points evaluated in {run.wall_time:.1f} s ({run.workers})"
     else:
         done = f"nothing to run: all {run.points} points already in the table"
-    print(f"{args.task}: {done}; {len(rows)} in the table, {stable} stable, {run.failures} with errors")
+    print(f"{task_name}: {done}; {len(rows)} in the table, {stable} stable, {run.failures} with errors")
     print(f"  wrote {run.results_path}")
     if args.plot:
         for path in save_sweep_plots(rows, spec, out):
@@ -287,6 +304,11 @@ def command_sweep(args):
 def command_tasks(args):
     for name, task in TASKS.items():
         print(f"{name:18s} {task.description}")
+    files = sorted((models_directory() / "tasks").glob("*.yaml"))
+    if files:
+        print("task files (drake-hybrid simulate|analyze FILE.yaml):")
+    for path in files:
+        print(f"  {path}: {read_task_file(path).description}")
     return 0
 
 
@@ -353,12 +375,13 @@ def make_parser():
                         help="show the full Python traceback of an error (also DRAKE_HYBRID_TRACEBACK=1)")
     modes = [m.value for m in ControlMode]
     epilog = _task_options_epilog()
+    task_help = ", ".join(sorted(TASKS)) + ", or a task file FILE.yaml (a whole task in one file: models/tasks/)"
     simulate = sub.add_parser("simulate", parents=[common],
                               help="simulate a task (discrete 1 kHz plant and controller)",
                               description="Simulate a task; writes log.npz, summary.json, config.yaml and the "
                                           "plots to --out.",
                               epilog=epilog, formatter_class=argparse.RawDescriptionHelpFormatter)
-    simulate.add_argument("task", choices=sorted(TASKS), metavar="TASK", help=", ".join(sorted(TASKS)))
+    simulate.add_argument("task", type=_task_argument, metavar="TASK", help=task_help)
     simulate.add_argument("--duration", type=float, metavar="S", help="simulated time (s)")
     simulate.add_argument("--out", metavar="DIR", help="output directory (default ./runs/<task>)")
     simulate.add_argument("--mode", choices=modes, help="control law (default: the task's)")
@@ -376,7 +399,7 @@ def make_parser():
                              description="Linearize the closed loop at a contact equilibrium and compare its "
                                          "eigenvalues with the ones the gains design.",
                              epilog=epilog, formatter_class=argparse.RawDescriptionHelpFormatter)
-    analyze.add_argument("task", choices=sorted(TASKS), metavar="TASK", help=", ".join(sorted(TASKS)))
+    analyze.add_argument("task", type=_task_argument, metavar="TASK", help=task_help)
     analyze.add_argument("--mode", choices=modes, help="control law (default: the task's)")
     analyze.add_argument("--config", metavar="FILE.yaml", help="YAML scenario config (on top of the task's defaults)")
     analyze.add_argument("--option", action="append", metavar="KEY=VALUE",
@@ -396,7 +419,7 @@ def make_parser():
                            description="Evaluate a grid or Monte Carlo sample of config fields: per point a short "
                                        "simulation, two linearizations and the verdicts, appended to "
                                        "DIR/results.csv (docs/stability.md).")
-    sweep.add_argument("task", choices=sorted(TASKS), metavar="TASK", help=", ".join(sorted(TASKS)))
+    sweep.add_argument("task", type=_task_argument, metavar="TASK", help=task_help)
     sweep.add_argument("--grid", required=True, metavar="SPEC.yaml",
                        help="sweep spec: the config fields to vary and how (grid or random), the map to plot; "
                             "format in docs/stability.md")

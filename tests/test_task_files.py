@@ -1,0 +1,296 @@
+"""A whole task in one YAML file (scenario/data_task.py): the window-washing task written as
+models/tasks/window_washing.yaml runs as the built-in one, and a bad file is refused naming its field."""
+
+import textwrap
+import time
+
+import cloudpickle
+import numpy as np
+import pytest
+
+from pydrake.multibody.plant import MultibodyPlant
+
+from drake_hybrid.analysis.linearization import linearize_continuous
+from drake_hybrid.cli import main
+from drake_hybrid.core.errors import ConfigError
+from drake_hybrid.experiments.simulation import simulate
+from drake_hybrid.experiments.sweep import read_results, run_sweep
+from drake_hybrid.experiments.sweep_spec import load_spec
+from drake_hybrid.scenario.config import dump_config
+from drake_hybrid.scenario.data_task import load_task_file
+from drake_hybrid.scenario.parsing import models_directory
+from drake_hybrid.scenario.schema_doc import schema_markdown
+from drake_hybrid.scenario.tasks import get_task, register_task
+
+WINDOW_FILE = models_directory() / "tasks" / "window_washing.yaml"
+
+
+@pytest.fixture(scope="module")
+def window_file_task():
+    return load_task_file(WINDOW_FILE)
+
+
+def test_window_file_loads_as_the_built_in_config(window_file_task):
+    task, config = window_file_task
+    built_in = get_task("window-washing").default_config()
+    assert config.task == task.name == "window-washing-file"
+    assert config.gains == built_in.gains and config.mode == built_in.mode
+    assert config.desired_velocity == built_in.desired_velocity and config.desired_force == built_in.desired_force
+    np.testing.assert_allclose(config.start.configuration, [0.9, 0.98, np.pi / 2])
+    assert config.start.force_integral == built_in.start.force_integral
+
+
+def test_window_file_runs_as_the_built_in_task(window_file_task):
+    """Same velocity and force errors (the logs agree to 1e-9) over 0.3 s of the discrete run."""
+    _, config = window_file_task
+    built_in = get_task("window-washing").default_config(duration=0.3)
+    file_run = simulate(config.replace(duration=0.3))
+    built_in_run = simulate(built_in)
+    for name in ("velocity_error", "force_error", "q", "constraint"):
+        np.testing.assert_allclose(file_run.log[name], built_in_run.log[name], rtol=0, atol=1e-9, err_msg=name)
+    for rows in ("velocity_rows", "force_rows"):
+        for ours, theirs in zip(file_run.summary[rows], built_in_run.summary[rows]):
+            assert ours["final_error"] == pytest.approx(theirs["final_error"], abs=1e-9)
+
+
+def test_window_file_linearizes_to_the_designed_eigenvalues(window_file_task):
+    _, config = window_file_task
+    ours = linearize_continuous(config)
+    theirs = linearize_continuous(get_task("window-washing").default_config())
+    assert ours.match.matched
+    np.testing.assert_allclose(np.sort_complex(ours.match.predicted), [-10, -10, -8])
+    np.testing.assert_allclose(np.sort_complex(ours.match.partner), np.sort_complex(theirs.match.partner),
+                               rtol=1e-6)
+
+
+def _write(tmp_path, replace=None, append=""):
+    text = WINDOW_FILE.read_text()
+    for old, new in (replace or {}).items():
+        assert old in text
+        text = text.replace(old, new)
+    path = tmp_path / "task.yaml"
+    path.write_text(text + textwrap.dedent(append))
+    return path
+
+
+@pytest.mark.parametrize("replace, match", [
+    ({'rows: ["y - (window_height - pad_radius)"]': 'rows: ["__import__(\'os\')"]'},
+     r"constraint.rows\[0\]: names starting with '_' are not allowed: '__import__'"),
+    ({'rows: ["y - (window_height - pad_radius)"]': 'rows: ["y.real"]'},
+     r"constraint.rows\[0\]: not allowed in an expression \(attribute access\): 'y.real'"),
+    ({'rows: ["y - (window_height - pad_radius)"]': 'rows: ["z - 1"]'}, r"constraint.rows\[0\]: unknown name"),
+    ({'"1, 0, 0", "0, 0, 1"': '"1, 0", "0, 0, 1"'}, r"velocity_projection.rows\[0\]: expected 3 comma-separated"),
+    ({'"pi/2"]': '"pi/2", "1"]'}, r"start.configuration must have 3 entries"),
+    ({"kind: planar}": "kind: cylindrical}"}, r"chart.kind must be one of"),
+    ({"arm: planar_3r": "arm: planar_4r"}, r"robot.arm must name a model instance"),
+    ({"flange_frame: link3": "flange_frame: link9"}, r"robot.tool.flange_frame: .*link9"),
+    ({"window_height: 1.0 ": "window_height: one "}, r"parameters.window_height: expected a number"),
+    ({"name: window-washing-file": "name: window-washing"}, r"name: 'window-washing' is a built-in task"),
+    ({"gains: {velocity": "gains: {speed"}, r"config.gains: unknown field 'speed'"),
+])
+def test_bad_files_are_refused_naming_the_field(tmp_path, replace, match):
+    path = _write(tmp_path, replace)
+    with pytest.raises(ConfigError, match=match) as error:
+        task, config = load_task_file(path)
+        # Frame and instance names are checked when the robot is added to a plant.
+        task.add_robot(MultibodyPlant(0.0), config)
+    assert str(error.value).startswith(str(path)) and "\n" not in str(error.value)
+
+
+def test_kernel_projection_is_the_default(tmp_path):
+    """Without velocity_projection rows, E_p is a basis of ker E_f at the start: E E^T = I for the window."""
+    path = _write(tmp_path, {'rows: ["1, 0, 0", "0, 0, 1"]': "rows: []"}, "")
+    task, config = load_task_file(path, register=False)
+    E_p = task.space.velocity_projection.matrix(np.asarray(config.start.configuration))
+    np.testing.assert_allclose(np.abs(E_p @ np.array([0.0, 1.0, 0.0])), 0, atol=1e-12)
+    np.testing.assert_allclose(E_p @ E_p.T, np.eye(2), atol=1e-12)
+
+
+def test_cli_runs_a_task_file(tmp_path, capsys):
+    out = tmp_path / "run"
+    assert main(["simulate", str(WINDOW_FILE), "--duration", "0.2", "--out", str(out), "--no-progress", "--no-plots",
+                 "--quiet"]) == 0
+    assert (out / "summary.json").exists()
+    assert "window-washing-file" in capsys.readouterr().out
+    assert main(["analyze", str(WINDOW_FILE), "--quiet"]) == 0
+    assert "matched" in capsys.readouterr().out
+
+
+def test_cli_refuses_a_bad_task_file_in_one_line(tmp_path, capsys):
+    path = _write(tmp_path, {'rows: ["y - (window_height - pad_radius)"]': 'rows: ["(lambda: 0)()"]'})
+    assert main(["analyze", str(path)]) == 2
+    error = capsys.readouterr().err.strip()
+    assert "\n" not in error and "constraint.rows[0]" in error and "lambda" in error
+    assert main(["simulate", str(tmp_path / "missing.yaml")]) == 2
+    assert "does not exist" in capsys.readouterr().err
+
+
+def test_workpiece_from_the_library_shapes(tmp_path):
+    """The pane as a library box (custom.add_rigid_workpiece) instead of window.sdf: the same
+    linearized closed loop (the same rigid hydroelastic box, 3 m x 0.5 m x 20 mm, its lower face at 1 m)."""
+    path = _write(tmp_path, {
+        "  directives:\n  - add_model: {name: window,": "  shapes:\n  - {shape: box, size: [3.0, 0.5, 0.02], "
+        "X_WG: {translation: [1.0, 0.0, 1.01]}}\n  #",
+        "  - add_weld: {parent: world, child: window::pane": "  #"}, "")
+    task, config = load_task_file(path, register=False)
+    assert task.spec.workpiece.shapes[0].shape == "box" and not task.spec.workpiece.directives
+    task.name = config.task = "window-washing-box"
+    register_task(task)
+    ours = linearize_continuous(config)
+    theirs = linearize_continuous(get_task("window-washing").default_config())
+    np.testing.assert_allclose(np.sort_complex(ours.match.partner), np.sort_complex(theirs.match.partner),
+                               rtol=1e-6)
+
+
+def test_cli_refuses_options_for_a_task_file(capsys):
+    assert main(["analyze", str(WINDOW_FILE), "--option", "joints=4"]) == 2
+    assert "a task file has no task options" in capsys.readouterr().err
+
+
+def test_cli_tasks_lists_the_task_files(capsys):
+    assert main(["tasks"]) == 0
+    out = capsys.readouterr().out
+    assert "window_washing.yaml" in out and "from a task file" in out
+
+
+def test_robot_from_the_arm_loader(tmp_path):
+    """robot.loader (scenario.robots.load_arm) instead of directives: the planar 3R arm with the pad
+    tool at its tip along +x, so the pad centre is 0.05 m beyond the tip (end_effector_point); the
+    linearized closed loop has the designed eigenvalues."""
+    robot = textwrap.dedent(f"""\
+        robot:
+          loader: {{path: {models_directory() / "planar_3r.sdf"}, flange: link3, tool_frame: tip, tool_axis: "+x",
+                   collision: drop}}
+          end_effector_frame: tip
+          end_effector_point: [0.05, 0.0, 0.0]
+          only_pad_contact: true
+        workpiece:""")
+    text = WINDOW_FILE.read_text()
+    start, end = text.index("robot:\n"), text.index("workpiece:")
+    path = tmp_path / "loader.yaml"
+    path.write_text((text[:start] + robot + text[end + len("workpiece:"):]).replace(
+        "name: window-washing-file", "name: window-washing-loader"))
+    task, config = load_task_file(path)
+    result = linearize_continuous(config)
+    assert result.match.matched, result.match.as_dict()
+    np.testing.assert_allclose(np.sort_complex(result.match.predicted), [-10, -10, -8])
+
+
+def test_start_as_a_pose_of_the_end_effector_frame(tmp_path):
+    """start.pose (of frame E = tip) gives the same chart start as start.configuration."""
+    path = _write(tmp_path, {'configuration: ["0.9", "window_height - pad_radius", "pi/2"]':
+                             "pose: [0.9, 0.0, 0.98, 0.0, -1.5707963267948966, 0.0]"})
+    task, config = load_task_file(path, register=False)
+    np.testing.assert_allclose(config.start.configuration, [0.9, 0.98, np.pi / 2], atol=1e-12)
+
+
+def test_task_file_pickles_as_its_text(window_file_task):
+    """Shipped to Dask workers by its text: the copy rebuilt from it has the same constraint space."""
+    task, config = window_file_task
+    copy = cloudpickle.loads(cloudpickle.dumps(task))
+    assert copy is not task and copy.name == task.name and copy.text == task.text
+    x, nu = np.asarray(config.start.configuration), np.array([0.1, 0.02, -0.3])
+    ours, theirs = copy.space.evaluate(x, nu), task.space.evaluate(x, nu)
+    np.testing.assert_array_equal(ours.matrix, theirs.matrix)
+    assert dump_config(copy.default_config()) == dump_config(task.default_config())
+
+
+SWEEP = """
+base:
+  duration: 0.15
+parameters:
+  gains.force_proportional: {values: [0.5, 2.0]}
+  control_period: {values: [0.001, 0.004]}
+"""
+TIMING_COLUMNS = {"wall_time", "simulation_wall_time", "linearization_wall_time", "cpu_time", "worker"}
+
+
+def _assert_same_rows(ours, theirs):
+    """The same verdicts, and the numbers to 1e-6 relative (the file's start comes from numeric
+    inverse kinematics, the built-in task's from the closed form: equal to ~1e-11)."""
+    assert len(ours) == len(theirs)
+    for a, b in zip(ours, theirs):
+        for name in a:
+            if name in TIMING_COLUMNS:
+                continue
+            if isinstance(a[name], float) and isinstance(b[name], float):
+                assert a[name] == pytest.approx(b[name], rel=1e-6, abs=1e-8), (a["point"], name)
+            else:
+                assert a[name] == b[name], (a["point"], name)
+
+
+@pytest.fixture(scope="module")
+def built_in_sweep(tmp_path_factory):
+    out = tmp_path_factory.mktemp("built_in")
+    run_sweep("window-washing", load_spec(text=SWEEP), out, workers=0, progress=False)
+    return read_results(out / "results.csv")
+
+
+def test_cli_sweeps_a_task_file_serially_as_the_built_in_task(built_in_sweep, tmp_path, capsys):
+    spec = tmp_path / "spec.yaml"
+    spec.write_text(SWEEP)
+    assert main(["sweep", str(WINDOW_FILE), "--grid", str(spec), "--out", str(tmp_path / "out"), "--workers", "0",
+                 "--no-progress"]) == 0
+    assert "4 of 4 points evaluated" in capsys.readouterr().out
+    _assert_same_rows(read_results(tmp_path / "out" / "results.csv"), built_in_sweep)
+
+
+@pytest.mark.slow
+def test_task_file_sweep_on_a_local_dask_cluster(built_in_sweep, tmp_path):
+    """The task travels to two worker processes (by its text) and gives the built-in task's results."""
+    task, _ = load_task_file(WINDOW_FILE)
+    run = run_sweep(task.name, load_spec(text=SWEEP), tmp_path, workers=2, progress=False)
+    rows = read_results(tmp_path / "results.csv")
+    assert run.workers == "local:2" and len({row["worker"] for row in rows}) == 2
+    _assert_same_rows(rows, built_in_sweep)
+
+
+def test_readme_shows_the_task_file_as_it_is():
+    readme = (models_directory().parent / "README.md").read_text()
+    assert WINDOW_FILE.read_text().rstrip() in readme
+
+
+def test_a_task_that_is_not_built_in_tilted_pane_with_a_redundant_arm():
+    """models/tasks/tilted_pane_4r.yaml: the 4R arm on a library box tilted by 20 degrees, kernel E_p.
+    The linearized loop has the designed eigenvalues; the run tracks 0.05 m/s along the face and 10 N
+    to 1 % within five design time constants of contact."""
+    task, config = load_task_file(models_directory() / "tasks" / "tilted_pane_4r.yaml")
+    E_p = task.space.velocity_projection.matrix(np.asarray(config.start.configuration))
+    tilt = task.spec.parameters["tilt"]
+    np.testing.assert_allclose(np.abs(E_p[0]), [np.cos(tilt), np.sin(tilt), 0], atol=1e-12)
+    result = linearize_continuous(config)
+    assert result.match.matched, result.match.as_dict()
+    np.testing.assert_allclose(np.sort_complex(result.match.predicted), [-10, -10, -10, -8])
+    run = simulate(config.replace(duration=1.0))
+    summary = run.summary
+    along, turning = summary["velocity_rows"]
+    for row in (along, summary["force_rows"][0]):
+        assert row["settling_time_1_percent"] is not None and row["settling_time_1_percent"] < 5 * 0.125, row
+    assert turning["max_error_after_5_time_constants"] < 1e-3        # rad/s, commanded 0
+    assert abs(summary["velocity_rows"][0]["final_error"]) < 0.01 * 0.05
+    assert abs(summary["force_rows"][0]["final_error"]) < 0.01 * 10.0
+
+
+def test_schema_page_is_generated_from_the_types():
+    """docs/task_files.md is the output of scenario.schema_doc (regenerate it after changing a field)."""
+    page = (models_directory().parent / "docs" / "task_files.md").read_text()
+    assert page == schema_markdown()
+    assert "| `constraint.rows` | List[str] | [] | C(x), one expression per row |" in page
+    assert "`config.gains.velocity`" in page and "`workpiece.shapes[].X_WG`" in page
+
+
+@pytest.mark.parametrize("text, match", [
+    ("parameters: " + "[" * 3000 + "]" * 3000, "nests too deeply"),
+    ("parameters: " + "{a: " * 3000 + "1" + "}" * 3000, "nests too deeply"),
+    ("name: x\n" + "# padding\n" * 200_000, "larger than 1000 kB"),
+    ("a: &a [x, x, x, x, x, x, x, x]\nb: &b [*a, *a, *a, *a, *a, *a, *a, *a]\nc: [*b, *b, *b, *b, *b, *b, *b, *b]",
+     "unknown field 'a'"),
+    ("constraint: {rows: &r [[y, y, y], [y, y, y]]}\nstart: {configuration: *r}", r"constraint.rows\[0\]: expected a word"),
+])
+def test_hostile_yaml_is_refused_quickly(tmp_path, text, match):
+    path = tmp_path / "hostile.yaml"
+    path.write_text(text)
+    start = time.perf_counter()
+    with pytest.raises(ConfigError, match=match):
+        load_task_file(path)
+    assert time.perf_counter() - start < 2.0
