@@ -36,6 +36,7 @@ def animation(tmp_path_factory):
     return html
 
 
+@pytest.mark.slow                # several seconds: not in the fast loop (-m 'not slow')
 def test_html_is_self_contained(animation):
     text = animation.read_text()
     assert text.lstrip().lower().startswith("<!doctype html>")
@@ -45,6 +46,7 @@ def test_html_is_self_contained(animation):
     assert "animation" in text and 2e6 < len(text) < 4e6      # viewer (about 2.3 MB) plus 2 s of recording
 
 
+@pytest.mark.slow                # several seconds: not in the fast loop (-m 'not slow')
 @pytest.mark.browser
 def test_animation_renders_offline_in_headless_chromium(animation, tmp_path):
     executable = _chromium_or_skip()
@@ -63,6 +65,7 @@ def test_animation_renders_offline_in_headless_chromium(animation, tmp_path):
     assert changed > 1e-3, f"only {changed:.2%} of the pixels changed: the animation does not play"
 
 
+@pytest.mark.slow                # several seconds: not in the fast loop (-m 'not slow')
 def test_seek_shows_the_recording_at_the_asked_time(animation, tmp_path):
     """With ``seek`` the screenshots are frames of the recording at those simulation times: the
     same time twice gives the same picture, the start and the end of the 2 s wipe differ."""

@@ -96,6 +96,7 @@ def _compare(fast, generic, inputs, integrals, what):
     return generic_diagnostics
 
 
+@pytest.mark.slow                # several seconds: not in the fast loop (-m 'not slow')
 @pytest.mark.parametrize("mode", MODES)
 def test_both_paths_give_every_output_at_random_states(task, mode, rng):
     name, start = task

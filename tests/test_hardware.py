@@ -48,6 +48,7 @@ def drum():
 
 # -- the loop reproduces the directly wired one -------------------------------------------------------
 
+@pytest.mark.slow                # several seconds: not in the fast loop (-m 'not slow')
 @pytest.mark.parametrize("wrench_source", ["force_torque", "external_torque"])
 def test_lock_step_loop_reproduces_the_directly_wired_loop(drum, wrench_source):
     """Same start, same law, same plant: the messages carry doubles and the controller uses each
@@ -72,6 +73,7 @@ def test_lock_step_loop_reproduces_the_directly_wired_loop(drum, wrench_source):
     assert 0 <= delay["max"] <= 1e-6 + 1e-12
 
 
+@pytest.mark.slow                # several seconds: not in the fast loop (-m 'not slow')
 def test_force_torque_bias_is_removed_on_the_controller_side(drum):
     """A sensor offset on the robot side, the same bias configured on the controller side: the run is
     the unbiased one; left uncorrected, the 2 N offset shows in the force the law sees."""

@@ -23,6 +23,7 @@ def random_state(task, config, plant, rng):
     return q, 0.3 * rng.normal(size=plant.num_velocities())
 
 
+@pytest.mark.slow                # several seconds: not in the fast loop (-m 'not slow')
 @pytest.mark.parametrize("workpiece", ["window", "sphere"])
 def test_K0_is_identity_minus_the_schur_complement_of_M_f(workpiece, rng):
     """K_0 = I + M_fp^T M_f^-1 M_fp - M_p = I - S; without kinematic rows S^-1 = P^T Lambda P,
@@ -55,6 +56,7 @@ def test_K0_is_identity_minus_the_schur_complement_of_M_f(workpiece, rng):
         np.testing.assert_allclose(np.linalg.inv(S), P.T @ Lambda @ P, rtol=1e-9, atol=1e-9)
 
 
+@pytest.mark.slow                # several seconds: not in the fast loop (-m 'not slow')
 def test_rigid_contact_closed_loop_with_kinematic_rows(rng):
     """UR5e on the sphere, impedance mode, rigid normal contact: the velocity rows realize
     e_p'' + K_v e_p' + K_p e_p = F_v, the kinematic (orientation) rows C'' + 3 w C' + 2 w^2 C = F_k,
@@ -117,6 +119,7 @@ def ratio(numerator, denominator, selection):
     return rms(numerator) / rms(denominator)
 
 
+@pytest.mark.slow                # several seconds: not in the fast loop (-m 'not slow')
 def test_window_grinding_realizes_the_designed_impedance():
     result = simulate(GRINDING.default_config())
     out = impedance_realization(result.scenario, result.log)
@@ -138,6 +141,7 @@ def test_window_grinding_realizes_the_designed_impedance():
     assert np.abs(F_v).max() > 8.0                               # the patch's mu = 0.9 at 10 N
 
 
+@pytest.mark.slow                # several seconds: not in the fast loop (-m 'not slow')
 def test_sphere_grinding_realizes_the_designed_impedance():
     result = simulate(GRINDING.default_config({"workpiece": "sphere"}))
     out = impedance_realization(result.scenario, result.log)
@@ -148,6 +152,7 @@ def test_sphere_grinding_realizes_the_designed_impedance():
     assert np.abs(result.log["tangential_force"][:, 1]).max() > 4.0        # mu = 0.5 at 10 N: real friction
 
 
+@pytest.mark.slow                # several seconds: not in the fast loop (-m 'not slow')
 @pytest.mark.parametrize("workpiece", ["window", "sphere"])
 def test_tangential_poles_are_the_roots_of_the_designed_impedance(workpiece):
     result = linearize_continuous(GRINDING.default_config({"workpiece": workpiece}))
@@ -157,6 +162,7 @@ def test_tangential_poles_are_the_roots_of_the_designed_impedance(workpiece):
         assert np.min(np.abs(result.eigenvalues - root)) < 0.05 * abs(root)
 
 
+@pytest.mark.slow                # several seconds: not in the fast loop (-m 'not slow')
 def test_velocity_force_stalls_where_impedance_force_slides():
     """The paper's section 3.2 motivation, measured on the window with mu = 0.5: with the same K_v,
     velocity/force control cannot build the 5 N of friction (it would need a velocity error

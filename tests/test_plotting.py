@@ -112,6 +112,7 @@ def test_eigenvalue_figures():
     assert any(ax.get_ylabel() == "pad modulus E (Pa)" for ax in sweep.axes)        # the colour bar
 
 
+@pytest.mark.slow                # several seconds: not in the fast loop (-m 'not slow')
 def test_the_cli_writes_every_figure(tmp_path):
     from drake_hybrid.cli import main
 

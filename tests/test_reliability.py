@@ -40,6 +40,7 @@ WINDOW = get_task("window-washing")
 
 @pytest.mark.parametrize("case", [case for case in reliability.CASES if case is not reliability.case_bad_configuration],
                          ids=lambda case: case.__name__[len("case_"):])
+@pytest.mark.slow                # several seconds: not in the fast loop (-m 'not slow')
 def test_fault_case_meets_its_criteria(case):
     figures = case(quick=True)
     assert figures

@@ -358,6 +358,7 @@ def tracking(arm, name, x):
     return summary
 
 
+@pytest.mark.slow                # several seconds: not in the fast loop (-m 'not slow')
 def test_loaded_six_dof_arm_tracks_on_a_plane(ur10):
     # Five time constants: 0.5 s; measured 0.66 % (velocity, the transient's tail) and 1e-4 % (force).
     summary = tracking(ur10, "ur10-plane", 0.7)

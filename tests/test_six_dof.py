@@ -33,6 +33,7 @@ def sphere_run():
     return simulate(SPHERE.default_config())
 
 
+@pytest.mark.slow                # several seconds: not in the fast loop (-m 'not slow')
 def test_crank_turns_at_the_commanded_rate_with_the_commanded_wrench(crank_run):
     summary, log = crank_run.summary, crank_run.log
     assert_rows_settled_within(summary, 2.0)
@@ -44,6 +45,7 @@ def test_crank_turns_at_the_commanded_rate_with_the_commanded_wrench(crank_run):
     assert summary["task"] == "crank-turning" and log["force"].shape[1] == 4
 
 
+@pytest.mark.slow                # several seconds: not in the fast loop (-m 'not slow')
 def test_sphere_is_polished_along_the_latitude(sphere_run):
     summary, log = sphere_run.summary, sphere_run.log
     assert_rows_settled_within(summary, 2.0)
@@ -53,6 +55,7 @@ def test_sphere_is_polished_along_the_latitude(sphere_run):
     assert np.abs(log["constraint"][len(log["t"]) // 5:, 1:]).max() < 1e-4
 
 
+@pytest.mark.slow                # several seconds: not in the fast loop (-m 'not slow')
 def test_pole_crossing_fails_loudly_with_euler_angles_and_succeeds_with_the_pose_chart():
     config = SPHERE.default_config()
     config.task_options.update(path="pole", chart="euler")
@@ -79,6 +82,7 @@ def test_pole_crossing_fails_loudly_with_euler_angles_and_succeeds_with_the_pose
     assert x[0] < -0.01 and x[-1] > 0.01
 
 
+@pytest.mark.slow                # several seconds: not in the fast loop (-m 'not slow')
 def test_sphere_linearization_matches_the_design():
     result = linearize_continuous(SPHERE.default_config())
     assert result.equilibrium_residual < 1e-2
@@ -203,6 +207,7 @@ def test_wrist_sensor_reads_the_crank_constraint_wrench_at_rest():
     np.testing.assert_allclose(force, [0.0, 5.0, 0.0, 0.0], atol=1e-4)     # and the loop holds F_d
 
 
+@pytest.mark.slow                # several seconds: not in the fast loop (-m 'not slow')
 def test_wrist_sensor_agrees_with_the_contact_sensor_on_the_sphere():
     from test_window_washing import sensor_readings_at_rest
 
@@ -235,6 +240,7 @@ def test_corrected_3_3_13a_and_appendix_b_on_the_task_sphere(rng):
         space.evaluate(equator, np.zeros(6))
 
 
+@pytest.mark.slow                # several seconds: not in the fast loop (-m 'not slow')
 def test_outward_facing_starts_are_rejected():
     """Both the crank and the sphere constraints admit an outward branch (docs/theory.md §2); a start
     there is refused with a BranchError."""
@@ -263,6 +269,7 @@ def test_outward_facing_starts_are_rejected():
             check_start(scenario, q)
 
 
+@pytest.mark.slow                # several seconds: not in the fast loop (-m 'not slow')
 @pytest.mark.parametrize("task", [CRANK, SPHERE], ids=lambda t: t.name)
 def test_tasks_stay_away_from_kinematic_singularities(task):
     """The worst condition number of the geometric Jacobian along the run (reported in the docs)."""

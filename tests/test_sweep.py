@@ -188,6 +188,7 @@ def serial_sweep(tmp_path_factory):
     return run, read_results(out)
 
 
+@pytest.mark.slow                # several seconds: not in the fast loop (-m 'not slow')
 def test_small_sweep_on_a_local_dask_cluster_matches_serial(serial_sweep, tmp_path):
     serial_run, serial = serial_sweep
     run = run_sweep(WINDOW, load_spec(text=SMALL_SWEEP), tmp_path, workers=2, progress=False)
@@ -205,6 +206,7 @@ def test_small_sweep_on_a_local_dask_cluster_matches_serial(serial_sweep, tmp_pa
     assert serial_run.failures == run.failures == 4
 
 
+@pytest.mark.slow                # the serial sweep fixture (15 s): not in the fast loop
 def test_sweep_verdicts_agree_with_the_physics(serial_sweep):
     """K_fp = 2 on a stiff pad: the sampled force loop diverges (multiplier outside the unit circle,
     the simulation's force error does not settle); K_fp = 0.5 is stable at both rates."""
@@ -221,6 +223,7 @@ def test_sweep_verdicts_agree_with_the_physics(serial_sweep):
         assert rigid_contact_theory_stable(apply_parameters(default_config(), {"gains.force_proportional": 2.0}))
 
 
+@pytest.mark.slow                # several seconds: not in the fast loop (-m 'not slow')
 def test_resume_runs_only_the_missing_points(serial_sweep, tmp_path):
     serial_run, serial = serial_sweep
     source = serial_run.results_path
@@ -247,6 +250,7 @@ def test_resume_runs_only_the_missing_points(serial_sweep, tmp_path):
         run_sweep(WINDOW, other, tmp_path, workers=0, resume=True, progress=False)
 
 
+@pytest.mark.slow                # the serial sweep fixture (15 s): not in the fast loop
 def test_results_table_has_every_column_and_the_map_plots(serial_sweep, tmp_path):
     from drake_hybrid.viz.plotting import save_sweep_plots
 
@@ -282,6 +286,7 @@ def _rows_per_point(path):
     return {point: points.count(point) for point in points}
 
 
+@pytest.mark.slow                # several seconds: not in the fast loop (-m 'not slow')
 def test_a_sweep_killed_mid_run_resumes_with_every_point_once(tmp_path):
     spec_path = tmp_path / "spec.yaml"
     spec_path.write_text(FAST_SWEEP)
@@ -347,6 +352,7 @@ def test_overlaps_counts_and_strict_booleans_are_refused(text, message):
         load_spec(text=text)
 
 
+@pytest.mark.slow                # several seconds: not in the fast loop (-m 'not slow')
 def test_an_unreachable_scheduler_leaves_nothing_behind(tmp_path):
     with pytest.raises(SweepSpecError, match="no Dask scheduler answers there"):
         run_sweep(WINDOW, load_spec(text=FAST_SWEEP), tmp_path / "out", scheduler="tcp://127.0.0.1:1",

@@ -226,6 +226,7 @@ def built_in_sweep(tmp_path_factory):
     return read_results(out / "results.csv")
 
 
+@pytest.mark.slow                # several seconds: not in the fast loop (-m 'not slow')
 def test_cli_sweeps_a_task_file_serially_as_the_built_in_task(built_in_sweep, tmp_path, capsys):
     spec = tmp_path / "spec.yaml"
     spec.write_text(SWEEP)
@@ -250,6 +251,7 @@ def test_readme_shows_the_task_file_as_it_is():
     assert WINDOW_FILE.read_text().rstrip() in readme
 
 
+@pytest.mark.slow                # several seconds: not in the fast loop (-m 'not slow')
 def test_a_task_that_is_not_built_in_tilted_pane_with_a_redundant_arm():
     """models/tasks/tilted_pane_4r.yaml: the 4R arm on a library box tilted by 20 degrees, kernel E_p.
     The linearized loop has the designed eigenvalues; the run tracks 0.05 m/s along the face and 10 N

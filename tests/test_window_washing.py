@@ -27,6 +27,7 @@ def default_run():
     return simulate(TASK.default_config())
 
 
+@pytest.mark.slow                # several seconds: not in the fast loop (-m 'not slow')
 def test_velocity_and_force_errors_settle_below_one_percent_within_five_time_constants(default_run):
     log, summary = default_run.log, default_run.summary
     tau = summary["design_time_constant"]
@@ -62,6 +63,7 @@ def test_transients_follow_the_designed_exponentials(default_run):
     assert force_deviation < 0.05 * initial_force_error
 
 
+@pytest.mark.slow                # several seconds: not in the fast loop (-m 'not slow')
 def test_position_mode_tracks(tmp_path):
     config = TASK.default_config()
     config.mode = "position-force"
@@ -187,6 +189,7 @@ def test_wrist_sensor_agrees_with_contact_sensor_once_tool_weight_is_compensated
     np.testing.assert_allclose(from_wrist, from_contact, atol=1e-6 * 10.0)
 
 
+@pytest.mark.slow                # several seconds: not in the fast loop (-m 'not slow')
 def test_simulation_with_the_wrist_sensor_and_filter():
     config = TASK.default_config()
     config.sensor = WristSensorConfig(bandwidth_hz=100.0)
@@ -195,6 +198,7 @@ def test_simulation_with_the_wrist_sensor_and_filter():
     assert_rows_settled_within(summary, 1.0)
 
 
+@pytest.mark.slow                # several seconds: not in the fast loop (-m 'not slow')
 def test_redundant_four_joint_arm_tracks_and_damps_its_null_space():
     config = TASK.default_config()
     config.task_parameters["joints"] = 4

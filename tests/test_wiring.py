@@ -111,6 +111,7 @@ def custom_window():
     TASKS.pop(task.name)
 
 
+@pytest.mark.slow                # several seconds: not in the fast loop (-m 'not slow')
 def test_custom_task_reproduces_the_built_in_task(custom_window):
     task, config, reference = custom_window
     custom, builtin = simulate(config), simulate(reference)
@@ -150,6 +151,7 @@ def test_register_task_keeps_the_built_in_tasks(custom_window):
     assert get_task("custom-window") is again
 
 
+@pytest.mark.slow                # several seconds: not in the fast loop (-m 'not slow')
 def test_a_custom_task_is_swept_on_a_dask_cluster_of_other_processes(custom_window, tmp_path):
     """Workers are other processes without the registry of this one: the task travels with its points."""
     task, config, _ = custom_window
