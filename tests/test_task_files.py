@@ -3,6 +3,7 @@ models/tasks/window_washing.yaml runs as the built-in one, and a bad file is ref
 
 import textwrap
 import time
+from pathlib import Path
 
 import cloudpickle
 import numpy as np
@@ -23,6 +24,8 @@ from drake_hybrid.scenario.schema_doc import schema_markdown
 from drake_hybrid.scenario.tasks import get_task, register_task
 
 WINDOW_FILE = models_directory() / "tasks" / "window_washing.yaml"
+
+REPOSITORY = Path(__file__).resolve().parents[1]     # the checkout (README, docs), not the installed package
 
 
 @pytest.fixture(scope="module")
@@ -247,7 +250,7 @@ def test_task_file_sweep_on_a_local_dask_cluster(built_in_sweep, tmp_path):
 
 
 def test_readme_shows_the_task_file_as_it_is():
-    readme = (models_directory().parent / "README.md").read_text()
+    readme = (REPOSITORY / "README.md").read_text()
     assert WINDOW_FILE.read_text().rstrip() in readme
 
 
@@ -275,7 +278,7 @@ def test_a_task_that_is_not_built_in_tilted_pane_with_a_redundant_arm():
 
 def test_schema_page_is_generated_from_the_types():
     """docs/task_files.md is the output of scenario.schema_doc (regenerate it after changing a field)."""
-    page = (models_directory().parent / "docs" / "task_files.md").read_text()
+    page = (REPOSITORY / "docs" / "task_files.md").read_text()
     assert page == schema_markdown()
     assert "| `constraint.rows` | List[str] | [] | C(x), one expression per row |" in page
     assert "`config.gains.velocity`" in page and "`workpiece.shapes[].X_WG`" in page
