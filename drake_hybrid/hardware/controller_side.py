@@ -33,18 +33,15 @@ from pydrake.systems.framework import DiagramBuilder, TriggerType
 from pydrake.systems.lcm import LcmPublisherSystem, LcmSubscriberSystem
 from pydrake.systems.primitives import LogVectorOutput
 
-from drake_hybrid.control.gains import ControlMode
 from drake_hybrid.core.errors import ConfigError
 from drake_hybrid.hardware.command import DriverGravityCompensation, TorqueCommandSafety
 from drake_hybrid.hardware.gain_change import GainSelector, bumpless_integrals
 from drake_hybrid.hardware.messages import HardwareConfig
 from drake_hybrid.hardware.watchdog import MessageWatchdog
 from drake_hybrid.hardware.wrench import ExternalTorqueWrench, ForceTorqueConditioning
-from drake_hybrid.scenario.builder import make_controller
+from drake_hybrid.scenario.builder import make_controller, prepare_config
 from drake_hybrid.scenario.config import ScenarioConfig
 from drake_hybrid.scenario.plant import build_controller_plant
-from drake_hybrid.scenario.task import pad_kinematic_rows
-from drake_hybrid.scenario.tasks import get_task
 from drake_hybrid.systems.sensors import LowPassFilter, WrenchConditioner
 
 
@@ -149,14 +146,7 @@ def check_hardware_config(config):
 def prepared(config):
     """(task, mode, constraint space, config with the desired force padded) as build_scenario has them."""
     check_hardware_config(config)
-    task = get_task(config.task)
-    mode = ControlMode.parse(config.mode)
-    config.validate()
-    task.options(config)
-    constraint_space = task.constraint_space(config)
-    config = dataclasses.replace(config, desired_force=pad_kinematic_rows(
-        config.desired_force, constraint_space.force_size, constraint_space.constraint.kinematic_rows))
-    return task, mode, constraint_space, config
+    return prepare_config(config)
 
 
 def build_controller_station(config, lcm, hardware=None, initial_positions=None, with_loggers=True, gain_changes=()):

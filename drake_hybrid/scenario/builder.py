@@ -102,20 +102,27 @@ def make_controller(config, task, plant, controller_plant, robot, constraint_spa
         plant_time_step=plant.time_step() if plant_time_step is None else plant_time_step)
 
 
+def prepare_config(config):
+    """(task, mode, constraint space, config) with every field validated once (``config.validate``,
+    the task's typed options) and the desired force padded with zeros on the kinematic rows (given
+    for the force-controlled rows only): what every diagram built from a config starts from."""
+    task = get_task(config.task)
+    mode = ControlMode.parse(config.mode)
+    config.validate()
+    task.options(config)
+    constraint_space = task.constraint_space(config)
+    config = dataclasses.replace(config, desired_force=pad_kinematic_rows(
+        config.desired_force, constraint_space.force_size, constraint_space.constraint.kinematic_rows))
+    return task, mode, constraint_space, config
+
+
 def build_scenario(config, meshcat=None, with_loggers=True, sampled_plant_outputs=True, controller_sample_lead=True):
     """Build the closed-loop diagram of ``config``. See the module docstring.
 
     The last two arguments exist for ``analysis.linearize_discrete`` (see there)."""
     if not isinstance(config, ScenarioConfig):
         raise TypeError(f"build_scenario: expected a ScenarioConfig, got {type(config).__name__}")
-    task = get_task(config.task)
-    mode = ControlMode.parse(config.mode)
-    config.validate()
-    task.options(config)
-    constraint_space = task.constraint_space(config)
-    # A desired force given for the force-controlled rows only: zeros for the kinematic rows.
-    config = dataclasses.replace(config, desired_force=pad_kinematic_rows(
-        config.desired_force, constraint_space.force_size, constraint_space.constraint.kinematic_rows))
+    task, mode, constraint_space, config = prepare_config(config)
     control_period = config.control_period if config.control_period > 0 else None
     bandwidth = config.sensor.bandwidth_hz
 
