@@ -42,13 +42,13 @@ from typing import List
 import numpy as np
 
 from pydrake.autodiffutils import AutoDiffXd
-from pydrake.multibody.tree import MultibodyForces_
 from pydrake.common.value import AbstractValue
+from pydrake.multibody.tree import MultibodyForces_
 from pydrake.systems.framework import LeafSystem_, ValueProducer
 from pydrake.systems.scalar_conversion import TemplateSystem
 
-from drake_hybrid.control.controller import MultibodyForcesHolder
 from drake_hybrid.control.gains import ControlMode, HybridGains
+from drake_hybrid.control.law_system import LawSystemParts, MultibodyForcesHolder
 from drake_hybrid.control.sampling import SAMPLE_LEAD
 from drake_hybrid.core.errors import ConfigError, DimensionError, check_fields
 from drake_hybrid.core.kinematics import declare_task_input, resolve_frame
@@ -180,32 +180,12 @@ def _declare_common(system, T, plant, end_effector_frame, end_effector_point, co
                                    prerequisites_of_calc={state_ticket})
 
 
-class _BaselineMixin:
+class _BaselineMixin(LawSystemParts):
     """State handling shared by the baselines (continuous integrals, or sampled with a held torque)."""
-
-    def validated_gains(self):
-        return self._gains
-
-    def diagnostic_slices(self):
-        return dict(self._diagnostic_slices)
 
     def integral_state_slices(self):
         m, k = self.force_size, self.velocity_size
         return slice(0, m), slice(m, m + k)
-
-    def plant(self):
-        return self._plant
-
-    def get_estimated_state_input_port(self):
-        return self._state_port
-
-    def get_measured_wrench_input_port(self):
-        return self._wrench_port
-
-    def _integrals(self, context):
-        if self.control_period is None:
-            return context.get_continuous_state_vector().CopyToVector()
-        return context.get_discrete_state(0).CopyToVector()[:self._integrated_size]
 
     def _solution(self, context):
         return self._solution_cache.Eval(context)

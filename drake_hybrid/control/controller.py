@@ -29,25 +29,16 @@ from pydrake.systems.framework import LeafSystem_, ValueProducer
 from pydrake.systems.scalar_conversion import TemplateSystem
 
 from drake_hybrid.control.damping import joint_damping, warn_damped_joints
-from drake_hybrid.control.gains import ControlMode, HybridGains
-from drake_hybrid.control.phases import ContactPhase
-from drake_hybrid.control.sampling import SAMPLE_LEAD
 from drake_hybrid.control.fast_law import FastLaw
+from drake_hybrid.control.gains import ControlMode, HybridGains
 from drake_hybrid.control.law import LawConstants, evaluate_law
+from drake_hybrid.control.law_system import LawSystemParts
+from drake_hybrid.control.phases import ContactPhase
 from drake_hybrid.control.safety import SafetyConfig, warn_singularity
+from drake_hybrid.control.sampling import SAMPLE_LEAD
 from drake_hybrid.core.errors import DimensionError
 from drake_hybrid.core.kinematics import declare_task_input, resolve_frame, set_plant_state
 from drake_hybrid.core.linalg import all_finite, value
-
-
-class MultibodyForcesHolder:
-    """A MultibodyForces in a cache entry (a Python object, so the cache holds it by reference); the
-    baselines' per-context scratch (``control.baselines``)."""
-
-    __slots__ = ("forces",)
-
-    def __init__(self, forces):
-        self.forces = forces
 
 
 class LawCache:
@@ -65,7 +56,7 @@ class LawCache:
 @TemplateSystem.define("HybridController_", T_list=[float, AutoDiffXd])
 def HybridController_(T):
 
-    class Impl(LeafSystem_[T]):
+    class Impl(LawSystemParts, LeafSystem_[T]):
         """Hybrid velocity/force (3.1-12), position/force (Remark 3) and impedance/force (3.2-6) control.
 
         .. pydrake_system::
@@ -362,20 +353,6 @@ def HybridController_(T):
             return AbstractValue.Make(LawCache(self._plant.CreateDefaultContext(), MultibodyForces_[T](self._plant)))
 
         # -- public helpers ---------------------------------------------------------------
-        def plant(self):
-            """The controller's own plant (of this system's scalar type)."""
-            return self._plant
-
-        def validated_gains(self):
-            """The gains as matrices (K_v, K_p, K_fp, K_fi)."""
-            return self._gains
-
-        def get_estimated_state_input_port(self):
-            return self._state_port
-
-        def get_measured_wrench_input_port(self):
-            return self._wrench_port
-
         def get_desired_velocity_input_port(self):
             return self._velocity_port
 
@@ -400,21 +377,12 @@ def HybridController_(T):
                     "smallest_singular_value": solution.smallest_singular_value,
                     "singularity_damping": solution.singularity_damping, "wrench_valid": solution.wrench_valid}
 
-        def diagnostic_slices(self):
-            """{name: slice} of each diagnostic in the ``diagnostics`` output (``sampled_diagnostics``)."""
-            return dict(self._diagnostic_slices)
-
         def integral_state_slices(self):
             """Slices of (xi, e_p) in the continuous or discrete state vector."""
             m, k = self.force_size, self.velocity_size
             return slice(0, m), slice(m, m + (k if self.mode.integrates_position else 0))
 
         # -- evaluation -----------------------------------------------------------------
-        def _integrals(self, context):
-            if self.control_period is None:
-                return context.get_continuous_state_vector().CopyToVector()
-            return context.get_discrete_state(0).CopyToVector()[:self._integrated_size]
-
         def _calc_solution(self, context, abstract_value):
             cache = abstract_value.get_mutable_value()
             plant_context = cache.plant_context
