@@ -58,6 +58,22 @@ START_ANGLE = 4.412                      # rad, crank angle alpha at t = 0
 CRANK_SEED = np.array([0.0, -1.2, 1.8, -0.6, 1.57, 0.0])   # IK seed: the wrist branch with q5 near pi/2
 
 
+def true_velocities(scenario, log):
+    """(samples x 2) the true-velocity rows E_t r-dot (spin, crank rate; docs/theory.md §6) of every
+    logged state of a crank run, whichever E_p the controller used."""
+    true_rows = crank_true_velocity_projection(scenario.constraint_space.chart, center=CRANK_CENTER,
+                                               radius=CRANK_RADIUS)
+    plant = scenario.controller_plant
+    context = plant.CreateDefaultContext()
+    rates = []
+    for q, v in zip(log["q"], log["v"]):
+        plant.SetPositions(context, q)
+        plant.SetVelocities(context, v)
+        task = scenario.controller.kinematics.evaluate(context)
+        rates.append(true_rows.matrix(task.configuration) @ task.velocity)
+    return np.array(rates)
+
+
 @dataclass
 class CrankTurningOptions:
     start_angle: float = START_ANGLE                            # rad, crank angle alpha at t = 0
@@ -241,16 +257,7 @@ class CrankTurning(Task):
         Li & Sastry law only: a baseline has no such design)."""
         if scenario.config.controller != "li-sastry":
             return []
-        true_rows = crank_true_velocity_projection(scenario.constraint_space.chart, center=CRANK_CENTER,
-                                                   radius=CRANK_RADIUS)
-        plant = scenario.controller_plant
-        context = plant.CreateDefaultContext()
-        rates = []
-        for q, v in zip(log["q"], log["v"]):
-            plant.SetPositions(context, q)
-            plant.SetVelocities(context, v)
-            task = scenario.controller.kinematics.evaluate(context)
-            rates.append((true_rows.matrix(task.configuration) @ task.velocity)[1])
+        rates = true_velocities(scenario, log)[:, 1]
         t = log["t"]
         # The true-velocity command (the paper's rows get it converted to a pseudo-velocity).
         command = np.array([scenario.config.desired_velocity.evaluate(float(time))[0][1] for time in t])
