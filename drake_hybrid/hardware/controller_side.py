@@ -39,10 +39,9 @@ from drake_hybrid.hardware.gain_change import GainSelector, bumpless_integrals
 from drake_hybrid.hardware.messages import HardwareConfig
 from drake_hybrid.hardware.watchdog import MessageWatchdog
 from drake_hybrid.hardware.wrench import ExternalTorqueWrench, ForceTorqueConditioning
-from drake_hybrid.scenario.builder import make_controller, prepare_config
+from drake_hybrid.scenario.builder import add_wrench_path, make_controller, prepare_config
 from drake_hybrid.scenario.config import ScenarioConfig
 from drake_hybrid.scenario.plant import build_controller_plant
-from drake_hybrid.systems.sensors import LowPassFilter, WrenchConditioner
 
 
 @dataclass
@@ -188,17 +187,7 @@ def build_controller_station(config, lcm, hardware=None, initial_positions=None,
         builder.Connect(watchdog.GetOutputPort("torque_external"), wrench.GetInputPort("torque_external"))
     builder.Connect(state, wrench.GetInputPort("estimated_state"))
     wrench_output = wrench.GetOutputPort("wrench")
-    conditioner = wrench_filter = None
-    bandwidth = config.sensor.bandwidth_hz
-    if config.sensor.condition:
-        conditioner = builder.AddNamedSystem("wrench_conditioner", WrenchConditioner(
-            period, bandwidth, config.sensor.max_hold_time, use_sequence=False, tare=False))
-        builder.Connect(wrench_output, conditioner.GetInputPort("raw_wrench"))
-        wrench_output = conditioner.GetOutputPort("wrench")
-    elif bandwidth > 0:
-        wrench_filter = builder.AddNamedSystem("wrench_filter", LowPassFilter(6, bandwidth, period))
-        builder.Connect(wrench_output, wrench_filter.get_input_port(0))
-        wrench_output = wrench_filter.get_output_port(0)
+    wrench_output, conditioner, wrench_filter = add_wrench_path(builder, wrench_output, config.sensor, period)
     builder.Connect(wrench_output, controller.get_measured_wrench_input_port())
     builder.Connect(state, controller.get_estimated_state_input_port())
 

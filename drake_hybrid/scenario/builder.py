@@ -116,6 +116,26 @@ def prepare_config(config):
     return task, mode, constraint_space, config
 
 
+def add_wrench_path(builder, wrench_output, sensor, period, sequence=None, tare=False):
+    """The wrench's way to the controller (``sensor``: a ScenarioConfig.sensor): a WrenchConditioner
+    with ``sensor.condition`` (fed the sample ``sequence`` output when given; ``tare``), else a
+    low-pass filter when ``sensor.bandwidth_hz`` > 0, else nothing. Returns (the output port the
+    controller reads, the conditioner or None, the filter or None)."""
+    conditioner = wrench_filter = None
+    if sensor.condition:
+        conditioner = builder.AddNamedSystem("wrench_conditioner", WrenchConditioner(
+            period, sensor.bandwidth_hz, sensor.max_hold_time, use_sequence=sequence is not None, tare=tare))
+        builder.Connect(wrench_output, conditioner.GetInputPort("raw_wrench"))
+        if sequence is not None:
+            builder.Connect(sequence, conditioner.GetInputPort("sequence"))
+        wrench_output = conditioner.GetOutputPort("wrench")
+    elif sensor.bandwidth_hz > 0:
+        wrench_filter = builder.AddNamedSystem("wrench_filter", LowPassFilter(6, sensor.bandwidth_hz, period))
+        builder.Connect(wrench_output, wrench_filter.get_input_port(0))
+        wrench_output = wrench_filter.get_output_port(0)
+    return wrench_output, conditioner, wrench_filter
+
+
 def build_scenario(config, meshcat=None, with_loggers=True, sampled_plant_outputs=True, controller_sample_lead=True):
     """Build the closed-loop diagram of ``config``. See the module docstring.
 
@@ -124,7 +144,6 @@ def build_scenario(config, meshcat=None, with_loggers=True, sampled_plant_output
         raise TypeError(f"build_scenario: expected a ScenarioConfig, got {type(config).__name__}")
     task, mode, constraint_space, config = prepare_config(config)
     control_period = config.control_period if config.control_period > 0 else None
-    bandwidth = config.sensor.bandwidth_hz
 
     builder = DiagramBuilder()
     plant, scene_graph, robot = build_plant(task, config, builder, sampled_outputs=sampled_plant_outputs)
@@ -157,23 +176,15 @@ def build_scenario(config, meshcat=None, with_loggers=True, sampled_plant_output
     builder.Connect(plant.get_body_poses_output_port(), sensor.get_input_port(1))
     wrench_output = sensor.get_output_port(0)
     true_wrench = wrench_output
-    injector = conditioner = wrench_filter = supervisor = None
+    injector = supervisor = None
     if config.sensor_faults.active():
         injector = builder.AddNamedSystem("sensor_faults", SensorFaultInjector(config.sensor_faults, control_period))
         builder.Connect(wrench_output, injector.GetInputPort("wrench"))
         wrench_output = injector.GetOutputPort("faulty_wrench")
     tare = supervised and config.supervision.tare_time > 0 and not config.start.in_contact
-    if config.sensor.condition:
-        conditioner = builder.AddNamedSystem("wrench_conditioner", WrenchConditioner(
-            control_period, bandwidth, config.sensor.max_hold_time, use_sequence=injector is not None, tare=tare))
-        builder.Connect(wrench_output, conditioner.GetInputPort("raw_wrench"))
-        if injector is not None:
-            builder.Connect(injector.GetOutputPort("sequence"), conditioner.GetInputPort("sequence"))
-        wrench_output = conditioner.GetOutputPort("wrench")
-    elif bandwidth > 0:
-        wrench_filter = builder.AddNamedSystem("wrench_filter", LowPassFilter(6, bandwidth, control_period))
-        builder.Connect(wrench_output, wrench_filter.get_input_port(0))
-        wrench_output = wrench_filter.get_output_port(0)
+    wrench_output, conditioner, wrench_filter = add_wrench_path(
+        builder, wrench_output, config.sensor, control_period,
+        sequence=injector.GetOutputPort("sequence") if injector is not None else None, tare=tare)
     builder.Connect(wrench_output, controller.get_measured_wrench_input_port())
     if config.model_error.joint_friction > 0:
         friction = builder.AddNamedSystem("joint_friction", JointFriction(
