@@ -72,6 +72,9 @@ def test_the_window_linearization_agrees_with_central_differences_and_uses_autod
 
 def test_a_box_workpiece_gets_the_central_difference_jacobian_with_a_warning():
     config = ur5e_on_a_block()
+    # The paper's form: the default law cancels the measured F_v (control.law.tangential_compensation),
+    # and with it the wrong tangential derivative's effect, which this test needs to see.
+    config.compensate_tangential_force = False
     with pytest.warns(DerivativeMismatchWarning, match="disagrees with central differences"):
         dut = linearize_continuous(config)
     check = dut.jacobian_check

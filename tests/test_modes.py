@@ -62,14 +62,17 @@ def small_drum_task():
                                     joint_guess=[0.0, -0.3, 0.0, -2.2, 0.0, 1.9, 0.8]))
 
 
-def config_for(task, mode):
-    return task.default_config(desired_velocity=[0.05, 0.0, 0.0, 0.0, 0.0], desired_force=[10.0], mode=mode,
-                               gains=HybridGains(velocity=[16.0], position=[48.0], force_proportional=[0.5],
-                                                 force_integral=[15.0]))
+def config_for(task, mode, compensate_tangential_force=True):
+    config = task.default_config(desired_velocity=[0.05, 0.0, 0.0, 0.0, 0.0], desired_force=[10.0], mode=mode,
+                                 gains=HybridGains(velocity=[16.0], position=[48.0], force_proportional=[0.5],
+                                                   force_integral=[15.0]))
+    config.compensate_tangential_force = compensate_tangential_force
+    return config
 
 
 def test_velocity_mode_drift_on_a_small_drum_is_named_with_its_cause(small_drum_task):
-    dut = linearize_continuous(config_for(small_drum_task, "velocity-force"))
+    """The paper's form (F_v left in): the drift appears and is named."""
+    dut = linearize_continuous(config_for(small_drum_task, "velocity-force", compensate_tangential_force=False))
     assert len(dut.unstable_modes) == 1
     (mode,) = dut.unstable_modes
     assert mode.eigenvalue.real == pytest.approx(0.759, abs=0.01)          # measured 0.7593 1/s
@@ -87,3 +90,12 @@ def test_position_mode_regulates_the_drift(small_drum_task):
     dut = linearize_continuous(config_for(small_drum_task, "position-force"))
     assert dut.unstable_modes == []
     assert dut.eigenvalues.real.max() < UNSTABLE_RATE                      # measured 2e-14 1/s
+
+
+def test_the_default_law_cancels_the_measured_tangential_force_and_the_drift_with_it(small_drum_task):
+    """Velocity-force mode with the law's default F_v compensation: the zero of the unregulated
+    tangential position stays at 0 (the tessellation's dk acts only through the sensor path)."""
+    dut = linearize_continuous(config_for(small_drum_task, "velocity-force"))
+    assert dut.unstable_modes == []
+    assert dut.eigenvalues.real.max() < UNSTABLE_RATE                      # measured 1.7e-11 1/s
+    assert dut.jacobian_check.agrees

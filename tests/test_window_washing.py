@@ -224,7 +224,10 @@ def test_loggers_read_the_tick_and_do_not_rerun_the_law(monkeypatch):
         if not sampled:      # the same diagram with the live output ports logged instead
             monkeypatch.setattr(scenarios, "HybridController",
                                 lambda *a, **kw: original(*a, **{**kw, "sampled_diagnostics": False}))
-        scenario = build_scenario(config)
+        # Sampled plant outputs: the wrench then stays what the tick read until the next plant step,
+        # so the live re-evaluation can equal the tick (unsampled, it is recomputed with the new
+        # actuation: the very re-evaluation that the sampled diagnostics avoid).
+        scenario = build_scenario(config, sampled_plant_outputs=True)
         assert scenario.controller.sampled_diagnostics is sampled
         count = [0]
         law = scenario.controller._evaluate_law

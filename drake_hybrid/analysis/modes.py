@@ -108,11 +108,17 @@ def diagnose_unstable_modes(scenario, context, A, mode, designed, threshold=UNST
                 cause = (f"a contact stiffness along the velocity rows (direction {np.round(u, 2).tolist()}) beyond "
                          f"what K_p holds (about {stiffness:.3g} N/m or N m/rad); raise gains.position")
             else:
+                if getattr(scenario.config, "compensate_tangential_force", False):
+                    remedy = ("the law cancels the measured F_v, so the stiffness acts through the wrench path's "
+                              "lag: raise sensor.bandwidth_hz, or use position-force or impedance-force mode")
+                else:
+                    remedy = ("compensate_tangential_force: true (the default; off here), position-force or "
+                              "impedance-force mode removes it")
                 cause = (f"drift of the positions the velocity rows leave unregulated (velocity-force mode has no "
                          f"position feedback) along r_p direction {np.round(u, 2).tolist()}: a destabilizing contact "
                          f"stiffness of about {stiffness:.3g} (N/m or N m/rad along it) beyond the geometric F/rho "
                          "that the law cancels, from the tessellated pad and workpiece on a curved surface "
-                         "(docs/drake_notes.md); position-force or impedance-force mode regulates it")
+                         f"(docs/drake_notes.md); {remedy}")
         elif dominant == "velocity rows":
             cause = "a fast mode along the velocity rows: contact and sensor dynamics against K_v (wrench filter, pad)"
         elif dominant == "self-motion":

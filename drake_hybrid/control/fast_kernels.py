@@ -42,7 +42,8 @@ I_N, I_D, I_M, I_K, I_CHART, I_POSITION, I_IMPEDANCE, I_KERNEL, I_ANTI_WINDUP, I
 (I_OFFSET_KV, I_OFFSET_KP, I_OFFSET_KFP, I_OFFSET_KFI, I_OFFSET_MASK, I_OFFSET_B_INVERSE, I_OFFSET_LIMITS,
  I_OFFSET_POINT, I_OFFSET_CHART, I_OFFSET_BASIS, I_OFFSET_HALF_LOWER) = range(10, 21)
 I_CONFIGURATION = 21          # size of the chart's configuration x
-INT_SIZE = 22
+I_COMPENSATE_TANGENTIAL = 22  # 1: cancel the measured F_v (law.tangential_compensation)
+INT_SIZE = 23
 # -- scalars at the start of ``reals`` -------------------------------------------------------------
 (R_RANK_TOLERANCE, R_KERNEL_TOLERANCE, R_INVERTIBILITY_TOLERANCE, R_CHART_TOLERANCE, R_CONSTRAINT_FREQUENCY,
  R_NULL_SPACE_DAMPING, R_SINGULARITY_THRESHOLD, R_MAX_ACCELERATION, R_APPROACH_SPEED, R_APPROACH_GAIN) = range(10)
@@ -646,7 +647,10 @@ def law_kernel(x, nu, J, bias, C, E_f, curvature, E_f_dot, E_p, E_p_dot_nu, v, d
     force_command = -desired_force + matvec(K_fp, force_error) + matvec(K_fi, integrals[:m])
     if not in_contact:
         force_command = force_command * (1.0 - mask)
-    tau_f = matvec(transpose(J), matvec(transpose(E_f), force_command))
+    wrench_on_task = matvec(transpose(E_f), force_command)
+    if ints[I_COMPENSATE_TANGENTIAL] != 0 and ints[I_IMPEDANCE] == 0:  # F_c = -F_v on the velocity rows
+        wrench_on_task = wrench_on_task - matvec(transpose(E_p), tangential_force)
+    tau_f = matvec(transpose(J), wrench_on_task)
     task_rhs = task_acceleration - bias
 
     # diagnostics and the integral rates (frozen by ``finish`` while saturated)

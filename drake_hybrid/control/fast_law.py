@@ -209,6 +209,7 @@ def pack_constants(controller, law, space):
                                     int(law.approach_speed is not None)]
     ints[kernels.I_OFFSET_KV:kernels.I_OFFSET_HALF_LOWER + 1] = offsets
     ints[kernels.I_CONFIGURATION] = chart.configuration_size
+    ints[kernels.I_COMPENSATE_TANGENTIAL] = int(law.compensate_tangential_force)
     return np.concatenate(reals), ints
 
 

@@ -13,11 +13,12 @@ force on the robot, §0; k = d - m velocity rows, m force rows)::
           ... - K_p e_p                                  (Remark 3)
           ... + K_0 (F_v + F_m)                           (3.2-6)   impedance_compensation
     F_m = I_v a_p                       (a mechanism on the velocity rows)   mechanism_force
+    F_c = -F_v                          (velocity and position modes)        tangential_compensation
     a_f = -3 w_c C-dot - 2 w_c^2 C      (kinematic rows)             held_row_acceleration
     a_f = -K_a (C-dot - s n_C)          (off the surface)            guarded_acceleration
     r-ddot* = E^-1 ([a_p; a_f] - E-dot r-dot)             (3.0-11)   ConstraintSpace.task_acceleration
     u_f = -F_d + K_fp e_f + K_fi xi                       (3.1-12)   force_command
-    tau_f = J^T (E_f^T u_f + E_p^T F_m)                              force_torque
+    tau_f = J^T (E_f^T u_f + E_p^T (F_m + F_c))                      force_torque
     tau = ID(q, q-dot, J^-1 (r-ddot* - J-dot q-dot)) + tau_f   (n = d)   joint_torque
     tau = h + g + J^T Lambda (r-ddot* - J-dot q-dot) + tau_f
           - N^T M K_n q-dot,  Lambda = (J M^-1 J^T)^-1          (n > d)   joint_torque
@@ -54,17 +55,19 @@ class LawConstants:
     controller's scalar type (for h + g by inverse dynamics); approach_speed, approach_gain: the guarded move's s
     and K_a (None without a guarded move); velocity_row_inertia: I_v of a mechanism moving with the
     velocity rows (None: the paper's massless constraint); joint_damping, plant_time_step: the
-    model's B and the simulated plant's step h (``control.damping``; h = 0: continuous).
+    model's B and the simulated plant's step h (``control.damping``; h = 0: continuous);
+    compensate_tangential_force: cancel the measured F_v (``tangential_compensation``).
     """
 
     __slots__ = ("gains", "mode", "kinematic_rows", "force_controlled", "singularity_threshold",
                  "max_joint_acceleration", "effort_limits", "anti_windup", "actuation_from_torque",
                  "zero_acceleration", "approach_speed", "approach_gain", "velocity_row_inertia", "joint_damping",
-                 "plant_time_step")
+                 "plant_time_step", "compensate_tangential_force")
 
     def __init__(self, gains, mode, kinematic_rows, force_size, singularity_threshold, max_joint_acceleration,
                  effort_limits, anti_windup, actuation_from_torque, zero_acceleration, approach_speed=None,
-                 approach_gain=None, velocity_row_inertia=None, joint_damping=None, plant_time_step=0.0):
+                 approach_gain=None, velocity_row_inertia=None, joint_damping=None, plant_time_step=0.0,
+                 compensate_tangential_force=False):
         self.gains, self.mode = gains, mode
         self.kinematic_rows = tuple(kinematic_rows)
         self.force_controlled = np.ones(force_size)
@@ -75,6 +78,7 @@ class LawConstants:
         self.approach_speed, self.approach_gain = approach_speed, approach_gain
         self.velocity_row_inertia = velocity_row_inertia
         self.joint_damping, self.plant_time_step = joint_damping, plant_time_step
+        self.compensate_tangential_force = compensate_tangential_force
 
 
 class ControlSolution:
@@ -135,6 +139,28 @@ def mechanism_force(velocity_row_inertia, motion_acceleration):
     if velocity_row_inertia is None:
         return None
     return velocity_row_inertia @ motion_acceleration
+
+
+def tangential_compensation(tangential_force, mode, enabled):
+    """F_c = -F_v: the force along the velocity rows that cancels the measured tangential force, in
+    velocity-force and position-force mode (None when off, and always in impedance mode, where F_v
+    drives the impedance (3.2-6) instead).
+
+    The paper's §3.1 assumes F_v = 0: a frictionless contact on the exact surface. A real contact
+    has F_v from friction, from a tessellated or rough surface, or from a mechanism; left in, it
+    drives the velocity rows, whose positions velocity-force mode leaves unregulated. On a curved
+    workpiece the tessellated contact's tangential stiffness differs from the F/rho that the
+    turning E_f(x) cancels by dk, and that moves a zero of the velocity rows to s with
+    Lambda s (s + K_v) = dk: a slow real instability for dk > 0 (docs/theory.md §11). With the
+    measured F_v cancelled, dk acts only through the wrench path's lag: with a first-order
+    low-pass of w_w the root stays at 0 and the rest satisfy Lambda (s + K_v)(s + w_w) = dk, stable
+    for dk < Lambda K_v w_w. It also removes F_v's pull on the force rows, M_fp F_v of (3.2-9).
+    The wrench must be the force on the model's end effector: a wrist sensor's reading of a tool
+    the model already carries is not (``WristSensorConfig.compensate_tool_inertia``).
+    """
+    if not enabled or mode is ControlMode.IMPEDANCE_FORCE:
+        return None
+    return -tangential_force
 
 
 def impedance_blocks(velocity_projection, force_projection, task_mobility, kinematic_rows=()):
@@ -213,11 +239,13 @@ def force_command(desired_force, gains, force_error, force_integral, force_contr
     return command if in_contact else command * (1.0 - force_controlled)
 
 
-def force_torque(jacobian, force_projection, command, velocity_projection=None, mechanism=None):
-    """tau_f = J^T E_f^T u_f, plus J^T E_p^T F_m with a mechanism force F_m."""
+def force_torque(jacobian, force_projection, command, velocity_projection=None, velocity_row_forces=()):
+    """tau_f = J^T E_f^T u_f, plus J^T E_p^T F for each force F on the velocity rows that is not
+    None (the mechanism force F_m, the tangential compensation F_c)."""
     wrench = force_projection.T @ command
-    if mechanism is not None:
-        wrench = wrench + velocity_projection.T @ mechanism
+    for row_force in velocity_row_forces:
+        if row_force is not None:
+            wrench = wrench + velocity_projection.T @ row_force
     return jacobian.T @ wrench
 
 
@@ -289,6 +317,7 @@ def evaluate_law(constants, space, kinematics, plant, plant_context, forces, int
 
     a_p = motion_acceleration(desired_acceleration, gains, e_p_dot, e_p, mode)
     F_m = mechanism_force(constants.velocity_row_inertia, a_p)
+    F_c = tangential_compensation(tangential_force, mode, constants.compensate_tangential_force)
     C_dot = values.force_projection @ nu
     a_f = held_row_acceleration(values.constraint_value, C_dot, gains.constraint_frequency, mask)
     n, d = J.shape[1], J.shape[0]
@@ -310,7 +339,7 @@ def evaluate_law(constants, space, kinematics, plant, plant_context, forces, int
     task_acceleration = space.task_acceleration(values, a_p, a_f)       # (3.0-11)
 
     u_f = force_command(desired_force, gains, e_f, xi, mask, in_contact)
-    tau_f = force_torque(J, values.force_projection, u_f, values.velocity_projection, F_m)
+    tau_f = force_torque(J, values.force_projection, u_f, values.velocity_projection, (F_m, F_c))
     torque, base_torque, sigma_min, lambda_squared = joint_torque(
         plant, plant_context, forces, J, task_acceleration - kinematics.bias, tau_f, constants, dynamics)
 

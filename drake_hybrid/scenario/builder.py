@@ -99,6 +99,7 @@ def make_controller(config, task, plant, controller_plant, robot, constraint_spa
         safety=config.safety, guarded_move=config.supervision if supervised else None,
         sampled_diagnostics=with_loggers and control_period is not None,
         velocity_row_inertia=velocity_row_inertia(config, task, plant, constraint_space),
+        compensate_tangential_force=config.compensate_tangential_force,
         plant_time_step=plant.time_step() if plant_time_step is None else plant_time_step)
 
 
@@ -136,15 +137,24 @@ def add_wrench_path(builder, wrench_output, sensor, period, sequence=None, tare=
     return wrench_output, conditioner, wrench_filter
 
 
-def build_scenario(config, meshcat=None, with_loggers=True, sampled_plant_outputs=True, controller_sample_lead=True):
+def build_scenario(config, meshcat=None, with_loggers=True, sampled_plant_outputs=None, controller_sample_lead=True):
     """Build the closed-loop diagram of ``config``. See the module docstring.
 
-    The last two arguments exist for ``analysis.linearize_discrete`` (see there)."""
+    ``sampled_plant_outputs``: a discrete plant's contact results and reaction forces sampled at its
+    last step (Drake's ``use_sampled_output_ports``) or computed at the current state. Default: not
+    sampled under a sampled controller, so the measured wrench is the one the plant applies. The
+    sampled results are computed at the state before the last step while the body poses are
+    current, and the contact sensor's shift from the centroid to P across that gap (|v| h) adds a
+    false moment |f| |v| h: 1e-3 N m at 10 N, 0.1 m/s and 1 ms, which the law reads as F_v
+    (docs/drake_notes.md). A continuous controller keeps them sampled (no algebraic loop through the
+    actuation input). ``controller_sample_lead`` exists for ``analysis.linearize_discrete``."""
     if not isinstance(config, ScenarioConfig):
         raise TypeError(f"build_scenario: expected a ScenarioConfig, got {type(config).__name__}")
     task, mode, constraint_space, config = prepare_config(config)
     control_period = config.control_period if config.control_period > 0 else None
 
+    if sampled_plant_outputs is None:
+        sampled_plant_outputs = control_period is None
     builder = DiagramBuilder()
     plant, scene_graph, robot = build_plant(task, config, builder, sampled_outputs=sampled_plant_outputs)
     controller_plant, _ = build_controller_plant(task, config)

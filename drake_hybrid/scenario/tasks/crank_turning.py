@@ -107,6 +107,11 @@ class CrankTurning(Task):
             start=StartConfig(in_contact=True, force_integral=[0.0, 0.1, 0.0, 0.0]),
             task_parameters={"start_angle": START_ANGLE},
             task_options={"velocity_rows": "true"},
+            # The paper's form on the velocity rows: the crank's F_v is the handle's and the tool's
+            # inertia (the wrist sensor reads the tool the model already carries), which the
+            # mechanism (``mechanism.source``) and the task's predictions describe; cancelling the
+            # measured F_v would count the tool twice (control.law.tangential_compensation).
+            compensate_tangential_force=False,
         )
 
     def labels(self, config=None):
