@@ -99,7 +99,11 @@ class HybridGains:
     matrices; they are stored as flat lists (1, k or k*k entries)."""
 
     velocity: List[float] = field(default_factory=lambda: [10.0])
-    position: List[float] = field(default_factory=lambda: [25.0])
+    # K_p = 21: the position rows' roots s^2 + 10 s + 21 at -3 and -7, distinct (not the critically
+    # damped double root -5 of K_p = 25): a linearization tells distinct roots apart (a double root
+    # splits by the square root of any perturbation), and the slowest root's five time constants
+    # bound the transient (a double root's (1 + 5) e^-5 = 4 % of the initial error is not within 2 %).
+    position: List[float] = field(default_factory=lambda: [21.0])
     force_proportional: List[float] = field(default_factory=lambda: [0.5])
     force_integral: List[float] = field(default_factory=lambda: [15.0])
     null_space_damping: float = 10.0

@@ -1,0 +1,59 @@
+"""Issue 12's acceptance figures on arms the package does not ship (tests/own_arm_cases.py): nine of
+the 27 (arm, shape, mode) cases, a Latin square, so every arm meets every shape and every mode and
+every shape every mode. docs/own_arms.py runs all 27 and writes docs/own_arms.md.
+
+Per case: errors after five design time constants <= 2 % (velocity and force, % of the command),
+every designed eigenvalue within 5 % of its linearized partner, no real part above 0.01 1/s, and
+the Jacobian check in the linearization's output. Nothing is tuned per robot but its frames.
+
+Known failures, kept visible (strict xfail: they fail the run the day they pass):
+- impedance-force on the 5 cm cylinder and sphere: the unit-mass impedance yields, as designed,
+  to the tangential force of the tessellated contact (F_v up to 0.2 N at 10 N: the facets' normals
+  are off the surface's by up to half a facet angle), whose stiffness along the surface moves the
+  impedance's roots (62-88 % here) and leaves 12-14 % velocity error;
+- position-force on the 5 cm sphere: one designed root 7-11 % off (the tessellation's stiffness
+  again, against K_p; the errors are within 0.6 %).
+"""
+
+import logging
+
+import pytest
+
+import own_arm_cases as cases
+
+logging.getLogger("drake").setLevel(logging.ERROR)
+
+KNOWN = {
+    ("cylinder", "impedance-force"): "the unit-mass impedance yields to the tessellated contact's tangential force",
+    ("sphere", "impedance-force"): "the unit-mass impedance yields to the tessellated contact's tangential force",
+    ("sphere", "position-force"): "one designed root 7-11 % off: the tessellated sphere's stiffness against K_p",
+}
+
+
+def _case(arm, shape, mode):
+    reason = KNOWN.get((shape, mode))
+    marks = [pytest.mark.xfail(strict=True, reason=reason)] if reason else []
+    return pytest.param(arm, shape, mode, marks=marks, id=f"{arm}-{shape}-{mode}")
+
+
+@pytest.fixture(scope="module")
+def cache(tmp_path_factory):
+    return tmp_path_factory.mktemp("meshes")
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("arm, shape, mode", [_case(*case) for case in cases.latin_square()])
+def test_own_arm_on_own_surface(arm, shape, mode, cache):
+    figures = cases.run(arm, shape, mode, cache)
+    assert "Jacobian check" in figures["jacobian_check"]
+    assert figures["max_real_part"] <= cases.MAX_REAL_PART, figures
+    assert figures["velocity_error_percent"] <= cases.MAX_ERROR_PERCENT, figures
+    assert figures["force_error_percent"] <= cases.MAX_ERROR_PERCENT, figures
+    assert figures["eigenvalue_error"] <= cases.EIGENVALUE_TOLERANCE, figures
+
+
+def test_the_latin_square_covers_every_pair():
+    square = cases.latin_square()
+    assert len(square) == 9
+    for a, b in ((0, 1), (0, 2), (1, 2)):
+        assert len({(case[a], case[b]) for case in square}) == 9
