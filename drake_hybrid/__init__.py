@@ -7,8 +7,8 @@ Layers (each imports only the ones above it):
 * ``projections``  E_p and the constraint space E = [E_p; E_f] (sections 3.0, 3.3)
 * ``kinematics``   chart quantities (r, r-dot, J, J-dot q-dot) from a MultibodyPlant
 
-The names below are imported on first use (PEP 562), so that ``import drake_hybrid.cli`` does
-not load Drake before the command line has printed its first line (``drake_hybrid.cli``).
+The names below are imported on first use (PEP 562), so that the ``drake-hybrid`` command
+(``drake_hybrid.__main__``) prints its first line before Drake loads.
 """
 
 import importlib

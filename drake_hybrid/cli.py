@@ -22,25 +22,36 @@ help the README's synopsis mirrors (tests/test_cli_help.py).
 """
 
 import argparse
-import importlib
 import json
 import math
 import os
 import sys
 from pathlib import Path
 
-from drake_hybrid.core.progress import Stages
+import matplotlib.pyplot as plt
+import numpy as np
 
-# Drake, numba, matplotlib and Dask take a few seconds to import: each command imports what it
-# uses inside its function, and main() loads these first, under a stage line, so the command's first
-# output comes before them (tests/test_cli_help.py checks that pydrake is imported after it).
-HEAVY_MODULES = {
-    "simulate": ("Drake, numba and matplotlib", ["drake_hybrid.experiments.simulation", "drake_hybrid.viz.outputs"]),
-    "analyze": ("Drake, numba and matplotlib", ["drake_hybrid.analysis.linearization", "drake_hybrid.viz.plotting"]),
-    "sweep": ("Drake, numba, matplotlib and Dask", ["drake_hybrid.experiments.sweep", "drake_hybrid.viz.plotting"]),
-    "hardware": ("Drake and numba", ["drake_hybrid.hardware.realtime", "drake_hybrid.hardware.loop"]),
-    "tasks": ("Drake", []),
-}
+from pydrake.geometry import Meshcat
+from pydrake.lcm import DrakeLcm
+
+from drake_hybrid.analysis.linearization import linearize_continuous, linearize_discrete, shift_indices
+from drake_hybrid.control.gains import ControlMode
+from drake_hybrid.core.progress import Stages
+from drake_hybrid.experiments.simulation import RunStopped, simulate
+from drake_hybrid.experiments.sweep import read_results, run_sweep
+from drake_hybrid.experiments.sweep_spec import SweepSpecError, load_spec
+from drake_hybrid.hardware.controller_side import build_controller_station
+from drake_hybrid.hardware.loop import compare_with_direct
+from drake_hybrid.hardware.messages import HardwareConfig
+from drake_hybrid.hardware.panda import panda_config, panda_drum_task, panda_table_task
+from drake_hybrid.hardware.realtime import replay_timing, run_controller
+from drake_hybrid.scenario.config import load_config
+from drake_hybrid.scenario.data_task import is_task_file, load_task_file, read_task_file
+from drake_hybrid.scenario.parsing import models_directory
+from drake_hybrid.scenario.tasks import TASKS, get_task
+from drake_hybrid.viz.animation import set_task_camera
+from drake_hybrid.viz.outputs import write_run
+from drake_hybrid.viz.plotting import eigenvalue_figure, save_sweep_plots
 
 
 class UsageError(ValueError):
@@ -93,9 +104,6 @@ def _existing_ancestor(path):
 
 def _task_argument(value):
     """The TASK argument: a task's name, or a task file (FILE.yaml, scenario/data_task.py)."""
-    from drake_hybrid.scenario.data_task import is_task_file
-    from drake_hybrid.scenario.tasks import TASKS
-
     if is_task_file(value) or value in TASKS:
         return value
     raise argparse.ArgumentTypeError(f"invalid choice: '{value}' (choose from {', '.join(sorted(TASKS))}, "
@@ -103,10 +111,6 @@ def _task_argument(value):
 
 
 def _config(args):
-    from drake_hybrid.scenario.config import load_config
-    from drake_hybrid.scenario.data_task import is_task_file, load_task_file
-    from drake_hybrid.scenario.tasks import get_task
-
     _check_output_paths(args)
     options = _options(args)
     if is_task_file(args.task):
@@ -148,25 +152,17 @@ def _row_text(row):
     text = f"{command}; final error {amount(final, row['final_error_percent'])}, settled max {settled}"
     settle = row["settling_time_1_percent"]
     if settle is not None:
-        text += (f", within 1 % from {settle:.3f} s after contact on" if math.isfinite(settle)
+        text += (f", within 1 % from {settle:.3f} s after contact on" if np.isfinite(settle)
                  else ", not within 1 % at the end")
     return text
 
 
 def command_simulate(args):
-    import numpy as np
-
-    from drake_hybrid.experiments.simulation import RunStopped, simulate
-    from drake_hybrid.scenario.tasks import get_task
-    from drake_hybrid.viz.outputs import write_run
-
     config = _config(args)
     out = Path(args.out) if args.out else Path("runs") / config.task
     meshcat = None
     if args.html:
-        from pydrake.geometry import Meshcat
 
-        from drake_hybrid.viz.animation import set_task_camera
 
         meshcat = Meshcat()
         set_task_camera(meshcat, get_task(config.task))
@@ -206,14 +202,6 @@ def command_simulate(args):
 
 
 def command_analyze(args):
-    import matplotlib.pyplot as plt
-    import numpy as np
-
-    from drake_hybrid.analysis.linearization import linearize_continuous, linearize_discrete, shift_indices
-    from drake_hybrid.control.gains import ControlMode
-    from drake_hybrid.scenario.tasks import get_task
-    from drake_hybrid.viz.plotting import eigenvalue_figure
-
     config = _config(args)
     task = get_task(config.task)
     stages = Stages(enabled=not args.quiet)
@@ -289,11 +277,6 @@ def command_analyze(args):
 
 
 def command_sweep(args):
-    from drake_hybrid.experiments.sweep import read_results, run_sweep
-    from drake_hybrid.experiments.sweep_spec import SweepSpecError, load_spec
-    from drake_hybrid.scenario.data_task import is_task_file, load_task_file
-    from drake_hybrid.viz.plotting import save_sweep_plots
-
     _check_output_paths(args)
     task_name = load_task_file(args.task)[0].name if is_task_file(args.task) else args.task
     out = Path(args.out) if args.out else Path("runs") / f"sweep-{task_name}"
@@ -319,10 +302,6 @@ def command_sweep(args):
 
 
 def command_tasks(args):
-    from drake_hybrid.scenario.data_task import read_task_file
-    from drake_hybrid.scenario.parsing import models_directory
-    from drake_hybrid.scenario.tasks import TASKS
-
     for name, task in TASKS.items():
         print(f"{name:18s} {task.description}")
     files = sorted((models_directory() / "tasks").glob("*.yaml"))
@@ -335,8 +314,6 @@ def command_tasks(args):
 
 def _task_options_epilog():
     """The valid --option keys of every task (from its typed Options)."""
-    from drake_hybrid.scenario.tasks import TASKS
-
     lines = ["task options (--option KEY=VALUE, repeatable):"]
     for name, task in TASKS.items():
         entries = task.option_help()
@@ -345,18 +322,12 @@ def _task_options_epilog():
     return "\n".join(lines)
 
 
-HARDWARE_TASKS = {"panda-drum": "panda_drum_task", "panda-table": "panda_table_task"}   # hardware.panda
+HARDWARE_TASKS = {"panda-drum": panda_drum_task, "panda-table": panda_table_task}
 
 
 def command_hardware(args):
     """hil: lock-step loop vs the directly wired one; timing: a real-time run on memq:// (replayed
     robot); run: the controller side against a real driver at --lcm-url."""
-    from drake_hybrid.hardware import panda
-    from drake_hybrid.hardware.controller_side import build_controller_station
-    from drake_hybrid.hardware.loop import compare_with_direct
-    from drake_hybrid.hardware.messages import HardwareConfig
-    from drake_hybrid.hardware.realtime import replay_timing, run_controller
-
     if args.duration is not None and not (math.isfinite(args.duration) and args.duration > 0):
         raise UsageError(f"--duration must be a positive number of seconds, got {args.duration}")
     if not (math.isfinite(args.wait) and args.wait >= 0):
@@ -364,10 +335,10 @@ def command_hardware(args):
     if args.speed is not None and not math.isfinite(args.speed):
         raise UsageError(f"--speed must be a finite number (m/s), got {args.speed}")
     _check_output_paths(args)
-    task = getattr(panda, HARDWARE_TASKS[args.task])()
+    task = HARDWARE_TASKS[args.task]()
     speed = args.speed if args.speed is not None else (0.05 if args.mode == "hil" else 0.02)
-    config = panda.panda_config(task, duration=args.duration or {"hil": 2.0, "timing": 10.0, "run": 10.0}[args.mode],
-                                wrist_sensor=args.wrench_source == "force_torque", speed=speed)
+    config = panda_config(task, duration=args.duration or {"hil": 2.0, "timing": 10.0, "run": 10.0}[args.mode],
+                          wrist_sensor=args.wrench_source == "force_torque", speed=speed)
     hardware = HardwareConfig(wrench_source=args.wrench_source).validate()
     if args.mode == "hil":
         figures = compare_with_direct(config, hardware)[0]
@@ -378,8 +349,6 @@ def command_hardware(args):
         timing, _ = replay_timing(config, hardware, seconds=config.duration, lcm_url=args.lcm_url)
         figures = timing.summary
     else:
-        from pydrake.lcm import DrakeLcm
-
         lcm = DrakeLcm(args.lcm_url)
         station = build_controller_station(config, lcm, hardware, initial_positions=task.joint_guess,
                                            with_loggers=False)
@@ -398,9 +367,6 @@ def command_hardware(args):
 
 
 def make_parser():
-    from drake_hybrid.control.gains import ControlMode
-    from drake_hybrid.scenario.tasks import TASKS
-
     parser = argparse.ArgumentParser(prog="drake-hybrid", description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
@@ -487,23 +453,7 @@ def make_parser():
     return parser
 
 
-def load_modules(argv):
-    """Import what the command in ``argv`` uses (Drake, numba, matplotlib, Dask: a few seconds) under
-    one stage line with its time on standard error, the command's first output; silent with --quiet
-    or --help, and for an unknown command (the parser then says what is wrong)."""
-    command = argv[0] if argv else None
-    if command not in HEAVY_MODULES:
-        return
-    what, modules = HEAVY_MODULES[command]
-    stages = Stages(enabled=not {"-h", "--help", "--quiet"} & set(argv))
-    with stages(f"drake-hybrid {command}: loading {what}"):
-        for module in ["drake_hybrid.scenario.tasks"] + modules:
-            importlib.import_module(module)
-
-
 def main(argv=None):
-    argv = sys.argv[1:] if argv is None else list(argv)
-    load_modules(argv)
     args = make_parser().parse_args(argv)
     if args.traceback or os.environ.get("DRAKE_HYBRID_TRACEBACK", "") not in ("", "0"):
         return args.func(args)

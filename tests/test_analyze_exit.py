@@ -23,7 +23,7 @@ def test_the_crank_misses_only_what_the_handles_inertia_predicts(crank_lineariza
     (shift,) = result.shifts
     assert shift.designed == -10.0 and -9.5 < shift.predicted.real < -9.3 and "inertia" in shift.reason
     assert result.shifted_match.matched
-    monkeypatch.setattr("drake_hybrid.analysis.linearization.linearize_discrete", lambda *args, **kwargs: result)
+    monkeypatch.setattr(cli, "linearize_discrete", lambda *args, **kwargs: result)
     assert cli.main(["analyze", "crank-turning", "--quiet"]) == 0
     printed = capsys.readouterr().out
     assert "missed; predicted -9.4" in printed and "handle's spin inertia" in printed
@@ -33,7 +33,7 @@ def test_the_crank_misses_only_what_the_handles_inertia_predicts(crank_lineariza
 
 def test_a_miss_without_a_prediction_exits_1(crank_linearization, monkeypatch, capsys):
     unexplained = dataclasses.replace(crank_linearization, shifts=[], shifted_match=None)
-    monkeypatch.setattr("drake_hybrid.analysis.linearization.linearize_discrete", lambda *args, **kwargs: unexplained)
+    monkeypatch.setattr(cli, "linearize_discrete", lambda *args, **kwargs: unexplained)
     assert cli.main(["analyze", "crank-turning", "--quiet"]) == 1
     assert "not matched" in capsys.readouterr().out
 
