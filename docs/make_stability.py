@@ -67,7 +67,8 @@ def stability_map(args):
     for r in disagree:
         print(f"  disagree: E = {r[x]:.3g}, K_fp = {r[y]:g}, h = {r[facet]:g}: simulation {r['stable_simulation']}, "
               f"discrete {r['stable_discrete']} (worst Re {r['worst_discrete_real']:.3g} 1/s, "
-              f"steady |e_f| {r['steady_force_error']:.3g} N, |e_v| {r['steady_velocity_error']:.3g})")
+              f"steady |e_f| {r['steady_force_error']:.3g} ({r['steady_force_row']}), "
+              f"|e_v| {r['steady_velocity_error']:.3g} ({r['steady_velocity_row']}))")
     wrong = [r for r in continuous if r["stable_continuous"] != r["stable_simulation"]]
     print(f"continuous linearization (sampling not seen) disagrees with the simulation on {len(wrong)} of "
           f"{len(continuous)} points")
@@ -84,7 +85,7 @@ def monte_carlo(args):
     fig.savefig(FIGURES / "monte_carlo_window_washing.png", dpi=130)
     print("\nMonte Carlo, payload mass 0.8-1.2 x nominal (controller: nominal)")
     print("| control period | points | settle (sim.) | discrete eig. stable | steady max abs(e_f) (N): median / 95 % / max "
-          "| steady max abs(e_v) (m/s, rad/s): median / 95 % / max | force settling 1 % (s): median / max | peak abs(F) (N): max |")
+          "| steady max abs(e_v), worst row in its units: median / 95 % / max | force settling 1 % (s): median / max | peak abs(F) (N): max |")
     print("|---|---|---|---|---|---|---|---|")
     table = {}
     for period in sorted({row["control_period"] for row in rows}):

@@ -2,10 +2,13 @@
 
 import io
 import re
+import subprocess
+import sys
 from pathlib import Path
 
 import pytest
 
+import drake_hybrid.__main__ as entry
 import drake_hybrid.cli as cli
 from drake_hybrid.cli import main, make_parser
 from drake_hybrid.core.progress import Stages
@@ -105,3 +108,40 @@ def test_a_resumed_sweep_with_nothing_left_says_so(tmp_path, monkeypatch, capsys
     assert main(["sweep", "window-washing", "--grid", "spec.yaml", "--resume", "--out", str(tmp_path)]) == 0
     out = capsys.readouterr().out
     assert "nothing to run: all 12 points already in the table" in out and "0.0 s" not in out
+
+
+def test_the_entry_point_imports_without_drake_numba_or_matplotlib():
+    """drake-hybrid's entry point (drake_hybrid.__main__) loads none of the heavy modules before its first line."""
+    code = ("import sys, drake_hybrid.__main__; heavy = [m for m in ('pydrake', 'numba', 'matplotlib', 'dask') "
+            "if m in sys.modules]; print(heavy)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    assert out.strip() == "[]"
+
+
+def test_the_entry_points_commands_are_the_parsers():
+    assert set(entry.COMMANDS) == set(_subparsers(make_parser()))
+
+
+def test_the_loading_line_respects_quiet_and_help(capsys, monkeypatch):
+    monkeypatch.setattr(cli, "main", lambda argv: 0)          # only the entry point's own line
+    assert entry.main(["simulate", "window-washing"]) == 0
+    assert re.fullmatch(r"drake-hybrid simulate: loading Drake, numba, matplotlib and Dask \.\.\. \d+\.\d s\n",
+                        capsys.readouterr().err)
+    for argv in (["simulate", "window-washing", "--quiet"], ["analyze", "--help"], ["--help"], ["no-such-command"], []):
+        assert entry.main(argv) == 0
+        assert capsys.readouterr().err == "", argv
+
+
+@pytest.mark.slow
+def test_first_line_of_simulate_comes_before_pydrake_is_imported():
+    """-X importtime logs every import on stderr as it happens: the stage line must precede pydrake's."""
+    result = subprocess.run([sys.executable, "-X", "importtime", "-m", "drake_hybrid", "simulate", "no-such-task"],
+                            capture_output=True, text=True)
+    assert result.returncode == 2                      # the parser refuses the task after the imports
+    err = result.stderr
+    loading = err.find("drake-hybrid simulate: loading Drake")
+    pydrake = re.search(r"\|\s+pydrake$", err, flags=re.MULTILINE)
+    assert pydrake is not None and 0 <= loading < pydrake.start(), err[:2000]
+    quiet = subprocess.run([sys.executable, "-m", "drake_hybrid", "simulate", "no-such-task", "--quiet"],
+                           capture_output=True, text=True)
+    assert quiet.returncode == 2 and "loading" not in quiet.stderr

@@ -15,8 +15,8 @@ from pydrake.geometry import Box
 from pydrake.math import RigidTransform, RotationMatrix
 
 from drake_hybrid import ConstraintSpace, GivenVelocityProjection, PoseChart, surface_constraint
-from drake_hybrid.analysis.derivatives import (JACOBIAN_TOLERANCE, DerivativeMismatchWarning, checked_state_jacobian,
-                                               column_errors)
+from drake_hybrid.analysis.derivatives import (JACOBIAN_TOLERANCE, DerivativeMismatchWarning, JacobianCheck,
+                                               checked_state_jacobian, column_errors)
 from drake_hybrid.analysis.linearization import equilibrium_config, linearize_continuous
 from drake_hybrid.control.gains import HybridGains
 from drake_hybrid.scenario.builder import build_scenario
@@ -57,6 +57,19 @@ def test_column_errors_are_relative_to_the_column_and_ignore_rounding_columns():
     np.testing.assert_allclose(relative, [1.0 / 1001.0, 3e-9 / 1e-5, 1.0 / 2.0])
 
 
+def test_the_check_summary_says_what_is_compared_which_figure_is_judged_and_which_A_is_used():
+    dut = JacobianCheck(max_relative_error=2.3e-5, max_absolute_error=0.12, worst_column=2, worst_state="plant q[2]",
+                        tolerance=1e-3, epsilon=1e-5, used="autodiff", evaluations=12, largest_entry=4.8e3)
+    assert dut.summary() == (
+        "Jacobian check (AutoDiffXd vs central differences, step 1e-05): agree; largest column difference "
+        "2.3e-05 relative (the figure judged, tolerance 0.001; column plant q[2]), 0.12 absolute in a matrix "
+        "with entries up to 4.8e+03; eigenvalues from AutoDiffXd's A")
+    dut.max_relative_error, dut.used = 1.0, "autodiff with 2 column(s) from central differences"
+    assert ": DISAGREE;" in dut.summary()
+    assert dut.summary().endswith("eigenvalues from AutoDiffXd's A with 2 column(s) from central differences")
+    assert dut.as_dict()["largest_entry"] == 4.8e3
+
+
 def test_the_window_linearization_agrees_with_central_differences_and_uses_autodiff():
     with warnings.catch_warnings():
         warnings.simplefilter("error", DerivativeMismatchWarning)
@@ -66,7 +79,7 @@ def test_the_window_linearization_agrees_with_central_differences_and_uses_autod
     # Measured 2.3e-5 (the wrist column: rounding in the contact surface); 40 times below the tolerance.
     assert check.max_relative_error < 1e-4 < JACOBIAN_TOLERANCE
     assert check.evaluations == 2 * dut.A.shape[0]
-    assert "agree" in check.summary() and "using autodiff" in check.summary()
+    assert "): agree;" in check.summary() and "eigenvalues from AutoDiffXd's A" in check.summary()
     assert dut.match.matched
 
 

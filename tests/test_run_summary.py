@@ -85,6 +85,44 @@ def test_the_grinding_default_says_it_ends_in_the_surge_after_the_rough_patch():
     assert x_dot["units"] == "m/s" and x_dot["final_error_percent"] > 5
 
 
+def _sphere_log(breakaway, end, force_error=0.357):
+    """A grinding-on-the-sphere log: the path row (t_1 . p-dot, 0.035 m/s) still until ``breakaway``."""
+    t = np.arange(0.0, end + 5e-4, 1e-3)
+    desired = np.tile([0.0, 0.035, 0.0], (t.size, 1))
+    velocity = np.where((t >= breakaway)[:, None], desired, 0.0)
+    force_error = np.tile([force_error, 0.0, 0.0], (t.size, 1))
+    return {"t": t, "desired_velocity": desired, "velocity": velocity, "force_error": force_error,
+            "desired_force": np.tile([10.0, 0.0, 0.0], (t.size, 1))}
+
+
+def test_the_sphere_grinding_note_names_the_phase_the_run_ends_in():
+    from drake_hybrid.scenario.tasks.grinding import SPHERE_SETTLED_AFTER_SLIDING, sphere_phase_note
+
+    (note,) = sphere_phase_note(_sphere_log(breakaway=0.562, end=3.0))
+    assert "held the pad until t = 0.56 s" in note and "ends 2.44 s into sliding" in note
+    assert "(3.57 %)" in note and "(3.2-11)" in note and "--duration 6 ends in steady sliding" in note
+    (late,) = sphere_phase_note(_sphere_log(breakaway=0.562, end=0.562 + SPHERE_SETTLED_AFTER_SLIDING + 0.1))
+    assert late.endswith("the run ends in steady sliding")
+    (stuck,) = sphere_phase_note(_sphere_log(breakaway=5.0, end=3.0))
+    assert "static friction holding the pad" in stuck and "0 % of the command" in stuck
+    assert sphere_phase_note({**_sphere_log(0.5, 1.0), "desired_velocity": np.zeros((1001, 3))}) == []
+
+
+@pytest.mark.slow
+def test_the_sphere_grinding_summary_says_when_the_pad_broke_away():
+    """Measured, not assumed: the default sphere run's pad sticks for about half a second (the tangential
+    impedance building mu F_n = 5 N at K_p = 300), then slides."""
+    config = get_task("grinding").default_config({"workpiece": "sphere"})
+    config.duration = 1.0
+    result = simulate(config)
+    (note,) = result.summary["notes"]
+    breakaway = float(re.search(r"held the pad until t = ([0-9.]+) s", note).group(1))
+    assert 0.3 < breakaway < 0.8 and "into sliding" in note
+    config.contact.friction = 0.0                 # nothing to break away from, and no force error from it
+    frictionless = simulate(config)
+    assert frictionless.summary["notes"] == [] and frictionless.summary["final_force_error_percent"] < 0.1
+
+
 @pytest.mark.slow
 def test_the_crank_summary_prints_the_true_crank_rates_deviation_for_both_velocity_rows():
     """The README's 3.1 times: each crank run's note gives the true crank rate's deviation from the

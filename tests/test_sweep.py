@@ -13,7 +13,10 @@ import pytest
 
 from drake_hybrid.analysis.linearization import linearize_sampled_loop
 from drake_hybrid.cli import make_parser
-from drake_hybrid.experiments.sweep import RESULT_COLUMNS, read_results, rigid_contact_theory_stable, run_sweep
+from drake_hybrid.experiments.simulation import row_errors
+from drake_hybrid.experiments.sweep import (RESULT_COLUMNS, read_results, rigid_contact_theory_stable, run_sweep,
+                                          simulation_metrics)
+from drake_hybrid.experiments.sweep_spec import StabilityCriteria
 from drake_hybrid.experiments.sweep_spec import (SweepSpecError, apply_parameters, load_spec,
                                                  set_config_value)
 from drake_hybrid.scenario.builder import build_scenario
@@ -358,3 +361,40 @@ def test_an_unreachable_scheduler_leaves_nothing_behind(tmp_path):
         run_sweep(WINDOW, load_spec(text=FAST_SWEEP), tmp_path / "out", scheduler="tcp://127.0.0.1:1",
                   progress=False)
     assert not (tmp_path / "out").exists()
+
+
+def _window_result(x_dot_error, theta_dot_error):
+    """A settled window-washing result: x-dot commanded 0.1 m/s, theta-dot 0 rad/s, 10 N; constant errors."""
+    from types import SimpleNamespace
+
+    t = np.linspace(0.0, 1.0, 101)
+    log = {"t": t, "desired_velocity": np.tile([0.1, 0.0], (t.size, 1)),
+           "velocity_error": np.tile([x_dot_error, theta_dot_error], (t.size, 1)),
+           "desired_force": np.full((t.size, 1), 10.0), "force_error": np.full((t.size, 1), 0.01),
+           "force": np.full((t.size, 1), 10.01)}
+    summary = {"velocity_rows": row_errors(t, log["velocity_error"], log["desired_velocity"], ["x-dot", "theta-dot"],
+                                           ["m/s", "rad/s"], 0.0, 0.5),
+               "force_rows": row_errors(t, log["force_error"], log["desired_force"], ["normal force"], ["N"], 0.0, 0.5),
+               "velocity_settling_time_1_percent": 0.1, "force_settling_time_1_percent": 0.1,
+               "max_constraint_residual": 1e-3, "wall_time": 1.0}
+    return SimpleNamespace(log=log, summary=summary)
+
+
+def test_the_steady_verdict_is_per_row_in_each_rows_units_never_a_norm_across_units():
+    """2 mm/s on 0.1 m/s (2 %) and 0.01 rad/s on a row commanded to zero: each within 5 % of its scale, so
+    settled -- a norm of the two (0.0102 'units' > 5 mm/s) called it unsettled."""
+    criteria = StabilityCriteria(steady_window=0.2, steady_tolerance=0.05)
+    dut = simulation_metrics(_window_result(0.002, 0.01), criteria)
+    assert dut["stable_simulation"] is True
+    # the row furthest out relative to its scale: x-dot at 2 % (theta-dot is at 1 % of one rad/s)
+    assert dut["steady_velocity_row"] == "x-dot (m/s)" and dut["steady_velocity_error_percent"] == pytest.approx(2.0)
+    assert dut["steady_velocity_error"] == pytest.approx(0.002) and dut["final_velocity_error"] == pytest.approx(0.002)
+    assert dut["steady_force_row"] == "normal force (N)" and dut["steady_force_error_percent"] == pytest.approx(0.1)
+    # 6 mm/s is 6 % of that row's command: unsettled, and named
+    late = simulation_metrics(_window_result(0.006, 0.0), criteria)
+    assert late["stable_simulation"] is False and late["steady_velocity_row"] == "x-dot (m/s)"
+    assert late["steady_velocity_error_percent"] == pytest.approx(6.0)
+    # 0.06 rad/s of twist on the row commanded to zero: beyond 5 % of one rad/s, and no % for it
+    twist = simulation_metrics(_window_result(0.0, 0.06), criteria)
+    assert twist["stable_simulation"] is False and twist["steady_velocity_row"] == "theta-dot (rad/s)"
+    assert twist["steady_velocity_error"] == pytest.approx(0.06) and twist["steady_velocity_error_percent"] is None

@@ -49,7 +49,7 @@ class JacobianCheck:
     """How well the AutoDiffXd state Jacobian agrees with central differences, and which is used."""
 
     max_relative_error: float      # max over columns of the relative column error
-    max_absolute_error: float      # max over columns of the absolute column error
+    max_absolute_error: float      # max over columns of the absolute column error (A's units, e.g. 1/s^2)
     worst_column: int              # state index of the largest relative column error
     worst_state: str               # its name (as the diagram's state vector is laid out)
     tolerance: float
@@ -58,23 +58,29 @@ class JacobianCheck:
     evaluations: int               # time-derivative evaluations spent on the check
     replaced: list = field(default_factory=list)     # states whose column came from central differences
     unresolved: list = field(default_factory=list)   # disagreeing columns where the two steps disagree too
+    largest_entry: float = float("nan")   # max |A| (central differences): the scale of the absolute figure
 
     @property
     def agrees(self):
         return self.max_relative_error <= self.tolerance
 
     def summary(self):
-        """One line for reports: the agreement and the Jacobian used."""
+        """One line for reports: how closely the AutoDiffXd Jacobian agrees with central differences
+        (the relative column figure decides, against ``tolerance``; the absolute one is in A's units,
+        next to A's largest entry for scale) and which Jacobian the eigenvalues come from."""
         verdict = "agree" if self.agrees else "DISAGREE"
         unresolved = (f"; {len(self.unresolved)} column(s) unresolved (central differences not converged), "
                       "AutoDiffXd kept there" if self.unresolved else "")
-        return (f"Jacobian check: AutoDiffXd and central differences {verdict} (max column error "
-                f"{self.max_relative_error:.2g} relative, {self.max_absolute_error:.2g} absolute, worst "
-                f"column {self.worst_state}; tolerance {self.tolerance:g}){unresolved}; using {self.used}")
+        used = {"autodiff": "AutoDiffXd's A", "central differences": "the central-difference A"}.get(
+            self.used, self.used.replace("autodiff with", "AutoDiffXd's A with"))
+        return (f"Jacobian check (AutoDiffXd vs central differences, step {self.epsilon:g}): {verdict}; largest "
+                f"column difference {self.max_relative_error:.2g} relative (the figure judged, tolerance "
+                f"{self.tolerance:g}; column {self.worst_state}), {self.max_absolute_error:.2g} absolute in a matrix "
+                f"with entries up to {self.largest_entry:.2g}{unresolved}; eigenvalues from {used}")
 
     def as_dict(self):
         return {"max_relative_error": self.max_relative_error, "max_absolute_error": self.max_absolute_error,
-                "worst_column": self.worst_column, "worst_state": self.worst_state, "tolerance": self.tolerance,
+                "largest_entry": self.largest_entry, "worst_column": self.worst_column, "worst_state": self.worst_state, "tolerance": self.tolerance,
                 "epsilon": self.epsilon, "used": self.used, "agrees": bool(self.agrees),
                 "evaluations": self.evaluations, "replaced": self.replaced, "unresolved": self.unresolved}
 
@@ -179,7 +185,8 @@ def checked_state_jacobian(diagram, context, A_autodiff, tolerance=JACOBIAN_TOLE
                           max_absolute_error=float(absolute.max(initial=0.0)), worst_column=worst,
                           worst_state=name(worst), tolerance=tolerance, epsilon=epsilon, used=used,
                           evaluations=evaluations, replaced=[name(j) for j in replaced],
-                          unresolved=[name(j) for j in unresolved])
+                          unresolved=[name(j) for j in unresolved],
+                          largest_entry=float(np.max(np.abs(A_coarse), initial=0.0)))
     if replaced:
         warnings.warn(DerivativeMismatchWarning(
             f"{what}: the AutoDiffXd state Jacobian disagrees with central differences (column {name(worst)}: "

@@ -143,6 +143,23 @@ def row_units(units, count):
     return [parts[-1] if i >= len(parts) else parts[i] for i in range(count)] if len(parts) > 1 else parts * count
 
 
+def row_commands(desired):
+    """Each row's command: max |desired_i| over the run (in the row's units; 0 for a row commanded to zero)."""
+    return np.max(np.abs(np.asarray(desired, dtype=float)), axis=0)
+
+
+def max_row_errors(t, error, desired, after):
+    """Per row, over t >= ``after``: (max |e_i| in the row's units, or None if no sample is that late;
+    that in % of the row's command, or None for a row commanded to zero). The one definition of a
+    row's error that ``row_errors`` (summary.json) and the sweep's verdict share."""
+    window = t >= after
+    figures = []
+    for e, command in zip(np.abs(np.asarray(error, dtype=float)).T, row_commands(desired)):
+        worst = float(np.max(e[window])) if window.any() else None
+        figures.append((worst, None if worst is None or command == 0 else 100.0 * worst / float(command)))
+    return figures
+
+
 def row_errors(t, error, desired, names, units, since, settle_after):
     """Per-row error figures, each in the row's own units and in % of that row's command.
 
@@ -152,11 +169,11 @@ def row_errors(t, error, desired, names, units, since, settle_after):
     Settling times are counted from ``since``.
     """
     rows = []
+    commands = row_commands(desired)
+    settled = max_row_errors(t, error, desired, settle_after)
+    final = max_row_errors(t, error, desired, t[-1])
     for i in range(error.shape[1]):
-        e, command = np.abs(error[:, i]), float(np.max(np.abs(desired[:, i])))
-        after = t >= settle_after
-        worst = float(np.max(e[after])) if after.any() else None
-        percent = (lambda value: None if value is None or command == 0 else 100.0 * value / command)
+        e, command = np.abs(error[:, i]), float(commands[i])
         if command > 0 and np.isfinite(since):
             active = t >= since
             settle = settling_time(t[active], e[active], 0.01 * command) - since
@@ -164,9 +181,9 @@ def row_errors(t, error, desired, names, units, since, settle_after):
             settle = None
         rows.append({"name": names[i] if i < len(names) else f"row {i + 1}", "units": units[i],
                      "command": command, "final_error": float(error[-1, i]),
-                     "final_error_percent": percent(float(e[-1])),
-                     "max_error_after_5_time_constants": worst,
-                     "max_error_percent_after_5_time_constants": percent(worst),
+                     "final_error_percent": final[i][1],
+                     "max_error_after_5_time_constants": settled[i][0],
+                     "max_error_percent_after_5_time_constants": settled[i][1],
                      "settling_time_1_percent": settle})
     return rows
 

@@ -17,10 +17,16 @@ Per point it records the parameters, the verdicts, the metrics below and, on
 failure, the error text of every stage that failed (never dropped):
 
 * ``stable_simulation``: the run finished with finite values and, over the
-  last ``steady_window`` of the horizon, max |e_f| and max |e_p'| stayed
-  within ``steady_tolerance`` of the command (|F_d|, max |r-dot_pd|; absolute
-  units when a command is zero). Contact loss, chatter, limit cycles and
-  blow-up all fail it.
+  last ``steady_window`` of the horizon, every velocity and force row stayed
+  within ``steady_tolerance`` of its own command, in its own units (the rows of
+  summary.json, ``simulation.max_row_errors``; one unit of the row when it is
+  commanded to zero): never a norm across m/s and rad/s. Contact loss,
+  chatter, limit cycles and blow-up all fail it.
+* ``steady_*_error``, ``steady_*_error_percent``, ``steady_*_row``: the row of
+  the group furthest outside that tolerance (relative to its scale): its max
+  |e_i| over the window in its units, in % of its command (empty when
+  commanded to zero), and its name and units; ``final_*_error`` is that row's
+  |e_i| at the end.
 * ``stable_continuous``: every eigenvalue of the continuous closed loop,
   except the k = d - m marginal ones the law leaves (unregulated positions,
   ``analysis.predicted_eigenvalues``), has Re(s) < ``eigenvalue_margin``. The
@@ -66,7 +72,7 @@ from tqdm import tqdm
 from drake_hybrid.analysis.linearization import linearize_continuous, linearize_sampled_loop, predicted_eigenvalues
 from drake_hybrid.control.gains import ControlMode
 from drake_hybrid.core.errors import GainError
-from drake_hybrid.experiments.simulation import RunStopped, simulate
+from drake_hybrid.experiments.simulation import RunStopped, max_row_errors, row_commands, simulate
 from drake_hybrid.experiments.sweep_spec import (StabilityCriteria, SweepSpecError, apply_parameters, parameters_digest,
                                                  set_config_value)
 from drake_hybrid.scenario.config import dump_config, load_config
@@ -82,7 +88,7 @@ METRIC_COLUMNS = [
     "peak_force", "max_constraint_residual",
     "simulation_wall_time", "linearization_wall_time", "wall_time", "cpu_time",
 ]
-TEXT_COLUMNS = ["worker", "error"]
+TEXT_COLUMNS = ["steady_velocity_row", "steady_force_row", "worker", "error"]
 RESULT_COLUMNS = VERDICT_COLUMNS + METRIC_COLUMNS + TEXT_COLUMNS
 RESULTS_FILE = "results.csv"
 
@@ -104,28 +110,42 @@ def _error_norms(log, key):
     return np.linalg.norm(np.atleast_2d(log[key]).reshape(len(log["t"]), -1), axis=1)
 
 
+def steady_rows(log, summary, what, after, tolerance):
+    """The steady-window verdict of one group of rows (``what``: "velocity" or "force"), per row in
+    its own units (``simulation.max_row_errors``, as summary.json's rows): each row's max |e_i| over
+    t >= ``after`` within ``tolerance`` times its command, or times one of its units where it is
+    commanded to zero. Returns (settled, the worst row's (max |e_i|, % of its command or None,
+    "name (units)", index)), the worst row being the one furthest out relative to its scale."""
+    desired = log[f"desired_{what}"]
+    figures = max_row_errors(log["t"], log[f"{what}_error"], desired, after)
+    scales = [command if command > 0 else 1.0 for command in row_commands(desired)]
+    ratios = [error / scale for (error, _), scale in zip(figures, scales)]
+    worst = int(np.argmax(ratios))
+    row = summary[f"{what}_rows"][worst]
+    return (all(ratio <= tolerance for ratio in ratios),
+            (figures[worst][0], figures[worst][1], f"{row['name']} ({row['units']})", worst))
+
+
 def simulation_metrics(result, criteria):
     """The simulation's columns from a SimulationResult (see the module docstring)."""
     log, summary = result.log, result.summary
     t = log["t"]
     finite = all(np.all(np.isfinite(np.asarray(v, dtype=float))) for v in log.values())
-    window = t >= t[-1] - criteria.steady_window * (t[-1] - t[0])
-    speed, force = summary["command_scales"]["speed"], summary["command_scales"]["force"]
-    velocity_error, force_error = _error_norms(log, "velocity_error"), _error_norms(log, "force_error")
-    steady_velocity, steady_force = float(np.max(velocity_error[window])), float(np.max(force_error[window]))
-    settled = (steady_velocity <= criteria.steady_tolerance * (speed if speed > 0 else 1.0)
-               and steady_force <= criteria.steady_tolerance * (force if force > 0 else 1.0))
-    percent = lambda error, scale: 100.0 * error / scale if scale > 0 else None
+    after = t[-1] - criteria.steady_window * (t[-1] - t[0])
+    velocity_settled, velocity = steady_rows(log, summary, "velocity", after, criteria.steady_tolerance)
+    force_settled, force = steady_rows(log, summary, "force", after, criteria.steady_tolerance)
     return {
-        "stable_simulation": bool(finite and settled),
+        "stable_simulation": bool(finite and velocity_settled and force_settled),
         "velocity_settling_time": summary["velocity_settling_time_1_percent"],
         "force_settling_time": summary["force_settling_time_1_percent"],
-        "steady_velocity_error": steady_velocity,
-        "steady_force_error": steady_force,
-        "steady_velocity_error_percent": percent(steady_velocity, speed),
-        "steady_force_error_percent": percent(steady_force, force),
-        "final_velocity_error": float(velocity_error[-1]),
-        "final_force_error": float(force_error[-1]),
+        "steady_velocity_error": velocity[0],
+        "steady_force_error": force[0],
+        "steady_velocity_error_percent": velocity[1],
+        "steady_force_error_percent": force[1],
+        "steady_velocity_row": velocity[2],
+        "steady_force_row": force[2],
+        "final_velocity_error": float(abs(log["velocity_error"][-1, velocity[3]])),
+        "final_force_error": float(abs(log["force_error"][-1, force[3]])),
         "peak_force": float(np.max(_error_norms(log, "force"))),
         "max_constraint_residual": summary["max_constraint_residual"],
         "simulation_wall_time": summary["wall_time"],
