@@ -11,8 +11,8 @@ Known failures, kept visible (strict xfail: they fail the run the day they pass)
   to the tangential force of the tessellated contact (F_v up to 0.2 N at 10 N: the facets' normals
   are off the surface's by up to half a facet angle), whose stiffness along the surface moves the
   impedance's roots (62-88 % here) and leaves 12-14 % velocity error;
-- position-force on the 5 cm sphere: one designed root 7-11 % off (the tessellation's stiffness
-  again, against K_p; the errors are within 0.6 %).
+- position-force on the 5 cm sphere (and the xArm7's cylinder, not in this square): one designed
+  root 7-11 % off (the tessellation's stiffness again, against K_p; the errors are within 0.9 %).
 """
 
 import logging
