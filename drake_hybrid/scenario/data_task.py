@@ -63,6 +63,7 @@ from drake_hybrid.core.projections import ConstraintSpace, GivenVelocityProjecti
 from drake_hybrid.core.schema import check_yaml_against_schema
 from drake_hybrid.scenario.config import ScenarioConfig
 from drake_hybrid.scenario.custom import CustomTask, add_rigid_workpiece, attach_pad_tool
+from drake_hybrid.scenario.hooks import make_hooks
 from drake_hybrid.scenario.parsing import ConfigureParser
 from drake_hybrid.scenario.robots import TOOL_AXES, load_arm
 from drake_hybrid.scenario.tasks import register_task
@@ -144,6 +145,8 @@ class ConstraintSpec:
     rows: List[str] = field(default_factory=list)          # C(x), one expression per row
     kinematic_rows: List[int] = field(default_factory=list)   # rows the controller holds itself (no force)
     name: str = "constraint"                               # for messages
+    branch: str = ""                                       # negative on the intended branch (checked at the start)
+    branch_description: str = "the intended branch"        # for the message when the start is on another
 
 
 @dataclass
@@ -179,6 +182,7 @@ class TaskFile:
     name: str = ""                               # the task's name (ScenarioConfig.task; not a built-in one)
     description: str = "a task from a scenario file"   # shown by drake-hybrid tasks
     parameters: Dict[str, float] = field(default_factory=dict)   # named numbers the expressions may use
+    hooks: List[str] = field(default_factory=list)     # names of registered Python hooks (scenario/hooks.py)
     robot: RobotSpec = field(default_factory=RobotSpec)
     workpiece: WorkpieceSpec = field(default_factory=WorkpieceSpec)
     chart: ChartSpec = field(default_factory=ChartSpec)
@@ -248,10 +252,15 @@ class DataTask(CustomTask):
     and ``path``. Its start is in the chart's coordinates of the controlled point (``config.start.configuration``
     with the chart's number of coordinates; six numbers [x, y, z, roll, pitch, yaw] of E otherwise)."""
 
-    def __init__(self, spec, path, text, **pieces):
+    def __init__(self, spec, path, text, hooks=None, continuous_plant=True, **pieces):
         super().__init__(**pieces)
         self.spec, self.path, self.text = spec, Path(path), text
+        self.hooks = dict(hooks or {})            # {Task method: the hook's implementation} (scenario/hooks.py)
+        self.continuous_plant = continuous_plant
         self._config = None
+
+    def _hook(self, method):
+        return self.hooks.get(method)
 
     def __reduce__(self):
         """Pickled as the file's text (for Dask workers, other processes): rebuilt there by parsing it
@@ -260,6 +269,29 @@ class DataTask(CustomTask):
 
     def base_config(self, options):
         return dataclasses.replace(self._config, start=dataclasses.replace(self._config.start))
+
+    # -- the Task methods a hook may provide (the CustomTask's otherwise) --------------------------
+    def add_workpiece(self, plant, config):
+        return list(self._add_workpiece(plant, config))     # the file's workpiece, then a hook's
+
+    def make_source(self, config, controller_plant, robot, constraint_space):
+        hook = self._hook("make_source") or super().make_source
+        return hook(config, controller_plant, robot, constraint_space)
+
+    def start_positions(self, scenario):
+        return (self._hook("start_positions") or super().start_positions)(scenario)
+
+    def set_environment_state(self, scenario, plant_context):
+        return (self._hook("set_environment_state") or super().set_environment_state)(scenario, plant_context)
+
+    def velocity_row_inertia(self, plant, config, constraint_space):
+        return (self._hook("velocity_row_inertia") or super().velocity_row_inertia)(plant, config, constraint_space)
+
+    def eigenvalue_shifts(self, scenario, root_context):
+        return (self._hook("eigenvalue_shifts") or super().eigenvalue_shifts)(scenario, root_context)
+
+    def run_notes(self, scenario, log, design_time_constant):
+        return (self._hook("run_notes") or super().run_notes)(scenario, log, design_time_constant)
 
     def start_pose_of(self, config):
         values = list(config.start.configuration)
@@ -270,8 +302,13 @@ class DataTask(CustomTask):
         return super().start_pose_of(config)
 
 
-def _robot_adder(spec, path, where):
+def _robot_adder(spec, path, where, hooks):
     robot = spec.robot
+    if "add_robot" in hooks:
+        if robot.directives or robot.loader.path:
+            raise ConfigError(f"{where}robot: a hook adds the robot; give neither directives nor loader")
+        add_by_hook = hooks["add_robot"]
+        return _with_end_effector(lambda plant: add_by_hook(plant, None), robot, where)
     if robot.loader.path:
         if robot.directives:
             raise ConfigError(f"{where}robot: give either directives or loader, not both")
@@ -329,9 +366,10 @@ def _instance_names(plant):
     return [plant.GetModelInstanceName(ModelInstanceIndex(i)) for i in range(plant.num_model_instances())]
 
 
-def _workpiece_adder(spec, where):
+def _workpiece_adder(spec, where, hooks):
     workpiece = spec.workpiece
-    if not workpiece.directives and not workpiece.shapes:
+    add_by_hook = hooks.get("add_workpiece")
+    if not workpiece.directives and not workpiece.shapes and add_by_hook is None:
         raise ConfigError(f"{where}workpiece: give directives or shapes")
     add_models = _directives_adder(workpiece.directives, f"{where}workpiece") if workpiece.directives else None
     for index, shape in enumerate(workpiece.shapes):
@@ -344,7 +382,7 @@ def _workpiece_adder(spec, where):
         if not 0 < shape.resolution_hint < math.inf:
             raise ConfigError(f"{name}.resolution_hint must be positive (m), got {shape.resolution_hint}")
 
-    def add_workpiece(plant):
+    def add_workpiece(plant, config):
         geometries = []
         if add_models is not None:
             for info in add_models(plant):
@@ -354,22 +392,23 @@ def _workpiece_adder(spec, where):
             kind = SHAPES[shape.shape][0]
             geometries += add_rigid_workpiece(plant, kind(*shape.size), shape.X_WG.GetDeterministicValue(),
                                               name=f"{shape.name}_{index}", resolution_hint=shape.resolution_hint)
+        if add_by_hook is not None:
+            geometries += list(add_by_hook(plant, config))
         return geometries
     return add_workpiece
 
 
-def constraint_space_of(spec, chart, where, anchor):
-    """The ConstraintSpace of the file: C from ``constraint.rows``, E_p from ``velocity_projection``
-    (the kernel of E_f at ``anchor`` when no rows are given)."""
+def constraint_space_of(spec, chart, where, anchor, hooks=None):
+    """The ConstraintSpace of the file: C from ``constraint.rows`` (or a hook's ``constraint``), E_p
+    from ``velocity_projection`` (the kernel of E_f at ``anchor`` when no rows are given)."""
     symbols, parameters = chart.configuration_symbols, spec.parameters
-    if not spec.constraint.rows:
-        raise ConfigError(f"{where}constraint.rows: give C(x) as one expression per row")
-    rows = [expression_to_sympy(text, symbols, parameters, f"{where}constraint.rows[{i}]")
-            for i, text in enumerate(spec.constraint.rows)]
-    try:
-        constraint = Constraint(chart, rows, name=spec.constraint.name, kinematic_rows=spec.constraint.kinematic_rows)
-    except ValueError as error:
-        raise ConfigError(f"{where}constraint: {error}") from None
+    if hooks and "constraint" in hooks:
+        if spec.constraint.rows or spec.constraint.kinematic_rows or spec.constraint.branch:
+            raise ConfigError(f"{where}constraint: a hook gives the constraint; give no rows, kinematic_rows or "
+                              "branch")
+        constraint = hooks["constraint"](chart)
+    else:
+        constraint = _constraint_of_rows(spec, chart, where)
     d = chart.velocity_size
     given = spec.velocity_projection.rows
     try:
@@ -384,6 +423,21 @@ def constraint_space_of(spec, chart, where, anchor):
         raise
     except ValueError as error:
         raise ConfigError(f"{where}velocity_projection: {error}") from None
+
+
+def _constraint_of_rows(spec, chart, where):
+    symbols, parameters = chart.configuration_symbols, spec.parameters
+    if not spec.constraint.rows:
+        raise ConfigError(f"{where}constraint.rows: give C(x) as one expression per row")
+    rows = [expression_to_sympy(text, symbols, parameters, f"{where}constraint.rows[{i}]")
+            for i, text in enumerate(spec.constraint.rows)]
+    branch = (expression_to_sympy(spec.constraint.branch, symbols, parameters, f"{where}constraint.branch")
+              if spec.constraint.branch else None)
+    try:
+        return Constraint(chart, rows, name=spec.constraint.name, kinematic_rows=spec.constraint.kinematic_rows,
+                          branch=branch, branch_description=spec.constraint.branch_description)
+    except ValueError as error:
+        raise ConfigError(f"{where}constraint: {error}") from None
 
 
 def start_configuration_of(spec, chart, where):
@@ -427,15 +481,17 @@ def load_task_file(path, register=True, text=None):
     chart = make_chart(spec.chart, where)
     check_parameter_names(spec.parameters, chart.configuration_symbols, f"{where}parameters")
     start = start_configuration_of(spec, chart, where)
-    space = constraint_space_of(spec, chart, where, anchor=start)
+    hooks, continuous_plant = make_hooks(spec, where)
+    space = constraint_space_of(spec, chart, where, anchor=start, hooks=hooks)
     if len(spec.start.joint_guess) == 0:
         raise ConfigError(f"{where}start.joint_guess: give the arm's joint positions inverse kinematics starts from")
     labels = dataclasses.asdict(spec.labels)
     k, m = space.velocity_size, space.force_size
     labels["velocity"] = labels["velocity"] or [f"r-dot_p[{i}]" for i in range(k)]
     labels["force"] = labels["force"] or [f"F[{i}]" for i in range(m)]
-    task = DataTask(spec, path, text, name=spec.name, add_robot=_robot_adder(spec, path, where),
-                    add_workpiece=_workpiece_adder(spec, where), constraint_space=space,
+    task = DataTask(spec, path, text, hooks=hooks, continuous_plant=continuous_plant, name=spec.name,
+                    add_robot=_robot_adder(spec, path, where, hooks),
+                    add_workpiece=_workpiece_adder(spec, where, hooks), constraint_space=space,
                     start_pose=chart.pose(start), joint_guess=spec.start.joint_guess, labels=labels,
                     description=spec.description)
     config = dataclasses.replace(spec.config, task=spec.name)
