@@ -299,3 +299,76 @@ def test_hostile_yaml_is_refused_quickly(tmp_path, text, match):
     with pytest.raises(ConfigError, match=match):
         load_task_file(path)
     assert time.perf_counter() - start < 2.0
+
+
+# -- package:// URLs and paths relative to the task file -------------------------------------------
+
+PACKAGE_ARM = """\
+name: {name}
+packages: {{mine: arms}}                       # relative to this file
+robot:
+  loader: {{path: "{path}", flange: {flange}, collision: drop}}
+workpiece:
+  shapes:
+  - {{shape: box, size: [1.0, 1.0, 0.02], X_WG: {{translation: [0.6, 0.0, 0.09]}}}}
+chart: {{kind: pose}}
+constraint: {{rows: ["z - 0.12"]}}
+start: {{pose: [0.6, 0.0, 0.12, 3.14159, 0.0, 0.0], joint_guess: {guess}}}
+config: {{desired_force: {{kind: constant, value: [-5.0]}}}}
+"""
+
+
+def _package_task(tmp_path, path, flange="link3", guess="[0.0, 0.5, 0.5]"):
+    (tmp_path / "arms").mkdir(exist_ok=True)
+    (tmp_path / "arms" / "planar_3r.sdf").write_text((models_directory() / "planar_3r.sdf").read_text())
+    task_file = tmp_path / "tasks" / "arm.yaml"
+    task_file.parent.mkdir(exist_ok=True)
+    task_file.write_text(PACKAGE_ARM.format(name="package-arm", path=path, flange=flange, guess=guess).replace(
+        "packages: {mine: arms}", "packages: {mine: ../arms}"))
+    return task_file
+
+
+@pytest.mark.parametrize("path", ["package://mine/planar_3r.sdf", "../arms/planar_3r.sdf",
+                                  "package://drake_hybrid/planar_3r.sdf"])
+def test_robot_loader_finds_package_urls_and_relative_paths(tmp_path, path):
+    task, config = load_task_file(_package_task(tmp_path, path), register=False)
+    plant = MultibodyPlant(0.0)
+    robot = task.add_robot(plant, config)
+    plant.Finalize()
+    assert plant.num_actuators() == 3 and robot.end_effector_frame == "pad_center"
+
+
+def test_robot_loader_from_an_installed_model_package(tmp_path, monkeypatch):
+    """package://example-robot-data/... (installed with pip in the cmeel layout) without a packages entry."""
+    monkeypatch.setenv("DRAKE_HYBRID_CACHE", str(tmp_path / "cache"))
+    path = "package://example-robot-data/robots/ur_description/urdf/ur10_robot.urdf"
+    task, config = load_task_file(_package_task(tmp_path, path, flange="tool0",
+                                                guess="[0.0, -1.5, 1.5, -1.5, -1.5, 0.0]"), register=False)
+    plant = MultibodyPlant(0.0)
+    robot = task.add_robot(plant, config)
+    plant.Finalize()
+    assert plant.num_actuators() == 6 and plant.HasFrameNamed("tool0", robot.arm)
+
+
+@pytest.mark.parametrize("path, match", [
+    ("package://nowhere/arm.urdf", r"robot.loader.path: unknown package 'nowhere' in 'package://nowhere/arm.urdf'; "
+                                   r"known packages: \[.*'drake_hybrid'.*'example-robot-data'.*'mine'\]"),
+    ("package://mine/missing.sdf", r"robot.loader.path: no file '.*arms/missing.sdf' \(from 'package://mine/"),
+    ("https://example.com/arm.urdf", r"robot.loader.path: 'https://example.com/arm.urdf': give a package:// or "
+                                     r"file:// URL or a path"),
+])
+def test_bad_model_urls_are_refused_naming_the_field(tmp_path, path, match):
+    with pytest.raises(ConfigError, match=match):
+        load_task_file(_package_task(tmp_path, path), register=False)
+
+
+def test_directives_take_paths_relative_to_the_task_file(tmp_path):
+    """add_model.file: a plain path is relative to the task file (Drake's directives take URLs only)."""
+    (tmp_path / "models").mkdir()
+    (tmp_path / "models" / "window.sdf").write_text((models_directory() / "window.sdf").read_text())
+    path = tmp_path / "task.yaml"
+    path.write_text(WINDOW_FILE.read_text().replace("package://drake_hybrid/window.sdf", "models/window.sdf"))
+    task, config = load_task_file(path, register=False)
+    plant = MultibodyPlant(0.0)
+    task.add_workpiece(plant, config)
+    assert plant.HasModelInstanceNamed("window")

@@ -15,7 +15,8 @@ FILE.yaml``) runs it as a built-in task. The file::
       arm: arm                             # the model instance whose joints the law drives
       tool: {flange_frame: link3, X_flange_tool: {translation: [0.25, 0, 0], rotation: !Rpy {deg: [0, 90, 0]}}}
       end_effector_frame: pad_center       # frame E (the pad tool's pad_center by default)
-    # or, for an arm from a model package:  robot: {loader: {path: ur10.urdf, flange: tool0}}
+    # or an arm from a model package:
+    #   robot: {loader: {path: package://example-robot-data/robots/ur_description/urdf/ur10_robot.urdf, flange: tool0}}
     workpiece:
       directives: [...]                    # models welded in the scene (all their collision geometries)
       shapes:                              # and/or shapes of the library (rigid hydroelastic)
@@ -64,7 +65,7 @@ from drake_hybrid.core.schema import check_yaml_against_schema
 from drake_hybrid.scenario.config import ScenarioConfig
 from drake_hybrid.scenario.custom import CustomTask, add_rigid_workpiece, attach_pad_tool
 from drake_hybrid.scenario.hooks import make_hooks
-from drake_hybrid.scenario.parsing import ConfigureParser
+from drake_hybrid.scenario.parsing import ConfigureParser, installed_model_packages, models_directory
 from drake_hybrid.scenario.robots import TOOL_AXES, load_arm
 from drake_hybrid.scenario.tasks import register_task
 
@@ -87,7 +88,7 @@ class ToolSpec:
 class LoaderSpec:
     """``scenario.robots.load_arm``'s options: an arm from a URDF/SDF file (relative to the task file)."""
 
-    path: str = ""                               # URDF/SDF file (absolute, or relative to the task file)
+    path: str = ""                               # URDF/SDF file: package:// URL, absolute or relative to the file
     flange: str = ""                             # the frame (link) that ends the actuated chain
     tool_frame: str = ""                         # default: the flange
     base_pose: Transform = field(default_factory=Transform)   # X_W_base, where the base is welded
@@ -183,6 +184,7 @@ class TaskFile:
     description: str = "a task from a scenario file"   # shown by drake-hybrid tasks
     parameters: Dict[str, float] = field(default_factory=dict)   # named numbers the expressions may use
     hooks: List[str] = field(default_factory=list)     # names of registered Python hooks (scenario/hooks.py)
+    packages: Dict[str, str] = field(default_factory=dict)   # {name: folder (relative to the file)} for package://
     robot: RobotSpec = field(default_factory=RobotSpec)
     workpiece: WorkpieceSpec = field(default_factory=WorkpieceSpec)
     chart: ChartSpec = field(default_factory=ChartSpec)
@@ -236,10 +238,50 @@ def make_chart(spec, where):
         raise ConfigError(f"{where}chart: {error}") from None
 
 
-def _directives_adder(directives, what):
-    """add(plant) -> [ModelInstanceInfo]: process the directives with the package's parser."""
+def model_packages(spec, path, where):
+    """{package name: folder} a task file's ``package://`` URLs resolve with: drake_hybrid (models/),
+    the model packages installed with pip (``parsing.installed_model_packages``: example-robot-data)
+    and the file's ``packages`` (folders relative to the file)."""
+    packages = {"drake_hybrid": str(models_directory()), **installed_model_packages()}
+    for name, folder in spec.packages.items():
+        folder = Path(folder) if Path(folder).is_absolute() else Path(path).parent / folder
+        if not folder.is_dir():
+            raise ConfigError(f"{where}packages.{name}: no folder '{folder}'")
+        packages[name] = str(folder)
+    return packages
+
+
+def resolve_model_file(url, path, packages, where):
+    """The file of ``url``: ``package://<name>/<file>`` (``packages``), ``file://<absolute path>``,
+    an absolute path, or a path relative to the task file ``path``; ConfigError naming ``where``."""
+    if url.startswith("package://"):
+        name, _, rest = url[len("package://"):].partition("/")
+        if name not in packages:
+            raise ConfigError(f"{where}: unknown package '{name}' in '{url}'; known packages: {sorted(packages)} "
+                              "(add it to the file's packages: {name: folder})")
+        file = Path(packages[name]) / rest
+    elif url.startswith("file://"):
+        file = Path(url[len("file://"):])
+    elif "://" in url:
+        raise ConfigError(f"{where}: '{url}': give a package:// or file:// URL or a path")
+    else:
+        file = Path(url) if Path(url).is_absolute() else Path(path).parent / url
+    if not file.is_file():
+        raise ConfigError(f"{where}: no file '{file}' (from '{url}')")
+    return file
+
+
+def _directives_adder(directives, what, path=".", packages=None):
+    """add(plant) -> [ModelInstanceInfo]: process the directives with the package's parser, its
+    ``package://`` URLs resolved with ``packages`` and plain file names relative to the task file."""
+    for index, directive in enumerate(directives):
+        model = directive.add_model
+        if model is not None and "://" not in model.file:
+            file = resolve_model_file(model.file, path, {}, f"{what}.directives[{index}].add_model.file")
+            model.file = f"file://{file.resolve()}"
+
     def add(plant):
-        parser = ConfigureParser(Parser(plant))
+        parser = ConfigureParser(Parser(plant), packages)
         try:
             return ProcessModelDirectives(ModelDirectives(directives=directives), plant, parser)
         except RuntimeError as error:
@@ -302,7 +344,7 @@ class DataTask(CustomTask):
         return super().start_pose_of(config)
 
 
-def _robot_adder(spec, path, where, hooks):
+def _robot_adder(spec, path, where, hooks, packages):
     robot = spec.robot
     if "add_robot" in hooks:
         if robot.directives or robot.loader.path:
@@ -315,17 +357,15 @@ def _robot_adder(spec, path, where, hooks):
         if robot.loader.tool_axis not in TOOL_AXES:
             raise ConfigError(f"{where}robot.loader.tool_axis must be one of {list(TOOL_AXES)}, "
                               f"got '{robot.loader.tool_axis}'")
-        file = Path(robot.loader.path)
-        file = file if file.is_absolute() else Path(path).parent / file
-        if not file.is_file():
-            raise ConfigError(f"{where}robot.loader.path: no file '{file}'")
+        file = resolve_model_file(robot.loader.path, path, packages, f"{where}robot.loader.path")
         loaded = load_arm(str(file), robot.loader.flange, tool_frame=robot.loader.tool_frame or None,
                           base_pose=robot.loader.base_pose.GetDeterministicValue(),
-                          tool_axis=robot.loader.tool_axis, collision=robot.loader.collision)
+                          tool_axis=robot.loader.tool_axis, collision=robot.loader.collision,
+                          packages=packages)
         return _with_end_effector(loaded.add_robot, robot, where)
     if not robot.directives:
         raise ConfigError(f"{where}robot: give directives (with arm and tool) or loader.path")
-    add_models = _directives_adder(robot.directives, f"{where}robot")
+    add_models = _directives_adder(robot.directives, f"{where}robot", path, packages)
 
     def add_robot(plant):
         add_models(plant)
@@ -366,12 +406,13 @@ def _instance_names(plant):
     return [plant.GetModelInstanceName(ModelInstanceIndex(i)) for i in range(plant.num_model_instances())]
 
 
-def _workpiece_adder(spec, where, hooks):
+def _workpiece_adder(spec, path, where, hooks, packages):
     workpiece = spec.workpiece
     add_by_hook = hooks.get("add_workpiece")
     if not workpiece.directives and not workpiece.shapes and add_by_hook is None:
         raise ConfigError(f"{where}workpiece: give directives or shapes")
-    add_models = _directives_adder(workpiece.directives, f"{where}workpiece") if workpiece.directives else None
+    add_models = (_directives_adder(workpiece.directives, f"{where}workpiece", path, packages)
+                  if workpiece.directives else None)
     for index, shape in enumerate(workpiece.shapes):
         name = f"{where}workpiece.shapes[{index}]"
         if shape.shape not in SHAPES:
@@ -482,6 +523,7 @@ def load_task_file(path, register=True, text=None):
     check_parameter_names(spec.parameters, chart.configuration_symbols, f"{where}parameters")
     start = start_configuration_of(spec, chart, where)
     hooks, continuous_plant = make_hooks(spec, where)
+    packages = model_packages(spec, path, where)
     space = constraint_space_of(spec, chart, where, anchor=start, hooks=hooks)
     if len(spec.start.joint_guess) == 0:
         raise ConfigError(f"{where}start.joint_guess: give the arm's joint positions inverse kinematics starts from")
@@ -490,8 +532,8 @@ def load_task_file(path, register=True, text=None):
     labels["velocity"] = labels["velocity"] or [f"r-dot_p[{i}]" for i in range(k)]
     labels["force"] = labels["force"] or [f"F[{i}]" for i in range(m)]
     task = DataTask(spec, path, text, hooks=hooks, continuous_plant=continuous_plant, name=spec.name,
-                    add_robot=_robot_adder(spec, path, where, hooks),
-                    add_workpiece=_workpiece_adder(spec, where, hooks), constraint_space=space,
+                    add_robot=_robot_adder(spec, path, where, hooks, packages),
+                    add_workpiece=_workpiece_adder(spec, path, where, hooks, packages), constraint_space=space,
                     start_pose=chart.pose(start), joint_guess=spec.start.joint_guess, labels=labels,
                     description=spec.description)
     config = dataclasses.replace(spec.config, task=spec.name)
