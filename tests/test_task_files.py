@@ -1,6 +1,12 @@
 """A whole task in one YAML file (scenario/data_task.py): the window-washing task written as
 models/tasks/window_washing.yaml runs as the built-in one, and a bad file is refused naming its field."""
 
+import contextlib
+import json
+import os
+import signal
+import subprocess
+import sys
 import textwrap
 import time
 from pathlib import Path
@@ -372,3 +378,61 @@ def test_directives_take_paths_relative_to_the_task_file(tmp_path):
     plant = MultibodyPlant(0.0)
     task.add_workpiece(plant, config)
     assert plant.HasModelInstanceNamed("window")
+
+
+# -- an external Dask scheduler -------------------------------------------------------------------
+
+def _stop(process, timeout=10.0):
+    """Stop a process this test started and its children (its own session), SIGKILL if it lingers."""
+    if process.poll() is not None:
+        return
+    try:
+        os.killpg(process.pid, signal.SIGTERM)
+        process.wait(timeout=timeout)
+    except (ProcessLookupError, subprocess.TimeoutExpired):
+        with contextlib.suppress(ProcessLookupError):
+            os.killpg(process.pid, signal.SIGKILL)
+        process.wait(timeout=timeout)
+
+
+@pytest.mark.slow                # starts a scheduler and two worker processes (~10-20 s)
+def test_cli_sweeps_a_task_file_on_an_external_dask_scheduler(built_in_sweep, tmp_path):
+    """``dask scheduler`` and ``dask worker --nworkers 2`` on 127.0.0.1 (no dashboards), then
+    ``drake-hybrid sweep FILE.yaml --scheduler tcp://...``: the built-in task's results. Every
+    wait has a timeout and the processes are stopped in ``finally``, so a stuck cluster fails the
+    test instead of hanging CI."""
+    distributed = pytest.importorskip("distributed")
+    dask_cli = [sys.executable, "-m", "distributed.cli.dask_scheduler"]
+    scheduler_file = tmp_path / "scheduler.json"
+    started = []
+    common = dict(cwd=tmp_path, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
+    try:
+        started.append(subprocess.Popen(dask_cli + ["--host", "127.0.0.1", "--port", "0", "--no-dashboard",
+                                                    "--scheduler-file", str(scheduler_file)], **common))
+        deadline = time.monotonic() + 60
+        while not scheduler_file.exists() or not scheduler_file.read_text().strip():
+            assert started[0].poll() is None, "the dask scheduler exited"
+            assert time.monotonic() < deadline, "no scheduler file within 60 s"
+            time.sleep(0.2)
+        address = json.loads(scheduler_file.read_text())["address"]
+        assert address.startswith("tcp://127.0.0.1:")
+        started.append(subprocess.Popen([sys.executable, "-m", "distributed.cli.dask_worker", address,
+                                         "--nworkers", "2", "--nthreads", "1", "--host", "127.0.0.1",
+                                         "--no-dashboard", "--memory-limit", "0", "--death-timeout", "60",
+                                         "--local-directory", str(tmp_path / "workers")], **common))
+        with distributed.Client(address, timeout=30) as client:
+            client.wait_for_workers(2, timeout=90)
+        spec = tmp_path / "spec.yaml"
+        spec.write_text(SWEEP)
+        sweep = subprocess.run(
+            [sys.executable, "-c", "import sys; from drake_hybrid.cli import main; sys.exit(main(sys.argv[1:]))",
+             "sweep", str(WINDOW_FILE), "--grid", str(spec), "--out", str(tmp_path / "out"), "--scheduler", address,
+             "--no-progress"], cwd=tmp_path, capture_output=True, text=True, timeout=300)
+        assert sweep.returncode == 0, sweep.stderr[-2000:]
+        assert "4 of 4 points evaluated" in sweep.stdout
+    finally:
+        for process in reversed(started):
+            _stop(process)
+    rows = read_results(tmp_path / "out" / "results.csv")
+    assert len({row["worker"] for row in rows}) == 2          # both worker processes took points
+    _assert_same_rows(rows, built_in_sweep)
