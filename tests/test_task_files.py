@@ -15,6 +15,7 @@ import cloudpickle
 import numpy as np
 import pytest
 
+from pydrake.math import RotationMatrix
 from pydrake.multibody.plant import MultibodyPlant
 
 from drake_hybrid.analysis.linearization import linearize_continuous
@@ -436,3 +437,44 @@ def test_cli_sweeps_a_task_file_on_an_external_dask_scheduler(built_in_sweep, tm
     rows = read_results(tmp_path / "out" / "results.csv")
     assert len({row["worker"] for row in rows}) == 2          # both worker processes took points
     _assert_same_rows(rows, built_in_sweep)
+
+
+# -- expressions in poses (model directives, library shapes) ---------------------------------------
+
+def test_poses_take_expressions_of_the_parameters():
+    """The crank's weld pose is [crank_center_x, crank_center_y, crank_height]; the tilted pane's box
+    pose is written with sin, cos and the tilt."""
+    task, _ = load_task_file(models_directory() / "tasks" / "crank_turning.yaml", register=False)
+    weld = task.spec.workpiece.directives[1].add_weld
+    np.testing.assert_array_equal(weld.X_PC.translation, [0.45, 0.2, 0.3])
+    task, _ = load_task_file(models_directory() / "tasks" / "tilted_pane_4r.yaml", register=False)
+    X_WG = task.spec.workpiece.shapes[0].X_WG.GetDeterministicValue()
+    tilt = task.spec.parameters["tilt"]
+    np.testing.assert_allclose(X_WG.translation(), [1 + 0.01 * np.sin(tilt), 0, 1 + 0.01 * np.cos(tilt)], atol=1e-15)
+    np.testing.assert_allclose(X_WG.rotation().matrix(), RotationMatrix.MakeYRotation(tilt).matrix(), atol=1e-15)
+
+
+@pytest.mark.parametrize("value, match", [
+    ('"__import__(\'os\').system(\'true\')"', r"workpiece.directives\[1\].add_weld.X_PC.translation\[0\]: only the "
+                                              r"functions .* may be called, not '__import__"),
+    ("crank_center_x.real", r"workpiece.directives\[1\].add_weld.X_PC.translation\[0\]: not allowed in an "
+                            r"expression \(attribute access\)"),
+    ("crank_centre_x", r"workpiece.directives\[1\].add_weld.X_PC.translation\[0\]: unknown name"),
+    ('"9 ** 9 ** 9"', r"translation\[0\]"),
+])
+def test_bad_pose_expressions_are_refused_naming_the_field(tmp_path, value, match):
+    text = (models_directory() / "tasks" / "crank_turning.yaml").read_text()
+    path = tmp_path / "crank.yaml"
+    path.write_text(text.replace("translation: [crank_center_x,", f"translation: [{value},"))
+    start = time.perf_counter()
+    with pytest.raises(ConfigError, match=match) as error:
+        load_task_file(path, register=False)
+    assert str(error.value).startswith(str(path)) and time.perf_counter() - start < 2.0
+
+
+def test_config_takes_no_expressions(tmp_path):
+    """Only pose lists outside ``config`` are evaluated; elsewhere a word is a type error."""
+    path = _write(tmp_path, {"desired_velocity: {kind: constant, value: [0.1, 0.0]}":
+                             "desired_velocity: {kind: constant, value: [window_height, 0.0]}"})
+    with pytest.raises(ConfigError, match=r"config.desired_velocity.value"):
+        load_task_file(path, register=False)

@@ -48,6 +48,7 @@ from pathlib import Path
 from typing import Dict, List
 
 import numpy as np
+import yaml
 
 from pydrake.common.schema import Transform
 from pydrake.common.yaml import yaml_load_typed
@@ -211,6 +212,7 @@ def read_task_file(path, text=None):
     if len(text) > MAX_FILE_SIZE:
         raise ConfigError(f"{path}: the task file is larger than {MAX_FILE_SIZE // 1000} kB")
     try:
+        text = evaluate_pose_expressions(text, f"{path}: ")
         check_yaml_against_schema(text, TaskFile, f"{path}: ")
     except RecursionError:
         raise ConfigError(f"{path}: the YAML nests too deeply to be a task file") from None
@@ -218,6 +220,52 @@ def read_task_file(path, text=None):
         return yaml_load_typed(schema=TaskFile, data=text, defaults=TaskFile())
     except (AssertionError, RuntimeError, ValueError, TypeError) as error:
         raise ConfigError(f"{path}: {str(error).splitlines()[0]}") from None
+
+
+POSE_LISTS = ("translation", "deg", "rpy")     # the number lists of Drake's Transform (and our X_WG, ...)
+
+
+def evaluate_pose_expressions(text, where=""):
+    """``text`` with every expression in a pose's number lists (``translation: [...]`` and
+    ``rotation: !Rpy {deg: [...]}`` anywhere but in ``config``: model directives' ``X_PC``, ``X_PF``,
+    library shapes' ``X_WG``, the tool's and the loader's poses) replaced by its value, from the
+    file's ``parameters`` (core/expressions.py: parsed, never evaluated as Python); the text
+    unchanged if there is none (or if the YAML is not a mapping: the typed loader says why). E.g.
+    ``X_PC: {translation: [crank_center_x, crank_center_y, crank_height]}``."""
+    root = yaml.compose(text, Loader=yaml.SafeLoader)
+    if not isinstance(root, yaml.MappingNode):
+        return text
+    sections = {key.value: value for key, value in root.value if isinstance(key, yaml.ScalarNode)}
+    parameters = {}
+    if isinstance(sections.get("parameters"), yaml.MappingNode):
+        for key, value in sections["parameters"].value:
+            try:
+                parameters[key.value] = float(value.value)
+            except (TypeError, ValueError):
+                return text                        # the typed loader names the parameter
+    changed, seen = False, set()
+
+    def visit(node, field):
+        nonlocal changed
+        if id(node) in seen:                       # an alias: visited once (no exponential walks)
+            return
+        seen.add(id(node))
+        if isinstance(node, yaml.MappingNode):
+            for key, value in node.value:
+                if isinstance(key, yaml.ScalarNode) and not (field == "" and key.value == "config"):
+                    visit(value, f"{field}.{key.value}" if field else str(key.value))
+        elif isinstance(node, yaml.SequenceNode):
+            numbers = field.rsplit(".", 1)[-1] in POSE_LISTS
+            for index, item in enumerate(node.value):
+                if numbers and isinstance(item, yaml.ScalarNode) and item.tag == "tag:yaml.org,2002:str":
+                    value = expression_to_sympy(item.value, (), parameters, f"{where}{field}[{index}]")
+                    item.value, item.tag, item.style = repr(float(value.evalf())), "tag:yaml.org,2002:float", None
+                    changed = True
+                else:
+                    visit(item, f"{field}[{index}]")
+
+    visit(root, "")
+    return yaml.serialize(root, Dumper=yaml.SafeDumper) if changed else text
 
 
 def make_chart(spec, where):
