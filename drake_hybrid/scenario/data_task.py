@@ -8,6 +8,8 @@ FILE.yaml``) runs it as a built-in task. The file::
 
     name: window-washing-file              # the task's name (not a built-in one)
     parameters: {window_height: 1.0}       # named numbers the expressions may use
+    hooks: []                              # names of registered Python hooks (scenario/hooks.py)
+    packages: {}                           # {name: folder} for package:// URLs (relative to the file)
     robot:
       directives:                          # Drake model directives (add_model, add_weld, add_frame, ...)
       - add_model: {name: arm, file: package://drake_hybrid/planar_3r.sdf}
@@ -36,7 +38,11 @@ Size: one schema (the dataclasses) and the one function per section that turns i
 CustomTask's pieces; splitting them would put the schema and its meaning in different files.
 
 Expressions are parsed by the whitelisted grammar of ``core.expressions`` (never evaluated as
-Python): a file from someone else cannot run code. The start pose is given in the chart's
+Python): a file from someone else cannot run code. They are taken by the constraint and E_p rows,
+the start, and the number lists of poses outside ``config`` (``translation``, ``rotation: !Rpy
+{deg}``: ``evaluate_pose_expressions``). Hooks (``scenario.hooks``) are looked up by name in a
+registry, never imported from the file. Model files: ``package://`` URLs (``model_packages``) or
+paths relative to the file (``resolve_model_file``). The start pose is given in the chart's
 coordinates of the controlled point (``start.configuration``; or ``start.pose`` = [x, y, z, roll,
 pitch, yaw] of frame E); it is stored in ``config.start.configuration`` as chart coordinates, and ``config.task`` is the file's name.
 """

@@ -193,7 +193,7 @@ class _RoughPatch:
 
 _CRANK_METHODS = ("add_workpiece", "start_positions", "set_environment_state", "velocity_row_inertia",
                   "eigenvalue_shifts", "run_notes")
-for _hook in (
+PACKAGE_HOOKS = (
         TaskHook("ur5e_with_pad", "the UR5e (airo-models) at the origin with the pad tool at tool0; its links "
                  "make no contact", _UR5eWithPad, ("add_robot",)),
         TaskHook("crank", "Example 2.2's crank: pad welded to the handle (SAP), start at the handle, crank state, "
@@ -205,7 +205,8 @@ for _hook in (
         TaskHook("sphere_paper_constraint", "Example 2.3's (2.2-8) sphere constraint with the equator fix (switching "
                  "pieces), radial row in N", _SphereConstraint, ("constraint",), SPHERE_PARAMETERS),
         TaskHook("rough_patch", "the grinding pane: smooth, rough (rough_friction), smooth boxes; run notes on the "
-                 "patch", _RoughPatch, ("add_workpiece", "run_notes"), ROUGH_PATCH_PARAMETERS)):
+                 "patch", _RoughPatch, ("add_workpiece", "run_notes"), ROUGH_PATCH_PARAMETERS))
+for _hook in PACKAGE_HOOKS:
     register_hook(_hook)
 
 
