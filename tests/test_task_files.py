@@ -516,6 +516,7 @@ def ur10_plate_tasks(tmp_path_factory):
     return config, python_config
 
 
+@pytest.mark.slow                # about 5 s
 def test_a_file_with_an_arm_from_a_model_package_runs_as_the_same_task_in_python(ur10_plate_tasks):
     """The UR10 of example-robot-data by package:// URL on a library box: 0.2 s of the run (logs to
     1e-9) and the linearized loop (the designed -10 1/s six times) equal the Python CustomTask's."""
