@@ -47,6 +47,7 @@ from drake_hybrid.hardware.panda import panda_config, panda_drum_task, panda_tab
 from drake_hybrid.hardware.realtime import replay_timing, run_controller
 from drake_hybrid.scenario.config import load_config
 from drake_hybrid.scenario.data_task import is_task_file, load_task_file, read_task_file
+from drake_hybrid.scenario.hooks import ENTRY_POINT_GROUP, get_hook, hook_names
 from drake_hybrid.scenario.parsing import models_directory
 from drake_hybrid.scenario.tasks import TASKS, get_task
 from drake_hybrid.viz.animation import set_task_camera
@@ -309,6 +310,10 @@ def command_tasks(args):
         print("task files (drake-hybrid simulate|analyze FILE.yaml):")
     for path in files:
         print(f"  {path}: {read_task_file(path).description}")
+    print("hooks a task file may name (hooks: [...]; drake_hybrid/scenario/hooks.py and installed "
+          f"{ENTRY_POINT_GROUP} entry points):")
+    for name in hook_names():
+        print(f"  {name:24s} {get_hook(name).description}")
     return 0
 
 

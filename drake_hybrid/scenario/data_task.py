@@ -8,6 +8,8 @@ FILE.yaml``) runs it as a built-in task. The file::
 
     name: window-washing-file              # the task's name (not a built-in one)
     parameters: {window_height: 1.0}       # named numbers the expressions may use
+    hooks: []                              # names of registered Python hooks (scenario/hooks.py)
+    packages: {}                           # {name: folder} for package:// URLs (relative to the file)
     robot:
       directives:                          # Drake model directives (add_model, add_weld, add_frame, ...)
       - add_model: {name: arm, file: package://drake_hybrid/planar_3r.sdf}
@@ -15,7 +17,8 @@ FILE.yaml``) runs it as a built-in task. The file::
       arm: arm                             # the model instance whose joints the law drives
       tool: {flange_frame: link3, X_flange_tool: {translation: [0.25, 0, 0], rotation: !Rpy {deg: [0, 90, 0]}}}
       end_effector_frame: pad_center       # frame E (the pad tool's pad_center by default)
-    # or, for an arm from a model package:  robot: {loader: {path: ur10.urdf, flange: tool0}}
+    # or an arm from a model package:
+    #   robot: {loader: {path: package://example-robot-data/robots/ur_description/urdf/ur10_robot.urdf, flange: tool0}}
     workpiece:
       directives: [...]                    # models welded in the scene (all their collision geometries)
       shapes:                              # and/or shapes of the library (rigid hydroelastic)
@@ -35,7 +38,11 @@ Size: one schema (the dataclasses) and the one function per section that turns i
 CustomTask's pieces; splitting them would put the schema and its meaning in different files.
 
 Expressions are parsed by the whitelisted grammar of ``core.expressions`` (never evaluated as
-Python): a file from someone else cannot run code. The start pose is given in the chart's
+Python): a file from someone else cannot run code. They are taken by the constraint and E_p rows,
+the start, and the number lists of poses outside ``config`` (``translation``, ``rotation: !Rpy
+{deg}``: ``evaluate_pose_expressions``). Hooks (``scenario.hooks``) are looked up by name in a
+registry, never imported from the file. Model files: ``package://`` URLs (``model_packages``) or
+paths relative to the file (``resolve_model_file``). The start pose is given in the chart's
 coordinates of the controlled point (``start.configuration``; or ``start.pose`` = [x, y, z, roll,
 pitch, yaw] of frame E); it is stored in ``config.start.configuration`` as chart coordinates, and ``config.task`` is the file's name.
 """
@@ -47,6 +54,7 @@ from pathlib import Path
 from typing import Dict, List
 
 import numpy as np
+import yaml
 
 from pydrake.common.schema import Transform
 from pydrake.common.yaml import yaml_load_typed
@@ -63,7 +71,8 @@ from drake_hybrid.core.projections import ConstraintSpace, GivenVelocityProjecti
 from drake_hybrid.core.schema import check_yaml_against_schema
 from drake_hybrid.scenario.config import ScenarioConfig
 from drake_hybrid.scenario.custom import CustomTask, add_rigid_workpiece, attach_pad_tool
-from drake_hybrid.scenario.parsing import ConfigureParser
+from drake_hybrid.scenario.hooks import make_hooks
+from drake_hybrid.scenario.parsing import ConfigureParser, installed_model_packages, models_directory
 from drake_hybrid.scenario.robots import TOOL_AXES, load_arm
 from drake_hybrid.scenario.tasks import register_task
 
@@ -86,7 +95,7 @@ class ToolSpec:
 class LoaderSpec:
     """``scenario.robots.load_arm``'s options: an arm from a URDF/SDF file (relative to the task file)."""
 
-    path: str = ""                               # URDF/SDF file (absolute, or relative to the task file)
+    path: str = ""                               # URDF/SDF file: package:// URL, absolute or relative to the file
     flange: str = ""                             # the frame (link) that ends the actuated chain
     tool_frame: str = ""                         # default: the flange
     base_pose: Transform = field(default_factory=Transform)   # X_W_base, where the base is welded
@@ -144,6 +153,8 @@ class ConstraintSpec:
     rows: List[str] = field(default_factory=list)          # C(x), one expression per row
     kinematic_rows: List[int] = field(default_factory=list)   # rows the controller holds itself (no force)
     name: str = "constraint"                               # for messages
+    branch: str = ""                                       # negative on the intended branch (checked at the start)
+    branch_description: str = "the intended branch"        # for the message when the start is on another
 
 
 @dataclass
@@ -179,6 +190,8 @@ class TaskFile:
     name: str = ""                               # the task's name (ScenarioConfig.task; not a built-in one)
     description: str = "a task from a scenario file"   # shown by drake-hybrid tasks
     parameters: Dict[str, float] = field(default_factory=dict)   # named numbers the expressions may use
+    hooks: List[str] = field(default_factory=list)     # names of registered Python hooks (scenario/hooks.py)
+    packages: Dict[str, str] = field(default_factory=dict)   # {name: folder (relative to the file)} for package://
     robot: RobotSpec = field(default_factory=RobotSpec)
     workpiece: WorkpieceSpec = field(default_factory=WorkpieceSpec)
     chart: ChartSpec = field(default_factory=ChartSpec)
@@ -205,6 +218,7 @@ def read_task_file(path, text=None):
     if len(text) > MAX_FILE_SIZE:
         raise ConfigError(f"{path}: the task file is larger than {MAX_FILE_SIZE // 1000} kB")
     try:
+        text = evaluate_pose_expressions(text, f"{path}: ")
         check_yaml_against_schema(text, TaskFile, f"{path}: ")
     except RecursionError:
         raise ConfigError(f"{path}: the YAML nests too deeply to be a task file") from None
@@ -212,6 +226,52 @@ def read_task_file(path, text=None):
         return yaml_load_typed(schema=TaskFile, data=text, defaults=TaskFile())
     except (AssertionError, RuntimeError, ValueError, TypeError) as error:
         raise ConfigError(f"{path}: {str(error).splitlines()[0]}") from None
+
+
+POSE_LISTS = ("translation", "deg", "rpy")     # the number lists of Drake's Transform (and our X_WG, ...)
+
+
+def evaluate_pose_expressions(text, where=""):
+    """``text`` with every expression in a pose's number lists (``translation: [...]`` and
+    ``rotation: !Rpy {deg: [...]}`` anywhere but in ``config``: model directives' ``X_PC``, ``X_PF``,
+    library shapes' ``X_WG``, the tool's and the loader's poses) replaced by its value, from the
+    file's ``parameters`` (core/expressions.py: parsed, never evaluated as Python); the text
+    unchanged if there is none (or if the YAML is not a mapping: the typed loader says why). E.g.
+    ``X_PC: {translation: [crank_center_x, crank_center_y, crank_height]}``."""
+    root = yaml.compose(text, Loader=yaml.SafeLoader)
+    if not isinstance(root, yaml.MappingNode):
+        return text
+    sections = {key.value: value for key, value in root.value if isinstance(key, yaml.ScalarNode)}
+    parameters = {}
+    if isinstance(sections.get("parameters"), yaml.MappingNode):
+        for key, value in sections["parameters"].value:
+            try:
+                parameters[key.value] = float(value.value)
+            except (TypeError, ValueError):
+                return text                        # the typed loader names the parameter
+    changed, seen = False, set()
+
+    def visit(node, field):
+        nonlocal changed
+        if id(node) in seen:                       # an alias: visited once (no exponential walks)
+            return
+        seen.add(id(node))
+        if isinstance(node, yaml.MappingNode):
+            for key, value in node.value:
+                if isinstance(key, yaml.ScalarNode) and not (field == "" and key.value == "config"):
+                    visit(value, f"{field}.{key.value}" if field else str(key.value))
+        elif isinstance(node, yaml.SequenceNode):
+            numbers = field.rsplit(".", 1)[-1] in POSE_LISTS
+            for index, item in enumerate(node.value):
+                if numbers and isinstance(item, yaml.ScalarNode) and item.tag == "tag:yaml.org,2002:str":
+                    value = expression_to_sympy(item.value, (), parameters, f"{where}{field}[{index}]")
+                    item.value, item.tag, item.style = repr(float(value.evalf())), "tag:yaml.org,2002:float", None
+                    changed = True
+                else:
+                    visit(item, f"{field}[{index}]")
+
+    visit(root, "")
+    return yaml.serialize(root, Dumper=yaml.SafeDumper) if changed else text
 
 
 def make_chart(spec, where):
@@ -232,10 +292,50 @@ def make_chart(spec, where):
         raise ConfigError(f"{where}chart: {error}") from None
 
 
-def _directives_adder(directives, what):
-    """add(plant) -> [ModelInstanceInfo]: process the directives with the package's parser."""
+def model_packages(spec, path, where):
+    """{package name: folder} a task file's ``package://`` URLs resolve with: drake_hybrid (models/),
+    the model packages installed with pip (``parsing.installed_model_packages``: example-robot-data)
+    and the file's ``packages`` (folders relative to the file)."""
+    packages = {"drake_hybrid": str(models_directory()), **installed_model_packages()}
+    for name, folder in spec.packages.items():
+        folder = Path(folder) if Path(folder).is_absolute() else Path(path).parent / folder
+        if not folder.is_dir():
+            raise ConfigError(f"{where}packages.{name}: no folder '{folder}'")
+        packages[name] = str(folder)
+    return packages
+
+
+def resolve_model_file(url, path, packages, where):
+    """The file of ``url``: ``package://<name>/<file>`` (``packages``), ``file://<absolute path>``,
+    an absolute path, or a path relative to the task file ``path``; ConfigError naming ``where``."""
+    if url.startswith("package://"):
+        name, _, rest = url[len("package://"):].partition("/")
+        if name not in packages:
+            raise ConfigError(f"{where}: unknown package '{name}' in '{url}'; known packages: {sorted(packages)} "
+                              "(add it to the file's packages: {name: folder})")
+        file = Path(packages[name]) / rest
+    elif url.startswith("file://"):
+        file = Path(url[len("file://"):])
+    elif "://" in url:
+        raise ConfigError(f"{where}: '{url}': give a package:// or file:// URL or a path")
+    else:
+        file = Path(url) if Path(url).is_absolute() else Path(path).parent / url
+    if not file.is_file():
+        raise ConfigError(f"{where}: no file '{file}' (from '{url}')")
+    return file
+
+
+def _directives_adder(directives, what, path=".", packages=None):
+    """add(plant) -> [ModelInstanceInfo]: process the directives with the package's parser, its
+    ``package://`` URLs resolved with ``packages`` and plain file names relative to the task file."""
+    for index, directive in enumerate(directives):
+        model = directive.add_model
+        if model is not None and "://" not in model.file:
+            file = resolve_model_file(model.file, path, {}, f"{what}.directives[{index}].add_model.file")
+            model.file = f"file://{file.resolve()}"
+
     def add(plant):
-        parser = ConfigureParser(Parser(plant))
+        parser = ConfigureParser(Parser(plant), packages)
         try:
             return ProcessModelDirectives(ModelDirectives(directives=directives), plant, parser)
         except RuntimeError as error:
@@ -248,10 +348,15 @@ class DataTask(CustomTask):
     and ``path``. Its start is in the chart's coordinates of the controlled point (``config.start.configuration``
     with the chart's number of coordinates; six numbers [x, y, z, roll, pitch, yaw] of E otherwise)."""
 
-    def __init__(self, spec, path, text, **pieces):
+    def __init__(self, spec, path, text, hooks=None, continuous_plant=True, **pieces):
         super().__init__(**pieces)
         self.spec, self.path, self.text = spec, Path(path), text
+        self.hooks = dict(hooks or {})            # {Task method: the hook's implementation} (scenario/hooks.py)
+        self.continuous_plant = continuous_plant
         self._config = None
+
+    def _hook(self, method):
+        return self.hooks.get(method)
 
     def __reduce__(self):
         """Pickled as the file's text (for Dask workers, other processes): rebuilt there by parsing it
@@ -260,6 +365,29 @@ class DataTask(CustomTask):
 
     def base_config(self, options):
         return dataclasses.replace(self._config, start=dataclasses.replace(self._config.start))
+
+    # -- the Task methods a hook may provide (the CustomTask's otherwise) --------------------------
+    def add_workpiece(self, plant, config):
+        return list(self._add_workpiece(plant, config))     # the file's workpiece, then a hook's
+
+    def make_source(self, config, controller_plant, robot, constraint_space):
+        hook = self._hook("make_source") or super().make_source
+        return hook(config, controller_plant, robot, constraint_space)
+
+    def start_positions(self, scenario):
+        return (self._hook("start_positions") or super().start_positions)(scenario)
+
+    def set_environment_state(self, scenario, plant_context):
+        return (self._hook("set_environment_state") or super().set_environment_state)(scenario, plant_context)
+
+    def velocity_row_inertia(self, plant, config, constraint_space):
+        return (self._hook("velocity_row_inertia") or super().velocity_row_inertia)(plant, config, constraint_space)
+
+    def eigenvalue_shifts(self, scenario, root_context):
+        return (self._hook("eigenvalue_shifts") or super().eigenvalue_shifts)(scenario, root_context)
+
+    def run_notes(self, scenario, log, design_time_constant):
+        return (self._hook("run_notes") or super().run_notes)(scenario, log, design_time_constant)
 
     def start_pose_of(self, config):
         values = list(config.start.configuration)
@@ -270,25 +398,28 @@ class DataTask(CustomTask):
         return super().start_pose_of(config)
 
 
-def _robot_adder(spec, path, where):
+def _robot_adder(spec, path, where, hooks, packages):
     robot = spec.robot
+    if "add_robot" in hooks:
+        if robot.directives or robot.loader.path:
+            raise ConfigError(f"{where}robot: a hook adds the robot; give neither directives nor loader")
+        add_by_hook = hooks["add_robot"]
+        return _with_end_effector(lambda plant: add_by_hook(plant, None), robot, where)
     if robot.loader.path:
         if robot.directives:
             raise ConfigError(f"{where}robot: give either directives or loader, not both")
         if robot.loader.tool_axis not in TOOL_AXES:
             raise ConfigError(f"{where}robot.loader.tool_axis must be one of {list(TOOL_AXES)}, "
                               f"got '{robot.loader.tool_axis}'")
-        file = Path(robot.loader.path)
-        file = file if file.is_absolute() else Path(path).parent / file
-        if not file.is_file():
-            raise ConfigError(f"{where}robot.loader.path: no file '{file}'")
+        file = resolve_model_file(robot.loader.path, path, packages, f"{where}robot.loader.path")
         loaded = load_arm(str(file), robot.loader.flange, tool_frame=robot.loader.tool_frame or None,
                           base_pose=robot.loader.base_pose.GetDeterministicValue(),
-                          tool_axis=robot.loader.tool_axis, collision=robot.loader.collision)
+                          tool_axis=robot.loader.tool_axis, collision=robot.loader.collision,
+                          packages=packages)
         return _with_end_effector(loaded.add_robot, robot, where)
     if not robot.directives:
         raise ConfigError(f"{where}robot: give directives (with arm and tool) or loader.path")
-    add_models = _directives_adder(robot.directives, f"{where}robot")
+    add_models = _directives_adder(robot.directives, f"{where}robot", path, packages)
 
     def add_robot(plant):
         add_models(plant)
@@ -329,11 +460,13 @@ def _instance_names(plant):
     return [plant.GetModelInstanceName(ModelInstanceIndex(i)) for i in range(plant.num_model_instances())]
 
 
-def _workpiece_adder(spec, where):
+def _workpiece_adder(spec, path, where, hooks, packages):
     workpiece = spec.workpiece
-    if not workpiece.directives and not workpiece.shapes:
+    add_by_hook = hooks.get("add_workpiece")
+    if not workpiece.directives and not workpiece.shapes and add_by_hook is None:
         raise ConfigError(f"{where}workpiece: give directives or shapes")
-    add_models = _directives_adder(workpiece.directives, f"{where}workpiece") if workpiece.directives else None
+    add_models = (_directives_adder(workpiece.directives, f"{where}workpiece", path, packages)
+                  if workpiece.directives else None)
     for index, shape in enumerate(workpiece.shapes):
         name = f"{where}workpiece.shapes[{index}]"
         if shape.shape not in SHAPES:
@@ -344,7 +477,7 @@ def _workpiece_adder(spec, where):
         if not 0 < shape.resolution_hint < math.inf:
             raise ConfigError(f"{name}.resolution_hint must be positive (m), got {shape.resolution_hint}")
 
-    def add_workpiece(plant):
+    def add_workpiece(plant, config):
         geometries = []
         if add_models is not None:
             for info in add_models(plant):
@@ -354,22 +487,23 @@ def _workpiece_adder(spec, where):
             kind = SHAPES[shape.shape][0]
             geometries += add_rigid_workpiece(plant, kind(*shape.size), shape.X_WG.GetDeterministicValue(),
                                               name=f"{shape.name}_{index}", resolution_hint=shape.resolution_hint)
+        if add_by_hook is not None:
+            geometries += list(add_by_hook(plant, config))
         return geometries
     return add_workpiece
 
 
-def constraint_space_of(spec, chart, where, anchor):
-    """The ConstraintSpace of the file: C from ``constraint.rows``, E_p from ``velocity_projection``
-    (the kernel of E_f at ``anchor`` when no rows are given)."""
+def constraint_space_of(spec, chart, where, anchor, hooks=None):
+    """The ConstraintSpace of the file: C from ``constraint.rows`` (or a hook's ``constraint``), E_p
+    from ``velocity_projection`` (the kernel of E_f at ``anchor`` when no rows are given)."""
     symbols, parameters = chart.configuration_symbols, spec.parameters
-    if not spec.constraint.rows:
-        raise ConfigError(f"{where}constraint.rows: give C(x) as one expression per row")
-    rows = [expression_to_sympy(text, symbols, parameters, f"{where}constraint.rows[{i}]")
-            for i, text in enumerate(spec.constraint.rows)]
-    try:
-        constraint = Constraint(chart, rows, name=spec.constraint.name, kinematic_rows=spec.constraint.kinematic_rows)
-    except ValueError as error:
-        raise ConfigError(f"{where}constraint: {error}") from None
+    if hooks and "constraint" in hooks:
+        if spec.constraint.rows or spec.constraint.kinematic_rows or spec.constraint.branch:
+            raise ConfigError(f"{where}constraint: a hook gives the constraint; give no rows, kinematic_rows or "
+                              "branch")
+        constraint = hooks["constraint"](chart)
+    else:
+        constraint = _constraint_of_rows(spec, chart, where)
     d = chart.velocity_size
     given = spec.velocity_projection.rows
     try:
@@ -384,6 +518,21 @@ def constraint_space_of(spec, chart, where, anchor):
         raise
     except ValueError as error:
         raise ConfigError(f"{where}velocity_projection: {error}") from None
+
+
+def _constraint_of_rows(spec, chart, where):
+    symbols, parameters = chart.configuration_symbols, spec.parameters
+    if not spec.constraint.rows:
+        raise ConfigError(f"{where}constraint.rows: give C(x) as one expression per row")
+    rows = [expression_to_sympy(text, symbols, parameters, f"{where}constraint.rows[{i}]")
+            for i, text in enumerate(spec.constraint.rows)]
+    branch = (expression_to_sympy(spec.constraint.branch, symbols, parameters, f"{where}constraint.branch")
+              if spec.constraint.branch else None)
+    try:
+        return Constraint(chart, rows, name=spec.constraint.name, kinematic_rows=spec.constraint.kinematic_rows,
+                          branch=branch, branch_description=spec.constraint.branch_description)
+    except ValueError as error:
+        raise ConfigError(f"{where}constraint: {error}") from None
 
 
 def start_configuration_of(spec, chart, where):
@@ -427,15 +576,18 @@ def load_task_file(path, register=True, text=None):
     chart = make_chart(spec.chart, where)
     check_parameter_names(spec.parameters, chart.configuration_symbols, f"{where}parameters")
     start = start_configuration_of(spec, chart, where)
-    space = constraint_space_of(spec, chart, where, anchor=start)
+    hooks, continuous_plant = make_hooks(spec, where)
+    packages = model_packages(spec, path, where)
+    space = constraint_space_of(spec, chart, where, anchor=start, hooks=hooks)
     if len(spec.start.joint_guess) == 0:
         raise ConfigError(f"{where}start.joint_guess: give the arm's joint positions inverse kinematics starts from")
     labels = dataclasses.asdict(spec.labels)
     k, m = space.velocity_size, space.force_size
     labels["velocity"] = labels["velocity"] or [f"r-dot_p[{i}]" for i in range(k)]
     labels["force"] = labels["force"] or [f"F[{i}]" for i in range(m)]
-    task = DataTask(spec, path, text, name=spec.name, add_robot=_robot_adder(spec, path, where),
-                    add_workpiece=_workpiece_adder(spec, where), constraint_space=space,
+    task = DataTask(spec, path, text, hooks=hooks, continuous_plant=continuous_plant, name=spec.name,
+                    add_robot=_robot_adder(spec, path, where, hooks, packages),
+                    add_workpiece=_workpiece_adder(spec, path, where, hooks, packages), constraint_space=space,
                     start_pose=chart.pose(start), joint_guess=spec.start.joint_guess, labels=labels,
                     description=spec.description)
     config = dataclasses.replace(spec.config, task=spec.name)

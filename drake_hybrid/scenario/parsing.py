@@ -9,8 +9,13 @@ install) it is ``<repo>/models``; a regular install ships it as
     parser = Parser(plant)
     ConfigureParser(parser)
     parser.AddModelsFromUrl(model_url("planar_3r.sdf"))
+
+Model packages installed with pip in the cmeel layout (``<site-packages>/cmeel.prefix/share/<name>/
+package.xml``, e.g. ``example-robot-data``) are known by name too (``installed_model_packages``), so
+a task file may write ``package://example-robot-data/robots/...``.
 """
 
+import sys
 from pathlib import Path
 
 _PACKAGE = Path(__file__).resolve().parent.parent          # drake_hybrid/
@@ -24,11 +29,30 @@ def models_directory():
     raise FileNotFoundError(f"drake_hybrid's models folder (with package.xml) is missing next to {_PACKAGE}")
 
 
-def ConfigureParser(parser):
-    """Make ``package://drake_hybrid/...`` resolve to the models folder. Returns the parser."""
+def installed_model_packages():
+    """{package name: folder} of the model packages pip installed in the cmeel layout: every
+    ``<sys.path entry>/cmeel.prefix/share/<folder>/package.xml`` (named by the folder, as
+    example-robot-data's URDFs name themselves). Read from the disk, nothing is downloaded."""
+    packages = {}
+    for entry in sys.path:
+        share = Path(entry or ".") / "cmeel.prefix" / "share"
+        if share.is_dir():
+            for manifest in sorted(share.glob("*/package.xml")):
+                packages.setdefault(manifest.parent.name, str(manifest.parent))
+    return packages
+
+
+def ConfigureParser(parser, packages=None):
+    """Make ``package://drake_hybrid/...`` resolve to the models folder and ``package://<name>/...``
+    to ``packages`` {name: folder} (e.g. a task file's, with ``installed_model_packages``). Returns
+    the parser."""
     package_map = parser.package_map()
     if not package_map.Contains("drake_hybrid"):
         package_map.AddPackageXml(str(models_directory() / "package.xml"))
+    for name, folder in (packages or {}).items():
+        if package_map.Contains(name):
+            package_map.Remove(name)
+        package_map.Add(name, str(folder))
     return parser
 
 

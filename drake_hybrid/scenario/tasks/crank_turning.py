@@ -58,11 +58,11 @@ START_ANGLE = 4.412                      # rad, crank angle alpha at t = 0
 CRANK_SEED = np.array([0.0, -1.2, 1.8, -0.6, 1.57, 0.0])   # IK seed: the wrist branch with q5 near pi/2
 
 
-def true_velocities(scenario, log):
+def true_velocities(scenario, log, center=CRANK_CENTER, radius=CRANK_RADIUS):
     """(samples x 2) the true-velocity rows E_t r-dot (spin, crank rate; docs/theory.md §6) of every
-    logged state of a crank run, whichever E_p the controller used."""
-    true_rows = crank_true_velocity_projection(scenario.constraint_space.chart, center=CRANK_CENTER,
-                                               radius=CRANK_RADIUS)
+    logged state of a crank run, whichever E_p the controller used (the crank's axis at ``center``,
+    its radius ``radius``)."""
+    true_rows = crank_true_velocity_projection(scenario.constraint_space.chart, center=center, radius=radius)
     plant = scenario.controller_plant
     context = plant.CreateDefaultContext()
     rates = []
@@ -86,6 +86,14 @@ class CrankTurning(Task):
     continuous_plant = False      # the SAP weld constraint needs a discrete plant
     description = "UR5e turning a crank whose handle it holds (weld constraint), pushing along its axis (Example 2.2)"
     camera = ((0.8, -0.6, 0.55), (0.3, 0.0, 0.22))     # Meshcat view (position, target; m): the arm and the crank
+
+    def __init__(self, center=CRANK_CENTER, radius=CRANK_RADIUS, height=CRANK_HEIGHT, seed=CRANK_SEED):
+        """The crank's axis at ``center`` (x, y; m), its handle circle of ``radius`` at ``height`` (m);
+        ``seed``: the arm's joint positions inverse kinematics starts from. The defaults are the
+        built-in task's (the crank task file, models/tasks/crank_turning.yaml, gives its own through
+        the ``crank`` hook, scenario/hooks.py)."""
+        self.center, self.radius, self.height = np.asarray(center, dtype=float), float(radius), float(height)
+        self.seed = np.asarray(seed, dtype=float)
 
     def base_config(self, options):
         return ScenarioConfig(
@@ -124,6 +132,10 @@ class CrankTurning(Task):
     def _rows(self, config):
         return self.options(config).velocity_rows
 
+    def start_angle(self, config):
+        """The crank angle alpha at t = 0 (rad)."""
+        return self.options(config).start_angle
+
     # -- models -----------------------------------------------------------------------------------
     def add_robot(self, plant, config):
         return add_ur5e_with_pad(plant)
@@ -136,28 +148,35 @@ class CrankTurning(Task):
         ConfigureParser(parser)
         crank = parser.AddModelsFromUrl(model_url("crank.sdf"))[0]
         plant.WeldFrames(plant.world_frame(), plant.GetFrameByName("post", crank),
-                         RigidTransform([CRANK_CENTER[0], CRANK_CENTER[1], CRANK_HEIGHT]))
+                         RigidTransform([self.center[0], self.center[1], self.height]))
+        return self.weld_pad_to_handle(plant)
+
+    @staticmethod
+    def weld_pad_to_handle(plant):
+        """The SAP weld constraint holding the pad centre (tool z = 0.05 m) on the handle frame of the
+        crank (model instance ``crank``). Returns no geometries (the crank's are not the workpiece's)."""
+        if plant.time_step() == 0:
+            raise ConfigError("crank-turning needs a discrete plant (time_step > 0): the tool is attached to the "
+                             "handle by a SAP weld constraint, which continuous plants do not support")
         tool = plant.GetBodyByName("tool")
-        handle = plant.GetBodyByName("handle", crank)
-        # The pad centre (tool z = 0.05 m) coincides with the handle frame.
+        handle = plant.GetBodyByName("handle", plant.GetModelInstanceByName("crank"))
         plant.AddWeldConstraint(tool, RigidTransform([0, 0, PAD_CENTER_IN_TOOL]), handle, RigidTransform())
-        self._crank_instance = crank
         return []
 
     # -- task geometry ----------------------------------------------------------------------------
     def constraint_space(self, config):
         chart = EulerZXZChart()
-        constraint = crank_constraint(chart, radius=CRANK_RADIUS, height=CRANK_HEIGHT, center=CRANK_CENTER,
+        constraint = crank_constraint(chart, radius=self.radius, height=self.height, center=self.center,
                                       form="paper")
         if self._rows(config) == "paper":
-            return ConstraintSpace(constraint, crank_paper_projection(chart, center=CRANK_CENTER))
+            return ConstraintSpace(constraint, crank_paper_projection(chart, center=self.center))
         return ConstraintSpace(constraint,
-                               crank_true_velocity_projection(chart, center=CRANK_CENTER, radius=CRANK_RADIUS))
+                               crank_true_velocity_projection(chart, center=self.center, radius=self.radius))
 
     def make_source(self, config, controller_plant, robot, constraint_space):
         if self._rows(config) == "paper":
             chart = constraint_space.chart
-            true_rows = crank_true_velocity_projection(chart, center=CRANK_CENTER, radius=CRANK_RADIUS)
+            true_rows = crank_true_velocity_projection(chart, center=self.center, radius=self.radius)
             return PseudoVelocitySource(controller_plant, robot.end_effector_frame, robot.end_effector_point,
                                         constraint_space.velocity_projection, true_rows, config.desired_velocity,
                                         config.desired_force, constraint_space.force_size)
@@ -166,8 +185,8 @@ class CrankTurning(Task):
     # -- start ------------------------------------------------------------------------------------
     def handle_pose(self, alpha):
         """Pose of the handle frame (= pad centre) at crank angle alpha, handle spin 0."""
-        position = np.array([CRANK_CENTER[0] + CRANK_RADIUS * math.cos(alpha),
-                             CRANK_CENTER[1] + CRANK_RADIUS * math.sin(alpha), CRANK_HEIGHT])
+        position = np.array([self.center[0] + self.radius * math.cos(alpha),
+                             self.center[1] + self.radius * math.sin(alpha), self.height])
         # crank.sdf: handle = arm frame (rotated by alpha about z) then pitched by -pi/2 about y.
         R = RotationMatrix.MakeZRotation(alpha).multiply(RotationMatrix.MakeYRotation(-math.pi / 2))
         return RigidTransform(R, position)
@@ -176,8 +195,8 @@ class CrankTurning(Task):
         plant = scenario.controller_plant
         context = plant.CreateDefaultContext()
         kinematics = EndEffectorKinematics(plant, scenario.robot.end_effector_frame, np.zeros(3), PoseChart())
-        alpha = self.options(scenario.config).start_angle
-        return inverse_kinematics(kinematics, context, self.handle_pose(alpha), CRANK_SEED)
+        alpha = self.start_angle(scenario.config)
+        return inverse_kinematics(kinematics, context, self.handle_pose(alpha), self.seed)
 
     def velocity_row_inertia(self, plant, config, constraint_space):
         """I_v = G^T M_c G: the crank's (arm and spinning handle) inertia along the velocity rows at
@@ -189,7 +208,7 @@ class CrankTurning(Task):
         the constraint rows are zero, so the rows determine the crank's motion)."""
         context = plant.CreateDefaultContext()
         crank = plant.GetModelInstanceByName("crank")
-        plant.SetPositions(context, crank, [self.options(config).start_angle, 0.0])
+        plant.SetPositions(context, crank, [self.start_angle(config), 0.0])
         handle = plant.GetBodyByName("handle", crank)
         columns = plant.GetVelocitiesFromArray(crank, np.arange(plant.num_velocities())).astype(int)
         J_spatial = plant.CalcJacobianSpatialVelocity(context, JacobianWrtVariable.kV, handle.body_frame(),
@@ -262,7 +281,7 @@ class CrankTurning(Task):
         Li & Sastry law only: a baseline has no such design)."""
         if scenario.config.controller != "li-sastry":
             return []
-        rates = true_velocities(scenario, log)[:, 1]
+        rates = true_velocities(scenario, log, self.center, self.radius)[:, 1]
         t = log["t"]
         # The true-velocity command (the paper's rows get it converted to a pseudo-velocity).
         command = np.array([scenario.config.desired_velocity.evaluate(float(time))[0][1] for time in t])
@@ -278,6 +297,5 @@ class CrankTurning(Task):
         """The crank at the start angle, the handle unspun, both at rest."""
         plant = scenario.plant
         crank = plant.GetModelInstanceByName("crank")
-        alpha = self.options(scenario.config).start_angle
-        plant.SetPositions(plant_context, crank, [alpha, 0.0])
+        plant.SetPositions(plant_context, crank, [self.start_angle(scenario.config), 0.0])
         plant.SetVelocities(plant_context, crank, [0.0, 0.0])

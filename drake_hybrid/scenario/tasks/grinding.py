@@ -40,6 +40,79 @@ PANE_CENTER_X = 1.0
 PAD_RELAXATION_TIME = 0.002
 
 
+def add_window_with_rough_patch(plant, height, start, end, mu, mu_rough):
+    """Three rigid hydroelastic boxes side by side (smooth, rough from ``start`` to ``end`` along x,
+    smooth), lower faces at ``height``, registered on the world body; the pad on the patch sees
+    ``mu_rough``, elsewhere ``mu`` (the config's contact.friction). Returns the smooth boxes' ids."""
+    x_min, x_max = PANE_CENTER_X - PANE_SIZE[0] / 2, PANE_CENTER_X + PANE_SIZE[0] / 2
+    if not x_min < start < end < x_max:
+        raise ConfigError(f"grinding: the rough patch [{start}, {end}] must lie on the pane [{x_min}, {x_max}]")
+    if mu == 0:
+        mu_rough = 0.0                      # a frictionless copy (e.g. for the linearization)
+    elif not 0 < mu_rough < 2 * mu:
+        raise ConfigError(f"grinding: rough_friction must be in (0, 2 mu) = (0, {2 * mu}) so that a coefficient "
+                         f"of the patch combines with the pad's mu = {mu} to it; got {mu_rough}")
+    # 2 mu mu_patch / (mu + mu_patch) = mu_rough
+    mu_patch = mu_rough * mu / (2 * mu - mu_rough) if mu > 0 else 0.0
+    geometries = []
+    world = plant.world_body()
+    for name, (a, b), friction, color in [("pane_left", (x_min, start), mu, [0.6, 0.8, 0.95, 0.5]),
+                                          ("rough_patch", (start, end), mu_patch, [0.6, 0.4, 0.2, 0.9]),
+                                          ("pane_right", (end, x_max), mu, [0.6, 0.8, 0.95, 0.5])]:
+        box = Box(b - a, PANE_SIZE[1], PANE_SIZE[2])
+        X = RigidTransform([(a + b) / 2, 0.0, height + PANE_SIZE[2] / 2])
+        properties = ProximityProperties()
+        AddRigidHydroelasticProperties(properties)
+        AddContactMaterial(friction=CoulombFriction(friction, friction), properties=properties)
+        geometry = plant.RegisterCollisionGeometry(world, X, box, name, properties)
+        plant.RegisterVisualGeometry(world, X, box, name, np.array(color))
+        if name != "rough_patch":
+            geometries.append(geometry)
+    # The scenario sets contact.friction on the returned (smooth) geometries; the patch keeps its own.
+    return geometries
+
+
+def rough_patch_notes(scenario, log, design_time_constant, rough_start, rough_end, rough_friction):
+    """Where the pad is at the end relative to the rough patch (between ``rough_start`` and ``rough_end``
+    along x, mu = ``rough_friction``): leaving it releases the extra friction force, a transient that
+    lasts several design time constants; and whether velocity/force sticks."""
+    config = scenario.config
+    if "q" not in log or config.controller != "li-sastry":
+        return []
+    plant = scenario.controller_plant
+    context = plant.CreateDefaultContext()
+    x = []
+    for q in log["q"]:
+        plant.SetPositions(context, q)
+        x.append(scenario.controller.kinematics.evaluate(context).configuration[0])
+    x, t = np.array(x), log["t"]
+    notes = []
+    late = t >= t[-1] - min(1.0, 0.5 * t[-1])
+    command = float(np.mean(log["desired_velocity"][late, 0]))
+    speed = float(np.mean(log["velocity"][late, 0]))
+    if scenario.controller.mode.value == "velocity-force" and command > 0 and speed < 0.5 * command:
+        notes.append(f"the pad sticks (mean x-dot {100 * speed / command:.0f} % of the command over the last "
+                     f"{t[-1] - t[late][0]:.1f} s): velocity/force with this K_v would need a velocity error "
+                     "larger than the command to build the friction force mu F_n, and stalls; impedance/force "
+                     "(the default mode) slides (docs/impedance.md)")
+    on_patch = (x >= rough_start) & (x <= rough_end)
+    where = f"rough patch (mu = {rough_friction:g}, x from {rough_start:g} to {rough_end:g} m)"
+    if on_patch[-1]:
+        return notes + [f"the run ends with the pad on the {where}"]
+    if not on_patch.any():
+        side = "before" if x[-1] < rough_start else "past"
+        return notes + [f"the pad never reaches the {where}; it ends {side} it at x = {x[-1]:.3f} m"]
+    left = float(t[np.nonzero(on_patch)[0][-1] + 1])
+    after = float(t[-1]) - left
+    if after < 5 * design_time_constant:
+        steady = left + 10 * design_time_constant
+        return notes + [f"the run ends {after:.2f} s ({after / design_time_constant:.1f} design time constants) "
+                        f"after the pad left the {where}: the released friction force is still accelerating it, "
+                        f"so the final speed error is that transient's; --duration {np.ceil(steady * 10) / 10:g} "
+                        "ends in steady sliding"]
+    return notes + [f"the run ends in steady sliding, {after:.2f} s after the pad left the {where}"]
+
+
 @dataclass
 class GrindingOptions(WindowWashingOptions, SpherePolishingOptions):
     workpiece: str = choice("window", ("window", "sphere"))
@@ -112,39 +185,8 @@ class Grinding(Task):
         if self._base(config) is self._sphere:
             return sphere_phase_note(log) if float(config.contact.friction) > 0 else []
         options = self.options(config)
-        plant = scenario.controller_plant
-        context = plant.CreateDefaultContext()
-        x = []
-        for q in log["q"]:
-            plant.SetPositions(context, q)
-            x.append(scenario.controller.kinematics.evaluate(context).configuration[0])
-        x, t = np.array(x), log["t"]
-        notes = []
-        late = t >= t[-1] - min(1.0, 0.5 * t[-1])
-        command = float(np.mean(log["desired_velocity"][late, 0]))
-        speed = float(np.mean(log["velocity"][late, 0]))
-        if scenario.controller.mode.value == "velocity-force" and command > 0 and speed < 0.5 * command:
-            notes.append(f"the pad sticks (mean x-dot {100 * speed / command:.0f} % of the command over the last "
-                         f"{t[-1] - t[late][0]:.1f} s): velocity/force with this K_v would need a velocity error "
-                         "larger than the command to build the friction force mu F_n, and stalls; impedance/force "
-                         "(the default mode) slides (docs/impedance.md)")
-        on_patch = (x >= options.rough_start) & (x <= options.rough_end)
-        where = (f"rough patch (mu = {options.rough_friction:g}, x from {options.rough_start:g} to "
-                 f"{options.rough_end:g} m)")
-        if on_patch[-1]:
-            return notes + [f"the run ends with the pad on the {where}"]
-        if not on_patch.any():
-            side = "before" if x[-1] < options.rough_start else "past"
-            return notes + [f"the pad never reaches the {where}; it ends {side} it at x = {x[-1]:.3f} m"]
-        left = float(t[np.nonzero(on_patch)[0][-1] + 1])
-        after = float(t[-1]) - left
-        if after < 5 * design_time_constant:
-            steady = left + 10 * design_time_constant
-            return notes + [f"the run ends {after:.2f} s ({after / design_time_constant:.1f} design time constants) "
-                            f"after the pad "
-                    f"left the {where}: the released friction force is still accelerating it, so the final speed "
-                    f"error is that transient's; --duration {np.ceil(steady * 10) / 10:g} ends in steady sliding"]
-        return notes + [f"the run ends in steady sliding, {after:.2f} s after the pad left the {where}"]
+        return rough_patch_notes(scenario, log, design_time_constant, options.rough_start, options.rough_end,
+                                 options.rough_friction)
 
     # -- delegated to the base task -------------------------------------------------------------
     def add_robot(self, plant, config):
@@ -170,37 +212,9 @@ class Grinding(Task):
         return self._add_window_with_rough_patch(plant, config)
 
     def _add_window_with_rough_patch(self, plant, config):
-        """Three rigid hydroelastic boxes side by side (smooth, rough, smooth), lower faces at the
-        window's height, registered on the world body."""
         options = self.options(config)
-        height, start, end = options.window_height, options.rough_start, options.rough_end
-        mu, mu_rough = float(config.contact.friction), options.rough_friction
-        x_min, x_max = PANE_CENTER_X - PANE_SIZE[0] / 2, PANE_CENTER_X + PANE_SIZE[0] / 2
-        if not x_min < start < end < x_max:
-            raise ConfigError(f"grinding: the rough patch [{start}, {end}] must lie on the pane [{x_min}, {x_max}]")
-        if mu == 0:
-            mu_rough = 0.0                      # a frictionless copy (e.g. for the linearization)
-        elif not 0 < mu_rough < 2 * mu:
-            raise ConfigError(f"grinding: rough_friction must be in (0, 2 mu) = (0, {2 * mu}) so that a coefficient "
-                             f"of the patch combines with the pad's mu = {mu} to it; got {mu_rough}")
-        # 2 mu mu_patch / (mu + mu_patch) = mu_rough
-        mu_patch = mu_rough * mu / (2 * mu - mu_rough) if mu > 0 else 0.0
-        geometries = []
-        world = plant.world_body()
-        for name, (a, b), friction, color in [("pane_left", (x_min, start), mu, [0.6, 0.8, 0.95, 0.5]),
-                                              ("rough_patch", (start, end), mu_patch, [0.6, 0.4, 0.2, 0.9]),
-                                              ("pane_right", (end, x_max), mu, [0.6, 0.8, 0.95, 0.5])]:
-            box = Box(b - a, PANE_SIZE[1], PANE_SIZE[2])
-            X = RigidTransform([(a + b) / 2, 0.0, height + PANE_SIZE[2] / 2])
-            properties = ProximityProperties()
-            AddRigidHydroelasticProperties(properties)
-            AddContactMaterial(friction=CoulombFriction(friction, friction), properties=properties)
-            geometry = plant.RegisterCollisionGeometry(world, X, box, name, properties)
-            plant.RegisterVisualGeometry(world, X, box, name, np.array(color))
-            if name != "rough_patch":
-                geometries.append(geometry)
-        # The scenario sets contact.friction on the returned (smooth) geometries; the patch keeps its own.
-        return geometries
+        return add_window_with_rough_patch(plant, options.window_height, options.rough_start, options.rough_end,
+                                           float(config.contact.friction), options.rough_friction)
 
 
 # Sphere, defaults (mu = 0.5, 10 N, 0.05 m/s, impedance/force), measured on an 8 s run: breakaway at
