@@ -270,7 +270,7 @@ class ScenarioConfig:
     controller: str = "li-sastry"
     baseline: BaselineGains = field(default_factory=BaselineGains)
     mechanism: MechanismConfig = field(default_factory=MechanismConfig)
-    compensate_tangential_force: bool = True     # cancel the measured F_v in velocity/position-force mode
+    compensate_tangential_force: bool = False    # cancel the measured F_v in velocity/position-force mode (opt-in)
 
     def replace(self, **changes):
         """A copy with some top-level fields changed."""
