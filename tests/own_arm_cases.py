@@ -101,7 +101,6 @@ def config(custom_task, mode):
     """The task's default config in ``mode``: slide at SPEED along x pressing FORCE for five design
     time constants and 0.3 s more."""
     cfg = custom_task.default_config(desired_velocity=[SPEED, 0, 0, 0, 0], desired_force=[FORCE], mode=mode)
-    cfg.compensate_tangential_force = True       # the opt-in F_v cancellation, in every case alike
     mode = ControlMode.parse(mode)
     tau = design_time_constant(cfg.gains.matrices(5, 1, mode), mode)     # k = 5 velocity rows, m = 1
     cfg.duration = 5.0 * tau + 0.3

@@ -209,6 +209,7 @@ def test_wrist_sensor_reports_no_wrench_off_contact_only_with_the_tool_inertia_c
     the tool's inertial wrench unless compensated, then zero (to the SAP solve's accuracy)."""
     config = get_task("window-washing").default_config()
     config.sensor = WristSensorConfig(compensate_tool_inertia=compensate)
+    config.compensate_tangential_force = compensate      # allowed only with the tool's inertia removed
     scenario = build_scenario(config, with_loggers=False, sampled_plant_outputs=False)
     context = scenario.diagram.CreateDefaultContext()
     plant_context = scenario.plant_context(context)

@@ -99,3 +99,16 @@ def test_the_default_law_cancels_the_measured_tangential_force_and_the_drift_wit
     assert dut.unstable_modes == []
     assert dut.eigenvalues.real.max() < UNSTABLE_RATE                      # measured 1.7e-11 1/s
     assert dut.jacobian_check.agrees
+
+
+def test_a_wrist_sensor_without_tool_inertia_compensation_is_refused_with_the_cancellation():
+    from drake_hybrid.core.errors import ConfigError
+    from drake_hybrid.scenario.tasks import get_task
+
+    config = get_task("crank-turning").default_config()
+    assert config.compensate_tangential_force is False          # the crank keeps the paper's form
+    config.compensate_tangential_force = True
+    with pytest.raises(ConfigError, match="sensor.compensate_tool_inertia: true"):
+        config.validate()
+    config.sensor.compensate_tool_inertia = True
+    config.validate()

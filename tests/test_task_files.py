@@ -218,8 +218,6 @@ parameters:
   control_period: {values: [0.001, 0.004]}
 """
 TIMING_COLUMNS = {"wall_time", "simulation_wall_time", "linearization_wall_time", "cpu_time", "worker"}
-# The worst row's name: the file names its rows (v_x (m/s)); a Python CustomTask without labels does not.
-LABEL_COLUMNS = {"steady_velocity_row", "steady_force_row"}
 
 
 def _assert_same_rows(ours, theirs, marginal_noise=0.0):
@@ -230,7 +228,7 @@ def _assert_same_rows(ours, theirs, marginal_noise=0.0):
     assert len(ours) == len(theirs)
     for a, b in zip(ours, theirs):
         for name in a:
-            if name in TIMING_COLUMNS or name in LABEL_COLUMNS:
+            if name in TIMING_COLUMNS:
                 continue
             if marginal_noise and name.startswith("marginal_"):
                 assert abs(a[name]) < marginal_noise and abs(b[name]) < marginal_noise, (a["point"], name)
@@ -512,7 +510,7 @@ def ur10_plate_tasks(tmp_path_factory):
                                                         name="plate"),
         constraint_space=ConstraintSpace(plate, GivenVelocityProjection(chart, np.delete(np.eye(6), 2, axis=0))),
         start_pose=RigidTransform(RotationMatrix.MakeXRotation(np.pi), [0.7, 0.0, 0.12]),
-        joint_guess=task.spec.start.joint_guess))
+        joint_guess=task.spec.start.joint_guess, labels=task.labels()))
     python_config = python_task.default_config(desired_velocity=[0.05, 0, 0, 0, 0], desired_force=[10.0],
                                                duration=config.duration)
     return config, python_config
@@ -546,5 +544,8 @@ def test_a_file_with_an_arm_from_a_model_package_sweeps_on_two_workers(ur10_plat
     assert run.workers == "local:2"
     rows = read_results(tmp_path / "file" / "results.csv")
     assert all(not row["error"] for row in rows) and len({row["worker"] for row in rows}) == 2
-    # The 6-DOF loop's marginal modes come out at +-1e-8 1/s, different in the two runs.
-    _assert_same_rows(rows, read_results(tmp_path / "python" / "results.csv"), marginal_noise=1e-6)
+    # The marginal modes (zero in theory) of the one-period map come out between 1e-8 and 1.4e-4 1/s,
+    # different in the two runs: central differences (step 1e-5) resolve a multiplier mu near 1 to
+    # about 1e-7, log(mu)/h to about 1e-4 1/s at h = 1 ms (more for a repeated eigenvalue). Checked
+    # to be below ten times that in both, not compared.
+    _assert_same_rows(rows, read_results(tmp_path / "python" / "results.csv"), marginal_noise=1e-3)

@@ -112,8 +112,8 @@ def diagnose_unstable_modes(scenario, context, A, mode, designed, threshold=UNST
                     remedy = ("the law cancels the measured F_v, so the stiffness acts through the wrench path's "
                               "lag: raise sensor.bandwidth_hz, or use position-force or impedance-force mode")
                 else:
-                    remedy = ("compensate_tangential_force: true, position-force or impedance-force mode "
-                              "removes it")
+                    remedy = ("compensate_tangential_force: true (the default; off here), position-force or "
+                              "impedance-force mode removes it")
                 cause = (f"drift of the positions the velocity rows leave unregulated (velocity-force mode has no "
                          f"position feedback) along r_p direction {np.round(u, 2).tolist()}: a destabilizing contact "
                          f"stiffness of about {stiffness:.3g} (N/m or N m/rad along it) beyond the geometric F/rho "

@@ -214,8 +214,7 @@ def HybridController_(T):
             compensate_tangential_force: in velocity-force and position-force mode, cancel the
                 measured force along the velocity rows, F_v, which the paper's §3.1 assumes zero
                 (friction, a tessellated or curved workpiece); see ``law.tangential_compensation``.
-                Default False (the paper's form): opt-in until the discrete-time linearization's
-                finding is understood (docs/drake_notes.md). Impedance mode uses F_v as (3.2-6) says.
+                Default True; False is the paper's form (the crank and grinding tasks keep it). Impedance mode uses F_v as (3.2-6) says.
             fast_law: for T = float, evaluate the law through its compiled
                 float path (``fast_law``; the same law, equal to 1e-12) when
                 numba is available; False = the generic ``law.evaluate_law``.
@@ -224,7 +223,7 @@ def HybridController_(T):
         def _construct(self, plant, end_effector_frame, end_effector_point, constraint_space, gains=None,
                        mode=ControlMode.VELOCITY_FORCE, control_period=None, sample_lead=True, safety=None,
                        guarded_move=None, sampled_diagnostics=False, velocity_row_inertia=None,
-                       plant_time_step=0.0, compensate_tangential_force=False, fast_law=True, converter=None):
+                       plant_time_step=0.0, compensate_tangential_force=True, fast_law=True, converter=None):
             # Every argument as given, for scalar conversion (_construct_copy): one added later cannot
             # be forgotten there.
             arguments = locals()

@@ -117,4 +117,7 @@ def panda_config(task, duration=1.0, wrist_sensor=True, speed=0.05):
         gains=HybridGains(velocity=[16.0], position=[48.0], force_proportional=[0.5], force_integral=[15.0]))
     if wrist_sensor:
         config.sensor = WristSensorConfig()
+        # A real F/T sensor's driver reports the tool's own inertia too: the paper's form, which does
+        # not cancel F_v (scenario.config: compensate_tangential_force needs the tool's inertia removed).
+        config.compensate_tangential_force = False
     return config

@@ -270,7 +270,7 @@ class ScenarioConfig:
     controller: str = "li-sastry"
     baseline: BaselineGains = field(default_factory=BaselineGains)
     mechanism: MechanismConfig = field(default_factory=MechanismConfig)
-    compensate_tangential_force: bool = False    # cancel the measured F_v in velocity/position-force mode (opt-in)
+    compensate_tangential_force: bool = True     # cancel the measured F_v in velocity/position-force mode
 
     def replace(self, **changes):
         """A copy with some top-level fields changed."""
@@ -313,6 +313,11 @@ class ScenarioConfig:
         validate_simulator_config(self.simulator)
         self.contact.validate()
         self.sensor.validate()
+        if (self.compensate_tangential_force and isinstance(self.sensor, WristSensorConfig)
+                and not self.sensor.compensate_tool_inertia and self.controller == "li-sastry"):
+            raise ConfigError("compensate_tangential_force: true needs sensor.compensate_tool_inertia: true with a "
+                              "!WristSensorConfig (the wrist sensor reports the tool's own inertia as F_v, which "
+                              "the law would cancel a second time); set one of them")
         self.start.validate()
         self.model_error.validate()
         self.sensor_faults.validate()

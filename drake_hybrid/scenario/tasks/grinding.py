@@ -153,6 +153,9 @@ class Grinding(Task):
         config.contact.friction = 0.5
         config.contact.relaxation_time = PAD_RELAXATION_TIME
         config.start.force_integral = []
+        # The paper's velocity/force law against friction (docs/impedance.md compares the modes):
+        # cancelling the measured friction force would hide what this task shows.
+        config.compensate_tangential_force = False
         config.task_parameters.update({"rough_friction": 0.9, "rough_start": 1.05, "rough_end": 1.15})
         config.task_options = {"workpiece": "window"}
         return config
@@ -168,6 +171,9 @@ class Grinding(Task):
         config.contact.friction = 0.5
         config.contact.relaxation_time = PAD_RELAXATION_TIME
         config.start.force_integral = []
+        # The paper's velocity/force law against friction (docs/impedance.md compares the modes):
+        # cancelling the measured friction force would hide what this task shows.
+        config.compensate_tangential_force = False
         config.task_options.update(workpiece="sphere")
         return config
 
