@@ -8,9 +8,10 @@ the Jacobian check in the linearization's output. Nothing is tuned per robot but
 
 Known failures, kept visible (strict xfail: they fail the run the day they pass):
 - impedance-force on the 5 cm cylinder and sphere: the unit-mass impedance yields, as designed,
-  to the tangential force of the tessellated contact (F_v up to 0.2 N at 10 N: the facets' normals
-  are off the surface's by up to half a facet angle), whose stiffness along the surface moves the
-  impedance's roots (62-88 % here) and leaves 12-14 % velocity error;
+  to the measured tangential force, and SAP's contact on a curved workpiece has one with mu = 0: a
+  drag of 0.1-0.2 N at 10 N and 2 cm/s (relaxation time 0.01 or 0.002 s: the same; the "similar"
+  approximation: 0.02 N and 3.7 % velocity error instead of 12 %; docs/drake_notes.md), and the
+  tessellation's stiffness along the surface moves the impedance's roots (62-88 %);
 - position-force on the 5 cm sphere (and the xArm7's cylinder, not in this square): one designed
   root 7-11 % off (the tessellation's stiffness again, against K_p; the errors are within 0.9 %).
 """
