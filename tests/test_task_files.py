@@ -407,9 +407,10 @@ def _stop(process, timeout=10.0):
 
 
 @pytest.mark.slow                # starts a scheduler and two worker processes (~10-20 s)
-def test_cli_sweeps_a_task_file_on_an_external_dask_scheduler(built_in_sweep, tmp_path):
+def test_cli_sweeps_a_task_file_on_an_external_dask_scheduler(ur10_python_sweep, tmp_path):
     """``dask scheduler`` and ``dask worker --nworkers 2`` on 127.0.0.1 (no dashboards), then
-    ``drake-hybrid sweep FILE.yaml --scheduler tcp://...``: the built-in task's results. Every
+    ``drake-hybrid sweep models/tasks/ur10_plate.yaml --scheduler tcp://...`` (a task that is not
+    built in: the UR10 of a model package on a plate): the results of the same task built in Python. Every
     wait has a timeout and the processes are stopped in ``finally``, so a stuck cluster fails the
     test instead of hanging CI."""
     distributed = pytest.importorskip("distributed")
@@ -433,11 +434,12 @@ def test_cli_sweeps_a_task_file_on_an_external_dask_scheduler(built_in_sweep, tm
                                          "--local-directory", str(tmp_path / "workers")], **common))
         with distributed.Client(address, timeout=30) as client:
             client.wait_for_workers(2, timeout=90)
+        spec_text, python_rows = ur10_python_sweep
         spec = tmp_path / "spec.yaml"
-        spec.write_text(SWEEP)
+        spec.write_text(spec_text)
         sweep = subprocess.run(
             [sys.executable, "-c", "import sys; from drake_hybrid.cli import main; sys.exit(main(sys.argv[1:]))",
-             "sweep", str(WINDOW_FILE), "--grid", str(spec), "--out", str(tmp_path / "out"), "--scheduler", address,
+             "sweep", str(UR10_FILE), "--grid", str(spec), "--out", str(tmp_path / "out"), "--scheduler", address,
              "--no-progress"], cwd=tmp_path, capture_output=True, text=True, timeout=300)
         assert sweep.returncode == 0, sweep.stderr[-2000:]
         assert "4 of 4 points evaluated" in sweep.stdout
@@ -446,7 +448,7 @@ def test_cli_sweeps_a_task_file_on_an_external_dask_scheduler(built_in_sweep, tm
             _stop(process)
     rows = read_results(tmp_path / "out" / "results.csv")
     assert len({row["worker"] for row in rows}) == 2          # both worker processes took points
-    _assert_same_rows(rows, built_in_sweep)
+    _assert_same_rows(rows, python_rows, marginal_noise=1e-3)
 
 
 # -- expressions in poses (model directives, library shapes) ---------------------------------------
@@ -530,17 +532,26 @@ def test_a_file_with_an_arm_from_a_model_package_runs_as_the_same_task_in_python
     np.testing.assert_allclose(np.sort_complex(ours.match.partner), np.sort_complex(theirs.match.partner), rtol=1e-8)
 
 
+@pytest.fixture(scope="module")
+def ur10_python_sweep(ur10_plate_tasks, tmp_path_factory):
+    """(sweep spec text, results) of the UR10 plate task built in Python, swept serially.
+
+    The Python task's defaults have no desired values: the base gives the file's. With K_fp = 2 the
+    force error of this loop does not settle and runs that start equal to 1e-15 part by percents:
+    points with K_fp <= 0.5."""
+    text = SWEEP.replace("base:\n", "base:\n  desired_velocity.value[0]: 0.05\n"
+                         "  desired_force.value[0]: 10.0\n").replace("[0.5, 2.0]", "[0.25, 0.5]")
+    out = tmp_path_factory.mktemp("ur10_python")
+    run_sweep("ur10-plate-python", load_spec(text=text), out, workers=0, progress=False)
+    return text, read_results(out / "results.csv")
+
+
 @pytest.mark.slow
-def test_a_file_with_an_arm_from_a_model_package_sweeps_on_two_workers(ur10_plate_tasks, tmp_path):
+def test_a_file_with_an_arm_from_a_model_package_sweeps_on_two_workers(ur10_python_sweep, tmp_path):
     """The file's 4-point sweep on two worker processes (which know the UR10 only from the file's
     text) equals the Python task's serial sweep (a task registered in Python never reaches a worker)."""
-    # The Python task's defaults have no desired values: the base gives the file's. With K_fp = 2 the
-    # force error of this loop does not settle and runs that start equal to 1e-15 part by percents:
-    # points with K_fp <= 0.5.
-    spec = load_spec(text=SWEEP.replace("base:\n", "base:\n  desired_velocity.value[0]: 0.05\n"
-                                        "  desired_force.value[0]: 10.0\n").replace("[0.5, 2.0]", "[0.25, 0.5]"))
-    run_sweep("ur10-plate-python", spec, tmp_path / "python", workers=0, progress=False)
-    run = run_sweep("ur10-plate", spec, tmp_path / "file", workers=2, progress=False)
+    spec_text, python_rows = ur10_python_sweep
+    run = run_sweep("ur10-plate", load_spec(text=spec_text), tmp_path / "file", workers=2, progress=False)
     assert run.workers == "local:2"
     rows = read_results(tmp_path / "file" / "results.csv")
     assert all(not row["error"] for row in rows) and len({row["worker"] for row in rows}) == 2
@@ -548,4 +559,4 @@ def test_a_file_with_an_arm_from_a_model_package_sweeps_on_two_workers(ur10_plat
     # different in the two runs: central differences (step 1e-5) resolve a multiplier mu near 1 to
     # about 1e-7, log(mu)/h to about 1e-4 1/s at h = 1 ms (more for a repeated eigenvalue). Checked
     # to be below ten times that in both, not compared.
-    _assert_same_rows(rows, read_results(tmp_path / "python" / "results.csv"), marginal_noise=1e-3)
+    _assert_same_rows(rows, python_rows, marginal_noise=1e-3)
