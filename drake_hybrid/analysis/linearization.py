@@ -341,6 +341,59 @@ def _one_period_jacobian(step, x0, epsilon):
     return A, residual
 
 
+# A one-period map is only piecewise smooth with SAP and hydroelastic contact: at an equilibrium on
+# a kink, small central-difference steps can show a multiplier outside the unit circle that the
+# loop does not have. One found above this rate (1/s) is checked at a step ten times larger.
+STEP_CHECK_RATE = 0.01
+STEP_CHECK_FACTOR = 10.0
+
+
+@dataclass
+class StepCheck:
+    """The second look at an unstable-looking one-period map: its worst real part (1/s) at
+    ``epsilon`` and at ``larger_epsilon``; ``confirmed`` when both are above STEP_CHECK_RATE."""
+
+    epsilon: float
+    worst_real: float
+    larger_epsilon: float
+    larger_worst_real: float
+
+    @property
+    def confirmed(self):
+        return self.worst_real > STEP_CHECK_RATE and self.larger_worst_real > STEP_CHECK_RATE
+
+    def summary(self):
+        verdict = ("confirmed" if self.confirmed else
+                   "NOT confirmed: the one-period map is not smooth at this equilibrium (a contact-solver kink), "
+                   "so the linearization cannot decide; trust the simulation")
+        return (f"step check: worst real part {self.worst_real:.3g} 1/s at step {self.epsilon:g}, "
+                f"{self.larger_worst_real:.3g} 1/s at step {self.larger_epsilon:g}: {verdict}")
+
+    def as_dict(self):
+        return {"epsilon": self.epsilon, "worst_real": self.worst_real, "larger_epsilon": self.larger_epsilon,
+                "larger_worst_real": self.larger_worst_real, "confirmed": self.confirmed}
+
+
+def _map_eigenvalues(A, period):
+    """The continuous-time equivalents log(mu) / period of A's multipliers (|mu| floored: a
+    multiplier at 0, a pure delay, maps to a large negative real part instead of -inf)."""
+    multipliers = np.linalg.eigvals(A)
+    magnitude = np.maximum(np.abs(multipliers), np.finfo(float).tiny)
+    return multipliers, (np.log(magnitude) + 1j * np.angle(multipliers)) / period
+
+
+def _step_checked_jacobian(step, x0, epsilon, period):
+    """(A, residual, StepCheck or None): the one-period map's Jacobian at ``epsilon``; if it has a
+    rate above STEP_CHECK_RATE, the same at STEP_CHECK_FACTOR times the step, for the StepCheck."""
+    A, residual = _one_period_jacobian(step, x0, epsilon)
+    worst = float(np.max(_map_eigenvalues(A, period)[1].real))
+    if worst <= STEP_CHECK_RATE:
+        return A, residual, None
+    larger = STEP_CHECK_FACTOR * epsilon
+    A_larger, _ = _one_period_jacobian(step, x0, larger)
+    return A, residual, StepCheck(epsilon, worst, larger, float(np.max(_map_eigenvalues(A_larger, period)[1].real)))
+
+
 @dataclass
 class DiscreteLinearization:
     A: np.ndarray                    # Jacobian of the one-period map x_{k+1} = f(x_k)
@@ -353,6 +406,7 @@ class DiscreteLinearization:
     wall_time: float
     shifts: list = field(default_factory=list)       # the task's EigenvalueShift predictions
     shifted_match: EigenvalueMatch = None            # the match against the design with those shifts
+    step_check: StepCheck = None     # set when the map looked unstable: the check at a larger step
 
 
 def linearize_discrete(config, tolerance=0.05, epsilon=1e-6, settle_time=0.0, stages=None):
@@ -413,7 +467,7 @@ def linearize_discrete(config, tolerance=0.05, epsilon=1e-6, settle_time=0.0, st
     start = time.perf_counter()
     x0 = state_vector(context)
     with stages(f"{c.task}: linearizing (one-period map, {x0.size} states, {2 * x0.size} steps)"):
-        A, residual = _one_period_jacobian(step, x0, epsilon)
+        A, residual, step_check = _step_checked_jacobian(step, x0, epsilon, c.plant.time_step)
     wall = time.perf_counter() - start
     multipliers = np.linalg.eigvals(A)
     h = c.plant.time_step
@@ -425,7 +479,7 @@ def linearize_discrete(config, tolerance=0.05, epsilon=1e-6, settle_time=0.0, st
     shifts, shifted_match = _task_shifts(c.task, scenario, context, predicted, eigenvalues, tolerance)
     return DiscreteLinearization(A=A, multipliers=multipliers, eigenvalues=eigenvalues, period=h,
                                  equilibrium_residual=residual, predicted=predicted, match=match, wall_time=wall,
-                                 shifts=shifts, shifted_match=shifted_match)
+                                 shifts=shifts, shifted_match=shifted_match, step_check=step_check)
 
 
 def impedance_realization(scenario, log):
@@ -554,14 +608,12 @@ def linearize_sampled_loop(config, epsilon=1e-5, tolerance=0.05, periods=1):
         return get_state(context)
 
     start = time.perf_counter()
-    A, residual = _one_period_jacobian(one_period, get_state(base), epsilon)
+    A, residual, step_check = _step_checked_jacobian(one_period, get_state(base), epsilon, periods * h)
     wall = time.perf_counter() - start
-    multipliers = np.linalg.eigvals(A)
-    # Multipliers at 0 (the held torque is recomputed every tick) have no continuous counterpart:
-    # floor |mu| so that they map to a large negative real part instead of -inf.
-    magnitude = np.maximum(np.abs(multipliers), np.finfo(float).tiny)
-    eigenvalues = (np.log(magnitude) + 1j * np.angle(multipliers)) / (periods * h)
+    # Multipliers at 0 (the held torque is recomputed every tick) have no continuous counterpart.
+    multipliers, eigenvalues = _map_eigenvalues(A, periods * h)
     predicted = controller_prediction(scenario.controller)
     match = match_eigenvalues(predicted.designed, eigenvalues, tolerance=tolerance, marginal=predicted.marginal)
     return DiscreteLinearization(A=A, multipliers=multipliers, eigenvalues=eigenvalues, period=h,
-                                 equilibrium_residual=residual, predicted=predicted, match=match, wall_time=wall)
+                                 equilibrium_residual=residual, predicted=predicted, match=match, wall_time=wall,
+                                 step_check=step_check)

@@ -34,6 +34,10 @@ failure, the error text of every stage that failed (never dropped):
   time step: it is the verdict for continuous loops only.
 * ``stable_discrete``: the same test on log(mu) / h for the multipliers mu of
   the one-period map (``analysis.linearize_sampled_loop``): it sees the sampling.
+  A map that looks unstable is differentiated again at a ten times larger step
+  (``discrete_step_check``); if the instability is not there, the map has a kink
+  at the equilibrium (SAP), the linearization cannot decide, and the verdict
+  is empty (None): ``stable`` is then the simulation's.
 * ``stable``: the simulation's verdict and the linearization that models the
   simulated loop (discrete when the controller is sampled, continuous when
   it is not), both True; if one of them is missing, the other.
@@ -88,7 +92,7 @@ METRIC_COLUMNS = [
     "peak_force", "max_constraint_residual",
     "simulation_wall_time", "linearization_wall_time", "wall_time", "cpu_time",
 ]
-TEXT_COLUMNS = ["steady_velocity_row", "steady_force_row", "worker", "error"]
+TEXT_COLUMNS = ["steady_velocity_row", "steady_force_row", "discrete_step_check", "worker", "error"]
 RESULT_COLUMNS = VERDICT_COLUMNS + METRIC_COLUMNS + TEXT_COLUMNS
 RESULTS_FILE = "results.csv"
 
@@ -205,6 +209,10 @@ def evaluate_point(config_yaml, criteria=None, continuous=True, discrete=True, t
             row["spectral_radius"] = float(np.max(np.abs(linear.multipliers)))
             row["discrete_equilibrium_residual"] = linear.equilibrium_residual
             row["stable_discrete"] = row["worst_discrete_real"] < criteria.eigenvalue_margin
+            if linear.step_check is not None:
+                row["discrete_step_check"] = linear.step_check.summary()
+                if not row["stable_discrete"] and not linear.step_check.confirmed:
+                    row["stable_discrete"] = None        # a kink of the map, not a mode: no verdict
         except Exception as error:
             errors.append(_stage_error("discrete linearization", error))
     row["linearization_wall_time"] = time.perf_counter() - linearization_start
