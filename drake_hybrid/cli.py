@@ -254,6 +254,9 @@ def command_analyze(args):
     check = getattr(result, "jacobian_check", None)
     print(f"  {check.summary()}" if check is not None else
           "  Jacobian: central differences of the one-period map (no AutoDiffXd to check)")
+    step_check = getattr(result, "step_check", None)
+    if step_check is not None:
+        print(f"  {step_check.summary()}")
     if args.plot:
         figure = eigenvalue_figure(match, title=f"{config.task}, {controller_mode.value}")
         figure.savefig(args.plot, dpi=110)
@@ -271,7 +274,8 @@ def command_analyze(args):
                         "velocity_dim": k, "force_dim": m, "task": config.task,
                         "equilibrium_residual": result.equilibrium_residual, "wall_time": result.wall_time,
                         "jacobian_check": check.as_dict() if check is not None else {"used": "central differences"},
-                        "unstable_modes": [d.as_dict() for d in getattr(result, "unstable_modes", [])]})
+                        "unstable_modes": [d.as_dict() for d in getattr(result, "unstable_modes", [])],
+                        "step_check": step_check.as_dict() if step_check is not None else None})
         Path(args.json).write_text(json.dumps(payload, indent=2))
         print(f"  wrote {args.json}")
     return code
