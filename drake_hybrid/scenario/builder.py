@@ -140,21 +140,13 @@ def add_wrench_path(builder, wrench_output, sensor, period, sequence=None, tare=
 def build_scenario(config, meshcat=None, with_loggers=True, sampled_plant_outputs=None, controller_sample_lead=True):
     """Build the closed-loop diagram of ``config``. See the module docstring.
 
-    ``sampled_plant_outputs``: a discrete plant's contact results and reaction forces sampled at its
-    last step (Drake's ``use_sampled_output_ports``) or computed at the current state. Default: not
-    sampled under a sampled controller, so the measured wrench is the one the plant applies. The
-    sampled results are computed at the state before the last step while the body poses are
-    current, and the contact sensor's shift from the centroid to P across that gap (|v| h) adds a
-    false moment |f| |v| h: 1e-3 N m at 10 N, 0.1 m/s and 1 ms, which the law reads as F_v
-    (docs/drake_notes.md). A continuous controller keeps them sampled (no algebraic loop through the
-    actuation input). ``controller_sample_lead`` exists for ``analysis.linearize_discrete``."""
+    ``sampled_plant_outputs``: see ``scenario.plant.build_plant`` (default: sampled only under a
+    continuous controller). ``controller_sample_lead`` exists for ``analysis.linearize_discrete``."""
     if not isinstance(config, ScenarioConfig):
         raise TypeError(f"build_scenario: expected a ScenarioConfig, got {type(config).__name__}")
     task, mode, constraint_space, config = prepare_config(config)
     control_period = config.control_period if config.control_period > 0 else None
 
-    if sampled_plant_outputs is None:
-        sampled_plant_outputs = control_period is None
     builder = DiagramBuilder()
     plant, scene_graph, robot = build_plant(task, config, builder, sampled_outputs=sampled_plant_outputs)
     controller_plant, _ = build_controller_plant(task, config)

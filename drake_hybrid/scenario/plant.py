@@ -16,6 +16,7 @@ from pydrake.multibody.plant import AddMultibodyPlant, CoulombFriction, Multibod
 from pydrake.multibody.tree import SpatialInertia
 
 from drake_hybrid.core.errors import ConfigError, UnknownFrameError
+from drake_hybrid.scenario.config import ContactSensorConfig
 
 
 @dataclass
@@ -60,11 +61,20 @@ def _set_contact_properties(plant, scene_graph, geometry_ids, config, pad):
         scene_graph.AssignRole(plant.get_source_id(), geometry_id, properties, RoleAssign.kReplace)
 
 
-def build_plant(task, config, builder, time_step=None, sampled_outputs=True):
+def build_plant(task, config, builder, time_step=None, sampled_outputs=None):
     """Add the task's plant (robot, tool, workpiece, contact properties) to ``builder``.
 
-    ``sampled_outputs=False`` makes a discrete plant's contact results and reaction forces those
-    of the step being taken (used by the discrete-time linearization)."""
+    ``sampled_outputs``: a discrete plant's contact results and reaction forces sampled at its last
+    step (Drake's ``use_sampled_output_ports``) or those of the step being taken. Default: not
+    sampled when the contact sensor reads them under a sampled controller (``config.control_period``
+    > 0: no algebraic loop, the controller's actuation comes from its state), so that the measured
+    wrench is the one the plant applies: sampled contact results are computed at the state before
+    the last step while the body poses are current, and shifting the contact force from its
+    centroid to the end effector across that gap adds a false moment |f| |v| h
+    (docs/drake_notes.md). Otherwise sampled (Drake's default): a wrist sensor's reaction force acts
+    at a frame of the tool, with no such shift, and a continuous controller would close a loop."""
+    if sampled_outputs is None:
+        sampled_outputs = not (config.control_period > 0 and isinstance(config.sensor, ContactSensorConfig))
     time_step = config.plant.time_step if time_step is None else time_step
     plant_config = copy.copy(config.plant)
     plant_config.time_step = time_step
