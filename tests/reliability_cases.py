@@ -121,7 +121,10 @@ def rigid_contact_velocity_error(scenario, q, v, disturbance_torque, tangential_
     """The steady velocity error e = K_v^-1 E_p J P (delta tau + J^T E_p^T F_v) that a generalized
     force disturbance causes under rigid contact, with P = M^-1 - M^-1 A^T (A M^-1 A^T)^-1 A M^-1,
     A = E_f J (the constrained acceleration: the force loop's integral cancels the normal part)
-    and F_v the measured tangential wrench (the ball pad's tessellation moment, docs/drake_notes.md)."""
+    and F_v the measured tangential wrench (the pad's contact moment; 0 where the law cancels it,
+    ``compensate_tangential_force``, control.law.tangential_compensation)."""
+    if scenario.config.compensate_tangential_force and scenario.controller.mode.value != "impedance-force":
+        tangential_force = np.zeros_like(tangential_force)
     plant = scenario.controller_plant
     context = plant.CreateDefaultContext()
     plant.SetPositions(context, q)
