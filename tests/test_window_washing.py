@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 from run_checks import assert_rows_settled_within
 
+from pydrake.geometry import Role
 from pydrake.systems.framework import DiagramBuilder
 
 from drake_hybrid.analysis.linearization import design_time_constant, linearize_continuous, predicted_eigenvalues
@@ -126,6 +127,25 @@ def test_config_round_trips_through_yaml():
     changed = load_config(data="mode: position-force\ngains:\n  velocity: [3.0]\n", defaults=config)
     assert changed.mode == "position-force" and changed.gains.velocity == [3.0]
     assert changed.gains.force_integral == config.gains.force_integral
+
+
+def test_relaxation_times_reach_the_pad_and_the_workpiece():
+    """SAP adds the pad's and the workpiece's relaxation times (Drake's 0.1 s where one is unset):
+    contact.relaxation_time sets the pad's, contact.workpiece_relaxation_time the workpiece's."""
+    def relaxation_times(pad, workpiece):
+        config = TASK.default_config()
+        config.contact.relaxation_time, config.contact.workpiece_relaxation_time = pad, workpiece
+        plant, scene_graph, robot = build_plant(TASK, config, DiagramBuilder())
+        inspector = scene_graph.model_inspector()
+        found = {}
+        for geometry in inspector.GetAllGeometryIds(Role.kProximity):
+            properties = inspector.GetProximityProperties(geometry)
+            key = "pad" if geometry in robot.pad_geometries else "workpiece"
+            found.setdefault(key, []).append(properties.GetPropertyOrDefault("material", "relaxation_time", None))
+        return found
+
+    assert relaxation_times(0.01, 0.0) == {"pad": [0.01], "workpiece": [0.0]}
+    assert relaxation_times(-1.0, -1.0) == {"pad": [None], "workpiece": [None]}
 
 
 def test_start_off_the_window_is_rejected():

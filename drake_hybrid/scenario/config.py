@@ -114,6 +114,7 @@ class ContactConfig:
     pad_modulus: float = 5.0e6                   # Pa, the pad's hydroelastic modulus
     pad_dissipation: float = 10.0                # s/m, Hunt-Crossley dissipation (continuous, similar, lagged)
     relaxation_time: float = -1.0                # s, SAP's linear dissipation (discrete plants); < 0: Drake's default
+    workpiece_relaxation_time: float = -1.0      # s, the workpiece's; SAP adds the two (< 0: Drake's 0.1 s)
     friction: float = 0.0                        # Coulomb mu (static = dynamic) of pad and workpiece
     pad_resolution: float = 0.003                # m, mesh resolution hint of the pad (see docs: tessellation torque)
 

@@ -56,6 +56,10 @@ def _set_contact_properties(plant, scene_graph, geometry_ids, config, pad):
             properties.UpdateProperty("material", "hunt_crossley_dissipation", float(config.pad_dissipation))
             if config.relaxation_time >= 0:
                 properties.UpdateProperty("material", "relaxation_time", float(config.relaxation_time))
+        elif config.workpiece_relaxation_time >= 0:
+            # SAP's pair relaxation time is the sum of the two geometries' (Drake's default 0.1 s each):
+            # docs/drake_notes.md, "SAP's normal damping drags a pad over a curved workpiece".
+            properties.UpdateProperty("material", "relaxation_time", float(config.workpiece_relaxation_time))
         properties.UpdateProperty("material", "coulomb_friction",
                                   CoulombFriction(float(config.friction), float(config.friction)))
         scene_graph.AssignRole(plant.get_source_id(), geometry_id, properties, RoleAssign.kReplace)

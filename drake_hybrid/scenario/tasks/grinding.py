@@ -36,7 +36,8 @@ PANE_SIZE = (3.0, 0.5, 0.02)       # models/window.sdf
 PANE_CENTER_X = 1.0
 # SAP's linear (Kelvin-Voigt) dissipation of the pad: a damped pad, as real grinding and polishing
 # pads are. Left at Drake's default, the pad's contact mode rings for about 0.2 s after each jump of
-# the friction force (docs/impedance.md).
+# the friction force (docs/impedance.md). Drake adds the workpiece's relaxation time (0.1 s, not set
+# here) to this one, so the pair has 0.102 s. That is what damps the ringing (docs/drake_notes.md).
 PAD_RELAXATION_TIME = 0.002
 
 
