@@ -166,6 +166,10 @@ def main(argv=None):
         f"**{len(figures) - len(failed) - sum(f.passed is None for f in figures)} pass, {len(failed)} fail, "
         f"{sum(f.passed is None for f in figures)} reference.**",
         "",
+        *[f"- Known failure, {fault} ({magnitude}), {what}: {why}."
+          for (fault, magnitude, what), why in reliability.KNOWN_FAILURES.items()
+          if any((f.fault, f.magnitude, f.figure) == (fault, magnitude, what) and f.passed is False for f in figures)],
+        "",
         "![contact loss](figures/reliability_contact_loss.png)",
         "",
         "*The window moves up 5 mm in 10 ms at t = 0.3 s: the force drops, the supervisor declares the "

@@ -4,7 +4,9 @@ The Panda (example-robot-data) presses its ball pad with 10 N on a horizontal cy
 5 cm. In velocity-force mode the positions along the velocity rows are unregulated by design (zero
 eigenvalues); the tessellated pad and cylinder give a tangential contact stiffness slightly
 different from the geometric F/rho that the law cancels, which moves one of those zeros to
-+0.76 1/s here (docs/drake_notes.md). Position-force mode regulates it.
++0.20 1/s here in the paper's form (+0.76 with a 5 mm drum mesh; docs/drake_notes.md). Position-force
+mode regulates it; the default law cancels the measured F_v (control.law.tangential_compensation),
+which removes it.
 """
 
 import importlib.metadata
@@ -75,12 +77,13 @@ def test_velocity_mode_drift_on_a_small_drum_is_named_with_its_cause(small_drum_
     dut = linearize_continuous(config_for(small_drum_task, "velocity-force", compensate_tangential_force=False))
     assert len(dut.unstable_modes) == 1
     (mode,) = dut.unstable_modes
-    assert mode.eigenvalue.real == pytest.approx(0.759, abs=0.01)          # measured 0.7593 1/s
+    # measured 0.2025 1/s with the default 2.5 mm mesh of this drum (0.7593 with a 5 mm one)
+    assert mode.eigenvalue.real == pytest.approx(0.2025, abs=0.01)
     assert mode.eigenvalue.imag == 0.0
     assert mode.dominant == "velocity rows" and mode.shares["velocity rows"] > 0.9
     assert "drift of the positions the velocity rows leave unregulated" in mode.likely_cause
     assert "tessellated" in mode.likely_cause and mode.stiffness > 0
-    assert "unstable mode 0.759" in mode.summary()
+    assert "unstable mode 0.203" in mode.summary()
     assert json.loads(json.dumps(mode.as_dict()))["dominant"] == "velocity rows"
     # Every other mode is below the threshold.
     assert np.sort(dut.eigenvalues.real)[-2] < UNSTABLE_RATE

@@ -44,8 +44,12 @@ WINDOW = get_task("window-washing")
 def test_fault_case_meets_its_criteria(case):
     figures = case(quick=True)
     assert figures
-    failed = [figure.row() for figure in figures if figure.passed is False]
+    failed = [figure.row() for figure in figures if figure.passed is False
+              and (figure.fault, figure.magnitude, figure.figure) not in reliability.KNOWN_FAILURES]
     assert not failed, failed
+    for figure in figures:                       # a known failure is kept visible: it must still fail
+        if (figure.fault, figure.magnitude, figure.figure) in reliability.KNOWN_FAILURES:
+            assert figure.passed is False, (figure.row(), "passes now: remove it from KNOWN_FAILURES")
     for figure in figures:
         assert math.isfinite(figure.value), figure.row()
 

@@ -125,7 +125,7 @@ class ShapeSpec:
     size: List[float] = field(default_factory=list)   # m (see the class docstring)
     X_WG: Transform = field(default_factory=Transform)   # the shape's pose in the world (m, deg)
     name: str = "workpiece"                      # geometry name (the index is appended)
-    resolution_hint: float = 0.005               # m
+    resolution_hint: float = 0.0                 # m; 0: the library's, tied to the curvature (custom.default_resolution)
 
 
 @dataclass
@@ -474,8 +474,9 @@ def _workpiece_adder(spec, path, where, hooks, packages):
         size = SHAPES[shape.shape][1]
         if len(shape.size) != size or not all(0 < v < math.inf for v in shape.size):
             raise ConfigError(f"{name}.size: a {shape.shape} needs {size} positive numbers (m), got {shape.size}")
-        if not 0 < shape.resolution_hint < math.inf:
-            raise ConfigError(f"{name}.resolution_hint must be positive (m), got {shape.resolution_hint}")
+        if not 0 <= shape.resolution_hint < math.inf:
+            raise ConfigError(f"{name}.resolution_hint must be positive (m), or 0 for the library's default, "
+                              f"got {shape.resolution_hint}")
 
     def add_workpiece(plant, config):
         geometries = []
@@ -486,7 +487,8 @@ def _workpiece_adder(spec, path, where, hooks, packages):
         for index, shape in enumerate(workpiece.shapes):
             kind = SHAPES[shape.shape][0]
             geometries += add_rigid_workpiece(plant, kind(*shape.size), shape.X_WG.GetDeterministicValue(),
-                                              name=f"{shape.name}_{index}", resolution_hint=shape.resolution_hint)
+                                              name=f"{shape.name}_{index}",
+                                              resolution_hint=shape.resolution_hint or None)
         if add_by_hook is not None:
             geometries += list(add_by_hook(plant, config))
         return geometries
