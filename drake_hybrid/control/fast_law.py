@@ -175,12 +175,7 @@ def _chart_block(chart):
 
 def pack_constants(controller, law, space):
     """(reals, ints) of ``fast_kernels`` for a HybridController and its LawConstants, or None (the
-    generic law runs). The kernels do not have two later lines of ``law``: the mechanism force
-    (``velocity_row_inertia``) and the discrete-step damping compensation (joint damping in the
-    model on a discrete plant); a controller that uses either runs the generic law."""
-    if law.velocity_row_inertia is not None or (law.plant_time_step > 0 and law.joint_damping is not None
-                                                and np.any(law.joint_damping)):
-        return None
+    generic law runs: a chart the kernels do not know)."""
     chart = space.chart
     kind, chart_values = _chart_block(chart)
     if kind is None:
@@ -194,9 +189,14 @@ def pack_constants(controller, law, space):
                         space.invertibility_tolerance, chart_tolerance, gains.constraint_frequency,
                         gains.null_space_damping, law.singularity_threshold, law.max_joint_acceleration,
                         law.approach_speed or 0.0, law.approach_gain or 0.0])
+    mechanism = law.velocity_row_inertia is not None
+    # damping.damping_compensation's condition: a discrete plant and damping in the model.
+    damped = law.plant_time_step > 0 and law.joint_damping is not None and bool(np.any(law.joint_damping))
     blocks = [gains.velocity, gains.position, gains.force_proportional, gains.force_integral, law.force_controlled,
               law.actuation_from_torque, law.effort_limits, controller._end_effector_point, chart_values,
-              projection.basis if kernel else np.zeros(0), projection._half_lower if kernel else np.zeros(0)]
+              projection.basis if kernel else np.zeros(0), projection._half_lower if kernel else np.zeros(0),
+              law.velocity_row_inertia if mechanism else np.zeros(0),
+              law.plant_time_step * np.asarray(law.joint_damping, dtype=float) if damped else np.zeros(0)]
     reals, offsets, position = [scalars], [], scalars.size
     for block in blocks:
         block = np.ascontiguousarray(block, dtype=float).reshape(-1)
@@ -207,7 +207,9 @@ def pack_constants(controller, law, space):
     ints[:kernels.I_GUARDED + 1] = [n, d, m, k, kind, int(law.mode.integrates_position),
                                     int(law.mode is ControlMode.IMPEDANCE_FORCE), int(kernel), int(law.anti_windup),
                                     int(law.approach_speed is not None)]
-    ints[kernels.I_OFFSET_KV:kernels.I_OFFSET_HALF_LOWER + 1] = offsets
+    ints[kernels.I_OFFSET_KV:kernels.I_OFFSET_HALF_LOWER + 1] = offsets[:11]
+    ints[kernels.I_OFFSET_MECHANISM], ints[kernels.I_OFFSET_DAMPING] = offsets[11:]
+    ints[kernels.I_MECHANISM], ints[kernels.I_DAMPING] = int(mechanism), int(damped)
     ints[kernels.I_CONFIGURATION] = chart.configuration_size
     ints[kernels.I_COMPENSATE_TANGENTIAL] = int(law.compensate_tangential_force)
     return np.concatenate(reals), ints
