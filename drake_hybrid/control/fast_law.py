@@ -279,16 +279,16 @@ class FastLaw:
             return None
         return cls(load_generated(source), constants[0], constants[1], controller)
 
-    def evaluate(self, plant_context, forces, integrals, desired_velocity, desired_acceleration, desired_force,
+    def evaluate(self, plant_context, forces, v, integrals, desired_velocity, desired_acceleration, desired_force,
                  wrench, phase):
-        """The ControlSolution, or None when the generic law must run (it raises or handles the case)."""
+        """The ControlSolution, or None when the generic law must run (it raises or handles the case);
+        ``v``: the plant context's generalized velocities (from the state the controller set)."""
         plant = self._plant
         X = plant.CalcRelativeTransform(plant_context, self._world, self._frame).GetAsMatrix34()
         J_g = plant.CalcJacobianSpatialVelocity(plant_context, JacobianWrtVariable.kV, self._frame, self._point,
                                                 self._world, self._world)
         A_bias = plant.CalcBiasSpatialAcceleration(plant_context, JacobianWrtVariable.kV, self._frame, self._point,
                                                    self._world, self._world).get_coeffs()
-        v = plant.GetVelocities(plant_context)
         M, base = self._empty_matrix, self._empty_vector
         if self._needs_mass_matrix:
             M = plant.CalcMassMatrix(plant_context)
@@ -346,6 +346,15 @@ class CompiledSolution:
 
     actuation, velocity_error, force_error, constraint_value, projected_velocity, force, tangential_force, \
         force_integral_rate, position_error_rate = (_field(i) for i in range(9))
+
+    def diagnostics_vector(self):
+        """law.ControlSolution.diagnostics_vector: one slice of the output (its layout is the same)."""
+        return self.out[self.slices[1].start:self.slices[6].stop]
+
+    def integral_rates_vector(self, size):
+        """law.ControlSolution.integral_rates_vector: one slice of the output."""
+        start = self.slices[7].start
+        return self.out[start:start + size]
 
     @property
     def wrench_valid(self):
