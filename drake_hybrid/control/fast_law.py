@@ -43,6 +43,7 @@ from drake_hybrid.core.projections import GivenVelocityProjection, KernelVelocit
 from drake_hybrid.core.symbolic import straight_line_program, time_derivative
 
 from drake_hybrid.control import fast_kernels as kernels
+from drake_hybrid.control.fast_kernels import DONE, NEEDS_BASE_TORQUE, NEEDS_INVERSE_DYNAMICS
 
 _WARNED = []
 _FUNCTIONS = "sin, cos, tan, asin, acos, atan, atan2, sqrt, exp, log, sinh, cosh, tanh, pi, e as E"
@@ -261,6 +262,8 @@ class FastLaw:
         starts = np.cumsum([0, n, k, m, m, k, m, k, m, k])
         self._slices = [slice(a, b) for a, b in zip(starts[:-1], starts[1:])]
         self._scalars = int(starts[-1])
+        size = self._scalars + kernels.OUTPUT_SCALARS + 2 * n                 # kernels.output_size
+        self._joint_acceleration_slice = slice(size - 2 * n, size - n)      # q-ddot (n = d), then tau_f
         self.compile_seconds = None
         self.fallbacks = 0
         self.disabled = False
@@ -283,17 +286,18 @@ class FastLaw:
                  wrench, phase):
         """The ControlSolution, or None when the generic law must run (it raises or handles the case);
         ``v``: the plant context's generalized velocities (from the state the controller set)."""
-        plant = self._plant
-        X = plant.CalcRelativeTransform(plant_context, self._world, self._frame).GetAsMatrix34()
-        J_g = plant.CalcJacobianSpatialVelocity(plant_context, JacobianWrtVariable.kV, self._frame, self._point,
-                                                self._world, self._world)
-        A_bias = plant.CalcBiasSpatialAcceleration(plant_context, JacobianWrtVariable.kV, self._frame, self._point,
-                                                   self._world, self._world).get_coeffs()
+        plant, world, frame, point = self._plant, self._world, self._frame, self._point
+        X = plant.CalcRelativeTransform(plant_context, world, frame).GetAsMatrix34()
+        J_g = plant.CalcJacobianSpatialVelocity(plant_context, JacobianWrtVariable.kV, frame, point, world, world)
+        A_bias = plant.CalcBiasSpatialAcceleration(plant_context, JacobianWrtVariable.kV, frame, point, world,
+                                                   world).get_coeffs()
         M, base = self._empty_matrix, self._empty_vector
         if self._needs_mass_matrix:
             M = plant.CalcMassMatrix(plant_context)
         if self._redundant:
             base = plant.CalcInverseDynamics(plant_context, self._zero_acceleration, forces)
+        phase = int(phase)
+        reals, ints, terms = self.reals, self.ints, self._terms
         if self.compile_seconds is None:
             # The first call compiles (or loads from the cache); a constraint numba cannot compile
             # leaves this controller on the generic law, with a one-line warning.
@@ -301,9 +305,9 @@ class FastLaw:
                 return None
             start = time.perf_counter()
             try:
-                self._terms_into(self._terms, X, J_g, A_bias, v, self.reals, self.ints)
-                self._law(self._terms, v, desired_velocity, desired_acceleration, desired_force, wrench, integrals,
-                          int(phase), M, base, self.reals, self.ints)
+                self._terms_into(terms, X, J_g, A_bias, v, reals, ints)
+                self._law(terms, v, desired_velocity, desired_acceleration, desired_force, wrench, integrals, phase, M,
+                          base, reals, ints)
             except Exception as error:
                 self.disabled = True
                 message = " ".join(str(error).split())[:200]
@@ -311,25 +315,21 @@ class FastLaw:
                               f"{message}); this controller runs the generic law", stacklevel=2)
                 return None
             self.compile_seconds = time.perf_counter() - start
-        if self._terms_into(self._terms, X, J_g, A_bias, v, self.reals, self.ints) != 0:
+        if self._terms_into(terms, X, J_g, A_bias, v, reals, ints) != 0:
             self.fallbacks += 1                       # the chart's singularity: the generic law raises
             return None
-        status, out = self._law(self._terms, v, desired_velocity, desired_acceleration, desired_force, wrench,
-                                integrals, int(phase), M, base, self.reals, self.ints)
-        if status == kernels.NEEDS_INVERSE_DYNAMICS:
-            n = self._zero_acceleration.size
-            torque = plant.CalcInverseDynamics(plant_context, out[out.size - 2 * n:out.size - n], forces)
-            status = self._finish(out, torque, base, self.reals, self.ints)
-            if status == kernels.NEEDS_BASE_TORQUE:
+        status, out = self._law(terms, v, desired_velocity, desired_acceleration, desired_force, wrench, integrals,
+                                phase, M, base, reals, ints)
+        if status == NEEDS_INVERSE_DYNAMICS:
+            torque = plant.CalcInverseDynamics(plant_context, out[self._joint_acceleration_slice], forces)
+            status = self._finish(out, torque, base, reals, ints)
+            if status == NEEDS_BASE_TORQUE:
                 base = plant.CalcInverseDynamics(plant_context, self._zero_acceleration, forces)
-                status = self._finish(out, torque, base, self.reals, self.ints)
-        if status != kernels.DONE:
+                status = self._finish(out, torque, base, reals, ints)
+        if status != DONE:
             self.fallbacks += 1
             return None
-        return self._solution(out, phase)
-
-    def _solution(self, out, phase):
-        return CompiledSolution(out, int(phase), self._slices, self._scalars)
+        return CompiledSolution(out, phase, self._slices, self._scalars)
 
 
 def _field(index):
