@@ -23,7 +23,9 @@ controller at the same state shows how much a simulation step's cold caches cost
 The sampled controller reads the wrench at k h - delta, before its new torque; a discrete plant
 with unsampled output ports answers with a contact solve at the old torque, and the step at k h
 solves again with the new one: two SAP solves per step where the sampled ports need one
-(counted with gdb in docs/drake_notes.md). That read's solve is ``contact results``.
+(counted with gdb in docs/drake_notes.md). Both are in ``contact results``: the tick's read, and
+the wrench logger's read at k h, which is the step's own solve (the step reuses it; warm-started
+from the tick's solution at the same state, it is the cheaper of the two).
 """
 
 import time

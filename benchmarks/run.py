@@ -172,9 +172,10 @@ def markdown(results):
               "same calculation at the same state timed alone in a loop, so the difference is what the contact "
               "solver's eviction of the CPU caches costs it. Contact results: the plant's contact results read by "
               "the sensor, twice per step: at k h - delta by the controller's tick (a SAP solve at the held torque) "
-              "and at k h by the wrench logger (the step's own solve, which the step then reuses); with unsampled "
-              "output ports the tick's read is a second SAP solve per step that the plant alone does not make "
-              "(docs/drake_notes.md). Rest: the plant's step beyond that, the simulator, the loggers.", "",
+              "and at k h by the wrench logger (the step's own solve, which the step then reuses, warm-started from the "
+              "tick's); with unsampled output ports the tick's read is a second SAP solve per step that the plant "
+              "alone does not make (docs/drake_notes.md). Rest: the plant's step beyond that, the simulator, the "
+              "loggers.", "",
               "## Accuracy and linearization, per task and mode", "",
               "| task | mode | final velocity error % | final force error % | max after 5 tau (v / F) % | "
               "max / final abs C | eigenvalue deviation % | matched | Linearize s | whole linearization s |",
