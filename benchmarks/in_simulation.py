@@ -21,7 +21,8 @@ parts add up to the step. Timing costs about 0.3 us per wrapped call, charged to
 controller at the same state shows how much a simulation step's cold caches cost the law.
 
 The sampled controller reads the wrench at k h - delta, before its new torque; a discrete plant
-with unsampled output ports answers with a contact solve at the old torque, and the step at k h
+with unsampled output ports (``build_plant`` gives them to the contact sensor; a wrist sensor keeps
+the sampled ones, so the crank's reads cost no solve) answers with a contact solve at the old torque, and the step at k h
 solves again with the new one: two SAP solves per step where the sampled ports need one
 (counted with gdb in docs/drake_notes.md). Both are in ``contact results``: the tick's read, and
 the wrench logger's read at k h, which is the step's own solve (the step reuses it; warm-started
