@@ -75,3 +75,20 @@ def test_torque_replay_reproduces_the_closed_loop_motion_exactly():
     rtf, contacts, drift = plant_alone_rtf(config, "replay", run.log)
     assert drift == 0.0
     assert contacts >= 1 and rtf > 0
+
+
+def test_the_in_simulation_profile_times_one_law_evaluation_and_two_contact_reads_per_step():
+    """The closed loop's parts are timed where they run (one law evaluation per step with sampled
+    diagnostics; the contact results read at the tick and by the wrench logger), the parts do not
+    exceed the step, and the timing wrappers are gone from the classes afterwards."""
+    import in_simulation
+
+    from drake_hybrid.control.controller import HybridController_
+
+    original = HybridController_[float].__dict__["_calc_solution"]
+    result = in_simulation.measure_task("window-washing", duration=0.05)
+    parts = result["parts"]
+    assert parts["law"]["per_step_calls"] == 1.0 and parts["update"]["per_step_calls"] == 1.0
+    assert parts["contact results"]["per_step_calls"] == 2.0
+    assert result["rest_per_step_us"] > 0
+    assert HybridController_[float].__dict__["_calc_solution"] is original

@@ -1,14 +1,18 @@
 """The compiled float law (control/fast_law.py) is the law of control/law.py: every output port and
 diagnostic equal to 1e-12 on every built-in task in every mode, a redundant arm, random states,
-near the singularity bound, in saturation and in the guarded move."""
+near the singularity bound, in saturation and in the guarded move, and with the law's later lines
+(the mechanism force, the discrete step's damping compensation, the tangential compensation)."""
 
 import warnings
 
 import numpy as np
 import pytest
 
+from pydrake.multibody.plant import MultibodyPlant
+
 from drake_hybrid.control import fast_kernels, fast_law
 from drake_hybrid.control.controller import HybridController
+from drake_hybrid.control.damping import joint_damping
 from drake_hybrid.control.gains import ControlMode
 from drake_hybrid.control.safety import SafetyConfig
 from drake_hybrid.scenario.builder import build_scenario
@@ -128,6 +132,47 @@ def test_both_paths_agree_near_the_singularity_bound_in_saturation_and_off_the_s
             seen["clipped"] += diagnostics["actuator_clipped"]
         assert fast.fast_law.fallbacks == 0
     assert all(count > 0 for count in seen.values()), seen
+
+
+def _damped_start(name, start, rng, joints=None):
+    """The task's controller plant rebuilt with viscous damping B in every arm joint (b in 1..20)."""
+    _, _, _, space, gains, q0 = start
+    task = TASKS[name if joints is None else "window-washing"]
+    config = task.default_config()
+    if joints is not None:
+        config.task_parameters = dict(config.task_parameters, joints=joints)
+    plant = MultibodyPlant(0.0)
+    robot = task.add_robot(plant, config)
+    for index in plant.GetJointIndices(robot.arm):
+        joint = plant.get_joint(index)
+        if joint.num_velocities() == 1:
+            joint.set_default_damping(float(rng.uniform(1.0, 20.0)))
+    plant.Finalize()
+    return plant, robot.end_effector_frame, robot.end_effector_point, space, gains, q0
+
+
+@pytest.mark.filterwarnings("ignore::drake_hybrid.control.damping.JointDampingWarning")
+@pytest.mark.parametrize("compensate_tangential_force", [False, True])
+@pytest.mark.parametrize("mode", MODES)
+def test_both_paths_agree_with_the_mechanism_force_the_damping_compensation_and_the_tangential_force(
+        task, mode, compensate_tangential_force, rng):
+    """law.mechanism_force (an I_v, symmetric positive definite), damping.damping_compensation (joint
+    damping in the model, a plant step h = 1 ms) and law.tangential_compensation on or off: the
+    controller runs compiled (no fallback) and equals the generic law."""
+    name, start = task
+    damped = _damped_start(name, start, rng, joints=4 if name == "window-washing-4r" else None)
+    assert np.all(joint_damping(damped[0]) > 0)
+    k = start[3].velocity_size
+    root = rng.normal(size=(k, k))
+    inertia = root @ root.T + 0.1 * np.eye(k)
+    fast, generic = _pair(damped, mode, velocity_row_inertia=inertia, plant_time_step=1e-3,
+                          compensate_tangential_force=compensate_tangential_force, guarded_move=Guarded())
+    assert fast.fast_law.ints[fast_kernels.I_MECHANISM] == 1 and fast.fast_law.ints[fast_kernels.I_DAMPING] == 1
+    for i in range(4):
+        inputs = _random_inputs(fast, start[5], rng, spread=0.02)
+        integrals = rng.normal(scale=0.05, size=fast.integral_state_slices()[1].stop)
+        _compare(fast, generic, inputs, integrals, f"{name} {mode} compensate {compensate_tangential_force} state {i}")
+    assert fast.fast_law.fallbacks == 0
 
 
 def test_the_first_tick_reports_its_compile_or_cache_load_time(task):

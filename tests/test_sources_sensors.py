@@ -146,3 +146,29 @@ def test_contact_sensor_sign_and_shift():
     wrench = sensor.get_output_port(0).Eval(sensor.GetMyContextFromRoot(context))
     np.testing.assert_allclose(wrench[3:], [0, 0, -10.0], atol=1e-6)
     np.testing.assert_allclose(wrench[:3], 0, atol=1e-3)              # through the pad centre (ball pad)
+
+
+@pytest.mark.parametrize("task_name, contact_model", [("window-washing", "hydroelastic_with_fallback"),
+                                                      ("window-washing", "point"), ("crank-turning", None)])
+def test_float_sensors_equal_their_generic_calculation(task_name, contact_model):
+    """The float sensors' plain-float arithmetic (``_calc_wrench_float``) gives the generic (float and
+    AutoDiffXd) calculation's wrench to rounding, while pressing: the contact sensor on hydroelastic and
+    point contact, the wrist sensor (crank) with its tool weight and the shift from the weld to P."""
+    from pydrake.systems.analysis import Simulator
+    from pydrake.systems.framework import BasicVector
+
+    config = get_task(task_name).default_config()
+    if contact_model is not None:
+        config.plant.contact_model = contact_model
+    scenario = build_scenario(config, with_loggers=False)
+    simulator = Simulator(scenario.diagram)
+    set_initial_conditions(scenario, simulator.get_mutable_context())
+    simulator.AdvanceTo(0.02)
+    sensor = scenario.sensor
+    context = sensor.GetMyContextFromRoot(simulator.get_context())
+    fast, generic = BasicVector(6), BasicVector(6)
+    sensor._calc_wrench_float(context, fast)
+    sensor._calc_wrench(context, generic)
+    assert np.linalg.norm(generic.value()[3:]) > 1.0                      # in contact
+    np.testing.assert_allclose(fast.value(), generic.value(), rtol=1e-12, atol=1e-12 * np.abs(generic.value()).max())
+    np.testing.assert_array_equal(sensor.get_output_port(0).Eval(context), fast.value())

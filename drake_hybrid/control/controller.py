@@ -391,9 +391,9 @@ def HybridController_(T):
             cache = abstract_value.get_mutable_value()
             plant_context = cache.plant_context
             # The plant at the estimated state, its force elements (gravity, joint damping, ...), the law.
-            set_plant_state(self, self._plant, self._state_port, context, plant_context)
+            state = set_plant_state(self, self._plant, self._state_port, context, plant_context)
             self._plant.CalcForceElementsContribution(plant_context, cache.forces)
-            cache.solution = self._evaluate_law(context, plant_context, cache.forces)
+            cache.solution = self._evaluate_law(context, plant_context, cache.forces, state)
 
         def _contact_phase(self, context):
             if self._phase_port is None:
@@ -411,22 +411,26 @@ def HybridController_(T):
                     raise ValueError(f"HybridController: input '{port.get_name()}' has non-finite entries "
                                      f"{value(command).tolist()}")
 
-        def _evaluate_law(self, context, plant_context, forces):
-            """Read each input once and run the law (control/law.py) at ``context``."""
+        def _evaluate_law(self, context, plant_context, forces, state):
+            """Read each input once and run the law (control/law.py) at ``context`` (``state``: the
+            estimated [q; v] already set in ``plant_context``)."""
             desired_velocity = self._velocity_port.Eval(context)
             desired_acceleration = self._acceleration_port.Eval(context)
             desired_force = self._force_port.Eval(context)
+            integrals = self._integrals(context)
+            wrench = self._wrench_port.Eval(context)
+            phase = self._contact_phase(context)
             solution = None
             if self.fast_law is not None:              # None: a check failed, the generic law raises (or copes)
-                solution = self.fast_law.evaluate(
-                    plant_context, forces, self._integrals(context), desired_velocity, desired_acceleration,
-                    desired_force, self._wrench_port.Eval(context), self._contact_phase(context))
+                solution = self.fast_law.evaluate(plant_context, forces, state[self.num_joints:], integrals,
+                                                  desired_velocity, desired_acceleration, desired_force, wrench,
+                                                  phase)
             if solution is None:
                 self._check_finite_commands(desired_velocity, desired_acceleration, desired_force)
                 solution = evaluate_law(
                     self._law, self.constraint_space, self.kinematics.evaluate(plant_context), self._plant,
-                    plant_context, forces, self._integrals(context), desired_velocity, desired_acceleration,
-                    desired_force, self._wrench_port.Eval(context), self._contact_phase(context))
+                    plant_context, forces, integrals, desired_velocity, desired_acceleration, desired_force, wrench,
+                    phase)
             if solution.singularity_damping > 0:
                 warn_singularity(self, solution.smallest_singular_value, self._max_joint_acceleration)
             return solution
@@ -450,8 +454,7 @@ def HybridController_(T):
 
         def _store_diagnostics(self, solution, discrete_state):
             if self.sampled_diagnostics:
-                discrete_state.get_mutable_vector(1).SetFromVector(np.concatenate(
-                    [getattr(solution, name) for name in self._diagnostic_slices]))
+                discrete_state.get_mutable_vector(1).SetFromVector(solution.diagnostics_vector())
 
         def _calc_position_error(self, context, output):
             m, k = self.force_size, self.velocity_size
@@ -464,19 +467,12 @@ def HybridController_(T):
             if self.control_period is not None or self._integrated_size == 0:
                 return
             solution = self._solution(context)
-            rates = [solution.force_integral_rate]
-            if self.mode.integrates_position:
-                rates.append(solution.position_error_rate)
-            derivatives.get_mutable_vector().SetFromVector(np.concatenate(rates))
+            derivatives.get_mutable_vector().SetFromVector(solution.integral_rates_vector(self._integrated_size))
 
         def _discrete_update(self, context, discrete_state):
             solution = self._solution(context)
             h = float(self.control_period)
-            integrals = self._integrals(context)
-            rates = [solution.force_integral_rate]
-            if self.mode.integrates_position:
-                rates.append(solution.position_error_rate)
-            new_integrals = integrals + h * np.concatenate(rates)
+            new_integrals = self._integrals(context) + h * solution.integral_rates_vector(self._integrated_size)
             discrete_state.get_mutable_vector(0).SetFromVector(np.concatenate([new_integrals, solution.actuation]))
             self._store_diagnostics(solution, discrete_state)
 

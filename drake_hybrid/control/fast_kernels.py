@@ -4,9 +4,11 @@
 user's C, E_f, E_f-dot (and a given E_p, E_p-dot nu) compiled from sympy and then calls
 ``law_kernel`` below: the chart maps, the kernel E_p, the rank margins, E = [E_p; E_f] factored
 once for the wrench split (3.0-8) and r-ddot* (3.0-11), the three laws (3.1-12), Remark 3,
-(3.2-6), the held and guarded rows, u_f, tau_f, J^-1 (bounded) or the dynamically consistent
-Lambda (bounded), the saturation and the integral rates. Every function mirrors one of
-control/law.py, core/projections.py, core/charts.py or control/safety.py line by line, so the two
+(3.2-6), the mechanism force F_m = I_v a_p, the tangential compensation F_c = -F_v, the held and
+guarded rows, u_f, tau_f, J^-1 (bounded) or the dynamically consistent Lambda (bounded), the
+discrete step's damping compensation h B a*, the saturation and the integral rates. Every function
+mirrors one of control/law.py, control/damping.py, core/projections.py, core/charts.py or
+control/safety.py line by line, so the two
 paths agree to rounding (tests/test_fast_law.py checks every output port to 1e-12).
 
 Small matrices (d <= 6, n <= 7) are multiplied and factored by hand-written loops: a LAPACK or
@@ -43,7 +45,10 @@ I_N, I_D, I_M, I_K, I_CHART, I_POSITION, I_IMPEDANCE, I_KERNEL, I_ANTI_WINDUP, I
  I_OFFSET_POINT, I_OFFSET_CHART, I_OFFSET_BASIS, I_OFFSET_HALF_LOWER) = range(10, 21)
 I_CONFIGURATION = 21          # size of the chart's configuration x
 I_COMPENSATE_TANGENTIAL = 22  # 1: cancel the measured F_v (law.tangential_compensation)
-INT_SIZE = 23
+I_MECHANISM = 23              # 1: the mechanism force F_m = I_v a_p (law.mechanism_force)
+I_DAMPING = 24                # 1: the discrete step's damping compensation h B a* (control.damping)
+I_OFFSET_MECHANISM, I_OFFSET_DAMPING = 25, 26   # offsets of I_v (k x k) and h B (n) in ``reals``
+INT_SIZE = 27
 # -- scalars at the start of ``reals`` -------------------------------------------------------------
 (R_RANK_TOLERANCE, R_KERNEL_TOLERANCE, R_INVERTIBILITY_TOLERANCE, R_CHART_TOLERANCE, R_CONSTRAINT_FREQUENCY,
  R_NULL_SPACE_DAMPING, R_SINGULARITY_THRESHOLD, R_MAX_ACCELERATION, R_APPROACH_SPEED, R_APPROACH_GAIN) = range(10)
@@ -538,11 +543,21 @@ def finish(out, torque, base_torque, reals, ints):
 
 
 @compiled
+def damping_compensation(joint_acceleration, reals, ints):
+    """damping.damping_compensation: h B a* (``reals`` holds h B, the product of the plant's step and the
+    model's joint damping)."""
+    n = ints[I_N]
+    return reals[ints[I_OFFSET_DAMPING]:ints[I_OFFSET_DAMPING] + n] * joint_acceleration
+
+
+@compiled
 def finish_inverse_dynamics(out, inverse_dynamics, base_torque, reals, ints):
     """n = d: tau = ID(q, q-dot, q-ddot) + tau_f (tau_f stored in ``out``), then ``finish``."""
     n = ints[I_N]
     start = out.size - n
     torque = inverse_dynamics + out[start:]
+    if ints[I_DAMPING] != 0:
+        torque = torque + damping_compensation(out[start - n:start], reals, ints)
     return finish(out, torque, base_torque, reals, ints)
 
 
@@ -595,6 +610,12 @@ def law_kernel(x, nu, J, bias, C, E_f, curvature, E_f_dot, E_p, E_p_dot_nu, v, d
     a_p = desired_acceleration - matvec(K_v, velocity_error)          # (3.1-12)
     if ints[I_POSITION] != 0:
         a_p = a_p - matvec(K_p, integrals[m:])                          # Remark 3
+    mechanism = ints[I_MECHANISM] != 0
+    if mechanism:                                                      # F_m = I_v a_p
+        I_v = reals[ints[I_OFFSET_MECHANISM]:ints[I_OFFSET_MECHANISM] + k * k].reshape((k, k))
+        mechanism_force = matvec(I_v, a_p)
+    else:
+        mechanism_force = np.zeros(k)
     C_dot = matvec(E_f, nu)
     w_c = reals[R_CONSTRAINT_FREQUENCY]
     a_f = (-3.0 * w_c * C_dot - 2.0 * w_c * w_c * C) * (1.0 - mask)    # held (kinematic) rows
@@ -626,7 +647,7 @@ def law_kernel(x, nu, J, bias, C, E_f, curvature, E_f_dot, E_p, E_p_dot_nu, v, d
                 return FALLBACK, out
             K_0 = K_0 + matmul(transpose(M_fp), correction)
         motion_force = np.empty(k + kinematic.size)
-        motion_force[:k] = tangential_force
+        motion_force[:k] = tangential_force + mechanism_force if mechanism else tangential_force
         for i in range(kinematic.size):
             motion_force[k + i] = force[kinematic[i]]
         compensation = matvec(K_0, motion_force)
@@ -648,8 +669,10 @@ def law_kernel(x, nu, J, bias, C, E_f, curvature, E_f_dot, E_p, E_p_dot_nu, v, d
     if not in_contact:
         force_command = force_command * (1.0 - mask)
     wrench_on_task = matvec(transpose(E_f), force_command)
-    if ints[I_COMPENSATE_TANGENTIAL] != 0 and ints[I_IMPEDANCE] == 0:  # F_c = -F_v on the velocity rows
-        wrench_on_task = wrench_on_task - matvec(transpose(E_p), tangential_force)
+    if mechanism:                                                      # + E_p^T F_m
+        wrench_on_task = wrench_on_task + matvec(transpose(E_p), mechanism_force)
+    if ints[I_COMPENSATE_TANGENTIAL] != 0 and ints[I_IMPEDANCE] == 0:  # + E_p^T F_c, F_c = -F_v
+        wrench_on_task = wrench_on_task + matvec(transpose(E_p), -tangential_force)
     tau_f = matvec(transpose(J), wrench_on_task)
     task_rhs = task_acceleration - bias
 
@@ -684,8 +707,11 @@ def law_kernel(x, nu, J, bias, C, E_f, curvature, E_f_dot, E_p, E_p_dot_nu, v, d
     J_T = transpose(J)
     J_bar = matmul(matmul(M_inverse, J_T), Lambda)
     null_space_transpose = np.eye(n) - matmul(J_T, transpose(J_bar))
-    torque = (base_torque + matvec(J_T, matvec(Lambda, task_rhs)) + tau_f
-              - matvec(null_space_transpose, matvec(M, reals[R_NULL_SPACE_DAMPING] * v)))
+    motion_torque = (matvec(J_T, matvec(Lambda, task_rhs))
+                     - matvec(null_space_transpose, matvec(M, reals[R_NULL_SPACE_DAMPING] * v)))
+    torque = base_torque + motion_torque + tau_f
+    if ints[I_DAMPING] != 0:
+        torque = torque + damping_compensation(matvec(M_inverse, motion_torque), reals, ints)
     return finish(out, torque, base_torque, reals, ints), out
 
 

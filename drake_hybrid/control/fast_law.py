@@ -43,6 +43,7 @@ from drake_hybrid.core.projections import GivenVelocityProjection, KernelVelocit
 from drake_hybrid.core.symbolic import straight_line_program, time_derivative
 
 from drake_hybrid.control import fast_kernels as kernels
+from drake_hybrid.control.fast_kernels import DONE, NEEDS_BASE_TORQUE, NEEDS_INVERSE_DYNAMICS
 
 _WARNED = []
 _FUNCTIONS = "sin, cos, tan, asin, acos, atan, atan2, sqrt, exp, log, sinh, cosh, tanh, pi, e as E"
@@ -175,12 +176,7 @@ def _chart_block(chart):
 
 def pack_constants(controller, law, space):
     """(reals, ints) of ``fast_kernels`` for a HybridController and its LawConstants, or None (the
-    generic law runs). The kernels do not have two later lines of ``law``: the mechanism force
-    (``velocity_row_inertia``) and the discrete-step damping compensation (joint damping in the
-    model on a discrete plant); a controller that uses either runs the generic law."""
-    if law.velocity_row_inertia is not None or (law.plant_time_step > 0 and law.joint_damping is not None
-                                                and np.any(law.joint_damping)):
-        return None
+    generic law runs: a chart the kernels do not know)."""
     chart = space.chart
     kind, chart_values = _chart_block(chart)
     if kind is None:
@@ -194,9 +190,14 @@ def pack_constants(controller, law, space):
                         space.invertibility_tolerance, chart_tolerance, gains.constraint_frequency,
                         gains.null_space_damping, law.singularity_threshold, law.max_joint_acceleration,
                         law.approach_speed or 0.0, law.approach_gain or 0.0])
+    mechanism = law.velocity_row_inertia is not None
+    # damping.damping_compensation's condition: a discrete plant and damping in the model.
+    damped = law.plant_time_step > 0 and law.joint_damping is not None and bool(np.any(law.joint_damping))
     blocks = [gains.velocity, gains.position, gains.force_proportional, gains.force_integral, law.force_controlled,
               law.actuation_from_torque, law.effort_limits, controller._end_effector_point, chart_values,
-              projection.basis if kernel else np.zeros(0), projection._half_lower if kernel else np.zeros(0)]
+              projection.basis if kernel else np.zeros(0), projection._half_lower if kernel else np.zeros(0),
+              law.velocity_row_inertia if mechanism else np.zeros(0),
+              law.plant_time_step * np.asarray(law.joint_damping, dtype=float) if damped else np.zeros(0)]
     reals, offsets, position = [scalars], [], scalars.size
     for block in blocks:
         block = np.ascontiguousarray(block, dtype=float).reshape(-1)
@@ -207,7 +208,9 @@ def pack_constants(controller, law, space):
     ints[:kernels.I_GUARDED + 1] = [n, d, m, k, kind, int(law.mode.integrates_position),
                                     int(law.mode is ControlMode.IMPEDANCE_FORCE), int(kernel), int(law.anti_windup),
                                     int(law.approach_speed is not None)]
-    ints[kernels.I_OFFSET_KV:kernels.I_OFFSET_HALF_LOWER + 1] = offsets
+    ints[kernels.I_OFFSET_KV:kernels.I_OFFSET_HALF_LOWER + 1] = offsets[:11]
+    ints[kernels.I_OFFSET_MECHANISM], ints[kernels.I_OFFSET_DAMPING] = offsets[11:]
+    ints[kernels.I_MECHANISM], ints[kernels.I_DAMPING] = int(mechanism), int(damped)
     ints[kernels.I_CONFIGURATION] = chart.configuration_size
     ints[kernels.I_COMPENSATE_TANGENTIAL] = int(law.compensate_tangential_force)
     return np.concatenate(reals), ints
@@ -259,6 +262,8 @@ class FastLaw:
         starts = np.cumsum([0, n, k, m, m, k, m, k, m, k])
         self._slices = [slice(a, b) for a, b in zip(starts[:-1], starts[1:])]
         self._scalars = int(starts[-1])
+        size = self._scalars + kernels.OUTPUT_SCALARS + 2 * n                 # kernels.output_size
+        self._joint_acceleration_slice = slice(size - 2 * n, size - n)      # q-ddot (n = d), then tau_f
         self.compile_seconds = None
         self.fallbacks = 0
         self.disabled = False
@@ -277,21 +282,22 @@ class FastLaw:
             return None
         return cls(load_generated(source), constants[0], constants[1], controller)
 
-    def evaluate(self, plant_context, forces, integrals, desired_velocity, desired_acceleration, desired_force,
+    def evaluate(self, plant_context, forces, v, integrals, desired_velocity, desired_acceleration, desired_force,
                  wrench, phase):
-        """The ControlSolution, or None when the generic law must run (it raises or handles the case)."""
-        plant = self._plant
-        X = plant.CalcRelativeTransform(plant_context, self._world, self._frame).GetAsMatrix34()
-        J_g = plant.CalcJacobianSpatialVelocity(plant_context, JacobianWrtVariable.kV, self._frame, self._point,
-                                                self._world, self._world)
-        A_bias = plant.CalcBiasSpatialAcceleration(plant_context, JacobianWrtVariable.kV, self._frame, self._point,
-                                                   self._world, self._world).get_coeffs()
-        v = plant.GetVelocities(plant_context)
+        """The ControlSolution, or None when the generic law must run (it raises or handles the case);
+        ``v``: the plant context's generalized velocities (from the state the controller set)."""
+        plant, world, frame, point = self._plant, self._world, self._frame, self._point
+        X = plant.CalcRelativeTransform(plant_context, world, frame).GetAsMatrix34()
+        J_g = plant.CalcJacobianSpatialVelocity(plant_context, JacobianWrtVariable.kV, frame, point, world, world)
+        A_bias = plant.CalcBiasSpatialAcceleration(plant_context, JacobianWrtVariable.kV, frame, point, world,
+                                                   world).get_coeffs()
         M, base = self._empty_matrix, self._empty_vector
         if self._needs_mass_matrix:
             M = plant.CalcMassMatrix(plant_context)
         if self._redundant:
             base = plant.CalcInverseDynamics(plant_context, self._zero_acceleration, forces)
+        phase = int(phase)
+        reals, ints, terms = self.reals, self.ints, self._terms
         if self.compile_seconds is None:
             # The first call compiles (or loads from the cache); a constraint numba cannot compile
             # leaves this controller on the generic law, with a one-line warning.
@@ -299,9 +305,9 @@ class FastLaw:
                 return None
             start = time.perf_counter()
             try:
-                self._terms_into(self._terms, X, J_g, A_bias, v, self.reals, self.ints)
-                self._law(self._terms, v, desired_velocity, desired_acceleration, desired_force, wrench, integrals,
-                          int(phase), M, base, self.reals, self.ints)
+                self._terms_into(terms, X, J_g, A_bias, v, reals, ints)
+                self._law(terms, v, desired_velocity, desired_acceleration, desired_force, wrench, integrals, phase, M,
+                          base, reals, ints)
             except Exception as error:
                 self.disabled = True
                 message = " ".join(str(error).split())[:200]
@@ -309,25 +315,21 @@ class FastLaw:
                               f"{message}); this controller runs the generic law", stacklevel=2)
                 return None
             self.compile_seconds = time.perf_counter() - start
-        if self._terms_into(self._terms, X, J_g, A_bias, v, self.reals, self.ints) != 0:
+        if self._terms_into(terms, X, J_g, A_bias, v, reals, ints) != 0:
             self.fallbacks += 1                       # the chart's singularity: the generic law raises
             return None
-        status, out = self._law(self._terms, v, desired_velocity, desired_acceleration, desired_force, wrench,
-                                integrals, int(phase), M, base, self.reals, self.ints)
-        if status == kernels.NEEDS_INVERSE_DYNAMICS:
-            n = self._zero_acceleration.size
-            torque = plant.CalcInverseDynamics(plant_context, out[out.size - 2 * n:out.size - n], forces)
-            status = self._finish(out, torque, base, self.reals, self.ints)
-            if status == kernels.NEEDS_BASE_TORQUE:
+        status, out = self._law(terms, v, desired_velocity, desired_acceleration, desired_force, wrench, integrals,
+                                phase, M, base, reals, ints)
+        if status == NEEDS_INVERSE_DYNAMICS:
+            torque = plant.CalcInverseDynamics(plant_context, out[self._joint_acceleration_slice], forces)
+            status = self._finish(out, torque, base, reals, ints)
+            if status == NEEDS_BASE_TORQUE:
                 base = plant.CalcInverseDynamics(plant_context, self._zero_acceleration, forces)
-                status = self._finish(out, torque, base, self.reals, self.ints)
-        if status != kernels.DONE:
+                status = self._finish(out, torque, base, reals, ints)
+        if status != DONE:
             self.fallbacks += 1
             return None
-        return self._solution(out, phase)
-
-    def _solution(self, out, phase):
-        return CompiledSolution(out, int(phase), self._slices, self._scalars)
+        return CompiledSolution(out, phase, self._slices, self._scalars)
 
 
 def _field(index):
@@ -344,6 +346,15 @@ class CompiledSolution:
 
     actuation, velocity_error, force_error, constraint_value, projected_velocity, force, tangential_force, \
         force_integral_rate, position_error_rate = (_field(i) for i in range(9))
+
+    def diagnostics_vector(self):
+        """law.ControlSolution.diagnostics_vector: one slice of the output (its layout is the same)."""
+        return self.out[self.slices[1].start:self.slices[6].stop]
+
+    def integral_rates_vector(self, size):
+        """law.ControlSolution.integral_rates_vector: one slice of the output."""
+        start = self.slices[7].start
+        return self.out[start:start + size]
 
     @property
     def wrench_valid(self):

@@ -88,6 +88,15 @@ class ControlSolution:
                  "tangential_force", "position_error_rate", "force_integral_rate", "wrench_valid", "contact_phase",
                  "saturation_scale", "actuator_clipped", "smallest_singular_value", "singularity_damping")
 
+    def diagnostics_vector(self):
+        """[e_p'; e_f; C; r-dot_p; F; F_v]: the diagnostics in the controller's ``diagnostics`` layout."""
+        return np.concatenate([self.velocity_error, self.force_error, self.constraint_value, self.projected_velocity,
+                               self.force, self.tangential_force])
+
+    def integral_rates_vector(self, size):
+        """The first ``size`` entries of [xi-dot; e_p-dot] (the integral states' layout)."""
+        return np.concatenate([self.force_integral_rate, self.position_error_rate])[:size]
+
 
 # ------------------------------------------------------------------------------------------------
 # The lines of the law

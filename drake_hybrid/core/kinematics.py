@@ -114,14 +114,15 @@ class EndEffectorKinematics:
 
 
 def set_plant_state(system, plant, state_port, context, plant_context):
-    """Set ``plant_context``'s positions and velocities to ``state_port``'s [q; v] at ``context``;
-    ValueError naming ``system`` and the port if it is not finite."""
+    """Set ``plant_context``'s positions and velocities to ``state_port``'s [q; v] at ``context``
+    and return [q; v]; ValueError naming ``system`` and the port if it is not finite."""
     state = state_port.Eval(context)
     if not all_finite(state):
         # Drake's SetPositionsAndVelocities aborts on a non-finite state; say which input it was.
         raise ValueError(f"{system.get_name() or type(system).__name__}: input '{state_port.get_name()}' has "
                          f"non-finite entries {value(state).tolist()}")
     plant.SetPositionsAndVelocities(plant_context, state)
+    return state
 
 
 def declare_plant_context_cache(system, plant, state_port):

@@ -124,11 +124,14 @@ def ContactWrenchSensor_(T):
             self._frame = frame
             self._end_effector_point = _point(end_effector_point, "ContactWrenchSensor")
             self._body_index = frame.body().index()
+            self._body_slot = int(self._body_index)
             self._point_in_body = frame.GetFixedPoseInBodyFrame().multiply(self._end_effector_point)
-            self.DeclareAbstractInputPort("contact_results", AbstractValue.Make(ContactResults_[T]()))
-            self.DeclareAbstractInputPort("body_poses", Value[List[RigidTransform_[T]]]([]))
+            self._robot_geometry_values = {geometry.get_value() for geometry in self._robot_geometries}
+            self._results_port = self.DeclareAbstractInputPort("contact_results",
+                                                               AbstractValue.Make(ContactResults_[T]()))
+            self._poses_port = self.DeclareAbstractInputPort("body_poses", Value[List[RigidTransform_[T]]]([]))
             # A function of the inputs only (not of time): a logger at the next instant reuses the value.
-            self.DeclareVectorOutputPort("wrench", 6, self._calc_wrench,
+            self.DeclareVectorOutputPort("wrench", 6, self._calc_wrench_float if T == float else self._calc_wrench,
                                          prerequisites_of_calc={self.all_input_ports_ticket()})
 
         def _construct_copy(self, other, converter=None):
@@ -160,6 +163,47 @@ def ContactWrenchSensor_(T):
                 F = info.contact_force() * (1.0 if on_B else -1.0)
                 total = total + _shift(np.concatenate([np.zeros(3), F]), p_WP - info.contact_point())
             output.SetFromVector(total)
+
+        def _calc_wrench_float(self, context, output):
+            """``_calc_wrench`` for T = float in plain Python floats (a numpy call on a 3-vector costs more
+            than its arithmetic): the forces f_i and moments about the world origin n_i + c_i x f_i
+            summed, then moved to P once, n_P = sum(n_i + c_i x f_i) - p_WP x sum f_i."""
+            results = self._results_port.Eval(context)
+            n0 = n1 = n2 = f0 = f1 = f2 = 0.0
+            robot = self._robot_geometry_values
+            for i in range(results.num_hydroelastic_contacts()):
+                info = results.hydroelastic_contact_info(i)
+                surface = info.contact_surface()
+                on_M = surface.id_M().get_value() in robot
+                if on_M == (surface.id_N().get_value() in robot):
+                    continue
+                # F_Ac_W: on the body of geometry M, at the centroid; the other body gets its negative.
+                a0, a1, a2, b0, b1, b2 = info.F_Ac_W().get_coeffs().tolist()
+                if not on_M:
+                    a0, a1, a2, b0, b1, b2 = -a0, -a1, -a2, -b0, -b1, -b2
+                c0, c1, c2 = surface.centroid().tolist()
+                n0 += a0 + c1 * b2 - c2 * b1
+                n1 += a1 + c2 * b0 - c0 * b2
+                n2 += a2 + c0 * b1 - c1 * b0
+                f0, f1, f2 = f0 + b0, f1 + b1, f2 + b2
+            for i in range(results.num_point_pair_contacts()):
+                info = results.point_pair_contact_info(i)
+                on_A = int(info.bodyA_index()) in self._robot_body_indices
+                on_B = int(info.bodyB_index()) in self._robot_body_indices
+                if on_A == on_B:
+                    continue
+                # F_Bc_W: on body B at the contact point; body A gets its negative.
+                b0, b1, b2 = info.contact_force().tolist()
+                if not on_B:
+                    b0, b1, b2 = -b0, -b1, -b2
+                c0, c1, c2 = info.contact_point().tolist()
+                n0 += c1 * b2 - c2 * b1
+                n1 += c2 * b0 - c0 * b2
+                n2 += c0 * b1 - c1 * b0
+                f0, f1, f2 = f0 + b0, f1 + b1, f2 + b2
+            p0, p1, p2 = self._poses_port.Eval(context)[self._body_slot].multiply(self._point_in_body).tolist()
+            output.SetFromVector([n0 - (p1 * f2 - p2 * f1), n1 - (p2 * f0 - p0 * f2), n2 - (p0 * f1 - p1 * f0),
+                                  f0, f1, f2])
 
     return Impl
 
@@ -227,13 +271,17 @@ def WristForceTorqueSensor_(T):
             self._tool_mass = tool.default_mass()
             self._tool_com = tool.default_com()
             self._gravity = plant.gravity_field().gravity_vector()
+            self._R_tool_Jc = self._X_tool_Jc.rotation().matrix()
+            self._p_tool_Jc_and_com = np.column_stack([self._X_tool_Jc.translation(), self._tool_com])
+            self._weight = (self._tool_mass * np.asarray(self._gravity, dtype=float)).tolist()
             frame = resolve_frame(plant, end_effector_frame)
             self._frame = frame
             self._end_effector_point = _point(end_effector_point, "WristForceTorqueSensor")
             self._body_index = frame.body().index()
             self._point_in_body = frame.GetFixedPoseInBodyFrame().multiply(self._end_effector_point)
-            self.DeclareAbstractInputPort("reaction_forces", Value[List[SpatialForce_[T]]]([]))
-            self.DeclareAbstractInputPort("body_poses", Value[List[RigidTransform_[T]]]([]))
+            self._body_slot, self._tool_slot = int(self._body_index), int(self._tool_index)
+            self._reactions_port = self.DeclareAbstractInputPort("reaction_forces", Value[List[SpatialForce_[T]]]([]))
+            self._poses_port = self.DeclareAbstractInputPort("body_poses", Value[List[RigidTransform_[T]]]([]))
             # Issue 18: the tool's inertial wrench, from its model (off: the paper's static compensation).
             self.compensate_tool_inertia = bool(compensate_tool_inertia)
             if self.compensate_tool_inertia:
@@ -243,7 +291,8 @@ def WristForceTorqueSensor_(T):
                 self._accelerations_port = self.DeclareAbstractInputPort("body_spatial_accelerations",
                                                                          Value[List[SpatialAcceleration_[T]]]([]))
             # A function of the inputs only (not of time): a logger at the next instant reuses the value.
-            self.DeclareVectorOutputPort("wrench", 6, self._calc_wrench,
+            fast = T == float and not self.compensate_tool_inertia
+            self.DeclareVectorOutputPort("wrench", 6, self._calc_wrench_float if fast else self._calc_wrench,
                                          prerequisites_of_calc={self.all_input_ports_ticket()})
 
         def _construct_copy(self, other, converter=None):
@@ -283,6 +332,27 @@ def WristForceTorqueSensor_(T):
             if self.compensate_tool_inertia:
                 wrench = wrench + _shift(self._tool_momentum_rate(context, R_W_tool, p_Wcom), p_WP - p_Wcom)
             output.SetFromVector(wrench)
+
+        def _calc_wrench_float(self, context, output):
+            """``_calc_wrench`` (static compensation) for T = float with one 3 x 3 product and the rest in
+            plain Python floats: wrench = -[R_WJc n + (p_WJc - p_WP) x R_WJc f; R_WJc f]
+            - [(p_Wcom - p_WP) x m g; m g]."""
+            coefficients = self._reactions_port.Eval(context)[self._joint_index].get_coeffs()
+            body_poses = self._poses_port.Eval(context)
+            X_W_tool = body_poses[self._tool_slot]
+            R_W_tool = X_W_tool.rotation().matrix()
+            R_WJc = R_W_tool @ self._R_tool_Jc
+            (n0, f0), (n1, f1), (n2, f2) = (R_WJc @ coefficients.reshape(2, 3).T).tolist()
+            t0, t1, t2 = X_W_tool.translation().tolist()
+            j0, j1, j2 = (R_W_tool @ self._p_tool_Jc_and_com).tolist()    # columns p_tool_Jc, p_tool_com
+            p0, p1, p2 = body_poses[self._body_slot].multiply(self._point_in_body).tolist()
+            a0, a1, a2 = t0 + j0[0] - p0, t1 + j1[0] - p1, t2 + j2[0] - p2    # p_WJc - p_WP
+            c0, c1, c2 = t0 + j0[1] - p0, t1 + j1[1] - p1, t2 + j2[1] - p2    # p_Wcom - p_WP
+            w0, w1, w2 = self._weight
+            output.SetFromVector([-(n0 + a1 * f2 - a2 * f1) - (c1 * w2 - c2 * w1),
+                                  -(n1 + a2 * f0 - a0 * f2) - (c2 * w0 - c0 * w2),
+                                  -(n2 + a0 * f1 - a1 * f0) - (c0 * w1 - c1 * w0),
+                                  -f0 - w0, -f1 - w1, -f2 - w2])
 
     return Impl
 
