@@ -212,7 +212,9 @@ def test_wrist_sensor_agrees_with_contact_sensor_once_tool_weight_is_compensated
 @pytest.mark.slow                # several seconds: not in the fast loop (-m 'not slow')
 def test_simulation_with_the_wrist_sensor_and_filter():
     config = TASK.default_config()
-    config.sensor = WristSensorConfig(bandwidth_hz=100.0)
+    # The tool's inertia removed: the law cancels the measured F_v (compensate_tangential_force),
+    # which must be the contact's alone (scenario.config refuses the two together otherwise).
+    config.sensor = WristSensorConfig(bandwidth_hz=100.0, compensate_tool_inertia=True)
     config.duration = 1.5
     summary = simulate(config).summary
     assert_rows_settled_within(summary, 1.0)
