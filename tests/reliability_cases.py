@@ -36,9 +36,9 @@ from drake_hybrid.systems.sources import Profile
 # to keep failing until they are fixed, then they leave this list): (fault, magnitude, figure) -> why.
 KNOWN_FAILURES = {
     ("controller model differs", "payload +20 %, link inertias +10 %", "max velocity error (% of speed)"):
-        "1.06 % at 0.6 s (0.56 % before this round): the theta-dot row's transient, slowed by the heavier "
-        "payload, has less help from the contact. SAP's pad-workpiece damping is now 0.01 s instead of Drake's "
-        "0.2 s (the drag fix), and the law cancels the contact moment it did leave in (1.00 % in the paper's form)",
+        "1.06 % at 0.6 s (0.56 % in the paper's form): the theta-dot row's transient, slowed by the heavier "
+        "payload, loses the help of the contact's damping moment, which the law now cancels with the rest of "
+        "the measured F_v (compensate_tangential_force)",
 }
 
 
