@@ -20,6 +20,7 @@ import numpy as np
 
 from drake_hybrid.analysis.linearization import design_time_constant
 from drake_hybrid.control.gains import HybridGains
+from drake_hybrid.control.law import tangential_compensation
 from drake_hybrid.control.phases import ContactPhase
 from drake_hybrid.control.safety import SafetyConfig
 from drake_hybrid.control.supervision import ContactSupervisor, SupervisionConfig
@@ -30,7 +31,6 @@ from drake_hybrid.scenario.tasks import get_task
 from drake_hybrid.systems.faults import SensorFaultConfig
 from drake_hybrid.systems.sensors import LowPassFilter, low_pass_coefficient
 from drake_hybrid.systems.sources import Profile
-
 
 # Rows that fail their criterion today, kept visible (the report says FAIL; the test requires them
 # to keep failing until they are fixed, then they leave this list): (fault, magnitude, figure) -> why.
@@ -133,8 +133,9 @@ def rigid_contact_velocity_error(scenario, q, v, disturbance_torque, tangential_
     A = E_f J (the constrained acceleration: the force loop's integral cancels the normal part)
     and F_v the measured tangential wrench (the pad's contact moment; 0 where the law cancels it,
     ``compensate_tangential_force``, control.law.tangential_compensation)."""
-    if scenario.config.compensate_tangential_force and scenario.controller.mode.value != "impedance-force":
-        tangential_force = np.zeros_like(tangential_force)
+    if tangential_compensation(tangential_force, scenario.controller.mode,
+                               scenario.config.compensate_tangential_force) is not None:
+        tangential_force = np.zeros_like(tangential_force)        # the law cancels it
     plant = scenario.controller_plant
     context = plant.CreateDefaultContext()
     plant.SetPositions(context, q)
