@@ -79,10 +79,38 @@ def test_the_grinding_default_says_it_ends_in_the_surge_after_the_rough_patch():
     """The default 3 s grinding run ends 0.2 s after the pad leaves the rough patch: the summary says
     so (and how long a run ending in steady sliding is), instead of a bare 26 % speed error."""
     result = simulate(get_task("grinding").default_config())
-    (note,) = result.summary["notes"]
+    edges, note = result.summary["notes"]
     assert "after the pad left the rough patch" in note and "--duration 3.8" in note
+    # x-dot's settled max (75 %) is the impedance's answer to the patch's friction steps, and the note says so.
+    assert "entering it" in edges and "leaving it" in edges and "peaking at 0.077 m/s" in edges
     x_dot = result.summary["velocity_rows"][0]
     assert x_dot["units"] == "m/s" and x_dot["final_error_percent"] > 5
+
+
+def test_the_impedance_step_peak_is_the_designed_impulse_response_at_its_largest():
+    from drake_hybrid.scenario.tasks.grinding import impedance_step_peak
+
+    # Roots -10 and -30 (K_v = 40, K_p = 300): (e^(-10 t) - e^(-30 t)) / 20, largest at t = ln 3 / 20.
+    assert impedance_step_peak(40.0, 300.0) == pytest.approx((3 ** -0.5 - 3 ** -1.5) / 20, rel=1e-6)
+    assert impedance_step_peak(20.0, 100.0) == pytest.approx(1 / (10 * math.e), rel=1e-6)    # double root -10
+
+
+def test_impedance_grinding_explains_x_dots_error_at_the_rough_patchs_edges():
+    """The default grinding run's x-dot 'settled max' (75 %) is the impedance yielding to the friction step
+    at the patch's edges: the note gives that peak as (3.2-6) predicts it and as measured after each edge."""
+    from drake_hybrid.scenario.tasks.grinding import friction_step_notes, impedance_step_peak
+
+    t = np.arange(0.0, 3.0005, 1e-3)
+    x = 0.85 + 0.1 * t                                                  # on the patch [1.05, 1.15] from 2 to 3 s
+    response = lambda since: np.where(t >= since, (np.exp(-10 * (t - since)) - np.exp(-30 * (t - since))) / 20, 0)
+    error = -4.0 * response(2.0) + 4.0 * response(2.6)                  # a 4 N step in, then out (at 2.6 s here)
+    x[t >= 2.6] = 1.2                                                  # off the patch from 2.6 s
+    (note,) = friction_step_notes(t, x, error, 0.1, 10.0, 40.0, 300.0, 1.05, 1.15, 0.5, 0.9)
+    peak = 4.0 * impedance_step_peak(40.0, 300.0)
+    assert f"(0.9 - 0.5) x 10 N = 4 N" in note and f"peaking at {peak:.3g} m/s (77 % of the command)" in note
+    assert re.search(r"measured 0\.077 m/s \(77 %\) entering it \(t = 2\.00 s, peak at 2\.0[56] s\); "
+                     r"0\.0\d+ m/s \(\d+ %\) leaving it \(t = 2\.60 s", note), note
+    assert friction_step_notes(t, np.full_like(t, 0.5), error, 0.1, 10.0, 40.0, 300.0, 1.05, 1.15, 0.5, 0.9) == []
 
 
 def _sphere_log(breakaway, end, force_error=0.357):
