@@ -202,6 +202,17 @@ def command_simulate(args):
     return 0
 
 
+def _nyquist_split(modes, period):
+    """(modes, the ones at the discrete step's Nyquist frequency): for a one-period map of step ``period``
+    (None: a continuous linearization, nothing to split), log(mu)/h of a real multiplier mu < 0 has
+    imaginary part +-pi/h; such a mode has no conjugate partner (log's principal branch gives one sign)."""
+    modes = np.asarray(modes, dtype=complex)
+    if not period:
+        return modes, modes[:0]
+    at = np.abs(np.abs(modes.imag) - np.pi / period) <= 1e-6 * np.pi / period
+    return modes[~at], modes[at]
+
+
 def command_analyze(args):
     config = _config(args)
     task = get_task(config.task)
@@ -234,7 +245,19 @@ def command_analyze(args):
         print(f"  [{n + 1}] {_fmt([shifted[i].designed])} -> {_fmt([shifted[i].predicted])}: {shifted[i].reason}")
     print(f"  marginal (theory: {len(match.marginal_partners)} x 0, unregulated positions): "
           f"{_fmt(match.marginal_partners)}")
-    print(f"  other modes (contact, filter, sampling, joint space): {_fmt(np.sort_complex(match.extra))}")
+    period = getattr(result, "period", None)
+    other, nyquist = _nyquist_split(match.extra, period)
+    print(f"  other modes (contact, filter, sampling, joint space): {_fmt(np.sort_complex(other))}")
+    if nyquist.size:
+        print(f"  at the step's Nyquist frequency pi/h = {np.pi / period:.4g} 1/s (multipliers mu < 0, which log(mu)/h "
+              f"maps to ln|mu|/h +- j pi/h: real modes that change sign every step, none of them designed): "
+              f"{_fmt(np.sort_complex(nyquist))}")
+    if result.shifted_match is not None:
+        raw, paired = 100 * np.max(match.relative_error), 100 * np.max(errors)
+        if abs(raw - paired) >= 0.005:
+            print(f"  worst deviation from the design: {paired:.2f} % with each designed eigenvalue paired as the "
+                  f"task's prediction pairs it (the table above); {raw:.2f} % paired by nearest distance alone "
+                  "(--json's relative_error; the figure docs/baselines.md quotes)")
     tolerance = f"{100 * args.tolerance:g} %"
     if match.matched:
         verdict, code = f"every designed eigenvalue within {tolerance}, no other mode unstable: matched", 0
@@ -267,6 +290,11 @@ def command_analyze(args):
         payload["predicted_shifts"] = [{"designed": [float(np.real(x.designed)), float(np.imag(x.designed))],
                                         "predicted": [float(np.real(x.predicted)), float(np.imag(x.predicted))],
                                         "reason": x.reason} for x in result.shifts]
+        if result.shifted_match is not None:
+            payload["paired_by_prediction"] = {"partners": [[float(np.real(q)), float(np.imag(q))] for q in shown.partner],
+                                               "relative_error": [float(e) for e in errors]}
+        if period:
+            payload["nyquist_frequency"] = float(np.pi / period)
         payload["matched_as_predicted"] = bool(match.matched or (result.shifted_match is not None
                                                                  and result.shifted_match.matched))
         payload.update({"gains": config.gains.as_lists(k, m, controller_mode), "mode": controller_mode.value,
