@@ -1,21 +1,7 @@
-"""drake-hybrid: hybrid velocity/force control (Li & Sastry 1987) as Drake systems.
-
-commands:
-  drake-hybrid simulate TASK    simulate a task; writes log.npz, summary.json, config.yaml and plots
-  drake-hybrid analyze TASK     linearize the closed loop; designed vs. linearized eigenvalues
-                                (TASK: a task's name or a task file FILE.yaml, scenario/data_task.py)
-  drake-hybrid sweep TASK --grid SPEC.yaml
-                                stability map / Monte Carlo sweep over config fields (Dask)
-  drake-hybrid tasks            list the tasks
-  drake-hybrid hardware hil|timing|run
-                                the controller over Drake's Panda LCM messages (memq:// in tests)
-
-"drake-hybrid COMMAND --help" gives each command's options.
-
-Bad input (a config field, a flag, a file) prints one line naming it and exits 2; a run that
-stops early (sensor fault, an error inside the simulation, Ctrl-C) writes what it logged up to
-the stop, prints why and exits 1. --traceback (or DRAKE_HYBRID_TRACEBACK=1) shows the full
-Python traceback instead.
+"""The ``drake-hybrid`` command line: one function per command and the parser (the entry point,
+``drake_hybrid.__main__``, imports this module after its first line). ``DESCRIPTION`` below is the
+top-level ``--help`` text, for users; this docstring is for readers of the source and is not printed
+(tests/test_cli_help.py checks both, and the help against the README's synopsis).
 
 Size: one command per function (simulate, analyze, sweep, tasks, hardware) and the parser whose
 help the README's synopsis mirrors (tests/test_cli_help.py).
@@ -53,6 +39,27 @@ from drake_hybrid.scenario.tasks import TASKS, get_task
 from drake_hybrid.viz.animation import set_task_camera
 from drake_hybrid.viz.outputs import write_run
 from drake_hybrid.viz.plotting import eigenvalue_figure, save_sweep_plots
+
+
+DESCRIPTION = """drake-hybrid: hybrid velocity/force control (Li & Sastry 1987) as Drake systems.
+
+commands:
+  drake-hybrid simulate TASK    simulate a task; writes log.npz, summary.json, config.yaml and plots
+  drake-hybrid analyze TASK     linearize the closed loop; designed vs. linearized eigenvalues
+                                (TASK: a task's name, or a task file FILE.yaml: docs/task_files.md)
+  drake-hybrid sweep TASK --grid SPEC.yaml
+                                stability map / Monte Carlo sweep over config fields (Dask)
+  drake-hybrid tasks            list the tasks
+  drake-hybrid hardware hil|timing|run
+                                the controller over Drake's Panda LCM messages (memq:// in tests)
+
+"drake-hybrid COMMAND --help" gives each command's options.
+
+Bad input (a config field, a flag, a file) prints one line naming it and exits 2; a run that
+stops early (sensor fault, an error inside the simulation, Ctrl-C) writes what it logged up to
+the stop, prints why and exits 1. --traceback (or DRAKE_HYBRID_TRACEBACK=1) shows the full
+Python traceback instead.
+"""
 
 
 class UsageError(ValueError):
@@ -404,7 +411,7 @@ def command_hardware(args):
 
 
 def make_parser():
-    parser = argparse.ArgumentParser(prog="drake-hybrid", description=__doc__,
+    parser = argparse.ArgumentParser(prog="drake-hybrid", description=DESCRIPTION,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     common = argparse.ArgumentParser(add_help=False)

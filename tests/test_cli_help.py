@@ -68,10 +68,28 @@ def test_option_help_lists_every_tasks_keys(capsys, command):
     assert "`" not in text
 
 
-def test_help_texts_point_at_documents_not_source_files(capsys):
-    for command in _subparsers(make_parser()):
-        text = _help(capsys, [command, "--help"])
-        assert not re.search(r"\w+/\w+\.py", text), (command, text)
+# What only a reader of the source needs: the module docstrings' "Size:" paragraphs, test and source
+# files, reST markup, dotted module paths.
+DEVELOPER_TEXT = re.compile(r"Size:|\btests/|\w\.py\b|``|\bdrake_hybrid\.\w")
+
+
+@pytest.mark.parametrize("command", [None, *_subparsers(make_parser())])
+def test_help_texts_point_at_documents_not_source_files(capsys, command):
+    text = _help(capsys, [command, "--help"] if command else ["--help"])
+    assert not re.search(r"\w+/\w+\.py", text), (command, text)
+    assert not DEVELOPER_TEXT.search(text), (command, DEVELOPER_TEXT.search(text).group(0))
+
+
+def test_top_level_help_is_the_users_description_not_the_modules_docstring(capsys):
+    """The parser's description is ``cli.DESCRIPTION``; no paragraph of cli's docstring (its notes for
+    readers of the source, such as its "Size:" reason) reaches the help, and the description itself
+    has none of that developer text (so that it cannot come back through a shared string)."""
+    text = _help(capsys, ["--help"])
+    assert cli.DESCRIPTION.strip() in text
+    for paragraph in cli.__doc__.split("\n\n"):
+        assert paragraph.strip() and paragraph.strip() not in text, paragraph
+    assert not DEVELOPER_TEXT.search(cli.DESCRIPTION)
+    assert DEVELOPER_TEXT.search(cli.__doc__)              # the pattern does catch the docstring's own text
 
 
 def test_stages_print_a_line_each_with_its_time_or_nothing():
