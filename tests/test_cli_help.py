@@ -163,3 +163,16 @@ def test_first_line_of_simulate_comes_before_pydrake_is_imported():
     quiet = subprocess.run([sys.executable, "-m", "drake_hybrid", "simulate", "no-such-task", "--quiet"],
                            capture_output=True, text=True)
     assert quiet.returncode == 2 and "loading" not in quiet.stderr
+
+
+def test_the_first_compile_time_is_the_readmes_measured_figure_everywhere():
+    """The README's 30-50 s for numba's first compile (measured on 2 cores) is what the stage line and
+    fast_law's docstring say too."""
+    import inspect
+
+    from drake_hybrid.control import fast_law
+    from drake_hybrid.experiments import simulation
+
+    figure = re.search(r"compiles the\s+control law with numba \((\d+-\d+) s on 2 cores", README.read_text()).group(1)
+    assert f"compiles them ({figure} s on 2 shared cores" in " ".join(fast_law.kernels_loaded.__doc__.split())
+    assert f"numba compiles it once, {figure} s)" in inspect.getsource(simulation.simulate)
