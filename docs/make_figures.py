@@ -102,12 +102,10 @@ def _screenshot(html, png, at):
 def animations():
     """Frames of the recorded 3-D animations: the window task, and the Panda of tutorial 6 (the
     notebook is run here, so the picture is the tutorial's own run)."""
-    from pydrake.geometry import Meshcat
-
-    from drake_hybrid.viz.animation import set_task_camera
+    from drake_hybrid.viz.animation import quiet_meshcat, set_task_camera
 
     task = get_task("window-washing")
-    meshcat = Meshcat()
+    meshcat = quiet_meshcat()
     set_task_camera(meshcat, task)
     result = simulate(task.default_config(), meshcat=meshcat, record_html=True)
     with tempfile.TemporaryDirectory() as tmp:

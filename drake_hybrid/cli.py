@@ -17,7 +17,6 @@ from pathlib import Path
 import matplotlib.pyplot as plt
 import numpy as np
 
-from pydrake.geometry import Meshcat
 from pydrake.lcm import DrakeLcm
 
 from drake_hybrid.analysis.linearization import linearize_continuous, linearize_discrete, shift_indices
@@ -36,7 +35,7 @@ from drake_hybrid.scenario.data_task import is_task_file, load_task_file, read_t
 from drake_hybrid.scenario.hooks import ENTRY_POINT_GROUP, get_hook, hook_names
 from drake_hybrid.scenario.parsing import models_directory
 from drake_hybrid.scenario.tasks import TASKS, get_task
-from drake_hybrid.viz.animation import set_task_camera
+from drake_hybrid.viz.animation import quiet_meshcat, set_task_camera
 from drake_hybrid.viz.outputs import write_run
 from drake_hybrid.viz.plotting import eigenvalue_figure, save_sweep_plots
 
@@ -170,9 +169,7 @@ def command_simulate(args):
     out = Path(args.out) if args.out else Path("runs") / config.task
     meshcat = None
     if args.html:
-
-
-        meshcat = Meshcat()
+        meshcat = quiet_meshcat()
         set_task_camera(meshcat, get_task(config.task))
     stages = Stages(enabled=not args.quiet)
     try:
@@ -181,10 +178,7 @@ def command_simulate(args):
     except RunStopped as error:
         result, stopped = error.result, error
     with stages(f"{config.task}: writing {out}" + ("" if args.no_plots else " (log, summary, plots)")):
-        files = write_run(result, out, plots=not args.no_plots)
-    if args.html and result.html:
-        Path(args.html).write_text(result.html)
-        files.append(Path(args.html))
+        files = write_run(result, out, plots=not args.no_plots, html_path=args.html)
     s = result.summary
     if stopped is not None:
         print(f"{s['task']}: {stopped}", file=sys.stderr)

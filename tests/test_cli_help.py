@@ -176,3 +176,20 @@ def test_the_first_compile_time_is_the_readmes_measured_figure_everywhere():
     figure = re.search(r"compiles the\s+control law with numba \((\d+-\d+) s on 2 cores", README.read_text()).group(1)
     assert f"compiles them ({figure} s on 2 shared cores" in " ".join(fast_law.kernels_loaded.__doc__.split())
     assert f"numba compiles it once, {figure} s)" in inspect.getsource(simulation.simulate)
+
+
+def test_html_writes_one_animation_and_no_meshcat_info_line(tmp_path, capsys, caplog):
+    """--html FILE: the animation goes to FILE only (no second copy in the run's folder), and Drake's
+    "Meshcat listening for connections" INFO line is not printed; the drake logger's level is restored."""
+    import logging
+
+    html = tmp_path / "run.html"
+    with caplog.at_level(logging.INFO, logger="drake"):
+        assert main(["simulate", "window-washing", "--duration", "0.02", "--no-plots", "--quiet",
+                     "--out", str(tmp_path / "run"), "--html", str(html)]) == 0
+        assert logging.getLogger("drake").level == logging.INFO
+    captured = capsys.readouterr()
+    assert "Meshcat listening" not in caplog.text + captured.out + captured.err
+    assert html.read_text().lstrip().lower().startswith("<!doctype html>")
+    assert sorted(p.name for p in (tmp_path / "run").iterdir()) == ["config.yaml", "log.npz", "summary.json"]
+    assert f"wrote {tmp_path / 'run' / 'log.npz'}" in captured.out and str(html) in captured.out

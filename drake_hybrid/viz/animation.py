@@ -6,6 +6,8 @@ self-contained file with the scene, the recorded animation and the viewer's
 JavaScript inlined, which plays offline in any browser (2.3 MB plus about
 30 kB per simulated second for the window task).
 
+* ``quiet_meshcat()``: a ``Meshcat`` without Drake's "Meshcat listening for connections at ..."
+  INFO line (a recording needs no browser connected; the command line does not print it).
 * ``set_task_camera(meshcat, task)``: the task's preferred view (its
   ``camera`` attribute: camera position and target in world, m).
 * ``render_html(html, png)``: open an HTML file in headless Chromium (Debian's
@@ -14,6 +16,7 @@ JavaScript inlined, which plays offline in any browser (2.3 MB plus about
   (``PageReport``). Used by the tests and by ``docs/make_figures.py``.
 """
 
+import logging
 import shutil
 import tempfile
 from dataclasses import dataclass, field
@@ -27,6 +30,22 @@ from matplotlib.image import imread
 # a closed network refuses.
 CHROMIUM_FLAGS = ("--no-sandbox", "--disable-gpu", "--enable-unsafe-swiftshader", "--disable-quic", "--no-first-run",
                   "--disable-background-networking", "--disable-component-update", "--disable-sync")
+
+
+def quiet_meshcat(**kwargs):
+    """``pydrake.geometry.Meshcat(**kwargs)`` with Drake's logger (Python's "drake" logger, which
+    pydrake keeps in step with spdlog's level) at WARNING while it starts, so that its INFO line
+    "Meshcat listening for connections at http://localhost:7000" is not printed; the logger's level
+    is restored afterwards."""
+    from pydrake.geometry import Meshcat
+
+    logger = logging.getLogger("drake")
+    level = logger.level
+    logger.setLevel(max(logging.WARNING, level))
+    try:
+        return Meshcat(**kwargs)
+    finally:
+        logger.setLevel(level)
 
 
 def set_task_camera(meshcat, task):

@@ -1,4 +1,4 @@
-"""The files of a run: log.npz, summary.json, config.yaml, the plots and the animation."""
+"""The files of a run: log.npz, summary.json, config.yaml, the plots and, when asked, the animation."""
 
 import json
 import math
@@ -23,9 +23,10 @@ def json_safe(value):
     return value
 
 
-def write_run(result, out_dir, plots=True):
+def write_run(result, out_dir, plots=True, html_path=None):
     """Write log.npz, summary.json, config.yaml and the plots (tracking, constraint residual,
-    torques) to ``out_dir``."""
+    torques) to ``out_dir``, and the recorded animation (``result.html``, if any) to ``html_path``
+    when one is given (``--html FILE``; the animation's only copy). Returns the paths written."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     np.savez_compressed(out / "log.npz", **result.log)
@@ -39,7 +40,7 @@ def write_run(result, out_dir, plots=True):
                                      labels=labels)
         files += save_run_plots(result.log, effort_limits(result.scenario), out,
                                 constraint_units=labels.get("constraint_units", "units of C"))
-    if result.html:
-        (out / "animation.html").write_text(result.html)
-        files.append(out / "animation.html")
+    if html_path and result.html:
+        Path(html_path).write_text(result.html)
+        files.append(Path(html_path))
     return files
