@@ -400,6 +400,32 @@ def test_the_steady_verdict_is_per_row_in_each_rows_units_never_a_norm_across_un
     assert twist["steady_velocity_error"] == pytest.approx(0.06) and twist["steady_velocity_error_percent"] is None
 
 
+def test_peak_force_is_per_row_in_its_units_and_names_the_row():
+    """The crank's four force rows (N, N, N m, N m here; commanded 0, 5 N, 0, 0): the reported peak is the
+    row whose peak is largest relative to its command (one unit where commanded to zero), in its units,
+    named -- not the norm across N and N m."""
+    from types import SimpleNamespace
+
+    t = np.linspace(0.0, 1.0, 101)
+    desired = np.tile([0.0, 5.0, 0.0, 0.0], (t.size, 1))
+    force = np.tile([0.2, 5.5, 0.3, 0.1], (t.size, 1))
+    force[10] = [0.5, 6.0, 0.9, 0.1]                              # the transient's peaks
+    names, units = ["F_x", "F_y", "M_x", "M_y"], ["N", "N", "N m", "N m"]
+    log = {"t": t, "desired_velocity": np.tile([0.5, 0.0], (t.size, 1)), "velocity_error": np.zeros((t.size, 2)),
+           "desired_force": desired, "force_error": force - desired, "force": force}
+    summary = {"velocity_rows": row_errors(t, log["velocity_error"], log["desired_velocity"], ["spin", "crank"],
+                                           ["rad/s", "rad/s"], 0.0, 0.5),
+               "force_rows": row_errors(t, log["force_error"], desired, names, units, 0.0, 0.5),
+               "velocity_settling_time_1_percent": 0.1, "force_settling_time_1_percent": 0.1,
+               "max_constraint_residual": 1e-3, "wall_time": 1.0}
+    metrics = simulation_metrics(SimpleNamespace(log=log, summary=summary), StabilityCriteria())
+    assert metrics["peak_force"] == pytest.approx(6.0) and metrics["peak_force_row"] == "F_y (N)"   # 1.2 x 5 N
+    force[10, 2] = 1.5                                            # 1.5 N m on a row commanded to zero: 1.5 units
+    metrics = simulation_metrics(SimpleNamespace(log=log, summary=summary), StabilityCriteria())
+    assert metrics["peak_force"] == pytest.approx(1.5) and metrics["peak_force_row"] == "M_x (N m)"
+    assert "peak_force_row" in RESULT_COLUMNS
+
+
 @pytest.mark.slow
 def test_an_unstable_looking_one_period_map_is_checked_at_a_larger_step():
     """The UR10 on a plate at rest: at the default step 1e-5 the sampled loop's map shows +3.87 1/s

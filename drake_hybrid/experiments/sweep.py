@@ -27,6 +27,9 @@ failure, the error text of every stage that failed (never dropped):
   |e_i| over the window in its units, in % of its command (empty when
   commanded to zero), and its name and units; ``final_*_error`` is that row's
   |e_i| at the end.
+* ``peak_force``, ``peak_force_row``: the measured force's peak |F_i| over the run
+  in its row's units, for the row whose peak is largest relative to its command
+  (one unit where commanded to zero), and that row's name and units.
 * ``stable_continuous``: every eigenvalue of the continuous closed loop,
   except the k = d - m marginal ones the law leaves (unregulated positions,
   ``analysis.predicted_eigenvalues``), has Re(s) < ``eigenvalue_margin``. The
@@ -92,7 +95,7 @@ METRIC_COLUMNS = [
     "peak_force", "max_constraint_residual",
     "simulation_wall_time", "linearization_wall_time", "wall_time", "cpu_time",
 ]
-TEXT_COLUMNS = ["steady_velocity_row", "steady_force_row", "discrete_step_check", "worker", "error"]
+TEXT_COLUMNS = ["steady_velocity_row", "steady_force_row", "peak_force_row", "discrete_step_check", "worker", "error"]
 RESULT_COLUMNS = VERDICT_COLUMNS + METRIC_COLUMNS + TEXT_COLUMNS
 RESULTS_FILE = "results.csv"
 
@@ -108,10 +111,6 @@ def _worst_real(match, marginal_count):
     marginal = np.asarray(match.marginal_partners)
     worst = float(np.max(regulated.real)) if regulated.size else None
     return worst, (float(np.max(marginal.real)) if marginal.size else None)
-
-
-def _error_norms(log, key):
-    return np.linalg.norm(np.atleast_2d(log[key]).reshape(len(log["t"]), -1), axis=1)
 
 
 def steady_rows(log, summary, what, after, tolerance):
@@ -130,6 +129,18 @@ def steady_rows(log, summary, what, after, tolerance):
             (figures[worst][0], figures[worst][1], f"{row['name']} ({row['units']})", worst))
 
 
+def peak_row_force(log, summary):
+    """The force row whose peak |F_i| over the run is largest relative to its scale (its command, or one
+    of its units where it is commanded to zero: ``steady_rows``'s scale): (that peak in the row's units,
+    "name (units)"). Per row, never a norm across rows (the crank's mix N and N m)."""
+    force = np.abs(np.asarray(log["force"], dtype=float)).reshape(len(log["t"]), -1)
+    peaks = np.max(force, axis=0)
+    scales = np.array([command if command > 0 else 1.0 for command in row_commands(log["desired_force"])])
+    worst = int(np.argmax(peaks / scales))
+    row = summary["force_rows"][worst]
+    return float(peaks[worst]), f"{row['name']} ({row['units']})"
+
+
 def simulation_metrics(result, criteria):
     """The simulation's columns from a SimulationResult (see the module docstring)."""
     log, summary = result.log, result.summary
@@ -138,6 +149,7 @@ def simulation_metrics(result, criteria):
     after = t[-1] - criteria.steady_window * (t[-1] - t[0])
     velocity_settled, velocity = steady_rows(log, summary, "velocity", after, criteria.steady_tolerance)
     force_settled, force = steady_rows(log, summary, "force", after, criteria.steady_tolerance)
+    peak_force, peak_force_row = peak_row_force(log, summary)
     return {
         "stable_simulation": bool(finite and velocity_settled and force_settled),
         "velocity_settling_time": summary["velocity_settling_time_1_percent"],
@@ -150,7 +162,8 @@ def simulation_metrics(result, criteria):
         "steady_force_row": force[2],
         "final_velocity_error": float(abs(log["velocity_error"][-1, velocity[3]])),
         "final_force_error": float(abs(log["force_error"][-1, force[3]])),
-        "peak_force": float(np.max(_error_norms(log, "force"))),
+        "peak_force": peak_force,
+        "peak_force_row": peak_force_row,
         "max_constraint_residual": summary["max_constraint_residual"],
         "simulation_wall_time": summary["wall_time"],
     }

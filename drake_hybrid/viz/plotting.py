@@ -321,7 +321,7 @@ SWEEP_LABELS = {
     "steady_velocity_error": "steady |e_p'|, worst row (its units: steady_velocity_row)",
     "force_settling_time": "force settling time, 1 % (s)",
     "velocity_settling_time": "velocity settling time, 1 % (s)",
-    "peak_force": "peak |F| (N)",
+    "peak_force": "peak |F_i|, worst row (its units: peak_force_row)",
     "model_error.payload_mass_scale": "payload mass / model",
 }
 
