@@ -119,6 +119,29 @@ def _fmt(value, digits=3):
     return "n/a" if value is None else f"{value:.{digits}g}"
 
 
+def report_lines(rounded):
+    """The lines main() prints, from the figures as baselines.json has them (``significant``), so that
+    stdout shows no float noise and the same figures as the tracked file."""
+    rc = rounded["instability"]["raibert-craig"]
+    lines = [f"Raibert-Craig at q = (-160, 30) deg: linearized {rc['worst_linearized']:+.4f} 1/s, analytic "
+             f"{rc['worst_analytic']:+.4f}, simulated growth {rc['simulated_growth']:+.4f} "
+             f"({100 * (rc['simulated_growth'] / rc['worst_linearized'] - 1):+.3f} %)"]
+    for name in ("fisher-mujtaba", "li-sastry", "pd-open-loop-force"):
+        lines.append(f"{name}: worst linearized real part {rounded['instability'][name]['worst_linearized']:+.4f} 1/s")
+    lines.append("unstable fraction of the regular grid: " + ", ".join(
+        f"{name} {100 * fraction:.4g} %" for name, fraction in rounded["unstable_fraction"].items()))
+    lines += ["", "| law | velocity error after 1 s (%) | force error after 1 s (%) | settling 1 % velocity / force (s) "
+              "| slowest stable eigenvalue (1/s) | largest real part (1/s) |", "|---|---|---|---|---|---|"]
+    for row in rounded["window"]:
+        lines.append(f"| {row['law']} | {_fmt(row['velocity_error_percent'])} | {_fmt(row['force_error_percent'])} | "
+                     f"{_fmt(row['velocity_settling_s'])} / {_fmt(row['force_settling_s'])} | "
+                     f"{_fmt(row['slowest_stable'])} | {_fmt(row['worst_real'])} |")
+    lines += ["", "| crank mode | paper form: worst deviation (%) | modelled mechanism and tool (%) |", "|---|---|---|"]
+    for mode, entry in rounded["crank"].items():
+        lines.append(f"| {mode} | {entry['paper']:.2f} | {entry['modelled']:.2f} |")
+    return lines
+
+
 def main():
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--quick", action="store_true", help="1.5 s window runs (the test's setting)")
@@ -128,24 +151,7 @@ def main():
     # Six figures for the instability: the simulated growth agrees with the linearization to 1e-4 relative.
     rounded = {**significant(results), "instability": significant(results["instability"], digits=6)}
     (DOCS / "baselines.json").write_text(json.dumps(rounded, indent=1) + "\n")
-    rc = results["instability"]["raibert-craig"]
-    print(f"Raibert-Craig at q = (-160, 30) deg: linearized {rc['worst_linearized']:+.4f} 1/s, analytic "
-          f"{rc['worst_analytic']:+.4f}, simulated growth {rc['simulated_growth']:+.4f} "
-          f"({100 * (rc['simulated_growth'] / rc['worst_linearized'] - 1):+.3f} %)")
-    for name in ("fisher-mujtaba", "li-sastry", "pd-open-loop-force"):
-        print(f"{name}: worst linearized real part {results['instability'][name]['worst_linearized']:+.4f} 1/s")
-    print(f"unstable fraction of the regular grid: {results['unstable_fraction']}")
-    print("\n| law | velocity error after 1 s (%) | force error after 1 s (%) | settling 1 % velocity / force (s) "
-          "| slowest stable eigenvalue (1/s) | largest real part (1/s) |")
-    print("|---|---|---|---|---|---|")
-    for row in results["window"]:
-        print(f"| {row['law']} | {_fmt(row['velocity_error_percent'])} | {_fmt(row['force_error_percent'])} | "
-              f"{_fmt(row['velocity_settling_s'])} / {_fmt(row['force_settling_s'])} | {_fmt(row['slowest_stable'])} "
-              f"| {_fmt(row['worst_real'])} |")
-    print("\n| crank mode | paper form: worst deviation (%) | modelled mechanism and tool (%) |")
-    print("|---|---|---|")
-    for mode, entry in results["crank"].items():
-        print(f"| {mode} | {entry['paper']:.2f} | {entry['modelled']:.2f} |")
+    print("\n".join(report_lines(rounded)))
 
 
 if __name__ == "__main__":

@@ -4,6 +4,7 @@ docs/reliability.py write through it)."""
 
 import json
 import math
+import re
 import sys
 from pathlib import Path
 
@@ -45,3 +46,29 @@ def test_the_scripts_write_no_dates_or_run_times():
         assert "datetime" not in text and "strftime" not in text, script
     reliability = (DOCS / "reliability.py").read_text()
     assert '"wall_time"' not in reliability and "Run time per case" not in reliability
+
+
+def test_make_baselines_prints_the_rounded_figures_without_float_noise():
+    """docs/make_baselines.py's stdout is made from the figures as baselines.json has them: noise in the
+    10th digit prints the same lines, and no number printed has more than 6 significant digits."""
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location("make_baselines", DOCS / "make_baselines.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    tracked = json.loads((DOCS / "baselines.json").read_text())
+
+    def noisy(value):
+        if isinstance(value, dict):
+            return {key: noisy(item) for key, item in value.items()}
+        if isinstance(value, list):
+            return [noisy(item) for item in value]
+        return value * (1 + 3e-11) if isinstance(value, float) else value
+
+    rounded = lambda results: {**significant(results), "instability": significant(results["instability"], digits=6)}
+    lines = module.report_lines(rounded(noisy(tracked)))
+    assert lines == module.report_lines(rounded(tracked))
+    text = "\n".join(lines)
+    assert "unstable fraction of the regular grid: raibert-craig" in text
+    for number in re.findall(r"\d+\.\d+", text):
+        assert len(number.replace(".", "").lstrip("0")) <= 6, number
