@@ -39,7 +39,6 @@ from drake_hybrid.viz.animation import quiet_meshcat, set_task_camera
 from drake_hybrid.viz.outputs import write_run
 from drake_hybrid.viz.plotting import eigenvalue_figure, save_sweep_plots
 
-
 DESCRIPTION = """drake-hybrid: hybrid velocity/force control (Li & Sastry 1987) as Drake systems.
 
 commands:

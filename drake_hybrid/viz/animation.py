@@ -25,6 +25,8 @@ from pathlib import Path
 import numpy as np
 from matplotlib.image import imread
 
+from pydrake.geometry import Meshcat
+
 # Chromium in a container without a GPU or a network: software WebGL (SwiftShader; Chromium 156
 # renders Meshcat with or without --enable-unsafe-swiftshader) and no background connections, which
 # a closed network refuses.
@@ -37,8 +39,6 @@ def quiet_meshcat(**kwargs):
     pydrake keeps in step with spdlog's level) at WARNING while it starts, so that its INFO line
     "Meshcat listening for connections at http://localhost:7000" is not printed; the logger's level
     is restored afterwards."""
-    from pydrake.geometry import Meshcat
-
     logger = logging.getLogger("drake")
     level = logger.level
     logger.setLevel(max(logging.WARNING, level))
