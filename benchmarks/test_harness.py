@@ -1,10 +1,11 @@
-"""Checks of the benchmark harness itself (not part of the package's suite):
-
-    pytest benchmarks/test_harness.py        # about 20 s; the UR5e case needs the bench extra
+"""Checks of the benchmark harness itself, run with the suite (pyproject's ``testpaths``; alone:
+``pytest benchmarks/test_harness.py``, about 25 s; the UR5e and Panda cases need the test or bench
+extra).
 
 They guard the claims the figures rest on: every timed tick really evaluates
-the law (no cached result) and the plant-alone replay does the closed loop's
-plant work (it reproduces the closed loop's motion exactly).
+the law (no cached result), the plant-alone replay and python_floor.py's
+floor replay do the closed loop's plant work (they reproduce the closed loop's
+motion exactly), and the tick floor makes the Drake calls it claims to.
 """
 
 import sys
@@ -12,6 +13,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+
+from pydrake.multibody.tree import MultibodyForces
 
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
@@ -63,18 +66,57 @@ def test_every_timed_idc_tick_sees_a_new_state():
     assert all(np.any(a != b) for a, b in zip(torques, torques[1:]))
 
 
-def test_torque_replay_reproduces_the_closed_loop_motion_exactly():
-    from closed_loop import plant_alone_rtf
-
+@pytest.fixture(scope="module")
+def window_run():
+    """(config, log) of 0.3 s of the window task's default closed loop."""
     from drake_hybrid.experiments.simulation import simulate
     from drake_hybrid.scenario.tasks import get_task
 
     config = get_task("window-washing").default_config()
     config.duration = 0.3
-    run = simulate(config)
-    rtf, contacts, drift = plant_alone_rtf(config, "replay", run.log)
+    return config, simulate(config).log
+
+
+@pytest.mark.slow
+def test_torque_replay_reproduces_the_closed_loop_motion_exactly(window_run):
+    from closed_loop import plant_alone_rtf
+
+    config, log = window_run
+    rtf, contacts, drift = plant_alone_rtf(config, "replay", log)
     assert drift == 0.0
     assert contacts >= 1 and rtf > 0
+
+
+@pytest.mark.slow
+def test_the_python_floor_replay_reproduces_the_closed_loop_motion_exactly(window_run):
+    """python_floor.py's closed-loop floor (one Python update per tick reading the state and the contact
+    results, holding the logged torque) does the closed loop's plant work: same motion, in contact."""
+    from python_floor import replay_floor_rtf
+
+    config, log = window_run
+    for sampled_outputs in (False, True):
+        rtf, drift = replay_floor_rtf(config, log, sampled_outputs)
+        assert drift == 0.0 and rtf > 0
+
+
+def test_the_tick_floor_makes_the_drake_calls_and_sees_a_new_state():
+    """python_floor.py's tick floor returns the plant's inverse dynamics at the fresh state it was given."""
+    from python_floor import floor_evaluation
+
+    robot = make_robot("ur5e")
+    evaluation = floor_evaluation(robot, np.random.default_rng(0))
+    output_port = evaluation.evaluate.__self__
+    torques = []
+    for _ in range(3):
+        evaluation()
+        torques.append(output_port.Eval(evaluation.context).copy())
+        plant_context = robot.plant.CreateDefaultContext()
+        robot.plant.SetPositionsAndVelocities(plant_context, evaluation.state_port.Eval(evaluation.context))
+        forces = MultibodyForces(robot.plant)
+        robot.plant.CalcForceElementsContribution(plant_context, forces)
+        expected = robot.plant.CalcInverseDynamics(plant_context, np.zeros(robot.plant.num_velocities()), forces)
+        np.testing.assert_allclose(torques[-1], expected, rtol=1e-12, atol=1e-12)
+    assert all(np.any(a != b) for a, b in zip(torques, torques[1:]))
 
 
 def test_the_in_simulation_profile_times_one_law_evaluation_and_two_contact_reads_per_step():
