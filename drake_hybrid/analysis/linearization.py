@@ -13,7 +13,8 @@
   differences: multipliers that see the control period.
 * ``match_eigenvalues``: pairs every predicted eigenvalue with a distinct
   measured one (minimum total relative distance) and says which are within
-  tolerance.
+  tolerance; ``predicted_match``: the match in which every miss is a predicted one
+  (a task's shifted design, an unstable mode its diagnosis predicts), if any.
 
 Size: the designed eigenvalues and the three linearizations (continuous, discrete, the sampled
 loop's one-period map) are compared with each other; splitting them is planned with the law
@@ -32,9 +33,9 @@ from pydrake.systems.analysis import ApplySimulatorConfig, InitializeParams, Sim
 from pydrake.systems.primitives import Linearize
 
 from drake_hybrid.analysis.derivatives import JACOBIAN_TOLERANCE, JacobianCheck, checked_state_jacobian
-from drake_hybrid.analysis.modes import diagnose_unstable_modes
-from drake_hybrid.control.law import impedance_blocks
+from drake_hybrid.analysis.modes import diagnose_unstable_modes, explained_modes
 from drake_hybrid.control.gains import ControlMode
+from drake_hybrid.control.law import impedance_blocks
 from drake_hybrid.control.sampling import SAMPLE_LEAD
 from drake_hybrid.core.progress import quiet
 from drake_hybrid.scenario.builder import build_scenario
@@ -216,6 +217,22 @@ def shifted_design(designed, shifts):
     for index, shift in shift_indices(designed, shifts).items():
         corrected[index] = shift.predicted
     return corrected
+
+
+def predicted_match(result, tolerance=0.05):
+    """The match of a linearization ``result`` in which every miss is a predicted one, or None.
+
+    Tries the plain match, then the one against the task's shifted design (``shifted_match``); a
+    match counts when every designed eigenvalue is within ``tolerance`` of its partner and every
+    unstable extra mode is within ``tolerance`` of the prediction of its diagnosis
+    (``result.unstable_modes``, ``analysis.modes.ModeDiagnosis.explained``). ``drake-hybrid analyze``
+    exits 0 on it (``--strict``: only on a plain match)."""
+    diagnoses = getattr(result, "unstable_modes", [])
+    for candidate in (result.match, getattr(result, "shifted_match", None)):
+        if (candidate is not None and bool(np.all(candidate.relative_error <= tolerance))
+                and explained_modes(candidate.unstable_extra, diagnoses, tolerance)):
+            return candidate
+    return None
 
 
 def _task_shifts(task_name, scenario, root_context, predicted, measured, tolerance):

@@ -21,13 +21,36 @@ the law's push along E_f(x) cancels exactly for a smooth pad and surface; a tess
 and workpiece turn it at a slightly different rate, and the difference dk gives a real
 eigenvalue s with Lambda s (s + K_v) = dk (Lambda: the arm's inertia along the mode,
 (u^T E_p J M^-1 J^T E_p^T u)^-1). The diagnosis reports that dk.
+
+The law's F_v cancellation (``control.law.tangential_compensation``) removes that stiffness from the
+velocity rows, but not the measured force on the held (kinematic) rows: a point contact leaves
+them to the controller (C-ddot + 3 w_c C-dot + 2 w_c^2 C = 0), and in velocity-force and
+position-force mode their measured force stays on the arm. For a smooth ball pad on a smooth
+surface it is zero (the contact force passes through the pad's centre along E_f's first row); a
+tessellated pad and workpiece give a small contact torque about the pad's centre that changes
+as the pad slides, and the arm's mobility carries it to the velocity rows. ``row_force_drift``
+predicts the resulting eigenvalues without the closed-loop Jacobian: the rigid arm under the law,
+
+    y-ddot = -K_v y-dot (- K_p y) + (E J M^-1 J^T E^T)[p, u] (dF_u / dy) y,
+
+y the positions along the velocity rows (y-dot = E_p r-dot), u the rows whose measured force the
+law leaves on the arm (the held rows, and the velocity rows when F_v is not cancelled), and
+dF_u / dy measured by central differences of the wrench sensor's reading split by E^-T
+(``DRIFT_STEP``) with the pad moved along each velocity row. The sphere's pole path: +0.508
+predicted, +0.497 1/s linearized (docs/drake_notes.md). A mode that prediction matches is
+named with it (``ModeDiagnosis.predicted``, ``explained``).
 """
 
 from dataclasses import dataclass, field
 
 import numpy as np
 
+from drake_hybrid.control.gains import ControlMode
+
 UNSTABLE_RATE = 0.01                  # 1/s: a mode growing faster than 1 % per second is named
+# m (or rad) along a velocity row: the step of the row forces' central differences in row_force_drift.
+# The sphere's pole path: dF/dy agrees to 3 digits at 1e-5, 1e-6 and 1e-7 (docs/drake_notes.md).
+DRIFT_STEP = 1e-6
 
 
 @dataclass
@@ -38,6 +61,13 @@ class ModeDiagnosis:
     likely_cause: str
     stiffness: float = float("nan")   # dk (N/m or N m/rad) that explains a slow tangential mode, velocity mode
     direction: list = field(default_factory=list)   # the mode's direction in the velocity rows (unit)
+    predicted: float = float("nan")   # 1/s: row_force_drift's nearest eigenvalue (slow velocity-row modes)
+    driven_by: str = ""               # the rows whose measured force drives it in that prediction
+
+    def explained(self, tolerance):
+        """True when ``predicted`` is within ``tolerance`` (relative) of the mode's eigenvalue."""
+        return bool(np.isfinite(self.predicted) and self.predicted != 0
+                    and abs(self.eigenvalue - self.predicted) <= tolerance * abs(self.predicted))
 
     def summary(self):
         shares = ", ".join(f"{name} {100 * value:.0f} %" for name, value in self.shares.items())
@@ -49,7 +79,110 @@ class ModeDiagnosis:
         return {"eigenvalue": [float(self.eigenvalue.real), float(self.eigenvalue.imag)], "shares": self.shares,
                 "dominant": self.dominant, "likely_cause": self.likely_cause,
                 "stiffness": None if np.isnan(self.stiffness) else self.stiffness,
-                "direction": self.direction}
+                "direction": self.direction,
+                "predicted": None if np.isnan(self.predicted) else self.predicted, "driven_by": self.driven_by}
+
+
+def explained_modes(unstable, diagnoses, tolerance):
+    """True when every eigenvalue in ``unstable`` has a diagnosis (same eigenvalue) whose
+    prediction it is within ``tolerance`` of (``ModeDiagnosis.explained``)."""
+    for value in np.atleast_1d(unstable):
+        same = [d for d in diagnoses if abs(d.eigenvalue - value) <= 1e-6 * max(1.0, abs(value))]
+        if not any(d.explained(tolerance) for d in same):
+            return False
+    return True
+
+
+def drift_eigenvalues(mobility, stiffness, velocity_gain, position_gain=None):
+    """Eigenvalues of y-ddot = -K_v y-dot - K_p y + G y, G = ``mobility`` @ ``stiffness`` (k x u
+    and u x k: the velocity rows' mobility to the rows u and dF_u/dy); ``position_gain`` K_p is
+    None in velocity-force mode. Sorted by real part, largest first."""
+    G = np.asarray(mobility, dtype=float) @ np.asarray(stiffness, dtype=float)
+    k = G.shape[0]
+    K_v = np.asarray(velocity_gain, dtype=float)
+    K_p = np.zeros((k, k)) if position_gain is None else np.asarray(position_gain, dtype=float)
+    values = np.linalg.eigvals(np.block([[np.zeros((k, k)), np.eye(k)], [G - K_p, -K_v]]))
+    return values[np.argsort(-values.real)]
+
+
+@dataclass
+class DriftPrediction:
+    """``row_force_drift``'s result: the eigenvalues of the rigid arm's velocity rows under the row
+    forces the law leaves on the arm, and of the held rows' and the velocity rows' parts alone."""
+
+    eigenvalues: np.ndarray           # with every row u the law leaves (largest real part first)
+    held_rows: np.ndarray             # with the held rows' force alone (empty without held rows)
+    velocity_rows: np.ndarray         # with F_v alone (empty when the law cancels it)
+    stiffness: np.ndarray             # dF/dy: all rows (velocity rows, then E_f's) by velocity row
+    held: tuple                       # indices of the held rows among E_f's
+    cancels_tangential: bool
+
+    @property
+    def driven_by(self):
+        """The rows whose force drives the largest eigenvalue: the part alone that comes closer."""
+        parts = {"held rows": self.held_rows, "velocity rows": self.velocity_rows}
+        top = {name: values[0].real for name, values in parts.items() if len(values)}
+        if not top:
+            return ""
+        return max(top, key=top.get)
+
+
+def _row_forces(scenario, context, q):
+    """[F_v; F] = E^-T w at the arm's positions ``q`` (the rest of ``context`` kept): the wrench
+    sensor's reading split as the law splits it (``ConstraintSpace.split_wrench``)."""
+    work = context.Clone()
+    plant, space = scenario.plant, scenario.constraint_space
+    plant_context = plant.GetMyMutableContextFromRoot(work)
+    plant.SetPositions(plant_context, q)
+    wrench = np.asarray(scenario.sensor.get_output_port(0).Eval(scenario.sensor.GetMyContextFromRoot(work)))
+    task = scenario.kinematics.evaluate(plant_context, check=False)
+    values = space.evaluate(task.configuration, task.velocity, check=False)
+    tangential, force = space.split_wrench(values, space.chart.generalized_force(task.configuration, wrench))
+    return np.concatenate([tangential, force])
+
+
+def row_force_drift(scenario, context, mode, step=DRIFT_STEP):
+    """Predict the velocity rows' slow eigenvalues from the row forces the law leaves on the arm
+    (module docstring): a ``DriftPrediction``, or None in impedance-force mode (whose K_0 takes
+    every motion row's measured force) or without velocity rows.
+
+    ``scenario``, ``context``: the closed loop at its linearization point (the arm's positions
+    are moved by ``step`` along each velocity row, dq = J^+ E^-1 e_i, on clones of ``context``)."""
+    space = scenario.constraint_space
+    k = space.velocity_size
+    if k == 0 or mode is ControlMode.IMPEDANCE_FORCE:
+        return None
+    plant = scenario.plant
+    plant_context = plant.GetMyContextFromRoot(context)
+    q0 = plant.GetPositions(plant_context).copy()
+    task = scenario.kinematics.evaluate(plant_context, check=False)
+    values = space.evaluate(task.configuration, task.velocity, check=False)
+    E = np.vstack([values.velocity_projection, values.force_projection])
+    J = task.jacobian
+    M = plant.CalcMassMatrix(plant_context)
+    if J.shape[1] != q0.size:
+        return None                                  # positions and velocities differ (a free body)
+    mobility = E @ J @ np.linalg.solve(M, J.T) @ E.T
+    stiffness = np.zeros((E.shape[0], k))
+    for i in range(k):
+        dq = np.linalg.pinv(J) @ np.linalg.solve(E, np.eye(E.shape[0])[i])
+        stiffness[:, i] = (_row_forces(scenario, context, q0 + step * dq)
+                           - _row_forces(scenario, context, q0 - step * dq)) / (2.0 * step)
+    held = tuple(space.constraint.kinematic_rows)
+    cancels = bool(getattr(scenario.config, "compensate_tangential_force", False))
+    gains = scenario.controller.validated_gains()
+    K_p = gains.position if mode.integrates_position else None
+    held_rows = [k + i for i in held]
+    velocity_rows = [] if cancels else list(range(k))
+
+    def part(rows):
+        if not rows:
+            return np.zeros(0, complex)
+        return drift_eigenvalues(mobility[:k][:, rows], stiffness[rows], gains.velocity, K_p)
+
+    return DriftPrediction(eigenvalues=part(velocity_rows + held_rows), held_rows=part(held_rows),
+                           velocity_rows=part(velocity_rows), stiffness=stiffness, held=held,
+                           cancels_tangential=cancels)
 
 
 def _plant_block(diagram, context, plant):
@@ -80,6 +213,7 @@ def diagnose_unstable_modes(scenario, context, A, mode, designed, threshold=UNST
     mobility = E_p @ J @ np.linalg.solve(M, J.T) @ E_p.T
     K_v = scenario.controller.validated_gains().velocity
     slowest = float(np.min(np.abs(np.real(designed)))) if len(designed) else 1.0
+    prediction = []                                  # row_force_drift, computed once when needed
     diagnoses = []
     for value, vector in zip(eigenvalues, vectors.T):
         if not value.real > threshold:
@@ -96,7 +230,14 @@ def diagnose_unstable_modes(scenario, context, A, mode, designed, threshold=UNST
         dominant = max(shares, key=shares.get) if total > 0 else "controller and sensor states"
         slow_real = abs(value.imag) < 1e-6 * max(1.0, abs(value)) and abs(value) < 0.5 * slowest
         stiffness, direction = float("nan"), []
+        predicted, driven_by = float("nan"), ""
         if dominant == "velocity rows" and slow_real:
+            if not prediction:
+                prediction.append(row_force_drift(scenario, context, mode))
+            drift = prediction[0]
+            if drift is not None and len(drift.eigenvalues):
+                nearest = drift.eigenvalues[np.argmin(np.abs(drift.eigenvalues - value))]
+                predicted, driven_by = float(nearest.real), drift.driven_by
             u = np.real(tangential) / (np.linalg.norm(np.real(tangential)) or 1.0)
             direction = [float(x) for x in u]
             inertia = 1.0 / float(u @ mobility @ u)
@@ -104,7 +245,19 @@ def diagnose_unstable_modes(scenario, context, A, mode, designed, threshold=UNST
             stiffness = inertia * s * (s + float(u @ K_v @ u))
             if mode.integrates_position:                 # Lambda (s^2 + K_v s + K_p) = dk
                 stiffness += inertia * float(u @ scenario.controller.validated_gains().position @ u)
-            if mode.integrates_position:
+            if driven_by == "held rows":
+                rows = ", ".join(str(i + 1) for i in drift.held)
+                tail = ("with F_v cancelled" if drift.cancels_tangential else "F_v's part alone predicts "
+                        f"{drift.velocity_rows[0].real:.3g}")
+                cause = (f"drift of the positions the velocity rows leave unregulated along r_p direction "
+                         f"{np.round(u, 2).tolist()}, driven by the measured force on the held row(s) {rows} of E_f: "
+                         "a contact torque about the pad's centre from the tessellated pad and workpiece (a smooth "
+                         "ball on a smooth surface gives none), which the law leaves on the arm in "
+                         f"{mode.value} mode; the rigid arm's loop with the contact's measured row-force stiffness "
+                         f"predicts {predicted:.3g} 1/s ({tail}; analysis.modes.row_force_drift). It changes with "
+                         "the pad's place on the meshes and their resolution (contact.pad_resolution); "
+                         "position-force or impedance-force mode regulates it (docs/drake_notes.md)")
+            elif mode.integrates_position:
                 cause = (f"a contact stiffness along the velocity rows (direction {np.round(u, 2).tolist()}) beyond "
                          f"what K_p holds (about {stiffness:.3g} N/m or N m/rad); raise gains.position")
             else:
@@ -128,6 +281,9 @@ def diagnose_unstable_modes(scenario, context, A, mode, designed, threshold=UNST
                      "wrench filter (sensor.bandwidth_hz)")
         else:
             cause = "controller or sensor states without arm motion (integrals, wrench filter)"
+        if np.isfinite(predicted) and driven_by != "held rows":
+            cause += f"; predicted {predicted:.3g} 1/s by analysis.modes.row_force_drift"
         diagnoses.append(ModeDiagnosis(eigenvalue=complex(value), shares=shares, dominant=dominant,
-                                       likely_cause=cause, stiffness=stiffness, direction=direction))
+                                       likely_cause=cause, stiffness=stiffness, direction=direction,
+                                       predicted=predicted, driven_by=driven_by))
     return diagnoses
