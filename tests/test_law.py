@@ -7,8 +7,8 @@ from pydrake.autodiffutils import AutoDiffXd, ExtractGradient
 
 from drake_hybrid.control.gains import ControlMode, HybridGains
 from drake_hybrid.control.law import (force_command, force_error, guarded_acceleration, held_row_acceleration,
-                                      impedance_compensation, impedance_gain, integral_rates, motion_acceleration,
-                                      velocity_error)
+                                      held_row_compensation, impedance_compensation, impedance_gain, integral_rates,
+                                      motion_acceleration, tangential_compensation, velocity_error)
 from drake_hybrid.control.phases import ContactPhase
 from drake_hybrid.core.linalg import value
 
@@ -73,6 +73,24 @@ def test_held_rows_have_the_designed_poles():
     gradient = ExtractGradient(a_f[1:])[0]
     A = np.array([[0.0, 1.0], gradient])
     np.testing.assert_allclose(np.sort(np.linalg.eigvals(A).real), [-2 * w_c, -w_c], rtol=1e-12)
+
+
+def test_the_compensations_cancel_the_forces_the_paper_assumes_zero():
+    """F_c = -F_v on the velocity rows and F_h = -F on the held rows, in velocity-force and
+    position-force mode with the option on; none in impedance mode (K_0 takes them), with the option
+    off, or (F_h) on a rejected wrench. Their derivative is -I on the rows they cancel, in AutoDiffXd."""
+    mask = np.array([1.0, 0.0, 0.0])                               # rows 1 and 2 held
+    tangential, force = np.array([0.3, -0.2]), np.array([-10.0, 0.04, -0.01])
+    for mode in (ControlMode.VELOCITY_FORCE, ControlMode.POSITION_FORCE):
+        np.testing.assert_array_equal(tangential_compensation(tangential, mode, True), -tangential)
+        np.testing.assert_array_equal(held_row_compensation(force, mask, True, mode, True), [0.0, -0.04, 0.01])
+        assert tangential_compensation(tangential, mode, False) is None
+        assert held_row_compensation(force, mask, True, mode, False) is None
+        assert held_row_compensation(force, mask, False, mode, True) is None      # dropout: F = F_d, not measured
+    assert tangential_compensation(tangential, ControlMode.IMPEDANCE_FORCE, True) is None
+    assert held_row_compensation(force, mask, True, ControlMode.IMPEDANCE_FORCE, True) is None
+    derivative = ExtractGradient(held_row_compensation(_seeded(force), mask, True, ControlMode.VELOCITY_FORCE, True))
+    np.testing.assert_allclose(derivative, -np.diag(1.0 - mask), rtol=0, atol=0)
 
 
 def test_guarded_move_approaches_along_the_pressing_direction():

@@ -23,13 +23,14 @@ eigenvalue s with Lambda s (s + K_v) = dk (Lambda: the arm's inertia along the m
 (u^T E_p J M^-1 J^T E_p^T u)^-1). The diagnosis reports that dk.
 
 The law's F_v cancellation (``control.law.tangential_compensation``) removes that stiffness from the
-velocity rows, but not the measured force on the held (kinematic) rows: a point contact leaves
-them to the controller (C-ddot + 3 w_c C-dot + 2 w_c^2 C = 0), and in velocity-force and
-position-force mode their measured force stays on the arm. For a smooth ball pad on a smooth
-surface it is zero (the contact force passes through the pad's centre along E_f's first row); a
-tessellated pad and workpiece give a small contact torque about the pad's centre that changes
-as the pad slides, and the arm's mobility carries it to the velocity rows. ``row_force_drift``
-predicts the resulting eigenvalues without the closed-loop Jacobian: the rigid arm under the law,
+velocity rows. The held (kinematic) rows carry a second such force: a point contact leaves them to
+the controller (C-ddot + 3 w_c C-dot + 2 w_c^2 C = 0). For a smooth ball pad on a smooth surface
+their measured force is zero (the contact force passes through the pad's centre along E_f's first
+row); a tessellated pad and workpiece give a small contact torque about the pad's centre that
+changes as the pad slides, and the arm's mobility carries it to the velocity rows. The law cancels
+it with F_v under the same option (``control.law.held_row_compensation``); in the paper's form
+(``compensate_tangential_force: false``) both stay on the arm. ``row_force_drift`` predicts the
+resulting eigenvalues without the closed-loop Jacobian: the rigid arm under the law,
 
     y-ddot = -K_v y-dot (- K_p y) + (E J M^-1 J^T E^T)[p, u] (dF_u / dy) y,
 
@@ -37,7 +38,9 @@ y the positions along the velocity rows (y-dot = E_p r-dot), u the rows whose me
 law leaves on the arm (the held rows, and the velocity rows when F_v is not cancelled), and
 dF_u / dy measured by central differences of the wrench sensor's reading split by E^-T
 (``DRIFT_STEP``) with the pad moved along each velocity row. The sphere's pole path: +0.508
-predicted, +0.497 1/s linearized (docs/drake_notes.md). A mode that prediction matches is
+predicted, +0.497 1/s linearized with F_v alone cancelled (the law before the held rows' force was
+cancelled too; now 0); in the paper's form +0.533 predicted, +0.510 linearized (docs/drake_notes.md).
+A mode that prediction matches is
 named with it (``ModeDiagnosis.predicted``, ``explained``).
 """
 
@@ -111,7 +114,7 @@ class DriftPrediction:
     forces the law leaves on the arm, and of the held rows' and the velocity rows' parts alone."""
 
     eigenvalues: np.ndarray           # with every row u the law leaves (largest real part first)
-    held_rows: np.ndarray             # with the held rows' force alone (empty without held rows)
+    held_rows: np.ndarray             # with the held rows' force alone (empty without held rows, or cancelled)
     velocity_rows: np.ndarray         # with F_v alone (empty when the law cancels it)
     stiffness: np.ndarray             # dF/dy: all rows (velocity rows, then E_f's) by velocity row
     held: tuple                       # indices of the held rows among E_f's
@@ -172,8 +175,8 @@ def row_force_drift(scenario, context, mode, step=DRIFT_STEP):
     cancels = bool(getattr(scenario.config, "compensate_tangential_force", False))
     gains = scenario.controller.validated_gains()
     K_p = gains.position if mode.integrates_position else None
-    held_rows = [k + i for i in held]
-    velocity_rows = [] if cancels else list(range(k))
+    held_rows = [] if cancels else [k + i for i in held]          # law.held_row_compensation
+    velocity_rows = [] if cancels else list(range(k))              # law.tangential_compensation
 
     def part(rows):
         if not rows:
@@ -247,16 +250,16 @@ def diagnose_unstable_modes(scenario, context, A, mode, designed, threshold=UNST
                 stiffness += inertia * float(u @ scenario.controller.validated_gains().position @ u)
             if driven_by == "held rows":
                 rows = ", ".join(str(i + 1) for i in drift.held)
-                tail = ("with F_v cancelled" if drift.cancels_tangential else "F_v's part alone predicts "
-                        f"{drift.velocity_rows[0].real:.3g}")
+                tail = f"F_v's part alone predicts {drift.velocity_rows[0].real:.3g}"
                 cause = (f"drift of the positions the velocity rows leave unregulated along r_p direction "
                          f"{np.round(u, 2).tolist()}, driven by the measured force on the held row(s) {rows} of E_f: "
                          "a contact torque about the pad's centre from the tessellated pad and workpiece (a smooth "
-                         "ball on a smooth surface gives none), which the law leaves on the arm in "
-                         f"{mode.value} mode; the rigid arm's loop with the contact's measured row-force stiffness "
+                         "ball on a smooth surface gives none), which the paper's form of the law leaves on the "
+                         f"arm in {mode.value} mode; the rigid arm's loop with the contact's measured row-force stiffness "
                          f"predicts {predicted:.3g} 1/s ({tail}; analysis.modes.row_force_drift). It changes with "
                          "the pad's place on the meshes and their resolution (contact.pad_resolution); "
-                         "position-force or impedance-force mode regulates it (docs/drake_notes.md)")
+                         "compensate_tangential_force: true (the default; off here) cancels it, and position-force "
+                         "or impedance-force mode regulates it (docs/drake_notes.md)")
             elif mode.integrates_position:
                 cause = (f"a contact stiffness along the velocity rows (direction {np.round(u, 2).tolist()}) beyond "
                          f"what K_p holds (about {stiffness:.3g} N/m or N m/rad); raise gains.position")

@@ -4,8 +4,8 @@
 user's C, E_f, E_f-dot (and a given E_p, E_p-dot nu) compiled from sympy and then calls
 ``law_kernel`` below: the chart maps, the kernel E_p, the rank margins, E = [E_p; E_f] factored
 once for the wrench split (3.0-8) and r-ddot* (3.0-11), the three laws (3.1-12), Remark 3,
-(3.2-6), the mechanism force F_m = I_v a_p, the tangential compensation F_c = -F_v, the held and
-guarded rows, u_f, tau_f, J^-1 (bounded) or the dynamically consistent Lambda (bounded), the
+(3.2-6), the mechanism force F_m = I_v a_p, the compensations F_c = -F_v and F_h = -F on the held
+rows, the held and guarded rows, u_f, tau_f, J^-1 (bounded) or the dynamically consistent Lambda (bounded), the
 discrete step's damping compensation h B a*, the saturation and the integral rates. Every function
 mirrors one of control/law.py, control/damping.py, core/projections.py, core/charts.py or
 control/safety.py line by line, so the two
@@ -44,7 +44,8 @@ I_N, I_D, I_M, I_K, I_CHART, I_POSITION, I_IMPEDANCE, I_KERNEL, I_ANTI_WINDUP, I
 (I_OFFSET_KV, I_OFFSET_KP, I_OFFSET_KFP, I_OFFSET_KFI, I_OFFSET_MASK, I_OFFSET_B_INVERSE, I_OFFSET_LIMITS,
  I_OFFSET_POINT, I_OFFSET_CHART, I_OFFSET_BASIS, I_OFFSET_HALF_LOWER) = range(10, 21)
 I_CONFIGURATION = 21          # size of the chart's configuration x
-I_COMPENSATE_TANGENTIAL = 22  # 1: cancel the measured F_v (law.tangential_compensation)
+I_COMPENSATE_TANGENTIAL = 22  # 1: cancel the measured F_v and the held rows' F (law.tangential_compensation,
+#                               law.held_row_compensation)
 I_MECHANISM = 23              # 1: the mechanism force F_m = I_v a_p (law.mechanism_force)
 I_DAMPING = 24                # 1: the discrete step's damping compensation h B a* (control.damping)
 I_OFFSET_MECHANISM, I_OFFSET_DAMPING = 25, 26   # offsets of I_v (k x k) and h B (n) in ``reals``
@@ -668,6 +669,8 @@ def law_kernel(x, nu, J, bias, C, E_f, curvature, E_f_dot, E_p, E_p_dot_nu, v, d
     force_command = -desired_force + matvec(K_fp, force_error) + matvec(K_fi, integrals[:m])
     if not in_contact:
         force_command = force_command * (1.0 - mask)
+    if ints[I_COMPENSATE_TANGENTIAL] != 0 and ints[I_IMPEDANCE] == 0 and wrench_valid:
+        force_command = force_command - force * (1.0 - mask)           # + F_h, F_h = -F on the held rows
     wrench_on_task = matvec(transpose(E_f), force_command)
     if mechanism:                                                      # + E_p^T F_m
         wrench_on_task = wrench_on_task + matvec(transpose(E_p), mechanism_force)

@@ -14,10 +14,11 @@ force on the robot, §0; k = d - m velocity rows, m force rows)::
           ... + K_0 (F_v + F_m)                           (3.2-6)   impedance_compensation
     F_m = I_v a_p                       (a mechanism on the velocity rows)   mechanism_force
     F_c = -F_v                          (velocity and position modes)        tangential_compensation
+    F_h = -F on the held rows           (velocity and position modes)        held_row_compensation
     a_f = -3 w_c C-dot - 2 w_c^2 C      (kinematic rows)             held_row_acceleration
     a_f = -K_a (C-dot - s n_C)          (off the surface)            guarded_acceleration
     r-ddot* = E^-1 ([a_p; a_f] - E-dot r-dot)             (3.0-11)   ConstraintSpace.task_acceleration
-    u_f = -F_d + K_fp e_f + K_fi xi                       (3.1-12)   force_command
+    u_f = -F_d + K_fp e_f + K_fi xi (+ F_h)               (3.1-12)   force_command
     tau_f = J^T (E_f^T u_f + E_p^T (F_m + F_c))                      force_torque
     tau = ID(q, q-dot, J^-1 (r-ddot* - J-dot q-dot)) + tau_f   (n = d)   joint_torque
     tau = h + g + J^T Lambda (r-ddot* - J-dot q-dot) + tau_f
@@ -56,7 +57,8 @@ class LawConstants:
     and K_a (None without a guarded move); velocity_row_inertia: I_v of a mechanism moving with the
     velocity rows (None: the paper's massless constraint); joint_damping, plant_time_step: the
     model's B and the simulated plant's step h (``control.damping``; h = 0: continuous);
-    compensate_tangential_force: cancel the measured F_v (``tangential_compensation``).
+    compensate_tangential_force: cancel the measured F_v and the held rows' measured force
+    (``tangential_compensation``, ``held_row_compensation``).
     """
 
     __slots__ = ("gains", "mode", "kinematic_rows", "force_controlled", "singularity_threshold",
@@ -170,6 +172,25 @@ def tangential_compensation(tangential_force, mode, enabled):
     if not enabled or mode is ControlMode.IMPEDANCE_FORCE:
         return None
     return -tangential_force
+
+
+def held_row_compensation(force, force_controlled, wrench_valid, mode, enabled):
+    """F_h = -F on the kinematic (held) rows of E_f, added to u_f: the force that cancels the measured
+    force along the rows the controller holds, in velocity-force and position-force mode (None when
+    off, and in impedance mode, whose K_0 takes it as a motion row's external force; 0 on a rejected
+    wrench, as F_v is).
+
+    A held row is one the contact cannot push along (a point contact's torques): the law's (3.0-11)
+    assumes nothing acts there. A real contact does: a compliant pad on a tessellated workpiece
+    reports a torque about its centre that changes as the pad moves over the facets. Left in, it
+    reaches the velocity rows through the arm's coupled mobility, (E J M^-1 J^T E^T)[p, h] dF_h/dy y,
+    a slow real mode of the positions velocity-force mode leaves unregulated (+0.50 1/s at the
+    sphere's pole; ``analysis.modes.row_force_drift`` predicts it), and it keeps the start from being
+    an equilibrium. Cancelled with ``tangential_compensation`` under the same option.
+    """
+    if not enabled or mode is ControlMode.IMPEDANCE_FORCE or not wrench_valid:
+        return None
+    return -force * (1.0 - force_controlled)
 
 
 def impedance_blocks(velocity_projection, force_projection, task_mobility, kinematic_rows=()):
@@ -348,6 +369,9 @@ def evaluate_law(constants, space, kinematics, plant, plant_context, forces, int
     task_acceleration = space.task_acceleration(values, a_p, a_f)       # (3.0-11)
 
     u_f = force_command(desired_force, gains, e_f, xi, mask, in_contact)
+    F_h = held_row_compensation(force, mask, wrench_valid, mode, constants.compensate_tangential_force)
+    if F_h is not None:
+        u_f = u_f + F_h
     tau_f = force_torque(J, values.force_projection, u_f, values.velocity_projection, (F_m, F_c))
     torque, base_torque, sigma_min, lambda_squared = joint_torque(
         plant, plant_context, forces, J, task_acceleration - kinematics.bias, tau_f, constants, dynamics)
