@@ -11,24 +11,29 @@ contact has a stiffness along the surface that the design does not have, and SAP
 (docs/drake_notes.md):
 - impedance-force on the 5 cm cylinder and sphere: the unit-mass impedance yields to both, as
   designed: its roots move (4.4-23 % in the matrix) and its velocity errors are 6.6-27 %;
-- position-force on the 5 cm sphere (and the xArm7's cylinder, not in this square): the law cancels
-  it one wrench-path lag late. The pair (-3, -7) of the tool's rotation about x, coupled with v_y,
-  moves to (-3.2, -6.5) on the UR10; with the linearization's low-pass at 1 kHz instead of
-  200 Hz it is at -3.04 and -6.91.
+- position-force on the 5 cm sphere (and the xArm7's cylinder, not in this square): the law splits
+  the wrench, which the linearization's 200 Hz low-pass delays, with the current E(x), which has
+  already turned (analysis.wrench_lag): the cancellation of F_v leaves -S D sT/(1 + sT) on the
+  velocity rows, about a velocity gain K_v + T S D, D ~ -F/rho. The pair (-3, -7) of the UR10
+  moves to (-3.23, -6.50); the prediction says (-3.22, -6.52). It is the constraint's curvature,
+  not the tessellation (a fourfold finer workpiece or pad mesh does not move it), and it vanishes
+  as T goes to 0 (at 1 kHz the pair is 1.3 % off).
 """
 
 import logging
 
+import numpy as np
 import pytest
 
 import own_arm_cases as cases
+from drake_hybrid.analysis.linearization import linearize_continuous
 
 logging.getLogger("drake").setLevel(logging.ERROR)
 
 KNOWN = {
     ("cylinder", "impedance-force"): "the unit-mass impedance yields to the tessellated contact's stiffness",
     ("sphere", "impedance-force"): "the unit-mass impedance yields to the tessellated contact's stiffness",
-    ("sphere", "position-force"): "the (-3, -7) pair 7.6-12 % off: the tessellated pad's stiffness through the sensor lag",
+    ("sphere", "position-force"): "the (-3, -7) pair 7.6-12 % off: the lagged wrench split with the turned E(x)",
 }
 
 
@@ -59,3 +64,13 @@ def test_the_latin_square_covers_every_pair():
     assert len(square) == 9
     for a, b in ((0, 1), (0, 2), (1, 2)):
         assert len({(case[a], case[b]) for case in square}) == 9
+
+
+@pytest.mark.slow
+def test_the_wrench_lag_predicts_the_moved_pair(cache):
+    """UR10, 5 cm sphere, position-force: the design misses by more than 5 %, the wrench-lag
+    prediction (analysis.wrench_lag) is met within 1 %."""
+    linearization = linearize_continuous(cases.config(cases.task("ur10", "sphere", cache), "position-force"))
+    assert np.max(linearization.match.relative_error) > cases.EIGENVALUE_TOLERANCE
+    assert linearization.wrench_lag is not None and linearization.wrench_lag.lag > 0
+    assert np.max(linearization.wrench_lag_match.relative_error) <= 0.01, linearization.wrench_lag_match.as_dict()
