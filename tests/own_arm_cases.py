@@ -123,9 +123,6 @@ def run(arm_name, shape, mode, cache_dir):
         "duration": cfg.duration,
         "eigenvalue_error": float(np.max(match.relative_error)),
         "eigenvalues_matched": bool(match.matched),
-        # against the design as the wrench filter's lag moves it (analysis.wrench_lag; None in impedance mode)
-        "eigenvalue_error_lag_predicted": (float(np.max(linearization.wrench_lag_match.relative_error))
-                                           if linearization.wrench_lag_match is not None else None),
         "max_real_part": float(np.max(linearization.eigenvalues.real)),
         "jacobian_check": linearization.jacobian_check.summary(),
         "seconds": time.perf_counter() - started,

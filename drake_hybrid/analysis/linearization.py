@@ -33,7 +33,6 @@ from pydrake.systems.primitives import Linearize
 
 from drake_hybrid.analysis.derivatives import JACOBIAN_TOLERANCE, JacobianCheck, checked_state_jacobian
 from drake_hybrid.analysis.modes import diagnose_unstable_modes
-from drake_hybrid.analysis.wrench_lag import wrench_lag_prediction
 from drake_hybrid.control.law import impedance_blocks
 from drake_hybrid.control.gains import ControlMode
 from drake_hybrid.control.sampling import SAMPLE_LEAD
@@ -282,23 +281,6 @@ class Linearization:
     shifted_match: EigenvalueMatch = None            # the match against the design with those shifts
     jacobian_check: JacobianCheck = None   # AutoDiffXd against central differences; which A is used
     unstable_modes: list = field(default_factory=list)   # analysis.modes.ModeDiagnosis, real part > 0.01 1/s
-    wrench_lag: object = None          # analysis.wrench_lag.WrenchLagPrediction (None where it does not apply)
-    wrench_lag_match: EigenvalueMatch = None         # the match against the design the wrench lag moves
-
-
-def lagged_design(predicted, prediction, controller):
-    """The designed eigenvalues with the velocity loop's replaced by their partners among
-    ``prediction.loop`` (analysis.wrench_lag), order kept."""
-    rows = np.linalg.eigvals(velocity_loop_matrix(controller.validated_gains(), controller.mode))
-    partners = match_eigenvalues(rows, prediction.loop).partner
-    moved = np.array(predicted.designed, dtype=complex)
-    taken = set()
-    for row, partner in zip(rows, partners):
-        index = next(i for i, value in enumerate(moved)
-                     if i not in taken and abs(value - row) <= 1e-9 * max(1.0, abs(row)))
-        moved[index] = partner
-        taken.add(index)
-    return moved
 
 
 def linearize_continuous(config, tolerance=0.05, bandwidth_hz=200.0, stages=None,
@@ -314,9 +296,6 @@ def linearize_continuous(config, tolerance=0.05, bandwidth_hz=200.0, stages=None
     ``DerivativeMismatchWarning`` is issued), and matches eig(A) against the
     designed eigenvalues. ``wall_time`` covers both derivatives. Every mode with real part
     above 0.01 1/s is named with its likely cause (``unstable_modes``, ``analysis.modes``).
-    Where the law cancels F_v, ``wrench_lag`` predicts how the low-pass on the wrench moves the
-    velocity loop on a curved constraint (analysis.wrench_lag) and ``wrench_lag_match`` matches
-    eig(A) against that prediction.
     ``stages`` (``core.progress.Stages``): one line per stage with its time.
     """
     stages = stages or quiet()
@@ -342,14 +321,9 @@ def linearize_continuous(config, tolerance=0.05, bandwidth_hz=200.0, stages=None
     match = match_eigenvalues(predicted.designed, eigenvalues, tolerance=tolerance, marginal=predicted.marginal)
     shifts, shifted_match = _task_shifts(c.task, scenario, context, predicted, eigenvalues, tolerance)
     modes = diagnose_unstable_modes(scenario, context, A, scenario.controller.mode, predicted.designed)
-    lag = wrench_lag_prediction(scenario, context)
-    lag_match = None
-    if lag is not None:
-        lag.predicted = lagged_design(predicted, lag, scenario.controller)
-        lag_match = match_eigenvalues(lag.predicted, eigenvalues, tolerance=tolerance, marginal=predicted.marginal)
     return Linearization(A=A, eigenvalues=eigenvalues, equilibrium_residual=residual, predicted=predicted,
                          match=match, wall_time=wall, shifts=shifts, shifted_match=shifted_match,
-                         jacobian_check=check, unstable_modes=modes, wrench_lag=lag, wrench_lag_match=lag_match)
+                         jacobian_check=check, unstable_modes=modes)
 
 
 # ------------------------------------------------------------------------------------------------
