@@ -114,10 +114,9 @@ def measured_forces(space, values, configuration, wrench, desired_force, wrench_
     [F_v; F] = E^-T (w + T E_f-dot^T F) (``force_projection_rate`` E_f-dot at (x, nu); F from the
     plain split; the turn of E_p weighs F_v, zero on the exact surface: second order). Split with
     the current E instead, a curved constraint's turning normal force reads as a tangential force
-    T D r_p-dot, D = dF_v/dr_p (about -F / rho), which the cancellation of F_v would apply to the
-    velocity rows: about a velocity gain K_v + T S D (S their constrained mobility), 7.6-12 % off
-    the designed pair (-3, -7) on a 5 cm sphere at 200 Hz (docs/theory.md §11). The chart's own
-    turn (PoseChart's R) weighs the moment, zero at a ball pad's centre: left out too.
+    T D r_p-dot, D = dF_v/dr_p (about -F / rho), whose cancellation gives the velocity rows a gain
+    K_v + T S D (docs/theory.md §11). The chart's own turn weighs the moment (0 at a ball pad's
+    centre): left out too.
 
     A wrench with a non-finite entry (sensor dropout) is ignored: F_v = 0 and F = F_d, so the
     force error is zero and xi holds for that evaluation (e_p, from the velocity error, does not).
