@@ -157,8 +157,9 @@ def _damped_start(name, start, rng, joints=None):
 def test_both_paths_agree_with_the_mechanism_force_the_damping_compensation_and_the_tangential_force(
         task, mode, compensate_tangential_force, rng):
     """law.mechanism_force (an I_v, symmetric positive definite), damping.damping_compensation (joint
-    damping in the model, a plant step h = 1 ms) and law.tangential_compensation on or off: the
-    controller runs compiled (no fallback) and equals the generic law."""
+    damping in the model, a plant step h = 1 ms), law.tangential_compensation on or off and a wrench
+    0.8 ms late (law.measured_forces splits it where it was measured): the controller runs compiled
+    (no fallback) and equals the generic law."""
     name, start = task
     damped = _damped_start(name, start, rng, joints=4 if name == "window-washing-4r" else None)
     assert np.all(joint_damping(damped[0]) > 0)
@@ -166,8 +167,10 @@ def test_both_paths_agree_with_the_mechanism_force_the_damping_compensation_and_
     root = rng.normal(size=(k, k))
     inertia = root @ root.T + 0.1 * np.eye(k)
     fast, generic = _pair(damped, mode, velocity_row_inertia=inertia, plant_time_step=1e-3,
-                          compensate_tangential_force=compensate_tangential_force, guarded_move=Guarded())
+                          compensate_tangential_force=compensate_tangential_force, guarded_move=Guarded(),
+                          wrench_lag=8e-4)
     assert fast.fast_law.ints[fast_kernels.I_MECHANISM] == 1 and fast.fast_law.ints[fast_kernels.I_DAMPING] == 1
+    assert fast.fast_law.reals[fast_kernels.R_WRENCH_LAG] == 8e-4
     for i in range(4):
         inputs = _random_inputs(fast, start[5], rng, spread=0.02)
         integrals = rng.normal(scale=0.05, size=fast.integral_state_slices()[1].stop)

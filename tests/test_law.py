@@ -119,3 +119,33 @@ def test_impedance_compensation_splits_k0_over_motion_rows(rng):
     K_0 = impedance_gain(Values.velocity_projection, Values.force_projection, mobility, [0])
     full = K_0 @ np.concatenate([F_v, F])
     np.testing.assert_allclose(np.concatenate([on_velocity, on_force]), full, rtol=1e-14)
+
+
+def test_a_lagged_wrench_is_split_where_it_was_measured():
+    """law.measured_forces: on a sphere of radius rho the frictionless contact force turns with the
+    pad. A wrench T late, split with the current E(x), reads as a tangential force of about
+    F T |v| / rho (over the row's cosine); split where it was measured (wrench_lag = T) it is F_v = 0 to O(T^2)."""
+    import sympy
+
+    from drake_hybrid import ConstraintSpace, GivenVelocityProjection, PoseChart, surface_constraint
+    from drake_hybrid.control.law import measured_forces
+
+    rho, pressing, lag, speed = 0.07, 10.0, 1e-3, 0.02
+    chart = PoseChart()
+    constraint = surface_constraint(chart, lambda p: sympy.sqrt(p[0]**2 + p[1]**2 + p[2]**2) - rho,
+                                    name="sphere", normal_rows=False)
+    space = ConstraintSpace(constraint, GivenVelocityProjection(chart, np.delete(np.eye(6), 2, axis=0)))
+    p = rho * np.array([np.sin(0.3), 0.0, np.cos(0.3)])
+    v = speed * np.array([np.cos(0.3), 0.0, -np.sin(0.3)])              # tangent: C-dot = 0
+    x, nu = chart.configuration(np.diag([1.0, -1.0, -1.0]), p), np.concatenate([v, np.zeros(3)])  # tool down
+    values = space.evaluate(x, nu)
+    earlier = p - lag * v
+    wrench = np.concatenate([np.zeros(3), pressing * earlier / np.linalg.norm(earlier)])   # [n; f] on the pad
+    E_f_dot = constraint.force_projection_rate(x, nu)
+    late, force_late, _ = measured_forces(space, values, x, wrench, np.array([-pressing]))
+    split, force, valid = measured_forces(space, values, x, wrench, np.array([-pressing]), lag, E_f_dot)
+    assert valid
+    # the x row of E_p against the normal tilted by 0.3 rad: F T |v| / (rho cos 0.3)
+    assert np.linalg.norm(late) == pytest.approx(pressing * lag * speed / (rho * np.cos(0.3)), rel=0.01)
+    assert np.linalg.norm(split) < 1e-3 * np.linalg.norm(late)
+    assert abs(abs(force[0]) - pressing) < 1e-6 < abs(abs(force_late[0]) - pressing)   # F too, through E's skew

@@ -215,6 +215,9 @@ def HybridController_(T):
                 measured force along the velocity rows, F_v, which the paper's §3.1 assumes zero
                 (friction, a tessellated or curved workpiece); see ``law.tangential_compensation``.
                 Default True; False is the paper's form (the crank and grinding tasks keep it). Impedance mode uses F_v as (3.2-6) says.
+            wrench_lag: T (s), how late the measured wrench arrives (the wrench path's low-pass,
+                ``systems.sensors.low_pass_lag``): the law splits it at the configuration T earlier,
+                to first order (``law.measured_forces``). Default 0.
             fast_law: for T = float, evaluate the law through its compiled
                 float path (``fast_law``; the same law, equal to 1e-12) when
                 numba is available; False = the generic ``law.evaluate_law``.
@@ -223,7 +226,8 @@ def HybridController_(T):
         def _construct(self, plant, end_effector_frame, end_effector_point, constraint_space, gains=None,
                        mode=ControlMode.VELOCITY_FORCE, control_period=None, sample_lead=True, safety=None,
                        guarded_move=None, sampled_diagnostics=False, velocity_row_inertia=None,
-                       plant_time_step=0.0, compensate_tangential_force=True, fast_law=True, converter=None):
+                       plant_time_step=0.0, compensate_tangential_force=True, wrench_lag=0.0, fast_law=True,
+                       converter=None):
             # Every argument as given, for scalar conversion (_construct_copy): one added later cannot
             # be forgotten there.
             arguments = locals()
@@ -258,6 +262,9 @@ def HybridController_(T):
                 raise ValueError(f"HybridController: control_period must be positive or None, got {control_period}")
             # Joint damping of the model, compensated at the simulated plant's step (control.damping).
             self.plant_time_step = float(plant_time_step)
+            if not float(wrench_lag) >= 0:
+                raise ValueError(f"HybridController: wrench_lag must be >= 0 (s), got {wrench_lag}")
+            self.wrench_lag = float(wrench_lag)
             self._damping = joint_damping(plant)
             if T == float:                        # once, not again for the AutoDiffXd copy
                 warn_damped_joints(plant, self.plant_time_step)
@@ -295,7 +302,8 @@ def HybridController_(T):
             self._law = LawConstants(self._gains, self.mode, self.kinematic_rows, m, singularity_threshold,
                                      self._max_joint_acceleration, self.effort_limits, anti_windup,
                                      actuation_from_torque, zero_acceleration, speed, gain, I_v,
-                                     self._damping, self.plant_time_step, bool(compensate_tangential_force))
+                                     self._damping, self.plant_time_step, bool(compensate_tangential_force),
+                                     self.wrench_lag)
 
             # -- ports ------------------------------------------------------------------
             # estimated_state, the controller's own plant of this system's scalar type, its kinematics.

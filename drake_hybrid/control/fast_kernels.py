@@ -52,8 +52,9 @@ I_OFFSET_MECHANISM, I_OFFSET_DAMPING = 25, 26   # offsets of I_v (k x k) and h B
 INT_SIZE = 27
 # -- scalars at the start of ``reals`` -------------------------------------------------------------
 (R_RANK_TOLERANCE, R_KERNEL_TOLERANCE, R_INVERTIBILITY_TOLERANCE, R_CHART_TOLERANCE, R_CONSTRAINT_FREQUENCY,
- R_NULL_SPACE_DAMPING, R_SINGULARITY_THRESHOLD, R_MAX_ACCELERATION, R_APPROACH_SPEED, R_APPROACH_GAIN) = range(10)
-REAL_SCALARS = 10
+ R_NULL_SPACE_DAMPING, R_SINGULARITY_THRESHOLD, R_MAX_ACCELERATION, R_APPROACH_SPEED, R_APPROACH_GAIN,
+ R_WRENCH_LAG) = range(11)
+REAL_SCALARS = 11
 CHART_PLANAR, CHART_EULER, CHART_POSE = 0, 1, 2
 PHASE_APPROACH, PHASE_CONTACT = 1, 2
 # -- status ------------------------------------------------------------------------------------------
@@ -597,10 +598,14 @@ def law_kernel(x, nu, J, bias, C, E_f, curvature, E_f_dot, E_p, E_p_dot_nu, v, d
     if rank_margin_of_factored(E, LU, singular) < reals[R_INVERTIBILITY_TOLERANCE]:
         return FALLBACK, out
 
-    # [F_v; F] = E^-T w (3.0-8); a non-finite wrench is ignored
+    # [F_v; F] = E^-T w (3.0-8), split where a lagged wrench was measured; a non-finite wrench is ignored
     wrench_valid = all_finite(wrench)
     if wrench_valid:
-        split = lu_solve_transpose(LU, pivots, generalized_force(x, wrench, reals, ints))
+        covector = generalized_force(x, wrench, reals, ints)
+        split = lu_solve_transpose(LU, pivots, covector)
+        if reals[R_WRENCH_LAG] > 0:
+            split = lu_solve_transpose(LU, pivots, covector + reals[R_WRENCH_LAG] * matvec(transpose(E_f_dot),
+                                                                                          split[k:]))
         tangential_force, force = split[:k], split[k:]
     else:
         tangential_force, force = np.zeros(k), desired_force.copy()

@@ -63,14 +63,15 @@ def _kernels_version():
 # ------------------------------------------------------------------------------------------------
 
 def _piece_terms(constraint, projection, chart):
-    """The sympy matrices [C, E_f, E_f-dot nu, E_f-dot or 0 x d, E_p or 0 x d, E_p-dot nu or 0]."""
+    """The sympy matrices [C, E_f, E_f-dot nu, E_f-dot, E_p or 0 x d, E_p-dot nu or 0] (E_f-dot: the
+    kernel projection's rate, and the split of a lagged wrench, law.measured_forces)."""
     C, E_f, curvature = constraint.symbolic_terms
     d = chart.velocity_size
+    E_f_dot = time_derivative(E_f, chart.configuration_symbols, chart.configuration_rate)
     if isinstance(projection, KernelVelocityProjection):
-        E_f_dot = time_derivative(E_f, chart.configuration_symbols, chart.configuration_rate)
         return [C, E_f, curvature, E_f_dot, sympy.zeros(0, d), sympy.zeros(0, 1)]
     E_p, E_p_dot_nu = projection.symbolic_terms
-    return [C, E_f, curvature, sympy.zeros(0, d), E_p, E_p_dot_nu]
+    return [C, E_f, curvature, E_f_dot, E_p, E_p_dot_nu]
 
 
 def _piece_source(name, terms, chart):
@@ -189,7 +190,7 @@ def pack_constants(controller, law, space):
     scalars = np.array([space.constraint.rank_tolerance, projection.rank_tolerance if kernel else 0.0,
                         space.invertibility_tolerance, chart_tolerance, gains.constraint_frequency,
                         gains.null_space_damping, law.singularity_threshold, law.max_joint_acceleration,
-                        law.approach_speed or 0.0, law.approach_gain or 0.0])
+                        law.approach_speed or 0.0, law.approach_gain or 0.0, law.wrench_lag])
     mechanism = law.velocity_row_inertia is not None
     # damping.damping_compensation's condition: a discrete plant and damping in the model.
     damped = law.plant_time_step > 0 and law.joint_damping is not None and bool(np.any(law.joint_damping))

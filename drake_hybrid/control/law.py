@@ -7,6 +7,7 @@ force on the robot, §0; k = d - m velocity rows, m force rows)::
 
     line of the law                                                 function
     [F_v; F] = E^-T w                                     (3.0-8)   measured_forces
+          ... + T E^-T E_f-dot^T F   (a wrench T late: split where it was measured)
     r-dot_p = E_p r-dot,  e_p' = r-dot_p - r-dot_pd        (3.0-6)   velocity_error
     e_f = F - F_d                       (0 on kinematic rows)        force_error
     a_p = r-ddot_pd - K_v e_p'                            (3.1-12)   motion_acceleration
@@ -35,6 +36,9 @@ Every function is pure except that ``joint_torque`` asks the plant for M and inv
 Float controllers run the same lines compiled (``fast_law``, ``fast_kernels``: numba, one call per
 tick); this module stays the law's definition and its AutoDiffXd path, and tests/test_fast_law.py
 holds the compiled path to it (every output port equal to 1e-12). A change here goes there too.
+
+Size: the law's single home, one small function per line, each with the derivation of its line
+(why it is there, what it assumes) in its docstring.
 """
 
 import numpy as np
@@ -58,18 +62,19 @@ class LawConstants:
     velocity rows (None: the paper's massless constraint); joint_damping, plant_time_step: the
     model's B and the simulated plant's step h (``control.damping``; h = 0: continuous);
     compensate_tangential_force: cancel the measured F_v and the held rows' measured force
-    (``tangential_compensation``, ``held_row_compensation``).
+    (``tangential_compensation``, ``held_row_compensation``); wrench_lag: T (s), how late the
+    wrench path delivers the wrench (its low-pass, ``measured_forces``).
     """
 
     __slots__ = ("gains", "mode", "kinematic_rows", "force_controlled", "singularity_threshold",
                  "max_joint_acceleration", "effort_limits", "anti_windup", "actuation_from_torque",
                  "zero_acceleration", "approach_speed", "approach_gain", "velocity_row_inertia", "joint_damping",
-                 "plant_time_step", "compensate_tangential_force")
+                 "plant_time_step", "compensate_tangential_force", "wrench_lag")
 
     def __init__(self, gains, mode, kinematic_rows, force_size, singularity_threshold, max_joint_acceleration,
                  effort_limits, anti_windup, actuation_from_torque, zero_acceleration, approach_speed=None,
                  approach_gain=None, velocity_row_inertia=None, joint_damping=None, plant_time_step=0.0,
-                 compensate_tangential_force=False):
+                 compensate_tangential_force=False, wrench_lag=0.0):
         self.gains, self.mode = gains, mode
         self.kinematic_rows = tuple(kinematic_rows)
         self.force_controlled = np.ones(force_size)
@@ -81,6 +86,7 @@ class LawConstants:
         self.velocity_row_inertia = velocity_row_inertia
         self.joint_damping, self.plant_time_step = joint_damping, plant_time_step
         self.compensate_tangential_force = compensate_tangential_force
+        self.wrench_lag = float(wrench_lag)
 
 
 class ControlSolution:
@@ -104,16 +110,28 @@ class ControlSolution:
 # The lines of the law
 # ------------------------------------------------------------------------------------------------
 
-def measured_forces(space, values, configuration, wrench, desired_force):
+def measured_forces(space, values, configuration, wrench, desired_force, wrench_lag=0.0, force_projection_rate=None):
     """(F_v, F, valid): [F_v; F] = E^-T w (3.0-8), w the chart covector of the measured wrench
     (the SpatialForce vector [n; f] on the end effector by the environment) at ``configuration``.
+
+    A wrench that arrives ``wrench_lag`` = T late (a low-pass on the wrench path) was exerted at
+    x - T x-dot, where E had not yet turned: it is split there, to first order in T,
+    [F_v; F] = E^-T (w + T E_f-dot^T F) (``force_projection_rate`` E_f-dot at (x, nu); F from the
+    plain split; the turn of E_p weighs F_v, zero on the exact surface: second order). Split with
+    the current E instead, a curved constraint's turning normal force reads as a tangential force
+    T D r_p-dot, D = dF_v/dr_p (about -F / rho), whose cancellation gives the velocity rows a gain
+    K_v + T S D (docs/theory.md §11). The chart's own turn weighs the moment (0 at a ball pad's
+    centre): left out too.
 
     A wrench with a non-finite entry (sensor dropout) is ignored: F_v = 0 and F = F_d, so the
     force error is zero and xi holds for that evaluation (e_p, from the velocity error, does not).
     """
     if not all_finite(wrench):
         return np.zeros(space.velocity_size), desired_force, False
-    tangential_force, force = space.split_wrench(values, space.chart.generalized_force(configuration, wrench))
+    covector = space.chart.generalized_force(configuration, wrench)
+    tangential_force, force = space.split_wrench(values, covector)
+    if wrench_lag > 0:
+        tangential_force, force = space.split_wrench(values, covector + wrench_lag * (force_projection_rate.T @ force))
     return tangential_force, force, True
 
 
@@ -341,7 +359,9 @@ def evaluate_law(constants, space, kinematics, plant, plant_context, forces, int
     values = space.evaluate(x, nu)                                       # E_p, E_f, E-dot r-dot, C
     xi, e_p = integrals[:m], integrals[m:]
 
-    tangential_force, force, wrench_valid = measured_forces(space, values, x, wrench, desired_force)
+    E_f_dot = space.constraint.force_projection_rate(x, nu) if constants.wrench_lag > 0 else None
+    tangential_force, force, wrench_valid = measured_forces(space, values, x, wrench, desired_force,
+                                                            constants.wrench_lag, E_f_dot)
     projected_velocity, e_p_dot = velocity_error(values.velocity_projection, nu, desired_velocity)
     e_f = force_error(force, desired_force, mask)
 

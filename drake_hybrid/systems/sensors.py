@@ -368,6 +368,18 @@ def low_pass_coefficient(bandwidth_hz, period):
     return 1.0 - math.exp(-2 * math.pi * bandwidth_hz * period)
 
 
+def low_pass_lag(bandwidth_hz, period):
+    """T (s): how far a first-order low-pass's output trails a ramp input, 1 / (2 pi f_c)
+    continuous (``period`` None or 0), h (1 - alpha) / alpha sampled (``low_pass_coefficient``);
+    0 without a filter (bandwidth_hz 0)."""
+    if not bandwidth_hz > 0:
+        return 0.0
+    if not period:
+        return 1.0 / (2 * math.pi * bandwidth_hz)
+    alpha = low_pass_coefficient(bandwidth_hz, period)
+    return period * (1.0 - alpha) / alpha
+
+
 @TemplateSystem.define("LowPassFilter_", T_list=[float, AutoDiffXd])
 def LowPassFilter_(T):
 
