@@ -166,7 +166,7 @@ def test_first_line_of_simulate_comes_before_pydrake_is_imported():
 
 
 def test_the_first_compile_time_is_the_readmes_measured_figure_everywhere():
-    """The README's 30-50 s for numba's first compile (measured on 2 cores) is what the stage line and
+    """The README's 30-65 s for numba's first compile (measured on 2 cores) is what the stage line and
     fast_law's docstring say too."""
     import inspect
 

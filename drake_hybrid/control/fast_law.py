@@ -230,7 +230,7 @@ def _warn_once(message):
 def kernels_loaded():
     """True once the law's compiled kernels are in this process (compiled, or loaded from numba's
     disk cache); before that, the first tick loads them (about 0.4 s) or, on a first run with an
-    empty cache, compiles them (30-50 s on 2 shared cores, as the README says)."""
+    empty cache, compiles them (30-65 s on 2 shared cores, as the README says)."""
     return bool(getattr(kernels.law_from_terms, "signatures", True))
 
 

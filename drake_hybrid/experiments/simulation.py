@@ -220,7 +220,7 @@ def simulate(config, progress=False, meshcat=None, record_html=False, setup=None
         meshcat.StartRecording(set_visualizations_while_recording=False)
     initializing = f"{config.task}: initializing the simulator"
     if getattr(scenario.controller, "fast_law", None) is not None and not kernels_loaded():
-        initializing += " (and the compiled law: on the first run ever, numba compiles it once, 30-50 s)"
+        initializing += " (and the compiled law: on the first run ever, numba compiles it once, 30-65 s)"
     with stages(initializing):
         simulator.Initialize()
     start = time.perf_counter()
