@@ -202,8 +202,8 @@ def main(argv=None):
         print(f"passes now, remove it from KNOWN_FAILURES: {' | '.join(figure.row())}")
     for figure in new_failures:
         print(f"NEW FAILURE (not in KNOWN_FAILURES): {' | '.join(figure.row())}")
-    print(f"{len(figures)} figures: {passed} pass, {len(known)} known failures, {len(new_failures)} new failures, "
-          f"{references} reference; {wall:.0f} s")
+    print(f"{len(figures)} figures: {passed} pass, {len(known)} known failure(s), {len(new_failures)} new "
+          f"failure(s), {references} reference; {wall:.0f} s")
     return reliability.exit_code(figures)
 
 
