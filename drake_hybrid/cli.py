@@ -366,7 +366,7 @@ def _task_options_epilog():
 
 
 HARDWARE_TASKS = {"panda-drum": panda_drum_task, "panda-table": panda_table_task}
-HARDWARE_DEFAULTS = {"hil": (2.0, 0.05), "timing": (10.0, 0.02), "run": (10.0, 0.02)}     # --duration (s), --speed (m/s)
+HARDWARE_DEFAULTS = {"hil": (2.0, 0.05), "timing": (10.0, 0.02), "run": (10.0, 0.02)}   # --duration s, --speed m/s
 
 
 def _milliseconds(stats):

@@ -314,7 +314,8 @@ def _timing_summary(stop=None):
 
 
 def test_hardware_prints_a_summary_and_json_only_with_json(tmp_path, capsys, monkeypatch):
-    monkeypatch.setattr(cli, "replay_timing", lambda *args, **kwargs: (SimpleNamespace(summary=_timing_summary()), None))
+    monkeypatch.setattr(cli, "replay_timing",
+                        lambda *args, **kwargs: (SimpleNamespace(summary=_timing_summary()), None))
     assert main(["hardware", "timing", "--duration", "0.01"]) == 0
     out = capsys.readouterr().out
     assert "{" not in out and "11 ticks at 1000 Hz" in out
