@@ -12,6 +12,7 @@ import json
 import math
 import os
 import sys
+import time
 from pathlib import Path
 
 import matplotlib.pyplot as plt
@@ -365,22 +366,67 @@ def _task_options_epilog():
 
 
 HARDWARE_TASKS = {"panda-drum": panda_drum_task, "panda-table": panda_table_task}
+HARDWARE_DEFAULTS = {"hil": (2.0, 0.05), "timing": (10.0, 0.02), "run": (10.0, 0.02)}   # --duration s, --speed m/s
+
+
+def _milliseconds(stats):
+    if stats is None:
+        return "none measured"
+    return f"p50 {stats['p50'] * 1e3:.3g} ms, p99 {stats['p99'] * 1e3:.3g} ms, max {stats['max'] * 1e3:.3g} ms"
+
+
+def _hardware_summary(args, figures):
+    """The lines ``drake-hybrid hardware MODE`` prints: what ran, how long, ticks, misses and the stop."""
+    head = f"{args.task}, {args.mode} (wrench from {args.wrench_source})"
+    if args.mode == "hil":
+        lines = [f"{head}: {figures['duration']:.2f} s in lock step over memq:// and directly wired, "
+                 f"in {figures['wall_time_s']:.1f} s"]
+        settled = 5 * figures["design_time_constant"]
+        for what in ("velocity", "force"):
+            direct, loop = figures[f"{what}_error_direct_percent"], figures[f"{what}_error_hardware_loop_percent"]
+            if direct is None or loop is None:
+                lines.append(f"  {what} error after 5 design time constants: not measured, the run is shorter "
+                             f"than {settled:.3g} s (--duration)")
+            else:
+                lines.append(f"  {what} error after 5 design time constants: directly wired {direct:.4g} %, "
+                             f"hardware loop {loop:.4g} % (they differ by "
+                             f"{figures[f'{what}_error_difference_points']:.2g} percentage points)")
+        lines.append(f"  largest difference over the run: joints {figures['max_joint_difference_rad']:.2g} rad, "
+                     f"force {figures['max_force_difference_N']:.2g} N")
+        delay = figures["status_delay_simulated_s"]
+        lines.append(f"  {figures['commands_published']} commands published; message delay (status sent to used, "
+                     f"simulated time): {'none measured' if delay is None else _milliseconds(delay)}")
+        return lines
+    ticks, period = figures["ticks"], figures["period_s"]
+    where = "replayed robot over " if args.mode == "timing" else "driver at "
+    misses = figures["deadline_misses"]
+    return [f"{head}: {ticks} ticks at {figures['rate_hz']:.0f} Hz over {figures['wall_s']:.2f} s of wall clock "
+            f"({where}{args.lcm_url}), in {figures['wall_time_s']:.1f} s",
+            f"  controller cost per tick (status in to command out): {_milliseconds(figures['controller_cost_s'])}",
+            f"  period jitter |interval - {period * 1e3:g} ms|: {_milliseconds(figures['period_jitter_s'])}",
+            f"  deadline misses (command more than {period * 1e3:g} ms after its status was sent): {misses} of "
+            f"{ticks} ticks ({100 * misses / ticks:.1f} %)",
+            f"  ticks without a new status: {figures['ticks_without_new_status']}; commands published: "
+            f"{figures['commands_published']} of {ticks}"]
 
 
 def command_hardware(args):
     """hil: lock-step loop vs the directly wired one; timing: a real-time run on memq:// (replayed
-    robot); run: the controller side against a real driver at --lcm-url."""
+    robot); run: the controller side against a real driver at --lcm-url. Prints a summary; a
+    watchdog stop is a fault (exit 1); --json FILE writes the figures."""
+    wait = getattr(args, "wait", None)
     if args.duration is not None and not (math.isfinite(args.duration) and args.duration > 0):
-        raise UsageError(f"--duration must be a positive number of seconds, got {args.duration}")
-    if not (math.isfinite(args.wait) and args.wait >= 0):
-        raise UsageError(f"--wait must be a number of seconds >= 0, got {args.wait}")
+        raise UsageError(f"--duration must be a positive number of seconds (> 0), got {args.duration}")
+    if wait is not None and not (math.isfinite(wait) and wait >= 0):
+        raise UsageError(f"--wait must be a number of seconds >= 0, got {wait}")
     if args.speed is not None and not math.isfinite(args.speed):
         raise UsageError(f"--speed must be a finite number (m/s), got {args.speed}")
     _check_output_paths(args)
+    start = time.perf_counter()
     task = HARDWARE_TASKS[args.task]()
-    speed = args.speed if args.speed is not None else (0.05 if args.mode == "hil" else 0.02)
-    config = panda_config(task, duration=args.duration or {"hil": 2.0, "timing": 10.0, "run": 10.0}[args.mode],
-                          wrist_sensor=args.wrench_source == "force_torque", speed=speed)
+    duration, speed = HARDWARE_DEFAULTS[args.mode]
+    config = panda_config(task, duration=args.duration or duration, wrist_sensor=args.wrench_source == "force_torque",
+                          speed=speed if args.speed is None else args.speed)
     hardware = HardwareConfig(wrench_source=args.wrench_source).validate()
     if args.mode == "hil":
         figures = compare_with_direct(config, hardware)[0]
@@ -394,17 +440,25 @@ def command_hardware(args):
         lcm = DrakeLcm(args.lcm_url)
         station = build_controller_station(config, lcm, hardware, initial_positions=task.joint_guess,
                                            with_loggers=False)
-        print(f"waiting up to {args.wait:g} s for {hardware.status_channel} on {args.lcm_url} ...", file=sys.stderr)
-        timing = run_controller(station, lcm, config.duration, first_wait=args.wait, wall_clock_stamps=True)
+        print(f"waiting up to {wait:g} s for {hardware.status_channel} on {args.lcm_url} ...", file=sys.stderr)
+        timing = run_controller(station, lcm, config.duration, first_wait=wait, wall_clock_stamps=True)
         if timing.summary["commands_published"] == 0:
             print(f"drake-hybrid hardware: no valid status on {hardware.status_channel}; nothing was commanded",
                   file=sys.stderr)
             return 1
         figures = timing.summary
-    text = json.dumps(figures, indent=2, default=str)
-    print(text)
+    figures["wall_time_s"] = time.perf_counter() - start
+    for line in _hardware_summary(args, figures):
+        print(line)
+    if figures["stop"] is None:
+        print("  no fault: the watchdog did not stop the controller")
     if args.json:
-        Path(args.json).write_text(text + "\n")
+        Path(args.json).write_text(json.dumps(figures, indent=2, default=str) + "\n")
+        print(f"  wrote {args.json}")
+    if figures["stop"] is not None:
+        print(f"{args.task}, {args.mode}: fault: the watchdog stopped the controller, {figures['stop']}",
+              file=sys.stderr)
+        return 1
     return 0
 
 
@@ -477,19 +531,46 @@ def make_parser():
     sweep.add_argument("--no-progress", action="store_true", help="no progress bar")
     sweep.set_defaults(func=command_sweep)
     hardware = sub.add_parser(
-        "hardware", parents=[common], help="the controller over Drake's Panda LCM messages (hil, timing, run)")
-    hardware.add_argument("mode", choices=["hil", "timing", "run"],
-                          help="hil: lock-step memq loop vs the directly wired one; timing: real-time run on memq "
-                               "(replayed robot); run: against a real driver at --lcm-url")
-    hardware.add_argument("--task", choices=sorted(HARDWARE_TASKS), default="panda-drum")
-    hardware.add_argument("--duration", type=float, help="seconds (default: hil 2, timing 10, run 10)")
-    hardware.add_argument("--lcm-url", default="memq://drake_hybrid",
-                          help="LCM URL (timing: memq:// only; run: the driver's, e.g. udpm://239.255.76.67:7667?ttl=0)")
-    hardware.add_argument("--wrench-source", choices=["force_torque", "external_torque"], default="force_torque")
-    hardware.add_argument("--speed", type=float, help="m/s along the surface (default: hil 0.05, timing/run 0.02)")
-    hardware.add_argument("--wait", type=float, default=5.0, help="run: seconds to wait for the first status")
-    hardware.add_argument("--json", help="also write the figures to this JSON file")
-    hardware.set_defaults(func=command_hardware)
+        "hardware", help="the controller over Drake's Panda LCM messages (hil, timing, run)",
+        description="The controller over Drake's Panda LCM messages (docs/hardware.md). Each mode prints a short "
+                    "summary; --json FILE also writes its figures. A stop by the watchdog is a fault: printed as "
+                    "one and exit 1.")
+    hardware_modes = hardware.add_subparsers(dest="mode", required=True, metavar="MODE",
+                                            help="what to run; drake-hybrid hardware MODE --help gives its options")
+    for mode, summary, description in [
+            ("hil", "lock-step hardware-in-the-loop run over memq:// vs the directly wired loop",
+             "Run the task twice: controller and simulated Panda as two diagrams exchanging only LCM messages "
+             "over memq:// in lock step, and directly wired; print both runs' velocity and force errors after "
+             "five design time constants and their difference."),
+            ("timing", "real-time run at 1 kHz over memq:// (replayed robot): cost, jitter, deadline misses",
+             "Record what the robot side sends in a lock-step run, replay it at wall-clock rate to a fresh "
+             "controller side over memq:// in this process; print the controller's cost per tick, the period "
+             "jitter and the deadline misses."),
+            ("run", "the controller side against a real driver at --lcm-url",
+             "Wait up to --wait seconds for the driver's first status at --lcm-url, then tick on each status for "
+             "--duration seconds, sending torque commands; exit 1 without commanding if no valid status came. "
+             "Before a first run on an arm read docs/hardware.md.")]:
+        parser_ = hardware_modes.add_parser(mode, parents=[common], help=summary, description=description)
+        parser_.add_argument("--task", choices=sorted(HARDWARE_TASKS), default="panda-drum",
+                             help="the Panda task (default panda-drum)")
+        parser_.add_argument("--duration", type=float, metavar="SECONDS",
+                             help=f"seconds of control, > 0 (default {HARDWARE_DEFAULTS[mode][0]:g})")
+        if mode == "timing":
+            parser_.add_argument("--lcm-url", default="memq://drake_hybrid", metavar="URL",
+                                 help="in-process LCM URL, memq:// only (default memq://drake_hybrid)")
+        elif mode == "run":
+            parser_.add_argument("--lcm-url", required=True, metavar="URL",
+                                 help="the driver's LCM URL, e.g. udpm://239.255.76.67:7667?ttl=0")
+            parser_.add_argument("--wait", type=float, default=5.0, metavar="SECONDS",
+                                 help="seconds to wait for the first status, >= 0 (default 5)")
+        parser_.add_argument("--wrench-source", choices=["force_torque", "external_torque"], default="force_torque",
+                             help="the measured wrench: the wrist F/T sensor's channel or the driver's external "
+                                  "joint torques (default force_torque)")
+        parser_.add_argument("--speed", type=float, metavar="M/S",
+                             help=f"commanded speed along the surface in m/s, any finite number (negative: the "
+                                  f"other way; default {HARDWARE_DEFAULTS[mode][1]:g})")
+        parser_.add_argument("--json", metavar="FILE", help="also write the figures to this JSON file")
+        parser_.set_defaults(func=command_hardware)
     tasks = sub.add_parser("tasks", parents=[common], help="list the tasks",
                            description="List the tasks and what each one does.")
     tasks.set_defaults(func=command_tasks)

@@ -58,9 +58,30 @@ class Figure:
     details: dict = field(default_factory=dict)
 
     def row(self):
-        verdict = "reference" if self.passed is None else ("pass" if self.passed else "FAIL")
+        verdict = "reference" if self.passed is None else ("pass" if self.passed else
+                                                           "FAIL (known)" if self.key() in KNOWN_FAILURES else "FAIL")
         return [self.fault, self.magnitude, self.figure, f"{self.value:.4g} {self.unit}".strip(), self.criterion,
                 verdict]
+
+    def key(self):
+        """How KNOWN_FAILURES names this row."""
+        return self.fault, self.magnitude, self.figure
+
+
+def split_failures(figures, known=None):
+    """(known, new, fixed) among ``figures``: the failed rows ``known`` (default KNOWN_FAILURES) lists,
+    the failed rows it does not list (regressions), and the rows it lists that pass now."""
+    known = KNOWN_FAILURES if known is None else known
+    failed = [figure for figure in figures if figure.passed is False]
+    return ([figure for figure in failed if figure.key() in known],
+            [figure for figure in failed if figure.key() not in known],
+            [figure for figure in figures if figure.passed is True and figure.key() in known])
+
+
+def exit_code(figures, known=None):
+    """docs/reliability.py's exit code: 1 on a failure that ``known`` does not list, else 0 (the known
+    failures are reported as known, and a known one that passes now is reported, not failed)."""
+    return 1 if split_failures(figures, known)[1] else 0
 
 
 def _figure(case, fault, magnitude, figure, value, limit, unit, criterion, details=None, reference=False, also=True):

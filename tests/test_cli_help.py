@@ -23,16 +23,33 @@ def _subparsers(parser):
     return action.choices
 
 
-def _readme_synopsis():
-    """{command: set of --options} from the README's "Command line" block."""
-    text = README.read_text()
-    block = text.split("## Command line", 1)[1].split("```", 2)[1]
+def _commands(parser=None, prefix=()):
+    """{"simulate": its parser, ..., "hardware hil": its parser, ...}: every command the user types,
+    a command with modes (hardware) by each of its modes."""
+    commands = {}
+    for name, sub in _subparsers(parser or make_parser()).items():
+        nested = [a for a in sub._actions if a.__class__.__name__ == "_SubParsersAction"]
+        commands.update(_commands(sub, prefix + (name,)) if nested else {" ".join(prefix + (name,)): sub})
+    return commands
+
+
+def _synopsis(text):
+    """{command: set of --options} of the "drake-hybrid ..." lines of a document's block."""
     synopsis = {}
-    for line in block.splitlines():
+    for line in text.splitlines():
         if line.startswith("drake-hybrid "):
-            command = line.split()[1]
+            command = " ".join(re.match(r"drake-hybrid((?: [a-z][a-z-]*)+)", line).group(1).split())
             synopsis[command] = set(re.findall(r"--[a-z][a-z-]*", line))
     return synopsis
+
+
+def _readme_synopsis():
+    """{command: set of --options} from the README's "Command line" block."""
+    return _synopsis(README.read_text().split("## Command line", 1)[1].split("```", 2)[1])
+
+
+def _options(parser):
+    return {o for action in parser._actions for o in action.option_strings if o.startswith("--")} - {"--help"}
 
 
 def _help(capsys, argv):
@@ -51,11 +68,33 @@ def test_top_level_help_lists_every_command_without_markup(capsys):
 
 def test_readme_synopsis_has_every_command_and_option_of_the_parser():
     synopsis = _readme_synopsis()
-    commands = _subparsers(make_parser())
+    commands = _commands()
     assert set(synopsis) == set(commands)
     for name, sub in commands.items():
-        options = {o for action in sub._actions for o in action.option_strings if o.startswith("--")} - {"--help"}
-        assert synopsis[name] == options, (name, sorted(options ^ synopsis[name]))
+        assert synopsis[name] == _options(sub), (name, sorted(_options(sub) ^ synopsis[name]))
+
+
+def test_hardware_docs_synopsis_has_every_mode_and_option_of_the_parser():
+    """docs/hardware.md's "Running" block lists each mode with all its options, as the parser has them."""
+    block = (README.parent / "docs" / "hardware.md").read_text().split("## Running", 1)[1].split("```", 2)[1]
+    synopsis = _synopsis(block)
+    hardware = {name: sub for name, sub in _commands().items() if name.startswith("hardware ")}
+    assert set(synopsis) == set(hardware) == {"hardware hil", "hardware timing", "hardware run"}
+    for name, sub in hardware.items():
+        assert synopsis[name] == _options(sub), (name, sorted(_options(sub) ^ synopsis[name]))
+
+
+@pytest.mark.parametrize("mode", ["hil", "timing", "run"])
+def test_every_hardware_option_says_what_goes_there(mode):
+    """Each hardware mode has a description; each option a help string, and a metavar naming what it takes
+    (URL, SECONDS, FILE: not argparse's upper-cased option name) unless it is a flag or a choice."""
+    parser = _commands()[f"hardware {mode}"]
+    assert parser.description and len(parser.description) > 40
+    for action in parser._actions:
+        assert action.help, action.option_strings
+        if action.nargs == 0 or action.choices:
+            continue
+        assert action.metavar and action.metavar != action.dest.upper(), action.option_strings
 
 
 @pytest.mark.parametrize("command", ["simulate", "analyze"])
@@ -73,9 +112,9 @@ def test_option_help_lists_every_tasks_keys(capsys, command):
 DEVELOPER_TEXT = re.compile(r"Size:|\btests/|\w\.py\b|``|\bdrake_hybrid\.\w")
 
 
-@pytest.mark.parametrize("command", [None, *_subparsers(make_parser())])
+@pytest.mark.parametrize("command", [None, *sorted(set(_subparsers(make_parser())) | set(_commands()))])
 def test_help_texts_point_at_documents_not_source_files(capsys, command):
-    text = _help(capsys, [command, "--help"] if command else ["--help"])
+    text = _help(capsys, [*command.split(), "--help"] if command else ["--help"])
     assert not re.search(r"\w+/\w+\.py", text), (command, text)
     assert not DEVELOPER_TEXT.search(text), (command, DEVELOPER_TEXT.search(text).group(0))
 

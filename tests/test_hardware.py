@@ -10,9 +10,11 @@ The 2 s comparisons against the issue's target (errors after five time constants
 percentage points) are marked slow.
 """
 
+import json
 import logging
 import math
 import time
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -20,6 +22,7 @@ from drake import lcmt_panda_command
 
 from pydrake.lcm import DrakeLcm
 
+from drake_hybrid import cli
 from drake_hybrid.cli import main
 from drake_hybrid.control.gains import HybridGains
 from drake_hybrid.core.errors import ConfigError
@@ -277,14 +280,75 @@ def test_wall_clock_stamps_for_a_real_driver(drum):
     assert len(stamps) == 21 and all(before - 1 < stamp * 1e-6 < time.time() + 1 for stamp in stamps)
 
 
-def test_command_line_hardware(capsys):
+def test_command_line_hardware(capsys, monkeypatch):
     assert main(["hardware", "run", "--duration", "0.02", "--wait", "0.05", "--lcm-url", "memq://cli_no_driver"]) == 1
     assert "nothing was commanded" in capsys.readouterr().err
-    assert main(["hardware", "timing", "--lcm-url", "udpm://239.255.76.67:7667?ttl=0"]) == 2
+    monkeypatch.setattr(cli, "replay_timing", lambda *args, **kwargs: pytest.fail("ran with a refused --lcm-url"))
+    assert main(["hardware", "timing", "--lcm-url", "tcpq://127.0.0.1:7700"]) == 2      # no network URL in tests
     assert "memq://" in capsys.readouterr().err
-    for argv, flag in [(["--duration", "nan"], "--duration"), (["--duration", "-1"], "--duration"),
-                       (["--wait", "-1"], "--wait"), (["--speed", "inf"], "--speed"),
-                       (["--json", "/no/such/dir/a.json"], "--json")]:
-        assert main(["hardware", "hil"] + argv) == 2
+    for argv, flag, allowed in [(["hil", "--duration", "nan"], "--duration", "> 0"),
+                                (["hil", "--duration", "-1"], "--duration", "> 0"),
+                                (["timing", "--duration", "0"], "--duration", "> 0"),
+                                (["run", "--lcm-url", "memq://cli_bad", "--wait", "-1"], "--wait", ">= 0"),
+                                (["hil", "--speed", "inf"], "--speed", "finite"),
+                                (["hil", "--json", "/no/such/dir/a.json"], "--json", "does not exist")]:
+        assert main(["hardware"] + argv) == 2
         error = capsys.readouterr().err.strip()
-        assert len(error.splitlines()) == 1 and flag in error, error
+        assert len(error.splitlines()) == 1 and flag in error and allowed in error, error
+
+
+def test_hardware_modes_take_only_their_options(capsys):
+    """hil has no LCM URL to take (it runs over its own memq://), and run needs the driver's."""
+    for argv, option in [(["hil", "--lcm-url", "memq://x"], "--lcm-url"), (["timing", "--wait", "1"], "--wait"),
+                         (["run"], "--lcm-url")]:
+        with pytest.raises(SystemExit) as exit_info:
+            main(["hardware"] + argv)
+        assert exit_info.value.code == 2 and option in capsys.readouterr().err
+
+
+def _timing_summary(stop=None):
+    stats = {"p50": 7.5e-4, "p99": 5.1e-3, "max": 9.2e-3}
+    return {"ticks": 11, "period_s": 1e-3, "rate_hz": 1000.0, "wall_s": 0.0102, "period_jitter_s": stats,
+            "controller_cost_s": stats, "status_to_command_s": stats, "deadline_misses": 2,
+            "ticks_without_new_status": 0, "commands_published": 11 if stop is None else 4, "stop": stop}
+
+
+def test_hardware_prints_a_summary_and_json_only_with_json(tmp_path, capsys, monkeypatch):
+    monkeypatch.setattr(cli, "replay_timing",
+                        lambda *args, **kwargs: (SimpleNamespace(summary=_timing_summary()), None))
+    assert main(["hardware", "timing", "--duration", "0.01"]) == 0
+    out = capsys.readouterr().out
+    assert "{" not in out and "11 ticks at 1000 Hz" in out
+    assert "deadline misses (command more than 1 ms after its status was sent): 2 of 11 ticks (18.2 %)" in out
+    assert "controller cost per tick (status in to command out): p50 0.75 ms, p99 5.1 ms, max 9.2 ms" in out
+    assert "no fault" in out
+    path = tmp_path / "timing.json"
+    assert main(["hardware", "timing", "--duration", "0.01", "--json", str(path)]) == 0
+    out = capsys.readouterr().out
+    assert "{" not in out and f"wrote {path}" in out
+    figures = json.loads(path.read_text())
+    assert figures["ticks"] == 11 and figures["deadline_misses"] == 2 and figures["stop"] is None
+
+
+def test_a_watchdog_stop_is_reported_as_a_fault_with_exit_1(tmp_path, capsys, monkeypatch):
+    reason = "stop at t = 0.0040 s: robot status stale (newest valid one 10.0 ms old); sending zero task torque"
+    monkeypatch.setattr(cli, "replay_timing",
+                        lambda *args, **kwargs: (SimpleNamespace(summary=_timing_summary(stop=reason)), None))
+    path = tmp_path / "timing.json"
+    assert main(["hardware", "timing", "--duration", "0.01", "--json", str(path)]) == 1
+    captured = capsys.readouterr()
+    assert "fault" not in captured.out
+    assert captured.err.strip() == f"panda-drum, timing: fault: the watchdog stopped the controller, {reason}"
+    assert json.loads(path.read_text())["stop"] == reason           # the figures are still written
+
+
+def test_command_line_hil_summary(tmp_path, capsys):
+    """A short lock-step run, for real: shorter than five time constants, the errors are said not measured."""
+    path = tmp_path / "hil.json"
+    assert main(["hardware", "hil", "--duration", "0.05", "--json", str(path)]) == 0
+    out = capsys.readouterr().out
+    assert out.startswith("panda-drum, hil (wrench from force_torque): 0.05 s in lock step over memq://")
+    assert "velocity error after 5 design time constants: not measured, the run is shorter than 1.25 s" in out
+    assert "51 commands published" in out and "no fault" in out and "{" not in out
+    figures = json.loads(path.read_text())
+    assert figures["commands_published"] == 51 and figures["stop"] is None
