@@ -143,7 +143,20 @@ def _fmt(values):
     return ", ".join(f"{v.real:.4g}{v.imag:+.4g}j" if abs(v.imag) > 1e-9 else f"{v.real:.4g}" for v in values)
 
 
-def _row_text(row):
+def _event_text(time, events):
+    """Where ``time`` (s) falls among the run's phases (summary["events"]): inside a span, or within 0.3 s
+    after its edge or an instant; empty if nowhere near one."""
+    for event in events or ():
+        start, end = event["start"], event.get("end")
+        if end is not None and start <= time <= end:
+            return f", {time - start:.2f} s after the start of: {event['label']}"
+        for edge, word in ((start, "the start"), (end, "the end")):
+            if edge is not None and 0 <= time - edge <= 0.3:
+                return f", {time - edge:.2f} s after {word if end is not None else 'the moment'} of: {event['label']}"
+    return ""
+
+
+def _row_text(row, events=()):
     """One row's errors: absolute in its units, % of its command where it has one, settling from contact."""
     units = row["units"]
 
@@ -155,6 +168,9 @@ def _row_text(row):
     command = f"command {row['command']:.3g} {units}" if row["command"] > 0 else "command 0"
     final = None if row["final_error"] is None else abs(row["final_error"])
     settled = amount(row["max_error_after_5_time_constants"], row["max_error_percent_after_5_time_constants"])
+    when = row.get("max_error_time_after_5_time_constants")
+    if when is not None and row["max_error_after_5_time_constants"]:
+        settled += f" at t = {when:.3f} s" + _event_text(when, events)
     text = f"{command}; final error {amount(final, row['final_error_percent'])}, settled max {settled}"
     settle = row["settling_time_1_percent"]
     if settle is not None:
@@ -193,7 +209,7 @@ def command_simulate(args):
           f"design time constants, t >= {start + 5 * s['design_time_constant']:.3f} s):")
     for what, rows in (("velocity", s["velocity_rows"]), ("force", s["force_rows"])):
         for row in rows:
-            print(f"    {what} {row['name']}: {_row_text(row)}")
+            print(f"    {what} {row['name']}: {_row_text(row, s.get('events'))}")
     residual = s["max_constraint_residual_after_contact"]
     print(f"  max |C(r)| after contact {residual:.3g}" if residual is not None else "  no contact made")
     for note in s.get("notes", []):
@@ -340,15 +356,18 @@ def command_sweep(args):
 
 
 def command_tasks(args):
+    print("tasks (drake-hybrid simulate|analyze NAME):")
     for name, task in TASKS.items():
-        print(f"{name:18s} {task.description}")
-    files = sorted((models_directory() / "tasks").glob("*.yaml"))
+        print(f"  {name:24s} {task.description}")
+    folder = models_directory() / "tasks"
+    files = sorted(folder.glob("*.yaml"))
     if files:
-        print("task files (drake-hybrid simulate|analyze FILE.yaml):")
+        print(f"task files: a whole task in one YAML file (docs/task_files.md); run one with drake-hybrid "
+              f"simulate|analyze {folder}/NAME.yaml, or copy it to start your own:")
     for path in files:
-        print(f"  {path}: {read_task_file(path).description}")
-    print("hooks a task file may name (hooks: [...]; drake_hybrid/scenario/hooks.py and installed "
-          f"{ENTRY_POINT_GROUP} entry points):")
+        print(f"  {path.name:24s} {read_task_file(path).description}")
+    print(f"hooks a task file may name (hooks: [...]; more come from installed packages' {ENTRY_POINT_GROUP} "
+          "entry points):")
     for name in hook_names():
         print(f"  {name:24s} {get_hook(name).description}")
     return 0

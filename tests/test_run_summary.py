@@ -170,3 +170,46 @@ def test_grinding_on_the_sphere_labels_its_rows_as_the_sphere_task():
     config = grinding.default_config({"workpiece": "sphere"})
     assert grinding.labels(config) == get_task("sphere-polishing").labels()
     assert grinding.labels(grinding.default_config()) == get_task("window-washing").labels()
+
+
+def test_the_settled_max_says_when_and_in_which_phase_of_the_run():
+    """The row's worst error after the start's transient comes with its time, and the CLI names the run's
+    phase it falls in or just after (the grinding force peak 0.007 s after the pad left the rough patch)."""
+    from drake_hybrid.cli import _row_text
+
+    t = np.arange(0.0, 3.0005, 1e-3)
+    error = np.where(np.abs(t - 2.807) < 5e-4, 0.661, 0.03)[:, None]
+    (row,) = row_errors(t, error, np.full((t.size, 1), 10.0), ["F"], ["N"], since=0.0, settle_after=0.5)
+    assert row["max_error_time_after_5_time_constants"] == pytest.approx(2.807)
+    events = [{"start": 1.67, "end": 2.80, "label": "pad on the rough patch (mu = 0.9)"}]
+    assert "settled max 0.661 N (6.61 %) at t = 2.807 s, 0.01 s after the end of: pad on the rough patch" in \
+        _row_text(row, events)
+    assert _row_text(row, [{"start": 1.0, "end": None, "label": "x"}]).count("after") == 1   # only 'after contact'
+
+
+def test_impedance_grinding_explains_fs_error_at_the_rough_patchs_edges():
+    """The default grinding run's force 'settled max' (6.6 %, 0.661 N) is the force loop's answer to the
+    friction step at the patch's edges (3.2-11): the note names each edge's peak and the error away from them."""
+    from drake_hybrid.scenario.tasks.grinding import force_step_note, rough_patch_events
+
+    t = np.arange(0.0, 3.0005, 1e-3)
+    on_patch = (t >= 1.67) & (t < 2.80)
+    ring = lambda since, size: np.where(t >= since, size * np.exp(-20 * (t - since)) * np.cos(60 * (t - since)), 0)
+    error = 0.03 + ring(1.67, 0.4) + ring(2.80, -0.63)
+    note = force_step_note(t, error, 10.0, on_patch, 0.5)
+    assert "(3.2-11)" in note and "0.43 N (4.3 %) entering it (peak at t = 1.67 s)" in note, note
+    assert "0.6 N (6.0 %) leaving it (peak at t = 2.80 s)" in note, note      # |0.03 - 0.63|
+    assert "away from the edges (t >= 0.50 s, 0.05 s before to 0.3 s after each) at most 0.03" in note, note
+    assert force_step_note(t, error, 10.0, np.zeros_like(on_patch), 0.5) is None
+    x = np.where(on_patch, 1.1, np.where(t < 1.67, 1.0, 1.2))
+    (span,) = rough_patch_events(t, x, 1.05, 1.15, 0.9)
+    assert span["start"] == pytest.approx(1.67) and span["end"] == pytest.approx(2.80)
+    assert span["label"] == "pad on the rough patch (mu = 0.9)"
+    assert rough_patch_events(t, np.full_like(t, 0.5), 1.05, 1.15, 0.9) == []
+
+
+def test_the_sphere_grinding_breakaway_is_an_event():
+    from drake_hybrid.scenario.tasks.grinding import sphere_breakaway
+
+    assert sphere_breakaway(_sphere_log(breakaway=0.562, end=3.0)) == pytest.approx(0.562)
+    assert sphere_breakaway(_sphere_log(breakaway=5.0, end=3.0)) is None            # still held at the end

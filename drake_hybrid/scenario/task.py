@@ -189,6 +189,12 @@ class Task(abc.ABC):
         task causes on purpose). Default: none."""
         return []
 
+    def run_events(self, scenario, log):
+        """Phases of the run the plots mark and the summary names where a row's worst error falls
+        (e.g. the pad on a rough patch): a list of ``{"start": t0, "end": t1 or None, "label": ...}``
+        (s; ``end`` None: an instant). Default: none."""
+        return []
+
     def labels(self, config=None):
         """Plot labels of the velocity- and force-controlled coordinates (``config``: the run's, for a
         task whose rows depend on its options)."""
