@@ -1,6 +1,7 @@
 """The ``drake-hybrid`` command line: one function per command and the parser (the entry point,
-``drake_hybrid.__main__``, imports this module after its first line). ``DESCRIPTION`` below is the
-top-level ``--help`` text, for users; this docstring is for readers of the source and is not printed
+``drake_hybrid.__main__``, imports this module after its first line). ``DESCRIPTION`` (from
+``drake_hybrid.commands``) is the top-level ``--help`` text, for users; this docstring is for readers
+of the source and is not printed
 (tests/test_cli_help.py checks both, and the help against the README's synopsis).
 
 Size: one command per function (simulate, analyze, sweep, tasks, hardware) and the parser whose
@@ -20,6 +21,9 @@ import numpy as np
 from pydrake.lcm import DrakeLcm
 
 from drake_hybrid.analysis.linearization import linearize_continuous, linearize_discrete, predicted_match, shift_indices
+# DESCRIPTION (the top-level help) and each command's line live in the light drake_hybrid.commands,
+# which the entry point answers --help from; cli.DESCRIPTION stays the name tests and readers use.
+from drake_hybrid.commands import COMMAND_HELP, DESCRIPTION, top_level_parser  # noqa: F401
 from drake_hybrid.control.gains import ControlMode
 from drake_hybrid.core.progress import Stages
 from drake_hybrid.experiments.simulation import RunStopped, simulate
@@ -38,26 +42,6 @@ from drake_hybrid.scenario.tasks import TASKS, get_task
 from drake_hybrid.viz.animation import quiet_meshcat, set_task_camera
 from drake_hybrid.viz.outputs import write_run
 from drake_hybrid.viz.plotting import eigenvalue_figure, save_sweep_plots
-
-DESCRIPTION = """drake-hybrid: hybrid velocity/force control (Li & Sastry 1987) as Drake systems.
-
-commands:
-  drake-hybrid simulate TASK    simulate a task; writes log.npz, summary.json, config.yaml and plots
-  drake-hybrid analyze TASK     linearize the closed loop; designed vs. linearized eigenvalues
-                                (TASK: a task's name, or a task file FILE.yaml: docs/task_files.md)
-  drake-hybrid sweep TASK --grid SPEC.yaml
-                                stability map / Monte Carlo sweep over config fields (Dask)
-  drake-hybrid tasks            list the tasks
-  drake-hybrid hardware hil|timing|run
-                                the controller over Drake's Panda LCM messages (memq:// in tests)
-
-"drake-hybrid COMMAND --help" gives each command's options.
-
-Bad input (a config field, a flag, a file) prints one line naming it and exits 2; a run that
-stops early (sensor fault, an error inside the simulation, Ctrl-C) writes what it logged up to
-the stop, prints why and exits 1. --traceback (or DRAKE_HYBRID_TRACEBACK=1) shows the full
-Python traceback instead.
-"""
 
 
 class UsageError(ValueError):
@@ -428,9 +412,7 @@ def command_hardware(args):
 
 
 def make_parser():
-    parser = argparse.ArgumentParser(prog="drake-hybrid", description=DESCRIPTION,
-                                     formatter_class=argparse.RawDescriptionHelpFormatter)
-    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    parser, sub = top_level_parser()
     common = argparse.ArgumentParser(add_help=False)
     common.add_argument("--traceback", action="store_true",
                         help="show the full Python traceback of an error (also DRAKE_HYBRID_TRACEBACK=1)")
@@ -438,7 +420,7 @@ def make_parser():
     epilog = _task_options_epilog()
     task_help = ", ".join(sorted(TASKS)) + ", or a task file FILE.yaml (a whole task in one file: models/tasks/)"
     simulate = sub.add_parser("simulate", parents=[common],
-                              help="simulate a task (discrete 1 kHz plant and controller)",
+                              help=COMMAND_HELP["simulate"],
                               description="Simulate a task; writes log.npz, summary.json, config.yaml and the "
                                           "plots to --out.",
                               epilog=epilog, formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -456,7 +438,7 @@ def make_parser():
                           help="no setup stages and no progress bar on stderr (for scripts); results still printed")
     simulate.set_defaults(func=command_simulate)
     analyze = sub.add_parser("analyze", parents=[common],
-                             help="linearize the closed loop; designed vs. linearized eigenvalues",
+                             help=COMMAND_HELP["analyze"],
                              description="Linearize the closed loop at a contact equilibrium and compare its "
                                          "eigenvalues with the ones the gains design.",
                              epilog=epilog, formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -477,7 +459,7 @@ def make_parser():
     analyze.add_argument("--quiet", action="store_true", help="no setup stages on stderr (for scripts)")
     analyze.set_defaults(func=command_analyze)
     sweep = sub.add_parser("sweep", parents=[common],
-                           help="stability map / Monte Carlo sweep over config fields (Dask)",
+                           help=COMMAND_HELP["sweep"],
                            description="Evaluate a grid or Monte Carlo sample of config fields: per point a short "
                                        "simulation, two linearizations and the verdicts, appended to "
                                        "DIR/results.csv (docs/stability.md).")
@@ -496,7 +478,7 @@ def make_parser():
     sweep.add_argument("--no-progress", action="store_true", help="no progress bar")
     sweep.set_defaults(func=command_sweep)
     hardware = sub.add_parser(
-        "hardware", parents=[common], help="the controller over Drake's Panda LCM messages (hil, timing, run)")
+        "hardware", parents=[common], help=COMMAND_HELP["hardware"])
     hardware.add_argument("mode", choices=["hil", "timing", "run"],
                           help="hil: lock-step memq loop vs the directly wired one; timing: real-time run on memq "
                                "(replayed robot); run: against a real driver at --lcm-url")
@@ -509,7 +491,7 @@ def make_parser():
     hardware.add_argument("--wait", type=float, default=5.0, help="run: seconds to wait for the first status")
     hardware.add_argument("--json", help="also write the figures to this JSON file")
     hardware.set_defaults(func=command_hardware)
-    tasks = sub.add_parser("tasks", parents=[common], help="list the tasks",
+    tasks = sub.add_parser("tasks", parents=[common], help=COMMAND_HELP["tasks"],
                            description="List the tasks and what each one does.")
     tasks.set_defaults(func=command_tasks)
     return parser

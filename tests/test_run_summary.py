@@ -79,12 +79,20 @@ def test_the_grinding_default_says_it_ends_in_the_surge_after_the_rough_patch():
     """The default 3 s grinding run ends 0.2 s after the pad leaves the rough patch: the summary says
     so (and how long a run ending in steady sliding is), instead of a bare 26 % speed error."""
     result = simulate(get_task("grinding").default_config())
-    edges, note = result.summary["notes"]
+    edges, force, note = result.summary["notes"]
     assert "after the pad left the rough patch" in note and "--duration 3.8" in note
     # x-dot's settled max (75 %) is the impedance's answer to the patch's friction steps, and the note says so.
     assert "entering it" in edges and "leaving it" in edges and "peaking at 0.077 m/s" in edges
     x_dot = result.summary["velocity_rows"][0]
     assert x_dot["units"] == "m/s" and x_dot["final_error_percent"] > 5
+    # F's settled max (6.6 %) is the force loop's answer to the same steps, just after the pad leaves the patch
+    # (the summary's event); away from the edges F stays within 1 %.
+    (span,) = result.summary["events"]
+    F = result.summary["force_rows"][0]
+    assert 0 <= F["max_error_time_after_5_time_constants"] - span["end"] < 0.3
+    assert "(3.2-11)" in force and "leaving it" in force
+    away = float(re.search(r"at most [\d.e-]+ N \(([\d.]+) %\)", force).group(1))
+    assert away < 1.0 < F["max_error_percent_after_5_time_constants"]
 
 
 def test_the_impedance_step_peak_is_the_designed_impulse_response_at_its_largest():
