@@ -129,8 +129,10 @@ def _fmt(values):
 
 def _event_text(time, events):
     """Where ``time`` (s) falls among the run's phases (summary["events"]): inside a span, or within 0.3 s
-    after its edge or an instant; empty if nowhere near one."""
+    after its edge or an instant; empty if nowhere near one (or only near phases that cause no error)."""
     for event in events or ():
+        if not event.get("explains_errors", True):
+            continue
         start, end = event["start"], event.get("end")
         if end is not None and start <= time <= end:
             return f", {time - start:.2f} s after the start of: {event['label']}"

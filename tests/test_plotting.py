@@ -145,5 +145,10 @@ def test_tracking_figure_marks_the_runs_phases_and_explains_the_start():
     title = ax_values.get_title().replace("\n", " ")
     assert "presses with the commanded force" in title and "K_fi xi(0) = 3 N" in title, title
     assert "velocity command steps from rest" in title and "a task's note" in title
+    instants = [{"start": start, "end": None, "label": "a switch"} for start in (0.7, 1.2)]
+    fig = plotting.tracking_figure(log, dict(summary, events=instants), desired, "force", labels=["F"], units="N")
+    legend = [text.get_text() for text in fig.axes[1].get_legend().get_texts()]
+    assert legend.count("a switch") == 1                               # one entry for several instants
+    assert sum(np.ptp(line.get_xdata()) == 0 and line.get_xdata()[0] in (0.7, 1.2) for line in fig.axes[1].lines) == 2
     velocity = plotting.tracking_figure(log, summary, np.full((t.size, 1), 0.1), "velocity", labels=["x-dot"])
     assert "\n" not in velocity.axes[0].get_title()                   # the start's words are the force figure's

@@ -176,8 +176,12 @@ def test_the_crank_summary_prints_the_true_crank_rates_deviation_for_both_veloci
 def test_grinding_on_the_sphere_labels_its_rows_as_the_sphere_task():
     grinding = get_task("grinding")
     config = grinding.default_config({"workpiece": "sphere"})
-    assert grinding.labels(config) == get_task("sphere-polishing").labels()
-    assert grinding.labels(grinding.default_config()) == get_task("window-washing").labels()
+    rows = lambda labels: {key: value for key, value in labels.items() if not key.endswith("_note")}
+    assert rows(grinding.labels(config)) == get_task("sphere-polishing").labels()
+    assert rows(grinding.labels(grinding.default_config())) == get_task("window-washing").labels()
+    # impedance/force (the default) says what its designed response leaves out; velocity/force has no such note
+    assert "(3.2-6)" in grinding.labels(config)["velocity_note"]
+    assert "velocity_note" not in grinding.labels(grinding.default_config().replace(mode="velocity-force"))
 
 
 def test_the_settled_max_says_when_and_in_which_phase_of_the_run():
@@ -193,6 +197,8 @@ def test_the_settled_max_says_when_and_in_which_phase_of_the_run():
     assert "settled max 0.661 N (6.61 %) at t = 2.807 s, 0.01 s after the end of: pad on the rough patch" in \
         _row_text(row, events)
     assert _row_text(row, [{"start": 1.0, "end": None, "label": "x"}]).count("after") == 1   # only 'after contact'
+    assert "switch" not in _row_text(row, [{"start": 2.8, "end": None, "label": "switch", "explains_errors": False}])
+    assert "0.01 s after the moment of: slip" in _row_text(row, [{"start": 2.8, "end": None, "label": "slip"}])
 
 
 def test_impedance_grinding_explains_fs_error_at_the_rough_patchs_edges():
@@ -221,3 +227,31 @@ def test_the_sphere_grinding_breakaway_is_an_event():
 
     assert sphere_breakaway(_sphere_log(breakaway=0.562, end=3.0)) == pytest.approx(0.562)
     assert sphere_breakaway(_sphere_log(breakaway=5.0, end=3.0)) is None            # still held at the end
+
+
+def test_the_sphere_constraints_piece_switches_are_events():
+    """(2.2-8) with the equator fix drops the component of (p - c) x a along the largest |a_k|: each change of
+    piece along the run is an instant the plots mark (its orientation rows change basis there)."""
+    from types import SimpleNamespace
+
+    from drake_hybrid.scenario.tasks.sphere_polishing import piece_switches
+
+    class Plant:
+        def CreateDefaultContext(self):
+            return {}
+
+        def SetPositions(self, context, q):
+            context["q"] = q
+
+    kinematics = SimpleNamespace(evaluate=lambda context: SimpleNamespace(configuration=context["q"]))
+    constraint = SimpleNamespace(pieces=[0, 1, 2], select=lambda x: int(np.argmax(np.abs(x))))
+    scenario = SimpleNamespace(constraint_space=SimpleNamespace(constraint=constraint), controller_plant=Plant(),
+                               controller=SimpleNamespace(kinematics=kinematics))
+    t = np.arange(0.0, 1.0005, 0.1)
+    q = np.array([[1.0, 0.5, 0.0]] * 4 + [[0.5, 1.0, 0.0]] * 3 + [[1.0, 0.5, 0.0]] * 4)
+    events = piece_switches(scenario, {"t": t, "q": q})
+    assert [event["start"] for event in events] == pytest.approx([0.4, 0.7])
+    assert all(event["end"] is None and "switches piece" in event["label"] for event in events)
+    assert not any(event["explains_errors"] for event in events)          # held rows' basis: no row's error
+    one_piece = SimpleNamespace(constraint_space=SimpleNamespace(constraint=SimpleNamespace()))
+    assert piece_switches(one_piece, {"t": t, "q": q}) == []

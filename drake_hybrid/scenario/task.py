@@ -192,7 +192,8 @@ class Task(abc.ABC):
     def run_events(self, scenario, log):
         """Phases of the run the plots mark and the summary names where a row's worst error falls
         (e.g. the pad on a rough patch): a list of ``{"start": t0, "end": t1 or None, "label": ...}``
-        (s; ``end`` None: an instant). Default: none."""
+        (s; ``end`` None: an instant; ``"explains_errors": False`` for a phase the plots mark but that
+        causes no row's error, e.g. a change of basis of held rows). Default: none."""
         return []
 
     def labels(self, config=None):

@@ -82,11 +82,14 @@ def _tracking_axes(ax_values, ax_errors, t, actual, desired, predicted, labels, 
 
 
 def _mark_events(axes, events):
-    """The run's phases (``summary["events"]``: a span shaded, an instant a dashed line), labelled once."""
-    for n, event in enumerate(events or ()):
-        color = f"C{(n + 5) % 10}"
+    """The run's phases (``summary["events"]``: a span shaded, an instant a dashed line), one colour and
+    one legend entry per label."""
+    colors = {}
+    for event in events or ():
+        first = event["label"] not in colors
+        color = colors.setdefault(event["label"], f"C{(len(colors) + 5) % 10}")
         for ax in axes:
-            label = event["label"] if ax is axes[-1] else None
+            label = event["label"] if ax is axes[-1] and first else None
             if event.get("end") is None:
                 ax.axvline(event["start"], color=color, lw=1.0, ls="--", label=label)
             else:

@@ -29,7 +29,7 @@ from pydrake.geometry import AddContactMaterial, AddRigidHydroelasticProperties,
 from pydrake.math import RigidTransform
 from pydrake.multibody.plant import CoulombFriction
 
-from drake_hybrid.control.gains import HybridGains
+from drake_hybrid.control.gains import ControlMode, HybridGains
 from drake_hybrid.core.errors import ConfigError
 from drake_hybrid.scenario.task import Task, choice
 from drake_hybrid.scenario.tasks.sphere_polishing import SpherePolishing, SpherePolishingOptions
@@ -294,7 +294,14 @@ class Grinding(Task):
         return config
 
     def labels(self, config=None):
-        return (self._base(config) if config is not None else self._window).labels(config)
+        base = self._base(config) if config is not None else self._window
+        labels = dict(base.labels(config))
+        if config is None or ControlMode.parse(config.mode) is ControlMode.IMPEDANCE_FORCE:
+            labels["velocity_note"] = (
+                "The designed response has no friction in it: from rest the tangential impedance first builds "
+                "mu F_n against static friction, then the pad slides; where the friction force steps (the shaded "
+                "phases) the impedance yields to it as e_p'' + K_v e_p' + K_p e_p = F_v (3.2-6) designs (run notes)")
+        return labels
 
     def run_notes(self, scenario, log, design_time_constant):
         """Which phase of the task the run ends in. Window: where the pad is relative to the rough
@@ -317,8 +324,9 @@ class Grinding(Task):
             return []
         if self._base(config) is self._sphere:
             breakaway = sphere_breakaway(log) if float(config.contact.friction) > 0 else None
-            return [] if breakaway is None else [{"start": breakaway, "end": None,
-                                                  "label": "static friction lets go: the pad slides"}]
+            return ([] if breakaway is None else [{"start": breakaway, "end": None,
+                                                   "label": "static friction lets go: the pad slides"}]
+                    ) + self._sphere.run_events(scenario, log)
         options = self.options(config)
         return rough_patch_events(log["t"], pad_positions(scenario, log), options.rough_start, options.rough_end,
                                   options.rough_friction)
