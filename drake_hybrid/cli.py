@@ -142,8 +142,10 @@ def _event_text(time, events):
     return ""
 
 
-def _row_text(row, events=()):
-    """One row's errors: absolute in its units, % of its command where it has one, settling from contact."""
+def _row_text(row, events=(), notes=False):
+    """One row's errors: absolute in its units, % of its command where it has one, settling from contact;
+    when its settled max falls in or just after a phase of the run, that phase (``notes``: the run has notes
+    that say why)."""
     units = row["units"]
 
     def amount(value, percent):
@@ -156,7 +158,8 @@ def _row_text(row, events=()):
     settled = amount(row["max_error_after_5_time_constants"], row["max_error_percent_after_5_time_constants"])
     when = row.get("max_error_time_after_5_time_constants")
     if when is not None and row["max_error_after_5_time_constants"]:
-        settled += f" at t = {when:.3f} s" + _event_text(when, events)
+        phase = _event_text(when, events)
+        settled += f" at t = {when:.3f} s" + phase + (" (see the notes)" if phase and notes else "")
     text = f"{command}; final error {amount(final, row['final_error_percent'])}, settled max {settled}"
     settle = row["settling_time_1_percent"]
     if settle is not None:
@@ -195,7 +198,7 @@ def command_simulate(args):
           f"design time constants, t >= {start + 5 * s['design_time_constant']:.3f} s):")
     for what, rows in (("velocity", s["velocity_rows"]), ("force", s["force_rows"])):
         for row in rows:
-            print(f"    {what} {row['name']}: {_row_text(row, s.get('events'))}")
+            print(f"    {what} {row['name']}: {_row_text(row, s.get('events'), bool(s.get('notes')))}")
     residual = s["max_constraint_residual_after_contact"]
     print(f"  max |C(r)| after contact {residual:.3g}" if residual is not None else "  no contact made")
     for note in s.get("notes", []):

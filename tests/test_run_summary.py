@@ -199,6 +199,7 @@ def test_the_settled_max_says_when_and_in_which_phase_of_the_run():
     assert _row_text(row, [{"start": 1.0, "end": None, "label": "x"}]).count("after") == 1   # only 'after contact'
     assert "switch" not in _row_text(row, [{"start": 2.8, "end": None, "label": "switch", "explains_errors": False}])
     assert "0.01 s after the moment of: slip" in _row_text(row, [{"start": 2.8, "end": None, "label": "slip"}])
+    assert "pad on the rough patch (mu = 0.9) (see the notes), within 1 %" in _row_text(row, events, notes=True)
 
 
 def test_impedance_grinding_explains_fs_error_at_the_rough_patchs_edges():
