@@ -235,7 +235,7 @@ def test_the_sphere_constraints_piece_switches_are_events():
     piece along the run is an instant the plots mark (its orientation rows change basis there)."""
     from types import SimpleNamespace
 
-    from drake_hybrid.scenario.tasks.sphere_polishing import piece_switches
+    from drake_hybrid.scenario.task import piece_switches
 
     class Plant:
         def CreateDefaultContext(self):

@@ -326,7 +326,7 @@ class Grinding(Task):
             breakaway = sphere_breakaway(log) if float(config.contact.friction) > 0 else None
             return ([] if breakaway is None else [{"start": breakaway, "end": None,
                                                    "label": "static friction lets go: the pad slides"}]
-                    ) + self._sphere.run_events(scenario, log)
+                    ) + super().run_events(scenario, log)
         options = self.options(config)
         return rough_patch_events(log["t"], pad_positions(scenario, log), options.rough_start, options.rough_end,
                                   options.rough_friction)

@@ -94,10 +94,6 @@ class SpherePolishing(Task):
             task_options={"chart": "pose", "path": "latitude", "velocity_rows": "true"},
         )
 
-    def run_events(self, scenario, log):
-        """Where (2.2-8)'s equator fix switches piece (``piece_switches``)."""
-        return piece_switches(scenario, log)
-
     def labels(self, config=None):
         return {"velocity": ["spin about a", "t_1 . p-dot", "t_2 . p-dot"], "velocity_units": "rad/s | m/s | m/s",
                 "force": ["normal force", "orientation row 1", "orientation row 2"], "force_units": "N | N | N",
@@ -189,22 +185,3 @@ class SpherePolishing(Task):
             return positions_at_depth(-config.start.gap)
         return pressing_positions(scenario, positions_at_depth)
 
-
-def piece_switches(scenario, log):
-    """The instants a switching constraint (core.constraints.SelectingConstraint: (2.2-8) with the equator
-    fix drops the component of (p - c) x a along the largest |a_k|) changes piece along the logged run:
-    its orientation rows change basis there, so their forces jump while the pad does not. None for a
-    constraint of one piece."""
-    constraint = scenario.constraint_space.constraint
-    if not hasattr(constraint, "pieces") or "q" not in log:
-        return []
-    plant = scenario.controller_plant
-    context = plant.CreateDefaultContext()
-    pieces = []
-    for q in log["q"]:
-        plant.SetPositions(context, q)
-        pieces.append(constraint.select(scenario.controller.kinematics.evaluate(context).configuration))
-    changes = np.nonzero(np.diff(pieces))[0] + 1
-    # The pad's motion and the normal force do not see the switch: it names no row's error (explains_errors).
-    return [{"start": float(log["t"][i]), "end": None, "explains_errors": False,
-             "label": "(2.2-8) switches piece: its orientation rows change basis"} for i in changes]
