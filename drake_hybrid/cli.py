@@ -1,8 +1,8 @@
 """The ``drake-hybrid`` command line: one function per command and the parser (the entry point,
 ``drake_hybrid.__main__``, imports this module after its first line). ``DESCRIPTION`` (from
 ``drake_hybrid.commands``) is the top-level ``--help`` text, for users; this docstring is for readers
-of the source and is not printed
-(tests/test_cli_help.py checks both, and the help against the README's synopsis).
+of the source and is not printed (tests/test_cli_help.py checks both, and the help against the README's
+synopsis).
 
 Size: one command per function (simulate, analyze, sweep, tasks, hardware) and the parser whose
 help the README's synopsis mirrors (tests/test_cli_help.py).
