@@ -1,7 +1,8 @@
 """The ``drake-hybrid`` command line: one function per command and the parser (the entry point,
-``drake_hybrid.__main__``, imports this module after its first line). ``DESCRIPTION`` below is the
-top-level ``--help`` text, for users; this docstring is for readers of the source and is not printed
-(tests/test_cli_help.py checks both, and the help against the README's synopsis).
+``drake_hybrid.__main__``, imports this module after its first line). ``DESCRIPTION`` (from
+``drake_hybrid.commands``) is the top-level ``--help`` text, for users; this docstring is for readers
+of the source and is not printed (tests/test_cli_help.py checks both, and the help against the README's
+synopsis).
 
 Size: one command per function (simulate, analyze, sweep, tasks, hardware) and the parser whose
 help the README's synopsis mirrors (tests/test_cli_help.py).
@@ -21,6 +22,9 @@ import numpy as np
 from pydrake.lcm import DrakeLcm
 
 from drake_hybrid.analysis.linearization import linearize_continuous, linearize_discrete, predicted_match, shift_indices
+# DESCRIPTION (the top-level help) and each command's line live in the light drake_hybrid.commands,
+# which the entry point answers --help from; cli.DESCRIPTION stays the name tests and readers use.
+from drake_hybrid.commands import COMMAND_HELP, DESCRIPTION, top_level_parser  # noqa: F401
 from drake_hybrid.control.gains import ControlMode
 from drake_hybrid.core.progress import Stages
 from drake_hybrid.experiments.simulation import RunStopped, simulate
@@ -39,26 +43,6 @@ from drake_hybrid.scenario.tasks import TASKS, get_task
 from drake_hybrid.viz.animation import quiet_meshcat, set_task_camera
 from drake_hybrid.viz.outputs import write_run
 from drake_hybrid.viz.plotting import eigenvalue_figure, save_sweep_plots
-
-DESCRIPTION = """drake-hybrid: hybrid velocity/force control (Li & Sastry 1987) as Drake systems.
-
-commands:
-  drake-hybrid simulate TASK    simulate a task; writes log.npz, summary.json, config.yaml and plots
-  drake-hybrid analyze TASK     linearize the closed loop; designed vs. linearized eigenvalues
-                                (TASK: a task's name, or a task file FILE.yaml: docs/task_files.md)
-  drake-hybrid sweep TASK --grid SPEC.yaml
-                                stability map / Monte Carlo sweep over config fields (Dask)
-  drake-hybrid tasks            list the tasks
-  drake-hybrid hardware hil|timing|run
-                                the controller over Drake's Panda LCM messages (memq:// in tests)
-
-"drake-hybrid COMMAND --help" gives each command's options.
-
-Bad input (a config field, a flag, a file) prints one line naming it and exits 2; a run that
-stops early (sensor fault, an error inside the simulation, Ctrl-C) writes what it logged up to
-the stop, prints why and exits 1. --traceback (or DRAKE_HYBRID_TRACEBACK=1) shows the full
-Python traceback instead.
-"""
 
 
 class UsageError(ValueError):
@@ -144,8 +128,25 @@ def _fmt(values):
     return ", ".join(f"{v.real:.4g}{v.imag:+.4g}j" if abs(v.imag) > 1e-9 else f"{v.real:.4g}" for v in values)
 
 
-def _row_text(row):
-    """One row's errors: absolute in its units, % of its command where it has one, settling from contact."""
+def _event_text(time, events):
+    """Where ``time`` (s) falls among the run's phases (summary["events"]): inside a span, or within 0.3 s
+    after its edge or an instant; empty if nowhere near one (or only near phases that cause no error)."""
+    for event in events or ():
+        if not event.get("explains_errors", True):
+            continue
+        start, end = event["start"], event.get("end")
+        if end is not None and start <= time <= end:
+            return f", {time - start:.2f} s after the start of: {event['label']}"
+        for edge, word in ((start, "the start"), (end, "the end")):
+            if edge is not None and 0 <= time - edge <= 0.3:
+                return f", {time - edge:.2f} s after {word if end is not None else 'the moment'} of: {event['label']}"
+    return ""
+
+
+def _row_text(row, events=(), notes=False):
+    """One row's errors: absolute in its units, % of its command where it has one, settling from contact;
+    when its settled max falls in or just after a phase of the run, that phase (``notes``: the run has notes
+    that say why)."""
     units = row["units"]
 
     def amount(value, percent):
@@ -156,6 +157,10 @@ def _row_text(row):
     command = f"command {row['command']:.3g} {units}" if row["command"] > 0 else "command 0"
     final = None if row["final_error"] is None else abs(row["final_error"])
     settled = amount(row["max_error_after_5_time_constants"], row["max_error_percent_after_5_time_constants"])
+    when = row.get("max_error_time_after_5_time_constants")
+    if when is not None and row["max_error_after_5_time_constants"]:
+        phase = _event_text(when, events)
+        settled += f" at t = {when:.3f} s" + phase + (" (see the notes)" if phase and notes else "")
     text = f"{command}; final error {amount(final, row['final_error_percent'])}, settled max {settled}"
     settle = row["settling_time_1_percent"]
     if settle is not None:
@@ -194,7 +199,7 @@ def command_simulate(args):
           f"design time constants, t >= {start + 5 * s['design_time_constant']:.3f} s):")
     for what, rows in (("velocity", s["velocity_rows"]), ("force", s["force_rows"])):
         for row in rows:
-            print(f"    {what} {row['name']}: {_row_text(row)}")
+            print(f"    {what} {row['name']}: {_row_text(row, s.get('events'), bool(s.get('notes')))}")
     residual = s["max_constraint_residual_after_contact"]
     print(f"  max |C(r)| after contact {residual:.3g}" if residual is not None else "  no contact made")
     for note in s.get("notes", []):
@@ -341,15 +346,18 @@ def command_sweep(args):
 
 
 def command_tasks(args):
+    print("tasks (drake-hybrid simulate|analyze NAME):")
     for name, task in TASKS.items():
-        print(f"{name:18s} {task.description}")
-    files = sorted((models_directory() / "tasks").glob("*.yaml"))
+        print(f"  {name:24s} {task.description}")
+    folder = models_directory() / "tasks"
+    files = sorted(folder.glob("*.yaml"))
     if files:
-        print("task files (drake-hybrid simulate|analyze FILE.yaml):")
+        print(f"task files: a whole task in one YAML file (docs/task_files.md); run one with drake-hybrid "
+              f"simulate|analyze {folder}/NAME.yaml, or copy it to start your own:")
     for path in files:
-        print(f"  {path}: {read_task_file(path).description}")
-    print("hooks a task file may name (hooks: [...]; drake_hybrid/scenario/hooks.py and installed "
-          f"{ENTRY_POINT_GROUP} entry points):")
+        print(f"  {path.name:24s} {read_task_file(path).description}")
+    print(f"hooks a task file may name (hooks: [...]; more come from installed packages' {ENTRY_POINT_GROUP} "
+          "entry points):")
     for name in hook_names():
         print(f"  {name:24s} {get_hook(name).description}")
     return 0
@@ -463,9 +471,7 @@ def command_hardware(args):
 
 
 def make_parser():
-    parser = argparse.ArgumentParser(prog="drake-hybrid", description=DESCRIPTION,
-                                     formatter_class=argparse.RawDescriptionHelpFormatter)
-    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    parser, sub = top_level_parser()
     common = argparse.ArgumentParser(add_help=False)
     common.add_argument("--traceback", action="store_true",
                         help="show the full Python traceback of an error (also DRAKE_HYBRID_TRACEBACK=1)")
@@ -473,7 +479,7 @@ def make_parser():
     epilog = _task_options_epilog()
     task_help = ", ".join(sorted(TASKS)) + ", or a task file FILE.yaml (a whole task in one file: models/tasks/)"
     simulate = sub.add_parser("simulate", parents=[common],
-                              help="simulate a task (discrete 1 kHz plant and controller)",
+                              help=COMMAND_HELP["simulate"],
                               description="Simulate a task; writes log.npz, summary.json, config.yaml and the "
                                           "plots to --out.",
                               epilog=epilog, formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -491,7 +497,7 @@ def make_parser():
                           help="no setup stages and no progress bar on stderr (for scripts); results still printed")
     simulate.set_defaults(func=command_simulate)
     analyze = sub.add_parser("analyze", parents=[common],
-                             help="linearize the closed loop; designed vs. linearized eigenvalues",
+                             help=COMMAND_HELP["analyze"],
                              description="Linearize the closed loop at a contact equilibrium and compare its "
                                          "eigenvalues with the ones the gains design.",
                              epilog=epilog, formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -512,7 +518,7 @@ def make_parser():
     analyze.add_argument("--quiet", action="store_true", help="no setup stages on stderr (for scripts)")
     analyze.set_defaults(func=command_analyze)
     sweep = sub.add_parser("sweep", parents=[common],
-                           help="stability map / Monte Carlo sweep over config fields (Dask)",
+                           help=COMMAND_HELP["sweep"],
                            description="Evaluate a grid or Monte Carlo sample of config fields: per point a short "
                                        "simulation, two linearizations and the verdicts, appended to "
                                        "DIR/results.csv (docs/stability.md).")
@@ -531,7 +537,7 @@ def make_parser():
     sweep.add_argument("--no-progress", action="store_true", help="no progress bar")
     sweep.set_defaults(func=command_sweep)
     hardware = sub.add_parser(
-        "hardware", help="the controller over Drake's Panda LCM messages (hil, timing, run)",
+        "hardware", help=COMMAND_HELP["hardware"],
         description="The controller over Drake's Panda LCM messages (docs/hardware.md). Each mode prints a short "
                     "summary; --json FILE also writes its figures. A stop by the watchdog is a fault: printed as "
                     "one and exit 1.")
@@ -571,7 +577,7 @@ def make_parser():
                                   f"other way; default {HARDWARE_DEFAULTS[mode][1]:g})")
         parser_.add_argument("--json", metavar="FILE", help="also write the figures to this JSON file")
         parser_.set_defaults(func=command_hardware)
-    tasks = sub.add_parser("tasks", parents=[common], help="list the tasks",
+    tasks = sub.add_parser("tasks", parents=[common], help=COMMAND_HELP["tasks"],
                            description="List the tasks and what each one does.")
     tasks.set_defaults(func=command_tasks)
     return parser

@@ -232,3 +232,14 @@ def test_html_writes_one_animation_and_no_meshcat_info_line(tmp_path, capsys, ca
     assert html.read_text().lstrip().lower().startswith("<!doctype html>")
     assert sorted(p.name for p in (tmp_path / "run").iterdir()) == ["config.yaml", "log.npz", "summary.json"]
     assert f"wrote {tmp_path / 'run' / 'log.npz'}" in captured.out and str(html) in captured.out
+
+
+def test_top_level_help_is_answered_without_loading_drake(capsys):
+    """drake-hybrid --help prints the parser's own top-level help from drake_hybrid.commands alone (a
+    fraction of a second, where loading Drake, numba, matplotlib and Dask takes several)."""
+    assert entry.main(["--help"]) == 0
+    assert capsys.readouterr().out == make_parser().format_help()
+    code = ("import sys, drake_hybrid.__main__ as entry; entry.main(['-h']); heavy = [m for m in ('pydrake', 'numba', "
+            "'matplotlib', 'dask') if m in sys.modules]; print(heavy)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    assert "usage: drake-hybrid" in out and out.strip().endswith("[]")

@@ -123,3 +123,32 @@ def test_the_cli_writes_every_figure(tmp_path):
     figure = tmp_path / "eigenvalues.png"
     assert main(["analyze", "window-washing", "--plot", str(figure)]) == 0
     assert figure.stat().st_size > 10_000
+
+
+def test_tracking_figure_marks_the_runs_phases_and_explains_the_start():
+    """A phase of the run (a span) is shaded on both axes and named in the legend; the force figure of a
+    start in contact says what its first samples are, with the step xi(0) adds to the first command."""
+    t = np.linspace(0.0, 3.0, 301)
+    desired = np.full((t.size, 1), -10.0)
+    log = {"t": t, "force": desired + 0.1, "desired_force": desired, "velocity": np.zeros((t.size, 1)),
+           "desired_velocity": np.full((t.size, 1), 0.1)}
+    summary = {"task": "test", "mode": "impedance-force", "design_time_constant": 0.1, "contact_time": 0.0,
+               "events": [{"start": 1.67, "end": 2.8, "label": "pad on the rough patch (mu = 0.9)"}],
+               "start_in_contact": True, "start_force_command_step": [3.0],
+               "force_rows": [{"name": "F", "units": "N"}]}
+    fig = plotting.tracking_figure(log, summary, desired, "force", labels=["F"], units="N", note="a task's note")
+    ax_values, ax_errors = fig.axes
+    for ax in (ax_values, ax_errors):
+        spans = [patch for patch in ax.patches if patch.get_x() == pytest.approx(1.67)]
+        assert len(spans) == 1 and spans[0].get_width() == pytest.approx(1.13)
+    assert "pad on the rough patch (mu = 0.9)" in {text.get_text() for text in ax_errors.get_legend().get_texts()}
+    title = ax_values.get_title().replace("\n", " ")
+    assert "presses with the commanded force" in title and "K_fi xi(0) = 3 N" in title, title
+    assert "velocity command steps from rest" in title and "a task's note" in title
+    instants = [{"start": start, "end": None, "label": "a switch"} for start in (0.7, 1.2)]
+    fig = plotting.tracking_figure(log, dict(summary, events=instants), desired, "force", labels=["F"], units="N")
+    legend = [text.get_text() for text in fig.axes[1].get_legend().get_texts()]
+    assert legend.count("a switch") == 1                               # one entry for several instants
+    assert sum(np.ptp(line.get_xdata()) == 0 and line.get_xdata()[0] in (0.7, 1.2) for line in fig.axes[1].lines) == 2
+    velocity = plotting.tracking_figure(log, summary, np.full((t.size, 1), 0.1), "velocity", labels=["x-dot"])
+    assert "\n" not in velocity.axes[0].get_title()                   # the start's words are the force figure's

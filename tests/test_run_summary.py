@@ -79,12 +79,20 @@ def test_the_grinding_default_says_it_ends_in_the_surge_after_the_rough_patch():
     """The default 3 s grinding run ends 0.2 s after the pad leaves the rough patch: the summary says
     so (and how long a run ending in steady sliding is), instead of a bare 26 % speed error."""
     result = simulate(get_task("grinding").default_config())
-    edges, note = result.summary["notes"]
+    edges, force, note = result.summary["notes"]
     assert "after the pad left the rough patch" in note and "--duration 3.8" in note
     # x-dot's settled max (75 %) is the impedance's answer to the patch's friction steps, and the note says so.
     assert "entering it" in edges and "leaving it" in edges and "peaking at 0.077 m/s" in edges
     x_dot = result.summary["velocity_rows"][0]
     assert x_dot["units"] == "m/s" and x_dot["final_error_percent"] > 5
+    # F's settled max (6.6 %) is the force loop's answer to the same steps, just after the pad leaves the patch
+    # (the summary's event); away from the edges F stays within 1 %.
+    (span,) = result.summary["events"]
+    F = result.summary["force_rows"][0]
+    assert 0 <= F["max_error_time_after_5_time_constants"] - span["end"] < 0.3
+    assert "(3.2-11)" in force and "leaving it" in force
+    away = float(re.search(r"at most [\d.e-]+ N \(([\d.]+) %\)", force).group(1))
+    assert away < 1.0 < F["max_error_percent_after_5_time_constants"]
 
 
 def test_the_impedance_step_peak_is_the_designed_impulse_response_at_its_largest():
@@ -168,5 +176,83 @@ def test_the_crank_summary_prints_the_true_crank_rates_deviation_for_both_veloci
 def test_grinding_on_the_sphere_labels_its_rows_as_the_sphere_task():
     grinding = get_task("grinding")
     config = grinding.default_config({"workpiece": "sphere"})
-    assert grinding.labels(config) == get_task("sphere-polishing").labels()
-    assert grinding.labels(grinding.default_config()) == get_task("window-washing").labels()
+    rows = lambda labels: {key: value for key, value in labels.items() if not key.endswith("_note")}
+    assert rows(grinding.labels(config)) == rows(get_task("sphere-polishing").labels())
+    assert rows(grinding.labels(grinding.default_config())) == rows(get_task("window-washing").labels())
+    # impedance/force (the default) says what its designed response leaves out; velocity/force has no such note
+    assert "(3.2-6)" in grinding.labels(config)["velocity_note"]
+    assert "velocity_note" not in grinding.labels(grinding.default_config().replace(mode="velocity-force"))
+
+
+def test_the_settled_max_says_when_and_in_which_phase_of_the_run():
+    """The row's worst error after the start's transient comes with its time, and the CLI names the run's
+    phase it falls in or just after (the grinding force peak 0.007 s after the pad left the rough patch)."""
+    from drake_hybrid.cli import _row_text
+
+    t = np.arange(0.0, 3.0005, 1e-3)
+    error = np.where(np.abs(t - 2.807) < 5e-4, 0.661, 0.03)[:, None]
+    (row,) = row_errors(t, error, np.full((t.size, 1), 10.0), ["F"], ["N"], since=0.0, settle_after=0.5)
+    assert row["max_error_time_after_5_time_constants"] == pytest.approx(2.807)
+    events = [{"start": 1.67, "end": 2.80, "label": "pad on the rough patch (mu = 0.9)"}]
+    assert "settled max 0.661 N (6.61 %) at t = 2.807 s, 0.01 s after the end of: pad on the rough patch" in \
+        _row_text(row, events)
+    assert _row_text(row, [{"start": 1.0, "end": None, "label": "x"}]).count("after") == 1   # only 'after contact'
+    assert "switch" not in _row_text(row, [{"start": 2.8, "end": None, "label": "switch", "explains_errors": False}])
+    assert "0.01 s after the moment of: slip" in _row_text(row, [{"start": 2.8, "end": None, "label": "slip"}])
+    assert "pad on the rough patch (mu = 0.9) (see the notes), within 1 %" in _row_text(row, events, notes=True)
+
+
+def test_impedance_grinding_explains_fs_error_at_the_rough_patchs_edges():
+    """The default grinding run's force 'settled max' (6.6 %, 0.661 N) is the force loop's answer to the
+    friction step at the patch's edges (3.2-11): the note names each edge's peak and the error away from them."""
+    from drake_hybrid.scenario.tasks.grinding import force_step_note, rough_patch_events
+
+    t = np.arange(0.0, 3.0005, 1e-3)
+    on_patch = (t >= 1.67) & (t < 2.80)
+    ring = lambda since, size: np.where(t >= since, size * np.exp(-20 * (t - since)) * np.cos(60 * (t - since)), 0)
+    error = 0.03 + ring(1.67, 0.4) + ring(2.80, -0.63)
+    note = force_step_note(t, error, 10.0, on_patch, 0.5)
+    assert "(3.2-11)" in note and "0.43 N (4.3 %) entering it (peak at t = 1.67 s)" in note, note
+    assert "0.6 N (6.0 %) leaving it (peak at t = 2.80 s)" in note, note      # |0.03 - 0.63|
+    assert "away from the edges (t >= 0.50 s, 0.05 s before to 0.3 s after each) at most 0.03" in note, note
+    assert force_step_note(t, error, 10.0, np.zeros_like(on_patch), 0.5) is None
+    x = np.where(on_patch, 1.1, np.where(t < 1.67, 1.0, 1.2))
+    (span,) = rough_patch_events(t, x, 1.05, 1.15, 0.9)
+    assert span["start"] == pytest.approx(1.67) and span["end"] == pytest.approx(2.80)
+    assert span["label"] == "pad on the rough patch (mu = 0.9)"
+    assert rough_patch_events(t, np.full_like(t, 0.5), 1.05, 1.15, 0.9) == []
+
+
+def test_the_sphere_grinding_breakaway_is_an_event():
+    from drake_hybrid.scenario.tasks.grinding import sphere_breakaway
+
+    assert sphere_breakaway(_sphere_log(breakaway=0.562, end=3.0)) == pytest.approx(0.562)
+    assert sphere_breakaway(_sphere_log(breakaway=5.0, end=3.0)) is None            # still held at the end
+
+
+def test_the_sphere_constraints_piece_switches_are_events():
+    """(2.2-8) with the equator fix drops the component of (p - c) x a along the largest |a_k|: each change of
+    piece along the run is an instant the plots mark (its orientation rows change basis there)."""
+    from types import SimpleNamespace
+
+    from drake_hybrid.scenario.task import piece_switches
+
+    class Plant:
+        def CreateDefaultContext(self):
+            return {}
+
+        def SetPositions(self, context, q):
+            context["q"] = q
+
+    kinematics = SimpleNamespace(evaluate=lambda context: SimpleNamespace(configuration=context["q"]))
+    constraint = SimpleNamespace(pieces=[0, 1, 2], select=lambda x: int(np.argmax(np.abs(x))))
+    scenario = SimpleNamespace(constraint_space=SimpleNamespace(constraint=constraint), controller_plant=Plant(),
+                               controller=SimpleNamespace(kinematics=kinematics))
+    t = np.arange(0.0, 1.0005, 0.1)
+    q = np.array([[1.0, 0.5, 0.0]] * 4 + [[0.5, 1.0, 0.0]] * 3 + [[1.0, 0.5, 0.0]] * 4)
+    events = piece_switches(scenario, {"t": t, "q": q})
+    assert [event["start"] for event in events] == pytest.approx([0.4, 0.7])
+    assert all(event["end"] is None and "switches piece" in event["label"] for event in events)
+    assert not any(event["explains_errors"] for event in events)          # held rows' basis: no row's error
+    one_piece = SimpleNamespace(constraint_space=SimpleNamespace(constraint=SimpleNamespace()))
+    assert piece_switches(one_piece, {"t": t, "q": q}) == []

@@ -31,6 +31,7 @@ def _assert_same_run(file_config, built_in_config, duration):
         assert ours.log[name].shape == theirs.log[name].shape, name
         np.testing.assert_allclose(ours.log[name], theirs.log[name], rtol=0, atol=1e-9, err_msg=name)
     assert ours.summary["notes"] == theirs.summary["notes"]
+    assert ours.summary["events"] == theirs.summary["events"]
     return ours
 
 
@@ -107,7 +108,7 @@ def test_hooked_task_pickles_as_its_text():
     """Dask workers rebuild the hooks from the names in the file's text."""
     task, _ = load_task_file(TASKS / "grinding.yaml")
     copy = cloudpickle.loads(cloudpickle.dumps(task))
-    assert copy is not task and sorted(copy.hooks) == sorted(task.hooks) == ["add_workpiece", "run_notes"]
+    assert copy is not task and sorted(copy.hooks) == sorted(task.hooks) == ["add_workpiece", "run_events", "run_notes"]
 
 
 def test_cli_tasks_lists_every_file_and_hook(capsys):

@@ -172,8 +172,10 @@ def row_errors(t, error, desired, names, units, since, settle_after):
     commands = row_commands(desired)
     settled = max_row_errors(t, error, desired, settle_after)
     final = max_row_errors(t, error, desired, t[-1])
+    late = t >= settle_after
     for i in range(error.shape[1]):
         e, command = np.abs(error[:, i]), float(commands[i])
+        worst_time = float(t[late][np.argmax(e[late])]) if late.any() else None
         if command > 0 and np.isfinite(since):
             active = t >= since
             settle = settling_time(t[active], e[active], 0.01 * command) - since
@@ -184,6 +186,7 @@ def row_errors(t, error, desired, names, units, since, settle_after):
                      "final_error_percent": final[i][1],
                      "max_error_after_5_time_constants": settled[i][0],
                      "max_error_percent_after_5_time_constants": settled[i][1],
+                     "max_error_time_after_5_time_constants": worst_time,
                      "settling_time_1_percent": settle})
     return rows
 
@@ -352,6 +355,12 @@ def summarize(scenario, log, wall_time):
         "real_time_factor": float(config.duration / wall_time) if wall_time > 0 else None,
         "command_scales": {"speed": speed_scale, "force": force_scale},
         "notes": list(scenario.task.run_notes(scenario, log, tau)),
+        "events": list(scenario.task.run_events(scenario, log)),
+        # The start in contact presses with F_d (the start is solved for it); xi(0) then steps the first
+        # force command by K_fi xi(0), per row (N in the row's units): the plots mark that step.
+        "start_in_contact": bool(config.start.in_contact),
+        "start_force_command_step": (np.asarray(gains.force_integral, dtype=float) @ np.asarray(
+            config.start.force_integral, dtype=float)).tolist() if config.start.force_integral else [0.0] * m,
     }
     return summary
 

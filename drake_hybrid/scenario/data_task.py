@@ -389,6 +389,9 @@ class DataTask(CustomTask):
     def run_notes(self, scenario, log, design_time_constant):
         return (self._hook("run_notes") or super().run_notes)(scenario, log, design_time_constant)
 
+    def run_events(self, scenario, log):
+        return (self._hook("run_events") or super().run_events)(scenario, log)
+
     def start_pose_of(self, config):
         values = list(config.start.configuration)
         if len(values) == self.space.chart.configuration_size:

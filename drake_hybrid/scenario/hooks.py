@@ -32,13 +32,14 @@ from drake_hybrid.core.constraints import sphere_constraint
 from drake_hybrid.core.errors import ConfigError
 from drake_hybrid.core.projections import crank_true_velocity_projection
 from drake_hybrid.scenario.tasks.crank_turning import CrankTurning
-from drake_hybrid.scenario.tasks.grinding import add_window_with_rough_patch, rough_patch_notes
+from drake_hybrid.scenario.tasks.grinding import (add_window_with_rough_patch, pad_positions, rough_patch_events,
+                                                  rough_patch_notes)
 from drake_hybrid.scenario.tasks.robots import add_ur5e_with_pad
 from drake_hybrid.systems.sources import PseudoVelocitySource
 
 ENTRY_POINT_GROUP = "drake_hybrid.task_hooks"
 HOOK_METHODS = ("add_robot", "add_workpiece", "constraint", "make_source", "start_positions",
-                "set_environment_state", "velocity_row_inertia", "eigenvalue_shifts", "run_notes")
+                "set_environment_state", "velocity_row_inertia", "eigenvalue_shifts", "run_notes", "run_events")
 NAME = re.compile(r"[a-z][a-z0-9_]{0,63}")
 
 
@@ -190,6 +191,11 @@ class _RoughPatch:
     def run_notes(self, scenario, log, design_time_constant):
         return rough_patch_notes(scenario, log, design_time_constant, self.start, self.end, self.friction)
 
+    def run_events(self, scenario, log):
+        if "q" not in log or scenario.config.controller != "li-sastry":
+            return []
+        return rough_patch_events(log["t"], pad_positions(scenario, log), self.start, self.end, self.friction)
+
 
 _CRANK_METHODS = ("add_workpiece", "start_positions", "set_environment_state", "velocity_row_inertia",
                   "eigenvalue_shifts", "run_notes")
@@ -205,7 +211,7 @@ PACKAGE_HOOKS = (
         TaskHook("sphere_paper_constraint", "Example 2.3's (2.2-8) sphere constraint with the equator fix (switching "
                  "pieces), radial row in N", _SphereConstraint, ("constraint",), SPHERE_PARAMETERS),
         TaskHook("rough_patch", "the grinding pane: smooth, rough (rough_friction), smooth boxes; run notes on the "
-                 "patch", _RoughPatch, ("add_workpiece", "run_notes"), ROUGH_PATCH_PARAMETERS))
+                 "patch", _RoughPatch, ("add_workpiece", "run_notes", "run_events"), ROUGH_PATCH_PARAMETERS))
 for _hook in PACKAGE_HOOKS:
     register_hook(_hook)
 

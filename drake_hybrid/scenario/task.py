@@ -24,6 +24,8 @@ import abc
 import dataclasses
 from dataclasses import dataclass
 
+import numpy as np
+
 from drake_hybrid.core.errors import ConfigError
 from drake_hybrid.scenario.config import ScenarioConfig
 from drake_hybrid.systems.sources import Profile, ProfileSource
@@ -189,6 +191,14 @@ class Task(abc.ABC):
         task causes on purpose). Default: none."""
         return []
 
+    def run_events(self, scenario, log):
+        """Phases of the run the plots mark and the summary names where a row's worst error falls
+        (e.g. the pad on a rough patch): a list of ``{"start": t0, "end": t1 or None, "label": ...}``
+        (s; ``end`` None: an instant; ``"explains_errors": False`` for a phase the plots mark but that
+        causes no row's error, e.g. a change of basis of held rows). Default: where a switching
+        constraint changes piece (``piece_switches``), none for a constraint of one piece."""
+        return piece_switches(scenario, log)
+
     def labels(self, config=None):
         """Plot labels of the velocity- and force-controlled coordinates (``config``: the run's, for a
         task whose rows depend on its options)."""
@@ -230,3 +240,23 @@ class Task(abc.ABC):
 
     def set_environment_state(self, scenario, plant_context):
         """Set the environment's own state at the start (e.g. the crank's angle). Default: none."""
+
+
+def piece_switches(scenario, log):
+    """The instants a switching constraint (core.constraints.SelectingConstraint, e.g. (2.2-8) with the
+    equator fix, which drops the component of (p - c) x a along the largest |a_k|) changes piece along
+    the logged run: its rows change basis there, so the held rows' forces jump while the pad does not.
+    None for a constraint of one piece."""
+    constraint = scenario.constraint_space.constraint
+    if not hasattr(constraint, "pieces") or "q" not in log:
+        return []
+    plant = scenario.controller_plant
+    context = plant.CreateDefaultContext()
+    pieces = []
+    for q in log["q"]:
+        plant.SetPositions(context, q)
+        pieces.append(constraint.select(scenario.controller.kinematics.evaluate(context).configuration))
+    changes = np.nonzero(np.diff(pieces))[0] + 1
+    # The pad's motion and the normal force do not see the switch: it names no row's error (explains_errors).
+    return [{"start": float(log["t"][i]), "end": None, "explains_errors": False,
+             "label": "the constraint switches piece: its held rows change basis"} for i in changes]

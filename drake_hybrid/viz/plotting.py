@@ -18,6 +18,7 @@ Size: one module for every figure of the package, so that they share one look (a
 the designed-prediction overlays); each function is one figure.
 """
 
+import textwrap
 from pathlib import Path
 
 import matplotlib
@@ -80,11 +81,47 @@ def _tracking_axes(ax_values, ax_errors, t, actual, desired, predicted, labels, 
     ax_errors.grid(alpha=0.3, which="both")
 
 
-def tracking_figure(log, summary, predicted, what, labels=(), units=""):
+def _mark_events(axes, events):
+    """The run's phases (``summary["events"]``: a span shaded, an instant a dashed line), one colour and
+    one legend entry per label."""
+    colors = {}
+    for event in events or ():
+        first = event["label"] not in colors
+        color = colors.setdefault(event["label"], f"C{(len(colors) + 5) % 10}")
+        for ax in axes:
+            label = event["label"] if ax is axes[-1] and first else None
+            if event.get("end") is None:
+                ax.axvline(event["start"], color=color, lw=1.0, ls="--", label=label)
+            else:
+                ax.axvspan(event["start"], event["end"], color=color, alpha=0.12, lw=0, label=label)
+
+
+def _start_text(log, summary, what):
+    """What the first samples of a start in contact are (the start solved to press with F_d; xi(0)'s
+    step of the first force command), for the force figure; None where there is nothing to say."""
+    if what != "force" or not summary.get("start_in_contact"):
+        return None
+    text = "t = 0: the start presses with the commanded force (solved for it)"
+    step = np.abs(np.asarray(summary.get("start_force_command_step") or [], dtype=float))
+    if step.size and np.max(step) > 0:
+        row = int(np.argmax(step))
+        rows = summary.get("force_rows") or []
+        name, unit = (rows[row]["name"], rows[row]["units"]) if row < len(rows) else (f"row {row + 1}", "")
+        text += (f"; the start's force integral xi(0) adds K_fi xi(0) = {step[row]:.3g} {unit} to the first "
+                 f"command of {name}: the contact answers within milliseconds, then the designed decay")
+    velocity = np.asarray(log.get("desired_velocity", np.zeros((1, 0))))
+    if velocity.size and np.max(np.abs(velocity[0])) > 0 and np.max(np.abs(log["velocity"][0])) == 0:
+        text += "; the velocity command steps from rest"
+    return text
+
+
+def tracking_figure(log, summary, predicted, what, labels=(), units="", note=None):
     """Measured, commanded and designed ``what`` ("velocity" or "force") and the error on a log scale.
 
     Every row in its own units; the designed response starts at contact (``summary["contact_time"]``);
-    dash-dot lines: 1 % of each row's command; dotted: contact + five design time constants."""
+    dash-dot lines: 1 % of each row's command; dotted: contact + five design time constants; shaded
+    spans and dashed lines: the run's phases (``summary["events"]``). Under the title: what the force's
+    first samples are (a start in contact), and ``note`` (the task's words on its transients)."""
     plt = _pyplot()
     fig, (ax_values, ax_errors) = plt.subplots(2, 1, figsize=(7.5, 6.0), sharex=True)
     actual, desired = log[what], log[f"desired_{what}"]
@@ -99,10 +136,12 @@ def tracking_figure(log, summary, predicted, what, labels=(), units=""):
             ax.axvline(contact, color="tab:green", lw=0.9, ls="-", label="contact" if ax is ax_errors else None)
     ax_errors.axvline(contact + 5 * summary["design_time_constant"], color="gray", lw=0.8, ls=":",
                       label="contact + 5 design time constants" if contact > 0 else "5 design time constants")
+    _mark_events((ax_values, ax_errors), summary.get("events"))
     ax_values.legend(fontsize=7, loc="best")
     ax_errors.legend(fontsize=7, loc="best")
-    ax_values.set_title(f"{summary['task']} ({summary['mode']}): {what} tracking vs. the designed exponential",
-                        fontsize=10)
+    title = f"{summary['task']} ({summary['mode']}): {what} tracking vs. the designed exponential"
+    caption = "\n".join(textwrap.fill(text, 120) for text in (_start_text(log, summary, what), note) if text)
+    ax_values.set_title(title + ("\n" + caption if caption else ""), fontsize=10 if not caption else 7.5)
     fig.tight_layout()
     return fig
 
@@ -115,7 +154,7 @@ def save_tracking_plots(log, summary, predicted_velocity, predicted_force, out_d
     paths = []
     for what, predicted in (("velocity", predicted_velocity), ("force", predicted_force)):
         fig = tracking_figure(log, summary, predicted, what, labels.get(what, ()),
-                              units=labels.get(f"{what}_units", ""))
+                              units=labels.get(f"{what}_units", ""), note=labels.get(f"{what}_note"))
         path = out / f"{what}_tracking.png"
         fig.savefig(path, dpi=120)
         plt.close(fig)

@@ -15,6 +15,9 @@ arrays plus ``position_error`` (e_p) and ``tangential_force`` (F_v).
 Friction of two geometries combines as 2 mu_1 mu_2 / (mu_1 + mu_2) in Drake;
 the patch's own coefficient is chosen so that the pad on the patch sees
 ``rough_friction``.
+
+Size: the task and what explains its runs (the notes on the rough patch's edges and the sphere's
+breakaway, the phases the plots mark), which read the task's own geometry and log.
 """
 
 import math
@@ -26,7 +29,7 @@ from pydrake.geometry import AddContactMaterial, AddRigidHydroelasticProperties,
 from pydrake.math import RigidTransform
 from pydrake.multibody.plant import CoulombFriction
 
-from drake_hybrid.control.gains import HybridGains
+from drake_hybrid.control.gains import ControlMode, HybridGains
 from drake_hybrid.core.errors import ConfigError
 from drake_hybrid.scenario.task import Task, choice
 from drake_hybrid.scenario.tasks.sphere_polishing import SpherePolishing, SpherePolishingOptions
@@ -120,6 +123,61 @@ def friction_step_notes(t, x, x_dot_error, command, normal_force, damping, stiff
             "the start's transient (docs/impedance.md)"]
 
 
+def pad_positions(scenario, log):
+    """The pad's position x along the pane (m) at every logged state."""
+    plant = scenario.controller_plant
+    context = plant.CreateDefaultContext()
+    x = []
+    for q in log["q"]:
+        plant.SetPositions(context, q)
+        x.append(scenario.controller.kinematics.evaluate(context).configuration[0])
+    return np.array(x)
+
+
+# How long the force loop and the pad's contact answer a step of the friction force (docs/impedance.md:
+# the compliant contact rings for about 0.15 s after each edge; 0.3 s covers it), and how early it starts:
+# the pad's contact patch reaches an edge before its centre does (about 15 ms at 0.1 m/s; 0.05 s covers it).
+EDGE_TRANSIENT = 0.3
+EDGE_LEAD = 0.05
+
+
+def force_step_note(t, force_error, command, on_patch, after):
+    """In impedance/force mode, the normal force's error at the rough patch's edges (``on_patch``: the
+    pad on the patch, per sample): each edge steps the friction force, and the force loop answers it
+    through the arm's inertia coupling, g_f = -M_f^-1 M_fp F_v (3.2-11), with the pad's contact ringing
+    for about 0.15 s. One note with the peak after each edge and the largest error away from the edges
+    (from ``after``, the end of the start's transient, on); None if the pad crosses no edge."""
+    crossings = np.nonzero(np.diff(on_patch.astype(int)))[0] + 1
+    if crossings.size == 0 or not command > 0:
+        return None
+    error = np.abs(force_error)
+    away = t >= after
+    peaks = []
+    for i in crossings:
+        window = (t >= t[i] - EDGE_LEAD) & (t < t[i] + EDGE_TRANSIENT)
+        away &= ~window
+        j = int(np.nonzero(window)[0][np.argmax(error[window])])
+        peaks.append(f"{error[j]:.3g} N ({100 * error[j] / command:.1f} %) {'entering' if on_patch[i] else 'leaving'} "
+                     f"it (peak at t = {t[j]:.2f} s)")
+    quiet = (f"; away from the edges (t >= {after:.2f} s, {EDGE_LEAD:g} s before to {EDGE_TRANSIENT:g} s after each) at most {np.max(error[away]):.3g} N "
+             f"({100 * np.max(error[away]) / command:.2f} %)") if away.any() else ""
+    return (f"F's error at the rough patch's edges is the force loop answering the friction force's step through "
+            f"the arm's inertia coupling, -M_f^-1 M_fp F_v (3.2-11), with the pad's contact ringing for about "
+            f"0.15 s: {'; '.join(peaks)}{quiet}. These peaks are F's 'settled max' whenever the pad crosses an "
+            "edge after the start's transient (docs/impedance.md)")
+
+
+def rough_patch_events(t, x, rough_start, rough_end, rough_friction):
+    """The span of the run the pad spends on the rough patch (for the plots and the summary)."""
+    on_patch = (x >= rough_start) & (x <= rough_end)
+    if not on_patch.any():
+        return []
+    inside = np.nonzero(on_patch)[0]
+    end = inside[-1] + 1
+    return [{"start": float(t[inside[0]]), "end": float(t[min(end, len(t) - 1)]),
+             "label": f"pad on the rough patch (mu = {rough_friction:g})"}]
+
+
 def rough_patch_notes(scenario, log, design_time_constant, rough_start, rough_end, rough_friction):
     """Where the pad is at the end relative to the rough patch (between ``rough_start`` and ``rough_end``
     along x, mu = ``rough_friction``): leaving it releases the extra friction force, a transient that
@@ -129,13 +187,7 @@ def rough_patch_notes(scenario, log, design_time_constant, rough_start, rough_en
     config = scenario.config
     if "q" not in log or config.controller != "li-sastry":
         return []
-    plant = scenario.controller_plant
-    context = plant.CreateDefaultContext()
-    x = []
-    for q in log["q"]:
-        plant.SetPositions(context, q)
-        x.append(scenario.controller.kinematics.evaluate(context).configuration[0])
-    x, t = np.array(x), log["t"]
+    x, t = pad_positions(scenario, log), log["t"]
     notes = []
     late = t >= t[-1] - min(1.0, 0.5 * t[-1])
     command = float(np.mean(log["desired_velocity"][late, 0]))
@@ -153,6 +205,10 @@ def rough_patch_notes(scenario, log, design_time_constant, rough_start, rough_en
                                          float(np.max(np.abs(log["desired_force"]))), float(gains.velocity[0, 0]),
                                          float(gains.position[0, 0]), rough_start, rough_end,
                                          float(config.contact.friction), rough_friction)
+        force_command = float(np.max(np.abs(log["desired_force"][:, 0])))
+        note = force_step_note(t, log["force_error"][:, 0], force_command, (x >= rough_start) & (x <= rough_end),
+                               float(t[0]) + 5 * design_time_constant)
+        notes += [note] if note else []
     on_patch = (x >= rough_start) & (x <= rough_end)
     where = f"rough patch (mu = {rough_friction:g}, x from {rough_start:g} to {rough_end:g} m)"
     if on_patch[-1]:
@@ -238,7 +294,14 @@ class Grinding(Task):
         return config
 
     def labels(self, config=None):
-        return (self._base(config) if config is not None else self._window).labels(config)
+        base = self._base(config) if config is not None else self._window
+        labels = dict(base.labels(config))
+        if config is None or ControlMode.parse(config.mode) is ControlMode.IMPEDANCE_FORCE:
+            labels["velocity_note"] = (
+                "The designed response has no friction in it: from rest the tangential impedance first builds "
+                "mu F_n against static friction, then the pad slides; where the friction force steps (the shaded "
+                "phases) the impedance yields to it as e_p'' + K_v e_p' + K_p e_p = F_v (3.2-6) designs (run notes)")
+        return labels
 
     def run_notes(self, scenario, log, design_time_constant):
         """Which phase of the task the run ends in. Window: where the pad is relative to the rough
@@ -253,6 +316,20 @@ class Grinding(Task):
         options = self.options(config)
         return rough_patch_notes(scenario, log, design_time_constant, options.rough_start, options.rough_end,
                                  options.rough_friction)
+
+    def run_events(self, scenario, log):
+        """Window: the span the pad spends on the rough patch. Sphere: when static friction lets go."""
+        config = scenario.config
+        if "q" not in log or config.controller != "li-sastry":
+            return []
+        if self._base(config) is self._sphere:
+            breakaway = sphere_breakaway(log) if float(config.contact.friction) > 0 else None
+            return ([] if breakaway is None else [{"start": breakaway, "end": None,
+                                                   "label": "static friction lets go: the pad slides"}]
+                    ) + super().run_events(scenario, log)
+        options = self.options(config)
+        return rough_patch_events(log["t"], pad_positions(scenario, log), options.rough_start, options.rough_end,
+                                  options.rough_friction)
 
     # -- delegated to the base task -------------------------------------------------------------
     def add_robot(self, plant, config):
@@ -301,7 +378,7 @@ def sphere_phase_note(log):
     command = np.abs(desired[:, row])
     if not np.any(command > 0):
         return []
-    moving = np.abs(log["velocity"][:, row]) >= 0.5 * command
+    moving = _sliding(log)
     force_command = abs(float(log["desired_force"][-1, 0]))
     error = 100 * abs(float(log["force_error"][-1, 0])) / force_command if force_command > 0 else float("nan")
     if not moving[-1]:
@@ -321,3 +398,21 @@ def sphere_phase_note(log):
     else:
         note += ": the run ends in steady sliding"
     return [note]
+
+
+def _sliding(log):
+    """Per sample: the pad moving along the path's row at half its command or more."""
+    desired = log["desired_velocity"]
+    row = int(np.argmax(np.max(np.abs(desired), axis=0)))
+    return np.abs(log["velocity"][:, row]) >= 0.5 * np.abs(desired[:, row])
+
+
+def sphere_breakaway(log):
+    """When the sphere run's pad starts to slide for good (s; None if it ends held or is never commanded)."""
+    if not np.any(np.abs(log["desired_velocity"]) > 0):
+        return None
+    moving = _sliding(log)
+    if not moving[-1]:
+        return None
+    stuck = np.nonzero(~moving)[0]
+    return float(log["t"][stuck[-1] + 1]) if stuck.size else None
