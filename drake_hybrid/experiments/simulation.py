@@ -188,6 +188,12 @@ def row_errors(t, error, desired, names, units, since, settle_after):
     return rows
 
 
+def max_after(values, window):
+    """Per column, max |values| over the samples in ``window`` (a list of floats, None if it is empty)."""
+    values = np.abs(np.asarray(values, dtype=float))[window]
+    return [float(v) for v in values.max(axis=0)] if values.shape[0] else [None] * values.shape[1]
+
+
 def _worst(rows, key):
     """The largest figure of ``key`` over the rows that have it (None if none has)."""
     values = [row[key] for row in rows if row[key] is not None]
@@ -260,7 +266,7 @@ def simulate(config, progress=False, meshcat=None, record_html=False, setup=None
         for key in [key for key in summary if "force_error" in key or key == "force_settling_time_1_percent"]:
             summary[key] = None
         for row in summary.get("force_rows") or []:
-            row.update({key: None for key in row if key not in ("name", "units", "command")})
+            row.update({key: None for key in row if key not in ("name", "units", "command", "held")})
     result = SimulationResult(config=config, log=log, summary=summary, scenario=scenario, html=html,
                               simulator=simulator, context=context)
     if stop:
@@ -315,6 +321,14 @@ def summarize(scenario, log, wall_time):
                                row_units(labels.get("velocity_units", "SI"), k), start, settle_after)
     force_rows = row_errors(t, log["force_error"], log["desired_force"], labels.get("force", []),
                             row_units(labels.get("force_units", "SI"), m), start, settle_after)
+    after_contact = t >= start
+    measured = max_after(log["force"], after_contact)
+    for i, row in enumerate(force_rows):
+        # A held row (controller.kinematic_rows) has no force loop: its "error" is not tracked, what it
+        # measures is what the contact (or friction, or the tessellated pad) pushes on the held motion.
+        row.update(held=i in controller.kinematic_rows, max_measured_force_after_contact=measured[i])
+    constraint_units = row_units(labels["constraint_units"], log["constraint"].shape[1]) \
+        if "constraint_units" in labels else None
     torque_ratio = np.max(np.abs(log["torque"]) / effort_limits(scenario), axis=0)
     pairs = lambda values: [[float(np.real(v)), float(np.imag(v))] for v in values]
     summary = {
@@ -347,6 +361,11 @@ def summarize(scenario, log, wall_time):
         # From contact on: before it, C is the start's gap, not a residual.
         "max_constraint_residual_after_contact":
             float(np.max(np.abs(log["constraint"][t >= start]))) if np.any(t >= start) else None,
+        # Per row of C, in its units (None where the task names none: a custom task's C).
+        "max_constraint_residual_rows_after_contact": max_after(log["constraint"], after_contact),
+        "constraint_units": constraint_units,
+        # Rows the controller holds kinematically (no force commanded; their measured force in force_rows).
+        "held": [row["name"] for row in force_rows if row["held"]],
         "max_torque_to_effort_limit": torque_ratio.tolist(),
         "wall_time": float(wall_time),
         "real_time_factor": float(config.duration / wall_time) if wall_time > 0 else None,
