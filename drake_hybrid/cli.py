@@ -308,7 +308,8 @@ def command_analyze(args):
         print(f"  {diagnosis.summary()}")
     check = getattr(result, "jacobian_check", None)
     print(f"  {check.summary()}" if check is not None else
-          "  Jacobian: central differences of the one-period map (no AutoDiffXd to check)")
+          "  Jacobian: the one-period map's, by central differences (a sampled loop has no AutoDiffXd Jacobian "
+          "to check it against); eigenvalues from it")
     step_check = getattr(result, "step_check", None)
     if step_check is not None:
         print(f"  {step_check.summary()}")

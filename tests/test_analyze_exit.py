@@ -32,6 +32,8 @@ def test_the_crank_misses_only_what_the_handles_inertia_predicts(crank_lineariza
     printed = capsys.readouterr().out
     assert "missed; predicted -9.4" in printed and "handle's spin inertia" in printed
     assert "matched as predicted" in printed
+    assert ("Jacobian: the one-period map's, by central differences (a sampled loop has no AutoDiffXd Jacobian "
+            "to check it against); eigenvalues from it") in printed
     assert cli.main(["analyze", "crank-turning", "--quiet", "--strict"]) == 1
 
 

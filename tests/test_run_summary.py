@@ -229,13 +229,34 @@ def test_the_constraint_residual_is_printed_in_cs_units():
 def test_the_paper_rows_are_labelled_as_pseudo_velocities_in_their_mixed_units():
     """The paper's E_p rows are pseudo-velocities: the crank's row 2 is -Y x-dot + X y-dot + phi-dot
     (m^2/s plus rad/s), the sphere's rows 2 and 3 t_i . p-dot + beta_i . (phi-dot, theta-dot) with beta_i
-    in 1/m (m/s plus rad/m/s); the true-velocity rows keep their own units."""
+    in 1/m (m/s plus rad/m/s). Their error, E_t r-dot - r-dot_td, is the true rows', in the true rows'
+    units; the true-velocity rows keep their own units."""
     crank, sphere = get_task("crank-turning"), get_task("sphere-polishing")
     paper = crank.labels(crank.default_config({"velocity_rows": "paper"}))
     assert row_units(paper["velocity_units"], 2) == ["rad/s", "m^2/s + rad/s"]
     assert paper["velocity"][1].startswith("pseudo-velocity")
+    assert row_units(paper["velocity_error_units"], 2) == ["rad/s", "rad/s"]
+    assert paper["velocity_error"][1].startswith("alpha-dot (crank)")
     assert row_units(crank.labels(crank.default_config())["velocity_units"], 2) == ["rad/s", "rad/s"]
+    assert "velocity_error" not in crank.labels(crank.default_config())
     paper = sphere.labels(sphere.default_config({"velocity_rows": "paper", "chart": "euler"}))
     assert row_units(paper["velocity_units"], 3) == ["rad/s", "m/s + rad/m/s", "m/s + rad/m/s"]
     assert all(name.startswith("pseudo-velocity") for name in paper["velocity"][1:])
+    assert row_units(paper["velocity_error_units"], 3) == ["rad/s", "m/s", "m/s"]
     assert row_units(sphere.labels(sphere.default_config())["velocity_units"], 3) == ["rad/s", "m/s", "m/s"]
+
+
+def test_the_crank_paper_rows_error_is_reported_against_the_true_command_in_rad_per_s():
+    """With velocity_rows=paper the controller is fed the pseudo-velocity (0.519 at the start, mixed units)
+    but its error e_p' is the true crank rate's (PseudoVelocitySource): the summary's row is alpha-dot's,
+    in rad/s, in % of the true 0.5 rad/s command."""
+    config = get_task("crank-turning").default_config({"velocity_rows": "paper"})
+    config.duration = 0.05
+    result = simulate(config)
+    log, (spin, rate) = result.log, result.summary["velocity_rows"]
+    np.testing.assert_array_equal(log["true_desired_velocity"], np.tile([0.0, 0.5], (log["t"].size, 1)))
+    assert np.max(log["desired_velocity"][:, 1]) > 0.505                  # the pseudo-velocity, not the command
+    assert rate["name"].startswith("alpha-dot (crank)") and rate["units"] == "rad/s" and rate["command"] == 0.5
+    assert rate["final_error_percent"] == pytest.approx(100 * abs(log["velocity_error"][-1, 1]) / 0.5)
+    assert spin["units"] == "rad/s" and spin["command"] == 0.0
+    assert "true_desired_velocity" not in simulate(get_task("crank-turning").default_config(duration=0.05)).log

@@ -290,6 +290,9 @@ def collect_log(scenario, context):
     for optional in ("true_wrench", "contact_phase"):        # sensor faults or conditioning; supervision
         if optional in scenario.loggers:
             log[optional] = _logged(scenario, context, optional)[1]
+    if getattr(scenario.source, "true_projection", None) is not None:   # the paper's pseudo-velocity: its
+        # velocity_error is E_t r-dot - r-dot_td (PseudoVelocitySource), the true rows'; r-dot_td is their command
+        log["true_desired_velocity"] = np.array([scenario.source.velocity_profile.evaluate(float(s))[0] for s in t])
     return log
 
 
@@ -317,15 +320,15 @@ def summarize(scenario, log, wall_time):
     labels = scenario.task.labels(scenario.config)
     start = contact_time(log)
     settle_after = start + 5 * tau
-    velocity_rows = row_errors(t, log["velocity_error"], log["desired_velocity"], labels.get("velocity", []),
-                               row_units(labels.get("velocity_units", "SI"), k), start, settle_after)
+    # With the paper's pseudo-velocity rows the error is the true rows' (collect_log): as those, against their command.
+    velocity_rows = row_errors(t, log["velocity_error"], log.get("true_desired_velocity", log["desired_velocity"]),
+                               labels.get("velocity_error", labels.get("velocity", [])),
+                               row_units(labels.get("velocity_error_units", labels.get("velocity_units", "SI")), k),
+                               start, settle_after)
     force_rows = row_errors(t, log["force_error"], log["desired_force"], labels.get("force", []),
                             row_units(labels.get("force_units", "SI"), m), start, settle_after)
-    after_contact = t >= start
-    measured = max_after(log["force"], after_contact)
-    for i, row in enumerate(force_rows):
-        # A held row (controller.kinematic_rows) has no force loop: its "error" is not tracked, what it
-        # measures is what the contact (or friction, or the tessellated pad) pushes on the held motion.
+    measured = max_after(log["force"], t >= start)
+    for i, row in enumerate(force_rows):      # a held row (controller.kinematic_rows) has no force loop
         row.update(held=i in controller.kinematic_rows, max_measured_force_after_contact=measured[i])
     constraint_units = row_units(labels["constraint_units"], log["constraint"].shape[1]) \
         if "constraint_units" in labels else None
@@ -361,11 +364,9 @@ def summarize(scenario, log, wall_time):
         # From contact on: before it, C is the start's gap, not a residual.
         "max_constraint_residual_after_contact":
             float(np.max(np.abs(log["constraint"][t >= start]))) if np.any(t >= start) else None,
-        # Per row of C, in its units (None where the task names none: a custom task's C).
-        "max_constraint_residual_rows_after_contact": max_after(log["constraint"], after_contact),
-        "constraint_units": constraint_units,
-        # Rows the controller holds kinematically (no force commanded; their measured force in force_rows).
-        "held": [row["name"] for row in force_rows if row["held"]],
+        "max_constraint_residual_rows_after_contact": max_after(log["constraint"], t >= start),
+        "constraint_units": constraint_units,      # per row of C (None where the task names none)
+        "held": [row["name"] for row in force_rows if row["held"]],    # no force commanded: see force_rows
         "max_torque_to_effort_limit": torque_ratio.tolist(),
         "wall_time": float(wall_time),
         "real_time_factor": float(config.duration / wall_time) if wall_time > 0 else None,

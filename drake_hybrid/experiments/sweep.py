@@ -119,7 +119,7 @@ def steady_rows(log, summary, what, after, tolerance):
     t >= ``after`` within ``tolerance`` times its command, or times one of its units where it is
     commanded to zero. Returns (settled, the worst row's (max |e_i|, % of its command or None,
     "name (units)", index)), the worst row being the one furthest out relative to its scale."""
-    desired = log[f"desired_{what}"]
+    desired = log.get(f"true_desired_{what}", log[f"desired_{what}"])     # the true rows' command (pseudo-velocity)
     figures = max_row_errors(log["t"], log[f"{what}_error"], desired, after)
     scales = [command if command > 0 else 1.0 for command in row_commands(desired)]
     ratios = [error / scale for (error, _), scale in zip(figures, scales)]

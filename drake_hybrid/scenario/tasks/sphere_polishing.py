@@ -107,9 +107,13 @@ class SpherePolishing(Task):
     def labels(self, config=None):
         if config is not None and self.options(config).velocity_rows == "paper":
             # (3.3-11)'s e_i = (t_i, beta_i, 0): t_i . p-dot (m/s) plus beta_i . (phi-dot, theta-dot), beta_i
-            # in 1/m: the paper's pseudo-velocity mixes units (docs/theory.md §6).
+            # in 1/m: the paper's pseudo-velocity mixes units (docs/theory.md §6). Its error e_p' = E_t r-dot -
+            # r-dot_td is the true rows' (PseudoVelocitySource): the summary's rows.
             velocity = {"velocity": ["psi-dot (spin)", "pseudo-velocity e_2 . r-dot", "pseudo-velocity e_3 . r-dot"],
-                        "velocity_units": "rad/s | m/s + rad/m/s | m/s + rad/m/s"}
+                        "velocity_units": "rad/s | m/s + rad/m/s | m/s + rad/m/s",
+                        "velocity_error": ["psi-dot (spin)", "t_1 . p-dot, through the paper's pseudo-velocity row",
+                                           "t_2 . p-dot, through the paper's pseudo-velocity row"],
+                        "velocity_error_units": "rad/s | m/s | m/s"}
         else:
             velocity = {"velocity": ["spin about a", "t_1 . p-dot", "t_2 . p-dot"],
                         "velocity_units": "rad/s | m/s | m/s"}
