@@ -14,6 +14,7 @@ import math
 import os
 import sys
 import time
+import warnings
 from pathlib import Path
 
 import matplotlib.pyplot as plt
@@ -21,6 +22,7 @@ import numpy as np
 
 from pydrake.lcm import DrakeLcm
 
+from drake_hybrid.analysis.derivatives import DerivativeMismatchWarning
 from drake_hybrid.analysis.linearization import linearize_continuous, linearize_discrete, predicted_match, shift_indices
 # DESCRIPTION (the top-level help) and each command's line live in the light drake_hybrid.commands,
 # which the entry point answers --help from; cli.DESCRIPTION stays the name tests and readers use.
@@ -154,6 +156,10 @@ def _row_text(row, events=(), notes=False):
             return "-"
         return f"{value:.3g} {units}" + (f" ({percent:.2f} %)" if percent is not None else "")
 
+    if row.get("held"):
+        measured = row.get("max_measured_force_after_contact")
+        return "held by the controller (no force commanded)" + (
+            "" if measured is None else f"; measured force up to {measured:.3g} {units} after contact")
     command = f"command {row['command']:.3g} {units}" if row["command"] > 0 else "command 0"
     final = None if row["final_error"] is None else abs(row["final_error"])
     settled = amount(row["max_error_after_5_time_constants"], row["max_error_percent_after_5_time_constants"])
@@ -167,6 +173,24 @@ def _row_text(row, events=(), notes=False):
         text += (f", within 1 % from {settle:.3f} s after contact on" if np.isfinite(settle)
                  else ", not within 1 % at the end")
     return text
+
+
+def _unit(unit):
+    return "(no unit)" if unit == "1" else unit
+
+
+def _residual_text(summary):
+    """max |C(r)| after contact in C's units: one figure if every row has the same unit, else one per row."""
+    residual = summary["max_constraint_residual_after_contact"]
+    if residual is None:
+        return "no contact made"
+    units, rows = summary.get("constraint_units"), summary.get("max_constraint_residual_rows_after_contact")
+    if not units or not rows:
+        return f"max |C(r)| after contact {residual:.3g} (in the units of C's rows)"
+    if len(set(units)) == 1:
+        return f"max |C(r)| after contact {residual:.3g} {_unit(units[0])}"
+    figures = ", ".join(f"{value:.3g} {_unit(unit)}" for value, unit in zip(rows, units))
+    return f"max |C_i(r)| after contact, per row of C: {figures}"
 
 
 def command_simulate(args):
@@ -200,8 +224,7 @@ def command_simulate(args):
     for what, rows in (("velocity", s["velocity_rows"]), ("force", s["force_rows"])):
         for row in rows:
             print(f"    {what} {row['name']}: {_row_text(row, s.get('events'), bool(s.get('notes')))}")
-    residual = s["max_constraint_residual_after_contact"]
-    print(f"  max |C(r)| after contact {residual:.3g}" if residual is not None else "  no contact made")
+    print(f"  {_residual_text(s)}")
     for note in s.get("notes", []):
         print(f"  note: {note}")
     print(f"  wrote {', '.join(str(f) for f in files)}")
@@ -223,13 +246,16 @@ def command_analyze(args):
     config = _config(args)
     task = get_task(config.task)
     stages = Stages(enabled=not args.quiet)
-    if getattr(task, "continuous_plant", True):
-        result = linearize_continuous(config, tolerance=args.tolerance, stages=stages)
-        how = "Linearize of the continuous closed loop"
-    else:
-        result = linearize_discrete(config, tolerance=args.tolerance, settle_time=0.5, stages=stages)
-        how = (f"Jacobian of the discrete closed loop's one-period map (h = {result.period * 1e3:g} ms), "
-               "eigenvalues log(mu)/h,")
+    with warnings.catch_warnings():
+        # The Jacobian check's own line below says what the warning would (which columns were replaced).
+        warnings.simplefilter("ignore", DerivativeMismatchWarning)
+        if getattr(task, "continuous_plant", True):
+            result = linearize_continuous(config, tolerance=args.tolerance, stages=stages)
+            how = "Linearize of the continuous closed loop"
+        else:
+            result = linearize_discrete(config, tolerance=args.tolerance, settle_time=0.5, stages=stages)
+            how = (f"Jacobian of the discrete closed loop's one-period map (h = {result.period * 1e3:g} ms), "
+                   "eigenvalues log(mu)/h,")
     match = result.match
     controller_mode = ControlMode.parse(config.mode)
     space = task.constraint_space(config)
@@ -288,7 +314,8 @@ def command_analyze(args):
         print(f"  {diagnosis.summary()}")
     check = getattr(result, "jacobian_check", None)
     print(f"  {check.summary()}" if check is not None else
-          "  Jacobian: central differences of the one-period map (no AutoDiffXd to check)")
+          "  Jacobian: the one-period map's, by central differences (a sampled loop has no AutoDiffXd Jacobian "
+          "to check it against); eigenvalues from it")
     step_check = getattr(result, "step_check", None)
     if step_check is not None:
         print(f"  {step_check.summary()}")
@@ -320,8 +347,20 @@ def command_analyze(args):
     return code
 
 
+def _where(workers):
+    """Where a sweep ran, in the command line's terms (``SweepRun.workers``: "serial", "local:N" or an address)."""
+    if workers == "serial":
+        return "serially in this process (--workers 0)"
+    if workers.startswith("local:"):
+        return f"on {workers.split(':', 1)[1]} local Dask worker processes (--workers)"
+    return f"on the Dask scheduler at {workers} (--scheduler)"
+
+
 def command_sweep(args):
     _check_output_paths(args)
+    if args.workers < 0:
+        raise UsageError(f"--workers must be 0 (serial, in this process) or a number of local Dask worker "
+                         f"processes, got {args.workers}")
     task_name = load_task_file(args.task)[0].name if is_task_file(args.task) else args.task
     out = Path(args.out) if args.out else Path("runs") / f"sweep-{task_name}"
     try:
@@ -334,7 +373,7 @@ def command_sweep(args):
     rows = read_results(run.results_path)
     stable = sum(1 for row in rows if row.get("stable"))
     if run.evaluated:
-        done = f"{run.evaluated} of {run.points} points evaluated in {run.wall_time:.1f} s ({run.workers})"
+        done = f"{run.evaluated} of {run.points} points evaluated in {run.wall_time:.1f} s {_where(run.workers)}"
     else:
         done = f"nothing to run: all {run.points} points already in the table"
     print(f"{task_name}: {done}; {len(rows)} in the table, {stable} stable, {run.failures} with errors")

@@ -25,7 +25,8 @@ from drake_hybrid.control.phases import ContactPhase
 from drake_hybrid.control.safety import SafetyConfig
 from drake_hybrid.control.supervision import ContactSupervisor, SupervisionConfig
 from drake_hybrid.core.errors import KinematicSingularityWarning
-from drake_hybrid.experiments.simulation import effort_limits, settling_time, simulate
+from drake_hybrid.experiments.metrics import settling_time
+from drake_hybrid.experiments.simulation import effort_limits, simulate
 from drake_hybrid.scenario.config import ModelErrorConfig
 from drake_hybrid.scenario.tasks import get_task
 from drake_hybrid.systems.faults import SensorFaultConfig

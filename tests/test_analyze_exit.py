@@ -3,12 +3,14 @@ for it, and the exit code says whether the misses are the predicted ones (--stri
 
 import dataclasses
 import json
+import warnings
 from types import SimpleNamespace
 
 import numpy as np
 import pytest
 
 import drake_hybrid.cli as cli
+from drake_hybrid.analysis.derivatives import DerivativeMismatchWarning, JacobianCheck
 from drake_hybrid.analysis.linearization import linearize_discrete, match_eigenvalues, shifted_design
 from drake_hybrid.scenario.task import EigenvalueShift
 from drake_hybrid.scenario.tasks import get_task
@@ -30,6 +32,8 @@ def test_the_crank_misses_only_what_the_handles_inertia_predicts(crank_lineariza
     printed = capsys.readouterr().out
     assert "missed; predicted -9.4" in printed and "handle's spin inertia" in printed
     assert "matched as predicted" in printed
+    assert ("Jacobian: the one-period map's, by central differences (a sampled loop has no AutoDiffXd Jacobian "
+            "to check it against); eigenvalues from it") in printed
     assert cli.main(["analyze", "crank-turning", "--quiet", "--strict"]) == 1
 
 
@@ -90,3 +94,33 @@ def test_modes_at_the_steps_nyquist_frequency_are_named_as_such(monkeypatch, cap
     assert "6283j" not in other and "-2292+896.8j" in other
     (nyquist,) = [line for line in printed.splitlines() if "Nyquist" in line]
     assert "pi/h = 6283 1/s" in nyquist and "-1.634e+04+6283j, -8719+6283j" in nyquist
+
+
+def test_analyze_prints_the_jacobian_checks_line_instead_of_a_python_warning(monkeypatch, capsys):
+    """Where the Jacobian check replaces AutoDiffXd's columns (the sphere's pole path, a box workpiece), the
+    linearization warns (DerivativeMismatchWarning) for library users; the command line prints the check's
+    own line (how closely AutoDiffXd agrees, which columns were replaced, which A the eigenvalues come
+    from) and no Python warning."""
+    designed = np.array([-10.0, -8.0, -10.0], dtype=complex)
+    check = JacobianCheck(max_relative_error=1.0, max_absolute_error=2e6, worst_column=0, worst_state="plant joint1_q",
+                          tolerance=1e-3, epsilon=1e-5, used="autodiff with 1 column(s) from central differences",
+                          evaluations=28, replaced=["plant joint1_q"], largest_entry=2.8e7)
+
+    def linearize(*args, **kwargs):
+        warnings.warn(DerivativeMismatchWarning("the closed loop: the AutoDiffXd state Jacobian disagrees"))
+        return SimpleNamespace(match=match_eigenvalues(designed, np.array([-10.0, -8.0, -9.97, 1e-12, -1e-10, -1257]),
+                                                       marginal=2),
+                               shifted_match=None, shifts=[], equilibrium_residual=1e-10, wall_time=0.1,
+                               unstable_modes=[], jacobian_check=check, step_check=None)
+
+    monkeypatch.setattr(cli, "linearize_continuous", linearize)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        assert cli.main(["analyze", "window-washing", "--quiet"]) == 0
+    assert not [w for w in caught if issubclass(w.category, DerivativeMismatchWarning)]
+    captured = capsys.readouterr()
+    assert "Warning" not in captured.err + captured.out
+    (line,) = [line for line in captured.out.splitlines() if "Jacobian check" in line]
+    assert "differ from central differences by at most 1 of the column's size (tolerance 0.001" in line
+    assert "replaced by central differences: plant joint1_q" in line
+    assert line.endswith("eigenvalues from AutoDiffXd's A with 1 column(s) from central differences")

@@ -11,9 +11,10 @@ import pytest
 import drake_hybrid.__main__ as entry
 import drake_hybrid.cli as cli
 from drake_hybrid.cli import main, make_parser
+from drake_hybrid.core.errors import ConfigError
 from drake_hybrid.core.progress import Stages
 from drake_hybrid.experiments.sweep import SweepRun
-from drake_hybrid.scenario.tasks import TASKS
+from drake_hybrid.scenario.tasks import TASKS, get_task
 
 README = Path(__file__).resolve().parent.parent / "README.md"
 
@@ -165,6 +166,40 @@ def test_a_resumed_sweep_with_nothing_left_says_so(tmp_path, monkeypatch, capsys
     assert main(["sweep", "window-washing", "--grid", "spec.yaml", "--resume", "--out", str(tmp_path)]) == 0
     out = capsys.readouterr().out
     assert "nothing to run: all 12 points already in the table" in out and "0.0 s" not in out
+
+
+def test_a_sweep_says_where_it_ran_in_the_command_lines_terms(tmp_path, monkeypatch, capsys):
+    """Not "(local:2)": the flag that chose it, and what it is."""
+    monkeypatch.setattr(cli, "load_spec", lambda path: object())
+    monkeypatch.setattr(cli, "read_results", lambda path: [{"stable": True}] * 4)
+    for workers, where in (("local:2", "on 2 local Dask worker processes (--workers)"),
+                           ("serial", "serially in this process (--workers 0)"),
+                           ("tcp://127.0.0.1:8786", "on the Dask scheduler at tcp://127.0.0.1:8786 (--scheduler)")):
+        run = SweepRun(out_dir=tmp_path, results_path=tmp_path / "results.csv", points=4, evaluated=4, failures=0,
+                       wall_time=2.0, workers=workers)
+        monkeypatch.setattr(cli, "run_sweep", lambda *args, run=run, **kwargs: run)
+        assert main(["sweep", "window-washing", "--grid", "spec.yaml", "--out", str(tmp_path)]) == 0
+        assert f"4 of 4 points evaluated in 2.0 s {where};" in capsys.readouterr().out
+    assert main(["sweep", "window-washing", "--grid", "spec.yaml", "--workers", "-1"]) == 2
+    assert capsys.readouterr().err == ("drake-hybrid sweep: --workers must be 0 (serial, in this process) or a number "
+                                       "of local Dask worker processes, got -1\n")
+
+
+@pytest.mark.parametrize("command", ["simulate", "analyze"])
+def test_the_papers_sphere_rows_without_euler_angles_are_refused_when_the_options_are_read(capsys, command):
+    """velocity_rows=paper is (3.3-11), written in z-x-z Euler angles: with the default chart=pose it is one
+    line naming both options (exit 2) before anything is built, not a TypeError from the projection; the
+    same ConfigError where a config file or a sweep's base sets the options."""
+    assert main([command, "sphere-polishing", "--option", "velocity_rows=paper", "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "Traceback" not in err
+    assert err.startswith(f"drake-hybrid {command}: task option velocity_rows=paper")
+    assert "needs chart=euler, got chart=pose; with chart=pose use velocity_rows=true" in err
+    task = get_task("sphere-polishing")
+    config = task.default_config({"velocity_rows": "paper", "chart": "euler"})
+    config.task_options["chart"] = "pose"
+    with pytest.raises(ConfigError, match=r"velocity_rows=paper .* needs chart=euler, got chart=pose"):
+        task.options(config)
 
 
 def test_the_entry_point_imports_without_drake_numba_or_matplotlib():

@@ -61,11 +61,13 @@ def test_the_check_summary_says_what_is_compared_which_figure_is_judged_and_whic
     dut = JacobianCheck(max_relative_error=2.3e-5, max_absolute_error=0.12, worst_column=2, worst_state="plant q[2]",
                         tolerance=1e-3, epsilon=1e-5, used="autodiff", evaluations=12, largest_entry=4.8e3)
     assert dut.summary() == (
-        "Jacobian check (AutoDiffXd vs central differences, step 1e-05): agree; largest column difference "
-        "2.3e-05 relative (the figure judged, tolerance 0.001; column plant q[2]), 0.12 absolute in a matrix "
-        "with entries up to 4.8e+03; eigenvalues from AutoDiffXd's A")
+        "Jacobian check (AutoDiffXd vs central differences, step 1e-05): agree; the columns of AutoDiffXd's A "
+        "differ from central differences by at most 2.3e-05 of the column's size (tolerance 0.001; largest in "
+        "column plant q[2]); eigenvalues from AutoDiffXd's A")
     dut.max_relative_error, dut.used = 1.0, "autodiff with 2 column(s) from central differences"
+    dut.replaced = ["plant q[0]", "plant q[2]"]
     assert ": DISAGREE;" in dut.summary()
+    assert "; replaced by central differences: plant q[0], plant q[2] (Drake's AutoDiffXd" in dut.summary()
     assert dut.summary().endswith("eigenvalues from AutoDiffXd's A with 2 column(s) from central differences")
     assert dut.as_dict()["largest_entry"] == 4.8e3
 

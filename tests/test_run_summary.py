@@ -1,13 +1,16 @@
 """What a run reports: per-row errors in each row's units, settling and predictions from contact."""
 
+import json
 import math
 import re
 
 import numpy as np
 import pytest
 
+from drake_hybrid.cli import _residual_text, _row_text, main
 from drake_hybrid.control.phases import ContactPhase
-from drake_hybrid.experiments.simulation import contact_time, predicted_tracking, row_errors, row_units, simulate
+from drake_hybrid.experiments.metrics import contact_time, row_errors, row_units
+from drake_hybrid.experiments.simulation import predicted_tracking, simulate
 from drake_hybrid.scenario.tasks import TASKS, get_task
 
 
@@ -256,3 +259,91 @@ def test_the_sphere_constraints_piece_switches_are_events():
     assert not any(event["explains_errors"] for event in events)          # held rows' basis: no row's error
     one_piece = SimpleNamespace(constraint_space=SimpleNamespace(constraint=SimpleNamespace()))
     assert piece_switches(one_piece, {"t": t, "q": q}) == []
+
+
+def test_a_held_row_prints_as_held_with_its_measured_force_not_as_an_error():
+    """A row the controller holds kinematically (no force loop, no force commanded) has no force error to
+    report; what it shows is the force measured along it."""
+    held = {"name": "orientation row 1", "units": "N", "command": 0.0, "final_error": 0.0, "held": True,
+            "final_error_percent": None, "max_error_after_5_time_constants": 0.0,
+            "max_error_percent_after_5_time_constants": None, "settling_time_1_percent": None,
+            "max_measured_force_after_contact": 0.00153}
+    assert _row_text(held) == ("held by the controller (no force commanded); measured force up to 0.00153 N "
+                               "after contact")
+    held["max_measured_force_after_contact"] = None               # a sensor fault: nothing measured to report
+    assert _row_text(held) == "held by the controller (no force commanded)"
+    tracked = dict(held, held=False, command=10.0, final_error=0.5, final_error_percent=5.0)
+    assert _row_text(tracked).startswith("command 10 N; final error 0.5 N (5.00 %)")
+
+
+def test_the_sphere_summary_lists_its_held_rows_and_their_measured_force(tmp_path, capsys):
+    """Sphere polishing: the orientation rows 2 and 3 are held by the controller (a point contact cannot
+    hold them); summary.json names them and their largest measured force after contact, the command line
+    prints them as held."""
+    out = tmp_path / "run"
+    assert main(["simulate", "sphere-polishing", "--duration", "0.05", "--no-plots", "--quiet", "--out",
+                     str(out)]) == 0
+    printed = capsys.readouterr().out
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["held"] == ["orientation row 1", "orientation row 2"]
+    log = np.load(out / "log.npz")
+    after = log["t"] >= summary["contact_time"]
+    for i, row in enumerate(summary["force_rows"]):
+        assert row["held"] == (i in (1, 2))
+        assert row["max_measured_force_after_contact"] == pytest.approx(np.abs(log["force"][after, i]).max())
+        if row["held"]:
+            assert (f"force {row['name']}: held by the controller (no force commanded); measured force up to "
+                    f"{row['max_measured_force_after_contact']:.3g} N after contact") in printed
+    assert "normal force: command 10 N; final error" in printed
+    # C's rows are all in m on the sphere: one figure, with its unit.
+    assert summary["constraint_units"] == ["m", "m", "m"]
+    assert f"max |C(r)| after contact {summary['max_constraint_residual_after_contact']:.3g} m\n" in printed
+
+
+def test_the_constraint_residual_is_printed_in_cs_units():
+    one = {"max_constraint_residual_after_contact": 8.4e-4, "constraint_units": ["m"],
+           "max_constraint_residual_rows_after_contact": [8.4e-4]}
+    assert _residual_text(one) == "max |C(r)| after contact 0.00084 m"
+    crank = {"max_constraint_residual_after_contact": 1.5e-5, "constraint_units": ["m^2", "m", "1", "m"],
+             "max_constraint_residual_rows_after_contact": [1.5e-5, 2e-6, 3e-7, 4e-6]}
+    assert _residual_text(crank) == ("max |C_i(r)| after contact, per row of C: 1.5e-05 m^2, 2e-06 m, "
+                                     "3e-07 (no unit), 4e-06 m")
+    custom = dict(one, constraint_units=None)                       # a task that names no units for C
+    assert _residual_text(custom) == "max |C(r)| after contact 0.00084 (in the units of C's rows)"
+    assert _residual_text(dict(one, max_constraint_residual_after_contact=None)) == "no contact made"
+
+
+def test_the_paper_rows_are_labelled_as_pseudo_velocities_in_their_mixed_units():
+    """The paper's E_p rows are pseudo-velocities: the crank's row 2 is -Y x-dot + X y-dot + phi-dot
+    (m^2/s plus rad/s), the sphere's rows 2 and 3 t_i . p-dot + beta_i . (phi-dot, theta-dot) with beta_i
+    in 1/m (m/s plus rad/m/s). Their error, E_t r-dot - r-dot_td, is the true rows', in the true rows'
+    units; the true-velocity rows keep their own units."""
+    crank, sphere = get_task("crank-turning"), get_task("sphere-polishing")
+    paper = crank.labels(crank.default_config({"velocity_rows": "paper"}))
+    assert row_units(paper["velocity_units"], 2) == ["rad/s", "m^2/s + rad/s"]
+    assert paper["velocity"][1].startswith("pseudo-velocity")
+    assert row_units(paper["velocity_error_units"], 2) == ["rad/s", "rad/s"]
+    assert paper["velocity_error"][1].startswith("alpha-dot (crank)")
+    assert row_units(crank.labels(crank.default_config())["velocity_units"], 2) == ["rad/s", "rad/s"]
+    assert "velocity_error" not in crank.labels(crank.default_config())
+    paper = sphere.labels(sphere.default_config({"velocity_rows": "paper", "chart": "euler"}))
+    assert row_units(paper["velocity_units"], 3) == ["rad/s", "m/s + rad/m/s", "m/s + rad/m/s"]
+    assert all(name.startswith("pseudo-velocity") for name in paper["velocity"][1:])
+    assert row_units(paper["velocity_error_units"], 3) == ["rad/s", "m/s", "m/s"]
+    assert row_units(sphere.labels(sphere.default_config())["velocity_units"], 3) == ["rad/s", "m/s", "m/s"]
+
+
+def test_the_crank_paper_rows_error_is_reported_against_the_true_command_in_rad_per_s():
+    """With velocity_rows=paper the controller is fed the pseudo-velocity (0.519 at the start, mixed units)
+    but its error e_p' is the true crank rate's (PseudoVelocitySource): the summary's row is alpha-dot's,
+    in rad/s, in % of the true 0.5 rad/s command."""
+    config = get_task("crank-turning").default_config({"velocity_rows": "paper"})
+    config.duration = 0.05
+    result = simulate(config)
+    log, (spin, rate) = result.log, result.summary["velocity_rows"]
+    np.testing.assert_array_equal(log["true_desired_velocity"], np.tile([0.0, 0.5], (log["t"].size, 1)))
+    assert np.max(log["desired_velocity"][:, 1]) > 0.505                  # the pseudo-velocity, not the command
+    assert rate["name"].startswith("alpha-dot (crank)") and rate["units"] == "rad/s" and rate["command"] == 0.5
+    assert rate["final_error_percent"] == pytest.approx(100 * abs(log["velocity_error"][-1, 1]) / 0.5)
+    assert spin["units"] == "rad/s" and spin["command"] == 0.0
+    assert "true_desired_velocity" not in simulate(get_task("crank-turning").default_config(duration=0.05)).log

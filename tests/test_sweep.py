@@ -13,7 +13,7 @@ import pytest
 
 from drake_hybrid.analysis.linearization import linearize_sampled_loop
 from drake_hybrid.cli import make_parser
-from drake_hybrid.experiments.simulation import row_errors
+from drake_hybrid.experiments.metrics import row_errors
 from drake_hybrid.experiments.sweep import (RESULT_COLUMNS, read_results, rigid_contact_theory_stable, run_sweep,
                                           simulation_metrics)
 from drake_hybrid.experiments.sweep_spec import StabilityCriteria

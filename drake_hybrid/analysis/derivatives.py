@@ -65,18 +65,21 @@ class JacobianCheck:
         return self.max_relative_error <= self.tolerance
 
     def summary(self):
-        """One line for reports: how closely the AutoDiffXd Jacobian agrees with central differences
-        (the relative column figure decides, against ``tolerance``; the absolute one is in A's units,
-        next to A's largest entry for scale) and which Jacobian the eigenvalues come from."""
+        """One line for reports, in plain words: how closely AutoDiffXd's A agrees with central
+        differences (the largest difference in a column relative to that column's size, the figure
+        judged against ``tolerance``), the columns replaced, and which A the eigenvalues come from.
+        The absolute figures are in ``as_dict``."""
         verdict = "agree" if self.agrees else "DISAGREE"
-        unresolved = (f"; {len(self.unresolved)} column(s) unresolved (central differences not converged), "
-                      "AutoDiffXd kept there" if self.unresolved else "")
+        replaced = (f"; replaced by central differences: {', '.join(self.replaced)} (Drake's AutoDiffXd derivative "
+                    "of hydroelastic contact, docs/drake_notes.md)" if self.replaced else "")
+        unresolved = (f"; {len(self.unresolved)} column(s) where the two steps disagree too: AutoDiffXd kept there"
+                      if self.unresolved else "")
         used = {"autodiff": "AutoDiffXd's A", "central differences": "the central-difference A"}.get(
             self.used, self.used.replace("autodiff with", "AutoDiffXd's A with"))
-        return (f"Jacobian check (AutoDiffXd vs central differences, step {self.epsilon:g}): {verdict}; largest "
-                f"column difference {self.max_relative_error:.2g} relative (the figure judged, tolerance "
-                f"{self.tolerance:g}; column {self.worst_state}), {self.max_absolute_error:.2g} absolute in a matrix "
-                f"with entries up to {self.largest_entry:.2g}{unresolved}; eigenvalues from {used}")
+        return (f"Jacobian check (AutoDiffXd vs central differences, step {self.epsilon:g}): {verdict}; the columns "
+                f"of AutoDiffXd's A differ from central differences by at most {self.max_relative_error:.2g} of the "
+                f"column's size (tolerance {self.tolerance:g}; largest in column {self.worst_state}){replaced}"
+                f"{unresolved}; eigenvalues from {used}")
 
     def as_dict(self):
         return {"max_relative_error": self.max_relative_error, "max_absolute_error": self.max_absolute_error,

@@ -29,7 +29,6 @@ A monitor set in ``setup`` runs after the sensor-fault monitor (both are kept; a
 the user's monitor asks for ends the run as a completed run, at that time).
 """
 
-import math
 import time
 from dataclasses import dataclass, field
 
@@ -41,8 +40,8 @@ from pydrake.systems.framework import EventStatus
 
 from drake_hybrid.analysis.linearization import controller_prediction, design_time_constant, predicted_errors
 from drake_hybrid.control.fast_law import kernels_loaded
-from drake_hybrid.control.phases import ContactPhase
 from drake_hybrid.core.progress import quiet
+from drake_hybrid.experiments.metrics import contact_time, max_after, row_errors, row_units, worst
 from drake_hybrid.scenario.builder import build_scenario
 from drake_hybrid.scenario.start import set_initial_conditions
 
@@ -115,88 +114,6 @@ def _logged(scenario, context, name):
     return log.sample_times(), log.data().T[:, columns]
 
 
-def settling_time(times, error_norm, bound):
-    """First time after which ``error_norm`` stays at or below ``bound`` (inf if never)."""
-    outside = np.nonzero(error_norm > bound)[0]
-    if outside.size == 0:
-        return float(times[0])
-    if outside[-1] == len(times) - 1:
-        return math.inf
-    return float(times[outside[-1] + 1])
-
-
-def contact_time(log, start_in_contact=True):
-    """When the hybrid law took over: the first sample in the CONTACT phase when a contact supervisor
-    ran (``contact_phase`` logged), else the first sample (a start in contact)."""
-    t = log["t"]
-    if "contact_phase" in log:
-        in_contact = np.nonzero(np.asarray(log["contact_phase"])[:, 0] == int(ContactPhase.CONTACT))[0]
-        return float(t[in_contact[0]]) if in_contact.size else math.inf
-    return float(t[0])
-
-
-def row_units(units, count):
-    """Per-row units from a task's label string ("m/s | rad/s"; one unit for every row if single)."""
-    parts = [part.strip() for part in str(units).split("|")]
-    if len(parts) == count:
-        return parts
-    return [parts[-1] if i >= len(parts) else parts[i] for i in range(count)] if len(parts) > 1 else parts * count
-
-
-def row_commands(desired):
-    """Each row's command: max |desired_i| over the run (in the row's units; 0 for a row commanded to zero)."""
-    return np.max(np.abs(np.asarray(desired, dtype=float)), axis=0)
-
-
-def max_row_errors(t, error, desired, after):
-    """Per row, over t >= ``after``: (max |e_i| in the row's units, or None if no sample is that late;
-    that in % of the row's command, or None for a row commanded to zero). The one definition of a
-    row's error that ``row_errors`` (summary.json) and the sweep's verdict share."""
-    window = t >= after
-    figures = []
-    for e, command in zip(np.abs(np.asarray(error, dtype=float)).T, row_commands(desired)):
-        worst = float(np.max(e[window])) if window.any() else None
-        figures.append((worst, None if worst is None or command == 0 else 100.0 * worst / float(command)))
-    return figures
-
-
-def row_errors(t, error, desired, names, units, since, settle_after):
-    """Per-row error figures, each in the row's own units and in % of that row's command.
-
-    ``since``: when the law took over (contact); ``settle_after``: when the design says the
-    transient is over (contact + 5 design time constants). A row commanded to zero has no % figures
-    and no settling time (there is no scale in its units to settle to); its absolute errors are given.
-    Settling times are counted from ``since``.
-    """
-    rows = []
-    commands = row_commands(desired)
-    settled = max_row_errors(t, error, desired, settle_after)
-    final = max_row_errors(t, error, desired, t[-1])
-    late = t >= settle_after
-    for i in range(error.shape[1]):
-        e, command = np.abs(error[:, i]), float(commands[i])
-        worst_time = float(t[late][np.argmax(e[late])]) if late.any() else None
-        if command > 0 and np.isfinite(since):
-            active = t >= since
-            settle = settling_time(t[active], e[active], 0.01 * command) - since
-        else:
-            settle = None
-        rows.append({"name": names[i] if i < len(names) else f"row {i + 1}", "units": units[i],
-                     "command": command, "final_error": float(error[-1, i]),
-                     "final_error_percent": final[i][1],
-                     "max_error_after_5_time_constants": settled[i][0],
-                     "max_error_percent_after_5_time_constants": settled[i][1],
-                     "max_error_time_after_5_time_constants": worst_time,
-                     "settling_time_1_percent": settle})
-    return rows
-
-
-def _worst(rows, key):
-    """The largest figure of ``key`` over the rows that have it (None if none has)."""
-    values = [row[key] for row in rows if row[key] is not None]
-    return max(values) if values else None
-
-
 def simulate(config, progress=False, meshcat=None, record_html=False, setup=None, stages=None):
     """Simulate ``config``; returns a SimulationResult (log arrays, summary, scenario, simulator and
     context). ``setup(scenario, simulator, context)``, if given, runs after the start is set and
@@ -263,7 +180,7 @@ def simulate(config, progress=False, meshcat=None, record_html=False, setup=None
         for key in [key for key in summary if "force_error" in key or key == "force_settling_time_1_percent"]:
             summary[key] = None
         for row in summary.get("force_rows") or []:
-            row.update({key: None for key in row if key not in ("name", "units", "command")})
+            row.update({key: None for key in row if key not in ("name", "units", "command", "held")})
     result = SimulationResult(config=config, log=log, summary=summary, scenario=scenario, html=html,
                               simulator=simulator, context=context)
     if stop:
@@ -287,6 +204,9 @@ def collect_log(scenario, context):
     for optional in ("true_wrench", "contact_phase"):        # sensor faults or conditioning; supervision
         if optional in scenario.loggers:
             log[optional] = _logged(scenario, context, optional)[1]
+    if getattr(scenario.source, "true_projection", None) is not None:   # the paper's pseudo-velocity: its
+        # velocity_error is E_t r-dot - r-dot_td (PseudoVelocitySource), the true rows'; r-dot_td is their command
+        log["true_desired_velocity"] = np.array([scenario.source.velocity_profile.evaluate(float(s))[0] for s in t])
     return log
 
 
@@ -314,10 +234,18 @@ def summarize(scenario, log, wall_time):
     labels = scenario.task.labels(scenario.config)
     start = contact_time(log)
     settle_after = start + 5 * tau
-    velocity_rows = row_errors(t, log["velocity_error"], log["desired_velocity"], labels.get("velocity", []),
-                               row_units(labels.get("velocity_units", "SI"), k), start, settle_after)
+    # With the paper's pseudo-velocity rows the error is the true rows' (collect_log): as those, against their command.
+    velocity_rows = row_errors(t, log["velocity_error"], log.get("true_desired_velocity", log["desired_velocity"]),
+                               labels.get("velocity_error", labels.get("velocity", [])),
+                               row_units(labels.get("velocity_error_units", labels.get("velocity_units", "SI")), k),
+                               start, settle_after)
     force_rows = row_errors(t, log["force_error"], log["desired_force"], labels.get("force", []),
                             row_units(labels.get("force_units", "SI"), m), start, settle_after)
+    measured = max_after(log["force"], t >= start)
+    for i, row in enumerate(force_rows):      # a held row (controller.kinematic_rows) has no force loop
+        row.update(held=i in controller.kinematic_rows, max_measured_force_after_contact=measured[i])
+    constraint_units = row_units(labels["constraint_units"], log["constraint"].shape[1]) \
+        if "constraint_units" in labels else None
     torque_ratio = np.max(np.abs(log["torque"]) / effort_limits(scenario), axis=0)
     pairs = lambda values: [[float(np.real(v)), float(np.imag(v))] for v in values]
     summary = {
@@ -336,20 +264,23 @@ def summarize(scenario, log, wall_time):
         # Headline figures: the worst row, each row in % of its own command (rows commanded to zero
         # are in velocity_rows / force_rows, in their own units); settling counted from contact.
         "contact_time": start,
-        "final_velocity_error_percent": _worst(velocity_rows, "final_error_percent"),
-        "final_force_error_percent": _worst(force_rows, "final_error_percent"),
+        "final_velocity_error_percent": worst(velocity_rows, "final_error_percent"),
+        "final_force_error_percent": worst(force_rows, "final_error_percent"),
         "max_velocity_error_percent_after_5_time_constants":
-            _worst(velocity_rows, "max_error_percent_after_5_time_constants"),
+            worst(velocity_rows, "max_error_percent_after_5_time_constants"),
         "max_force_error_percent_after_5_time_constants":
-            _worst(force_rows, "max_error_percent_after_5_time_constants"),
-        "velocity_settling_time_1_percent": _worst(velocity_rows, "settling_time_1_percent"),
-        "force_settling_time_1_percent": _worst(force_rows, "settling_time_1_percent"),
+            worst(force_rows, "max_error_percent_after_5_time_constants"),
+        "velocity_settling_time_1_percent": worst(velocity_rows, "settling_time_1_percent"),
+        "force_settling_time_1_percent": worst(force_rows, "settling_time_1_percent"),
         "velocity_rows": velocity_rows,
         "force_rows": force_rows,
         "max_constraint_residual": float(np.max(np.abs(log["constraint"]))),
         # From contact on: before it, C is the start's gap, not a residual.
         "max_constraint_residual_after_contact":
             float(np.max(np.abs(log["constraint"][t >= start]))) if np.any(t >= start) else None,
+        "max_constraint_residual_rows_after_contact": max_after(log["constraint"], t >= start),
+        "constraint_units": constraint_units,      # per row of C (None where the task names none)
+        "held": [row["name"] for row in force_rows if row["held"]],    # no force commanded: see force_rows
         "max_torque_to_effort_limit": torque_ratio.tolist(),
         "wall_time": float(wall_time),
         "real_time_factor": float(config.duration / wall_time) if wall_time > 0 else None,

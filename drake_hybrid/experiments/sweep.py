@@ -19,7 +19,7 @@ failure, the error text of every stage that failed (never dropped):
 * ``stable_simulation``: the run finished with finite values and, over the
   last ``steady_window`` of the horizon, every velocity and force row stayed
   within ``steady_tolerance`` of its own command, in its own units (the rows of
-  summary.json, ``simulation.max_row_errors``; one unit of the row when it is
+  summary.json, ``metrics.max_row_errors``; one unit of the row when it is
   commanded to zero): never a norm across m/s and rad/s. Contact loss,
   chatter, limit cycles and blow-up all fail it.
 * ``steady_*_error``, ``steady_*_error_percent``, ``steady_*_row``: the row of
@@ -79,7 +79,8 @@ from tqdm import tqdm
 from drake_hybrid.analysis.linearization import linearize_continuous, linearize_sampled_loop, predicted_eigenvalues
 from drake_hybrid.control.gains import ControlMode
 from drake_hybrid.core.errors import GainError
-from drake_hybrid.experiments.simulation import RunStopped, max_row_errors, row_commands, simulate
+from drake_hybrid.experiments.metrics import max_row_errors, row_commands
+from drake_hybrid.experiments.simulation import RunStopped, simulate
 from drake_hybrid.experiments.sweep_spec import (StabilityCriteria, SweepSpecError, apply_parameters, parameters_digest,
                                                  set_config_value)
 from drake_hybrid.scenario.config import dump_config, load_config
@@ -115,11 +116,11 @@ def _worst_real(match, marginal_count):
 
 def steady_rows(log, summary, what, after, tolerance):
     """The steady-window verdict of one group of rows (``what``: "velocity" or "force"), per row in
-    its own units (``simulation.max_row_errors``, as summary.json's rows): each row's max |e_i| over
+    its own units (``metrics.max_row_errors``, as summary.json's rows): each row's max |e_i| over
     t >= ``after`` within ``tolerance`` times its command, or times one of its units where it is
     commanded to zero. Returns (settled, the worst row's (max |e_i|, % of its command or None,
     "name (units)", index)), the worst row being the one furthest out relative to its scale."""
-    desired = log[f"desired_{what}"]
+    desired = log.get(f"true_desired_{what}", log[f"desired_{what}"])     # the true rows' command (pseudo-velocity)
     figures = max_row_errors(log["t"], log[f"{what}_error"], desired, after)
     scales = [command if command > 0 else 1.0 for command in row_commands(desired)]
     ratios = [error / scale for (error, _), scale in zip(figures, scales)]

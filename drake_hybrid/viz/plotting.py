@@ -27,6 +27,7 @@ import numpy as np
 from matplotlib import cm, colors
 from matplotlib.colors import SymLogNorm
 
+from drake_hybrid.experiments.metrics import row_units
 from drake_hybrid.experiments.sweep import theory_on_plane
 from drake_hybrid.scenario.config import load_config
 
@@ -47,11 +48,6 @@ def _positive(values):
     """``values`` with zeros (and negative rounding) masked as NaN: a log axis shows no numeric floor."""
     values = np.asarray(values, dtype=float)
     return np.where(values > 0, values, np.nan)
-
-
-def _row_units(units, count):
-    parts = [part.strip() for part in str(units).split("|")] if units else [""]
-    return parts if len(parts) == count else [parts[min(i, len(parts) - 1)] for i in range(count)]
 
 
 def _tracking_axes(ax_values, ax_errors, t, actual, desired, predicted, labels, what, units=()):
@@ -125,9 +121,9 @@ def tracking_figure(log, summary, predicted, what, labels=(), units="", note=Non
     plt = _pyplot()
     fig, (ax_values, ax_errors) = plt.subplots(2, 1, figsize=(7.5, 6.0), sharex=True)
     actual, desired = log[what], log[f"desired_{what}"]
-    row_units = _row_units(units, actual.shape[1])
-    _tracking_axes(ax_values, ax_errors, log["t"], actual, desired, predicted, labels, what, row_units)
-    unit_text = " | ".join(dict.fromkeys(u for u in row_units if u))
+    units_per_row = row_units(units or "", actual.shape[1])
+    _tracking_axes(ax_values, ax_errors, log["t"], actual, desired, predicted, labels, what, units_per_row)
+    unit_text = " | ".join(dict.fromkeys(u for u in units_per_row if u))
     ax_values.set_ylabel(f"{what} ({unit_text})" if unit_text else what)
     ax_errors.set_ylabel(f"|{what} error| ({unit_text})" if unit_text else f"|{what} error|")
     contact = float(summary.get("contact_time", 0.0))
@@ -282,16 +278,16 @@ def constraint_residual_figure(log, units="m", labels=None, title="constraint re
     sizes = np.max(np.abs(residual), axis=0)
     sizes = sizes[sizes > 0]
     logarithmic = sizes.size > 1 and sizes.max() / sizes.min() > 100
-    row_units = _row_units(units, residual.shape[1])
+    units_per_row = row_units(units or "", residual.shape[1])
     for i in range(residual.shape[1]):
         label = labels[i] if labels and i < len(labels) else f"C_{i + 1}"
-        unit = f" ({row_units[i]})" if row_units[i] else ""
+        unit = f" ({units_per_row[i]})" if units_per_row[i] else ""
         if logarithmic:
             ax.plot(log["t"], _positive(np.abs(residual[:, i])), lw=1.4, label=f"|{label}|{unit}")
         else:
             ax.plot(log["t"], residual[:, i], lw=1.4, label=f"{label}{unit}")
     ax.set_xlabel("time t (s)")
-    unit_text = " | ".join(dict.fromkeys(u for u in row_units if u))
+    unit_text = " | ".join(dict.fromkeys(u for u in units_per_row if u))
     name = "|C(r)|" if logarithmic else "C(r)"
     if logarithmic:
         ax.set_yscale("log")

@@ -124,10 +124,15 @@ class CrankTurning(Task):
 
     def labels(self, config=None):
         paper = config is not None and self._rows(config) == "paper"
+        # The paper's row 2, -Y x-dot + X y-dot + phi-dot, adds m^2/s to rad/s: (rho^2 + 1) alpha-dot on the circle.
+        # Its error e_p' = E_t r-dot - r-dot_td is alpha-dot's (PseudoVelocitySource): the summary's rows.
         crank_row = "pseudo-velocity (paper's E_p row 2, (3.3-8))" if paper else "alpha-dot (crank)"
         # Each force row is the multiplier of its row of C, so its unit is N m / (C's unit): row 1,
         # C_1 = X^2 + Y^2 - rho^2 in m^2, gives N/m, the radial force in N divided by |dC_1/dr| = 2 rho.
-        return {"velocity": ["psi-dot (spin)", crank_row], "velocity_units": "rad/s",
+        errors = {"velocity_error": ["psi-dot (spin)", "alpha-dot (crank), through the paper's pseudo-velocity row"],
+                  "velocity_error_units": "rad/s"} if paper else {}
+        return {"velocity": ["psi-dot (spin)", crank_row], **errors,
+                "velocity_units": "rad/s | m^2/s + rad/s" if paper else "rad/s",
                 "force": ["radial / 2 rho (row 1)", "vertical", "tilt torque", "tangential/yaw (row 4)"],
                 "force_units": "N/m | N | N m | N", "constraint_units": "m^2 | m | 1 | m",
                 "force_note": "Row 1 is the multiplier of C_1 = X^2 + Y^2 - rho^2 (m^2), hence N/m: the radial force "

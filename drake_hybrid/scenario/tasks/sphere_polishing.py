@@ -25,7 +25,8 @@ Task options (``task_options``):
       plane, e = e_y so that t_1 stays regular there). With the Euler chart
       the pole path stops with ChartSingularityError where |sin(theta)| < 0.01.
   ``velocity_rows``: ``true`` (Option A, default) or ``paper`` (the paper's
-      (3.3-11) E_p with the pseudo-velocity, naive: Euler chart, latitude path).
+      (3.3-11) E_p with the pseudo-velocity, naive: latitude path; it needs
+      ``chart: euler``, and reading the options refuses it with another chart).
 Task parameters: ``speed`` (m/s along the path), ``normal_force`` (N),
 ``start_angle`` (rad along the path from its start).
 """
@@ -41,6 +42,7 @@ from pydrake.multibody.parsing import Parser
 from drake_hybrid.control.gains import HybridGains
 from drake_hybrid.core.charts import EulerZXZChart, PoseChart
 from drake_hybrid.core.constraints import sphere_constraint
+from drake_hybrid.core.errors import ConfigError
 from drake_hybrid.core.kinematics import EndEffectorKinematics, inverse_kinematics
 from drake_hybrid.core.projections import ConstraintSpace, sphere_paper_projection, sphere_true_velocity_projection
 from drake_hybrid.scenario.config import ScenarioConfig, StartConfig
@@ -71,6 +73,14 @@ class SpherePolishingOptions:
     path: str = choice("latitude", ("latitude", "pole"))
     velocity_rows: str = choice("true", ("true", "paper"))       # true-velocity rows or (3.3-11) + pseudo-velocity
 
+    def __post_init__(self):
+        # The paper's (3.3-11) rows are written in its z-x-z angles (core.projections.sphere_paper_projection):
+        # refused here, when the options are read, not as a TypeError once the scenario is being built.
+        if self.velocity_rows == "paper" and self.chart != "euler":
+            raise ConfigError(f"task option velocity_rows=paper (the paper's (3.3-11) rows, in z-x-z Euler angles) "
+                              f"needs chart=euler, got chart={self.chart}; with chart={self.chart} use "
+                              "velocity_rows=true")
+
 
 class SpherePolishing(Task):
     Options = SpherePolishingOptions
@@ -95,7 +105,19 @@ class SpherePolishing(Task):
         )
 
     def labels(self, config=None):
-        return {"velocity": ["spin about a", "t_1 . p-dot", "t_2 . p-dot"], "velocity_units": "rad/s | m/s | m/s",
+        if config is not None and self.options(config).velocity_rows == "paper":
+            # (3.3-11)'s e_i = (t_i, beta_i, 0): t_i . p-dot (m/s) plus beta_i . (phi-dot, theta-dot), beta_i
+            # in 1/m: the paper's pseudo-velocity mixes units (docs/theory.md §6). Its error e_p' = E_t r-dot -
+            # r-dot_td is the true rows' (PseudoVelocitySource): the summary's rows.
+            velocity = {"velocity": ["psi-dot (spin)", "pseudo-velocity e_2 . r-dot", "pseudo-velocity e_3 . r-dot"],
+                        "velocity_units": "rad/s | m/s + rad/m/s | m/s + rad/m/s",
+                        "velocity_error": ["psi-dot (spin)", "t_1 . p-dot, through the paper's pseudo-velocity row",
+                                           "t_2 . p-dot, through the paper's pseudo-velocity row"],
+                        "velocity_error_units": "rad/s | m/s | m/s"}
+        else:
+            velocity = {"velocity": ["spin about a", "t_1 . p-dot", "t_2 . p-dot"],
+                        "velocity_units": "rad/s | m/s | m/s"}
+        return {**velocity,
                 "force": ["normal force", "orientation row 1", "orientation row 2"], "force_units": "N | N | N",
                 "constraint_units": "m",
                 # Measured on the default runs: 13.5 Hz at 0.035 m/s (latitude), 24 Hz at 0.05 m/s (pole).

@@ -1,0 +1,99 @@
+"""Per-row error figures of a run: each row in its own units and in % of its command, settling from contact.
+
+The one definition of a row's error that ``summary.json`` (``simulation.summarize``), the command line's
+summary and the sweep's verdict (``sweep``) share; pure numpy on the logged arrays, no Drake.
+"""
+
+import math
+
+import numpy as np
+
+from drake_hybrid.control.phases import ContactPhase
+
+
+def settling_time(times, error_norm, bound):
+    """First time after which ``error_norm`` stays at or below ``bound`` (inf if never)."""
+    outside = np.nonzero(error_norm > bound)[0]
+    if outside.size == 0:
+        return float(times[0])
+    if outside[-1] == len(times) - 1:
+        return math.inf
+    return float(times[outside[-1] + 1])
+
+
+def contact_time(log, start_in_contact=True):
+    """When the hybrid law took over: the first sample in the CONTACT phase when a contact supervisor
+    ran (``contact_phase`` logged), else the first sample (a start in contact)."""
+    t = log["t"]
+    if "contact_phase" in log:
+        in_contact = np.nonzero(np.asarray(log["contact_phase"])[:, 0] == int(ContactPhase.CONTACT))[0]
+        return float(t[in_contact[0]]) if in_contact.size else math.inf
+    return float(t[0])
+
+
+def row_units(units, count):
+    """Per-row units from a task's label string ("m/s | rad/s"; one unit for every row if single)."""
+    parts = [part.strip() for part in str(units).split("|")]
+    if len(parts) == count:
+        return parts
+    return [parts[-1] if i >= len(parts) else parts[i] for i in range(count)] if len(parts) > 1 else parts * count
+
+
+def row_commands(desired):
+    """Each row's command: max |desired_i| over the run (in the row's units; 0 for a row commanded to zero)."""
+    return np.max(np.abs(np.asarray(desired, dtype=float)), axis=0)
+
+
+def max_row_errors(t, error, desired, after):
+    """Per row, over t >= ``after``: (max |e_i| in the row's units, or None if no sample is that late;
+    that in % of the row's command, or None for a row commanded to zero). The one definition of a
+    row's error that ``row_errors`` (summary.json) and the sweep's verdict share."""
+    window = t >= after
+    figures = []
+    for e, command in zip(np.abs(np.asarray(error, dtype=float)).T, row_commands(desired)):
+        worst = float(np.max(e[window])) if window.any() else None
+        figures.append((worst, None if worst is None or command == 0 else 100.0 * worst / float(command)))
+    return figures
+
+
+def row_errors(t, error, desired, names, units, since, settle_after):
+    """Per-row error figures, each in the row's own units and in % of that row's command.
+
+    ``since``: when the law took over (contact); ``settle_after``: when the design says the
+    transient is over (contact + 5 design time constants). A row commanded to zero has no % figures
+    and no settling time (there is no scale in its units to settle to); its absolute errors are given.
+    Settling times are counted from ``since``.
+    """
+    rows = []
+    commands = row_commands(desired)
+    settled = max_row_errors(t, error, desired, settle_after)
+    final = max_row_errors(t, error, desired, t[-1])
+    late = t >= settle_after
+    for i in range(error.shape[1]):
+        e, command = np.abs(error[:, i]), float(commands[i])
+        worst_time = float(t[late][np.argmax(e[late])]) if late.any() else None
+        if command > 0 and np.isfinite(since):
+            active = t >= since
+            settle = settling_time(t[active], e[active], 0.01 * command) - since
+        else:
+            settle = None
+        rows.append({"name": names[i] if i < len(names) else f"row {i + 1}", "units": units[i],
+                     "command": command, "final_error": float(error[-1, i]),
+                     "final_error_percent": final[i][1],
+                     "max_error_after_5_time_constants": settled[i][0],
+                     "max_error_percent_after_5_time_constants": settled[i][1],
+                     "max_error_time_after_5_time_constants": worst_time,
+                     "settling_time_1_percent": settle})
+    return rows
+
+
+def max_after(values, window):
+    """Per column, max |values| over the samples in ``window`` (a list of floats, None if it is empty)."""
+    values = np.abs(np.asarray(values, dtype=float))[window]
+    return [float(v) for v in values.max(axis=0)] if values.shape[0] else [None] * values.shape[1]
+
+
+def worst(rows, key):
+    """The largest figure of ``key`` over the rows that have it (None if none has)."""
+    values = [row[key] for row in rows if row[key] is not None]
+    return max(values) if values else None
