@@ -13,6 +13,7 @@ import json
 import math
 import os
 import sys
+import tempfile
 import time
 import warnings
 from pathlib import Path
@@ -73,8 +74,10 @@ def _check_output_paths(args):
         ancestor = _existing_ancestor(Path(value))
         if not ancestor.is_dir():
             raise UsageError(f"--{flag} '{value}' cannot be created: '{ancestor}' is a file, not a directory")
-        if not os.access(ancestor, os.W_OK):
-            raise UsageError(f"--{flag} '{value}' cannot be created (no write permission)")
+        if problem := _unwritable(ancestor):
+            where = "is not writable" if ancestor == Path(value).absolute() else f"cannot be created in '{ancestor}'"
+            raise UsageError(f"--{flag} '{value}' {where} (the system says: {problem}); give a directory you "
+                             "can write to")
     for flag in ("html", "json", "plot"):
         value = getattr(args, flag, None)
         if not value or isinstance(value, bool):
@@ -84,8 +87,19 @@ def _check_output_paths(args):
             raise UsageError(f"--{flag} '{value}' is a directory; give a file name")
         if not path.parent.is_dir():
             raise UsageError(f"--{flag} '{value}': the folder '{path.parent}' does not exist")
-        if not os.access(path.parent, os.W_OK) or (path.exists() and not os.access(path, os.W_OK)):
-            raise UsageError(f"--{flag} '{value}' is not writable")
+        problem = _unwritable(path.parent)
+        if problem or (path.exists() and not os.access(path, os.W_OK)):
+            why = f": the folder '{path.parent}' takes no new files (the system says: {problem})" if problem else ""
+            raise UsageError(f"--{flag} '{value}' is not writable{why}")
+
+
+def _unwritable(folder):
+    """Why no file can be created in ``folder`` (the system's words, e.g. in /proc or a read-only disk), or ''."""
+    try:
+        tempfile.TemporaryFile(dir=folder).close()
+    except OSError as error:
+        return error.strerror or type(error).__name__
+    return ""
 
 
 def _existing_ancestor(path):
@@ -242,6 +256,15 @@ def _nyquist_split(modes, period):
     return modes[~at], modes[at]
 
 
+def _sampled_loop_text(config, period):
+    """What ``linearize_discrete`` linearized (``period``: its step, the plant's) against what ``simulate`` runs."""
+    low_pass = getattr(config.sensor, "bandwidth_hz", 0.0)
+    simulated = (f"simulate runs the controller every {config.control_period * 1e3:g} ms (control_period)"
+                 + (f" with a {low_pass:g} Hz wrench low-pass" if low_pass > 0 else ", no low-pass either"))
+    return (f"the sampled loop linearized at the plant's step h = {period * 1e3:g} ms, with the controller at that "
+            f"rate (every update at the same instants: one map per step) and no wrench low-pass; {simulated}")
+
+
 def command_analyze(args):
     config = _config(args)
     task = get_task(config.task)
@@ -263,6 +286,8 @@ def command_analyze(args):
     print(f"{config.task} ({controller_mode.value}): {how} at a contact equilibrium "
           f"(residual {result.equilibrium_residual:.2g}; the linearization itself took {result.wall_time:.2f} s)")
     # With the task's predicted shifts (physics the paper's model leaves out), pair against those.
+    if period := getattr(result, "period", None):
+        print(f"  {_sampled_loop_text(config, period)}")
     shown = result.shifted_match or match
     shifted = shift_indices(match.predicted, result.shifts)
     errors = np.abs(shown.partner - match.predicted) / np.abs(match.predicted)
@@ -277,7 +302,6 @@ def command_analyze(args):
         print(f"  [{n + 1}] {_fmt([shifted[i].designed])} -> {_fmt([shifted[i].predicted])}: {shifted[i].reason}")
     print(f"  marginal (theory: {len(match.marginal_partners)} x 0, unregulated positions): "
           f"{_fmt(match.marginal_partners)}")
-    period = getattr(result, "period", None)
     other, nyquist = _nyquist_split(match.extra, period)
     print(f"  other modes (contact, filter, sampling, joint space): {_fmt(np.sort_complex(other))}")
     if nyquist.size:
@@ -442,7 +466,9 @@ def _hardware_summary(args, figures):
                      f"force {figures['max_force_difference_N']:.2g} N")
         delay = figures["status_delay_simulated_s"]
         lines.append(f"  {figures['commands_published']} commands published; message delay (status sent to used, "
-                     f"simulated time): {'none measured' if delay is None else _milliseconds(delay)}")
+                     f"simulated time): {'none measured' if delay is None else _milliseconds(delay)}"
+                     + ("" if delay is None else " (LCM timestamps are whole microseconds: 1 us is their "
+                        "resolution, not a delay)"))
         return lines
     ticks, period = figures["ticks"], figures["period_s"]
     where = "replayed robot over " if args.mode == "timing" else "driver at "

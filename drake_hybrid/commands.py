@@ -29,7 +29,7 @@ Python traceback instead.
 
 # Each command's line in the top-level help, in the parser's order.
 COMMAND_HELP = {
-    "simulate": "simulate a task (discrete 1 kHz plant and controller)",
+    "simulate": "simulate a task (discrete plant at 1 kHz, the crank's at 2 kHz; 1 kHz controller)",
     "analyze": "linearize the closed loop; designed vs. linearized eigenvalues",
     "sweep": "stability map / Monte Carlo sweep over config fields (Dask)",
     "hardware": "the controller over Drake's Panda LCM messages (hil, timing, run)",

@@ -124,3 +124,14 @@ def test_analyze_prints_the_jacobian_checks_line_instead_of_a_python_warning(mon
     assert "differ from central differences by at most 1 of the column's size (tolerance 0.001" in line
     assert "replaced by central differences: plant joint1_q" in line
     assert line.endswith("eigenvalues from AutoDiffXd's A with 1 column(s) from central differences")
+
+
+def test_analyze_says_which_sampled_loop_it_linearized(monkeypatch, capsys):
+    """The crank's linearization runs the controller at the plant's 0.5 ms step without a low-pass; simulate
+    ticks it every 1 ms: the output says both."""
+    monkeypatch.setattr(cli, "linearize_discrete", lambda *args, **kwargs: _impedance_crank_result())
+    assert cli.main(["analyze", "crank-turning", "--mode", "impedance-force", "--quiet"]) == 0
+    (line,) = [line for line in capsys.readouterr().out.splitlines() if "sampled loop" in line]
+    assert ("the sampled loop linearized at the plant's step h = 0.5 ms, with the controller at that rate "
+            "(every update at the same instants: one map per step) and no wrench low-pass; simulate runs the "
+            "controller every 1 ms (control_period), no low-pass either") in line

@@ -15,6 +15,7 @@ from drake_hybrid.core.errors import ConfigError
 from drake_hybrid.core.progress import Stages
 from drake_hybrid.experiments.sweep import SweepRun
 from drake_hybrid.scenario.tasks import TASKS, get_task
+from drake_hybrid.scenario.tasks.grinding import SPHERE_ONLY
 
 README = Path(__file__).resolve().parent.parent / "README.md"
 
@@ -278,3 +279,58 @@ def test_top_level_help_is_answered_without_loading_drake(capsys):
             "'matplotlib', 'dask') if m in sys.modules]; print(heavy)")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
     assert "usage: drake-hybrid" in out and out.strip().endswith("[]")
+
+
+def test_simulates_help_names_each_tasks_plant_and_controller_rate():
+    """The top-level help's simulate line gives the rates the built-in tasks run at (the crank's plant steps
+    at 0.5 ms, the others' at 1 ms; every controller at 1 ms)."""
+    text = cli.COMMAND_HELP["simulate"]
+    for name in TASKS:
+        config = get_task(name).default_config()
+        assert f"{1e-3 / config.plant.time_step:g} kHz" in text, name
+        assert f"{1e-3 / config.control_period:g} kHz controller" in text, name
+    assert "the crank's at 2 kHz" in text
+
+
+@pytest.mark.parametrize("command", ["simulate", "analyze"])
+def test_grindings_sphere_options_say_so_and_are_refused_on_the_window(capsys, command):
+    """chart, path, speed, start_angle and velocity_rows steer the sphere's path: the help says they need
+    workpiece=sphere, and one given on the (default) window is one line naming it (exit 2), not ignored."""
+    text = _help(capsys, [command, "--help"])
+    grinding = text.split("  grinding:", 1)[1].split("\n  sphere-polishing:", 1)[0]
+    for name in SPHERE_ONLY:
+        (line,) = [line for line in grinding.splitlines() if line.strip().startswith(f"{name}=")]
+        assert line.endswith("(workpiece=sphere only)"), line
+    assert not [line for line in grinding.splitlines() if "rough_friction=" in line and "sphere only" in line]
+    assert main([command, "grinding", "--option", "chart=euler"]) == 2
+    assert capsys.readouterr().err == (
+        f"drake-hybrid {command}: task option 'chart' of task 'grinding' applies only with workpiece=sphere, got "
+        "workpiece=window; give workpiece=sphere too or leave 'chart' out\n")
+    config = get_task("grinding").default_config({"workpiece": "sphere", "chart": "euler"})
+    assert get_task("grinding").options(config).chart == "euler"
+
+
+def test_option_lists_in_errors_are_words_not_python_lists(capsys):
+    assert main(["simulate", "window-washing", "--option", "nope=1"]) == 2
+    assert capsys.readouterr().err == (
+        "drake-hybrid simulate: task 'window-washing' has no option 'nope'; its options: joints, window_height, "
+        "window_lift, window_lift_duration, window_lift_time\n")
+    assert main(["simulate", "grinding", "--option", "workpiece=drum"]) == 2
+    assert capsys.readouterr().err == ("drake-hybrid simulate: task option 'workpiece' of task 'grinding' must be "
+                                       "one of window, sphere, got 'drum'\n")
+
+
+@pytest.mark.skipif(not Path("/proc").is_dir(), reason="needs /proc, where no file can be created")
+@pytest.mark.parametrize("argv, flag, path", [
+    (["simulate", "window-washing", "--out", "/proc/x"], "--out", "/proc/x"),
+    (["analyze", "window-washing", "--json", "/proc/x.json"], "--json", "/proc/x.json"),
+    (["analyze", "window-washing", "--plot", "/proc/x.png"], "--plot", "/proc/x.png"),
+    (["sweep", "window-washing", "--grid", "spec.yaml", "--out", "/proc/x"], "--out", "/proc/x")])
+def test_an_output_path_that_cannot_be_written_is_named_by_its_flag(capsys, argv, flag, path):
+    """/proc exists and looks writable to root, but takes no new files: the line names the flag, the path and
+    the folder, not only the system's '[Errno 2] No such file or directory'."""
+    assert main(argv) == 2
+    error = capsys.readouterr().err
+    assert error.count("\n") == 1 and "Errno" not in error, error
+    assert error.startswith(f"drake-hybrid {argv[0]}: {flag} '{path}' "), error
+    assert "'/proc'" in error and "the system says:" in error, error

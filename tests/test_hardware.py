@@ -10,10 +10,13 @@ The 2 s comparisons against the issue's target (errors after five time constants
 percentage points) are marked slow.
 """
 
+import importlib.metadata
 import json
 import logging
 import math
 import time
+import tomllib
+from pathlib import Path
 from types import SimpleNamespace
 
 import numpy as np
@@ -31,7 +34,7 @@ from drake_hybrid.hardware.controller_side import build_controller_station
 from drake_hybrid.hardware import loop as loop_module
 from drake_hybrid.hardware.loop import run_hardware_loop, start_state
 from drake_hybrid.hardware.messages import HardwareConfig, HardwareFault, Rejection
-from drake_hybrid.hardware.panda import panda_config, panda_drum_task, panda_table_task
+from drake_hybrid.hardware.panda import panda_config, panda_drum_task, panda_table_task, panda_urdf
 from drake_hybrid.hardware.realtime import ReplayPacer, replay_timing, run_controller, start_controller_state
 from drake_hybrid.hardware.watchdog import accept, age, force_torque_fields
 
@@ -350,5 +353,23 @@ def test_command_line_hil_summary(tmp_path, capsys):
     assert out.startswith("panda-drum, hil (wrench from force_torque): 0.05 s in lock step over memq://")
     assert "velocity error after 5 design time constants: not measured, the run is shorter than 1.25 s" in out
     assert "51 commands published" in out and "no fault" in out and "{" not in out
+    assert "(LCM timestamps are whole microseconds: 1 us is their resolution, not a delay)" in out
     figures = json.loads(path.read_text())
     assert figures["commands_published"] == 51 and figures["stop"] is None
+
+
+def test_cli_panda_hint_names_the_extra_that_provides_the_model(monkeypatch):
+    """Without example-robot-data the Panda tasks say which extra installs it, in a clone's and PyPI's form."""
+    pyproject = tomllib.loads((Path(__file__).parents[1] / "pyproject.toml").read_text())
+    extras = pyproject["project"]["optional-dependencies"]
+    assert any(dependency.startswith("example-robot-data") for dependency in extras["bench"])
+
+    def missing(name):
+        raise importlib.metadata.PackageNotFoundError(name)
+
+    monkeypatch.setattr(importlib.metadata, "distribution", missing)
+    with pytest.raises(ConfigError) as error:
+        panda_urdf()
+    message = str(error.value)
+    assert len(message.splitlines()) == 1 and "example-robot-data" in message
+    assert 'pip install ".[bench]"' in message and 'pip install "drake-hybrid[bench]"' in message

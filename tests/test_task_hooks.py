@@ -149,7 +149,7 @@ def test_hook_names_that_are_not_registered_are_refused(tmp_path, hook, match):
 
 @pytest.mark.parametrize("old, new, match", [
     ("  rough_friction: 0.9       # mu of the pad on the patch\n", "",
-     r"hooks\[0\]: hook 'rough_patch' needs the parameters .*missing \['rough_friction'\]"),
+     r"hooks\[0\]: hook 'rough_patch' needs the parameters .*missing rough_friction"),
     ("hooks: [rough_patch]", "hooks: [rough_patch, rough_patch]",
      r"hooks\[1\]: hook 'rough_patch' provides add_workpiece, as hook 'rough_patch' does"),
     ("hooks: [rough_patch]", "hooks: [rough_patch, ur5e_with_pad]",

@@ -71,7 +71,7 @@ def type_mismatch(value, schema, path=""):
             return f"{where}: expected a section (a mapping of fields), got {value!r}"
         for key, item in value.items():
             if key not in fields:
-                return f"{where}: unknown field '{key}'; its fields are {sorted(fields)}"
+                return f"{where}: unknown field '{key}'; its fields are {', '.join(sorted(fields))}"
             found = type_mismatch(item, fields[key], f"{path}.{key}" if path else str(key))
             if found:
                 return found

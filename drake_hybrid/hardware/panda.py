@@ -1,4 +1,4 @@
-"""Franka Panda tasks for the hardware loop: the Panda of ``example-robot-data`` (a test extra)
+"""Franka Panda tasks for the hardware loop: the Panda of ``example-robot-data`` (the bench and test extras)
 with the pad tool at its TCP, as tutorials/06_your_own_robot.ipynb builds it.
 
 ``panda_drum_task()``   the pad on a horizontal drum (cylinder, axis along world y): m = 1
@@ -36,13 +36,13 @@ _ARMS = {}
 
 
 def panda_urdf():
-    """panda.urdf of the example-robot-data package (pip install drake-hybrid[test])."""
+    """panda.urdf of the example-robot-data package (the bench or test extra: pip install ".[bench]")."""
     try:
         share = Path(importlib.metadata.distribution("example-robot-data").locate_file(
             "cmeel.prefix/share/example-robot-data"))
     except importlib.metadata.PackageNotFoundError:
-        raise ConfigError("task: the Panda tasks need the example-robot-data package (pip install "
-                          "'drake-hybrid[test]')") from None
+        raise ConfigError("task: the Panda tasks need the example-robot-data package (the bench extra): from a "
+                          "clone pip install \".[bench]\", from PyPI pip install \"drake-hybrid[bench]\"") from None
     return share / "robots/panda_description/urdf/panda.urdf"
 
 

@@ -201,7 +201,7 @@ class MechanismConfig:
 
     def validate(self, prefix="mechanism."):
         if self.source not in MECHANISM_SOURCES:
-            raise ConfigError(f"{prefix}source must be one of {list(MECHANISM_SOURCES)}, got '{self.source}'")
+            raise ConfigError(f"{prefix}source must be one of {', '.join(MECHANISM_SOURCES)}, got '{self.source}'")
         if self.source == "given" and not self.velocity_row_inertia:
             raise ConfigError(f"{prefix}velocity_row_inertia must have 1, k or k*k entries with source 'given', "
                               "got none")
@@ -340,7 +340,7 @@ class ScenarioConfig:
         self.mechanism.validate()
         self.baseline.validate()
         if self.controller not in CONTROLLERS:
-            raise ConfigError(f"controller must be one of {list(CONTROLLERS)}, got '{self.controller}'")
+            raise ConfigError(f"controller must be one of {', '.join(CONTROLLERS)}, got '{self.controller}'")
         if self.controller != "li-sastry" and (self.mechanism.source != "none" or self.supervised):
             raise ConfigError(f"controller '{self.controller}' is a baseline without mechanism inertia or contact "
                               "supervision: use mechanism.source none and start in contact")

@@ -276,7 +276,7 @@ def evaluate_pose_expressions(text, where=""):
 
 def make_chart(spec, where):
     if spec.kind not in CHARTS:
-        raise ConfigError(f"{where}chart.kind must be one of {list(CHARTS)}, got '{spec.kind}'")
+        raise ConfigError(f"{where}chart.kind must be one of {', '.join(CHARTS)}, got '{spec.kind}'")
     if spec.kind == "euler_zxz":
         return EulerZXZChart()
     if spec.kind == "pose":
@@ -311,7 +311,7 @@ def resolve_model_file(url, path, packages, where):
     if url.startswith("package://"):
         name, _, rest = url[len("package://"):].partition("/")
         if name not in packages:
-            raise ConfigError(f"{where}: unknown package '{name}' in '{url}'; known packages: {sorted(packages)} "
+            raise ConfigError(f"{where}: unknown package '{name}' in '{url}'; known packages: {', '.join(sorted(packages))} "
                               "(add it to the file's packages: {name: folder})")
         file = Path(packages[name]) / rest
     elif url.startswith("file://"):
@@ -412,7 +412,7 @@ def _robot_adder(spec, path, where, hooks, packages):
         if robot.directives:
             raise ConfigError(f"{where}robot: give either directives or loader, not both")
         if robot.loader.tool_axis not in TOOL_AXES:
-            raise ConfigError(f"{where}robot.loader.tool_axis must be one of {list(TOOL_AXES)}, "
+            raise ConfigError(f"{where}robot.loader.tool_axis must be one of {', '.join(TOOL_AXES)}, "
                               f"got '{robot.loader.tool_axis}'")
         file = resolve_model_file(robot.loader.path, path, packages, f"{where}robot.loader.path")
         loaded = load_arm(str(file), robot.loader.flange, tool_frame=robot.loader.tool_frame or None,
@@ -473,7 +473,7 @@ def _workpiece_adder(spec, path, where, hooks, packages):
     for index, shape in enumerate(workpiece.shapes):
         name = f"{where}workpiece.shapes[{index}]"
         if shape.shape not in SHAPES:
-            raise ConfigError(f"{name}.shape must be one of {sorted(SHAPES)}, got '{shape.shape}'")
+            raise ConfigError(f"{name}.shape must be one of {', '.join(sorted(SHAPES))}, got '{shape.shape}'")
         size = SHAPES[shape.shape][1]
         if len(shape.size) != size or not all(0 < v < math.inf for v in shape.size):
             raise ConfigError(f"{name}.size: a {shape.shape} needs {size} positive numbers (m), got {shape.size}")

@@ -226,8 +226,8 @@ def make_hooks(spec, where):
         hook = get_hook(name, field)
         missing = [p for p in hook.parameters if p not in spec.parameters]
         if missing:
-            raise ConfigError(f"{field}: hook '{name}' needs the parameters {list(hook.parameters)}; missing "
-                              f"{missing}")
+            raise ConfigError(f"{field}: hook '{name}' needs the parameters {', '.join(hook.parameters)}; missing "
+                              f"{', '.join(missing)}")
         implementation = hook.make(spec)
         for method in hook.provides:
             if method in methods:

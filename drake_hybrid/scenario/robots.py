@@ -141,7 +141,7 @@ def _resolve(uri, model_folder, package_map):
         name, _, rest = uri[len("package://"):].partition("/")
         if not package_map.Contains(name):
             raise ConfigError(f"mesh '{uri}': package '{name}' is unknown; pass load_arm(..., packages={{'{name}': "
-                              f"folder}}) (known: {sorted(package_map.GetPackageNames())})")
+                              f"folder}}) (known: {', '.join(sorted(package_map.GetPackageNames()))})")
         return Path(package_map.GetPath(name)) / rest
     if uri.startswith("file://"):
         return Path(uri[len("file://"):])
@@ -621,7 +621,7 @@ def load_arm(path, flange, tool_frame=None, base_pose=None, tool_axis="+z", coll
     Returns a LoadedArm; its ``report`` lists every change.
     """
     if tool_axis not in TOOL_AXES:
-        raise ConfigError(f"load_arm: tool_axis must be one of {list(TOOL_AXES)}, got {tool_axis!r}")
+        raise ConfigError(f"load_arm: tool_axis must be one of {', '.join(TOOL_AXES)}, got {tool_axis!r}")
     report = prepare_model(path, collision=collision, packages=packages, cache_dir=cache_dir)
     tool_frame = tool_frame or flange
     report.flange, report.tool_frame = flange, tool_frame

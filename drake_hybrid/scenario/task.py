@@ -76,7 +76,7 @@ def _coerce(task_name, field, raw):
     allowed = field.metadata.get("allowed")
     word = str(raw)
     if allowed and word not in allowed:
-        raise ConfigError(f"{where} must be one of {list(allowed)}, got {raw!r}")
+        raise ConfigError(f"{where} must be one of {', '.join(allowed)}, got {raw!r}")
     return word
 
 
@@ -145,7 +145,8 @@ class Task(abc.ABC):
         """Store option ``name`` in task_parameters (numbers) or task_options (words and booleans)."""
         fields = {f.name: f for f in dataclasses.fields(self.Options)}
         if name not in fields:
-            raise ConfigError(f"task '{self.name}' has no option '{name}'; its options: {sorted(fields) or 'none'}")
+            raise ConfigError(f"task '{self.name}' has no option '{name}'; its options: "
+                              f"{', '.join(sorted(fields)) or 'none'}")
         value = _coerce(self.name, fields[name], raw)
         config.task_parameters.pop(name, None)
         config.task_options.pop(name, None)
@@ -177,7 +178,7 @@ class Task(abc.ABC):
             for name, raw in getattr(config, section).items():
                 if name not in fields:
                     raise ConfigError(f"{section}.{name}: task '{self.name}' has no such option; its options: "
-                                      f"{sorted(fields) or 'none'}")
+                                      f"{', '.join(sorted(fields)) or 'none'}")
                 values[name] = _coerce(self.name, fields[name], raw)
         return self.Options(**values)
 

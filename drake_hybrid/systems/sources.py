@@ -58,7 +58,7 @@ class Profile:
     def check_kind(self, what):
         """ConfigError naming ``what``.kind if it is not one of KINDS (the sizes are checked by ``validate``)."""
         if self.kind not in self.KINDS:
-            raise ConfigError(f"{what}.kind must be one of {list(self.KINDS)}, got '{self.kind}'")
+            raise ConfigError(f"{what}.kind must be one of {', '.join(self.KINDS)}, got '{self.kind}'")
 
     def validate(self, size, what):
         self.check_kind(what)

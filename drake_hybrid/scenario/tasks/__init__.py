@@ -31,4 +31,4 @@ def get_task(name):
     try:
         return TASKS[name]
     except KeyError:
-        raise ValueError(f"unknown task '{name}'; available tasks: {sorted(TASKS)}") from None
+        raise ValueError(f"unknown task '{name}'; available tasks: {', '.join(sorted(TASKS))}") from None

@@ -21,7 +21,7 @@ breakaway, the phases the plots mark), which read the task's own geometry and lo
 """
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 
 import numpy as np
 
@@ -235,6 +235,9 @@ class GrindingOptions(WindowWashingOptions, SpherePolishingOptions):
     rough_end: float = 1.15
 
 
+SPHERE_ONLY = tuple(f.name for f in fields(SpherePolishingOptions))   # the sphere's path: no meaning on the window
+
+
 class Grinding(Task):
     Options = GrindingOptions
     name = "grinding"
@@ -247,6 +250,19 @@ class Grinding(Task):
         self._window.Options = GrindingOptions
         self._sphere = SpherePolishing()
         self._sphere.Options = GrindingOptions
+
+    def options(self, config):
+        """The typed options; a sphere option (``SPHERE_ONLY``) without workpiece=sphere is refused."""
+        options = super().options(config)
+        given = [name for name in SPHERE_ONLY if name in config.task_parameters or name in config.task_options]
+        if given and options.workpiece != "sphere":
+            raise ConfigError(f"task option '{given[0]}' of task 'grinding' applies only with workpiece=sphere, got "
+                              f"workpiece={options.workpiece}; give workpiece=sphere too or leave '{given[0]}' out")
+        return options
+
+    def option_help(self):
+        return [line + (" (workpiece=sphere only)" if line.split("=", 1)[0] in SPHERE_ONLY else "")
+                for line in super().option_help()]
 
     def _base(self, config):
         return self._window if self.options(config).workpiece == "window" else self._sphere
