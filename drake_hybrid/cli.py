@@ -12,6 +12,7 @@ import argparse
 import json
 import math
 import os
+import re
 import sys
 import tempfile
 import time
@@ -159,11 +160,21 @@ def _event_text(time, events):
     return ""
 
 
-def _row_text(row, events=(), notes=False):
+def _notes_on(name, notes):
+    """The numbers (from 1) of the run's ``notes`` that name the row ``name`` (up to a comma or a parenthesis:
+    "F" of "F, along E_f = [0 1 0]") as a word, e.g. "x-dot's error ...": the notes about that row."""
+    short = re.split(r",| \(", name)[0].strip()
+    pattern = re.compile(rf"(?<![\w/-]){re.escape(short)}(?![\w/-])")
+    return [n + 1 for n, note in enumerate(notes or ()) if pattern.search(note)]
+
+
+def _row_text(row, events=(), notes=()):
     """One row's errors: absolute in its units, % of its command where it has one, settling from contact;
-    when its settled max falls in or just after a phase of the run, that phase (``notes``: the run has notes
-    that say why)."""
+    when its settled max falls in or just after a phase of the run, that phase; the numbers of the run's
+    ``notes`` that name the row (the ones that say why), if any."""
     units = row["units"]
+    about = _notes_on(row["name"], notes)
+    pointer = "" if not about else f"; see note{'s' if len(about) > 1 else ''} {', '.join(map(str, about))}"
 
     def amount(value, percent):
         if value is None:
@@ -180,13 +191,13 @@ def _row_text(row, events=(), notes=False):
     when = row.get("max_error_time_after_5_time_constants")
     if when is not None and row["max_error_after_5_time_constants"]:
         phase = _event_text(when, events)
-        settled += f" at t = {when:.3f} s" + phase + (" (see the notes)" if phase and notes else "")
+        settled += f" at t = {when:.3f} s" + phase
     text = f"{command}; final error {amount(final, row['final_error_percent'])}, settled max {settled}"
     settle = row["settling_time_1_percent"]
     if settle is not None:
         text += (f", within 1 % from {settle:.3f} s after contact on" if np.isfinite(settle)
                  else ", not within 1 % at the end")
-    return text
+    return text + pointer
 
 
 def _unit(unit):
@@ -237,10 +248,10 @@ def command_simulate(args):
           f"design time constants, t >= {start + 5 * s['design_time_constant']:.3f} s):")
     for what, rows in (("velocity", s["velocity_rows"]), ("force", s["force_rows"])):
         for row in rows:
-            print(f"    {what} {row['name']}: {_row_text(row, s.get('events'), bool(s.get('notes')))}")
+            print(f"    {what} {row['name']}: {_row_text(row, s.get('events'), s.get('notes'))}")
     print(f"  {_residual_text(s)}")
-    for note in s.get("notes", []):
-        print(f"  note: {note}")
+    for n, note in enumerate(s.get("notes", []), start=1):
+        print(f"  note {n}: {note}")
     print(f"  wrote {', '.join(str(f) for f in files)}")
     return 0
 

@@ -83,7 +83,7 @@ def test_the_grinding_default_says_it_ends_in_the_surge_after_the_rough_patch():
     so (and how long a run ending in steady sliding is), instead of a bare 26 % speed error."""
     result = simulate(get_task("grinding").default_config())
     edges, force, note = result.summary["notes"]
-    assert "after the pad left the rough patch" in note and "--duration 3.8" in note
+    assert "after the pad left the rough patch" in note and "--duration 3.8" in note and "x-dot's final error" in note
     # x-dot's settled max (75 %) is the impedance's answer to the patch's friction steps, and the note says so.
     assert "entering it" in edges and "leaving it" in edges and "peaking at 0.077 m/s" in edges
     x_dot = result.summary["velocity_rows"][0]
@@ -202,7 +202,31 @@ def test_the_settled_max_says_when_and_in_which_phase_of_the_run():
     assert _row_text(row, [{"start": 1.0, "end": None, "label": "x"}]).count("after") == 1   # only 'after contact'
     assert "switch" not in _row_text(row, [{"start": 2.8, "end": None, "label": "switch", "explains_errors": False}])
     assert "0.01 s after the moment of: slip" in _row_text(row, [{"start": 2.8, "end": None, "label": "slip"}])
-    assert "pad on the rough patch (mu = 0.9) (see the notes), within 1 %" in _row_text(row, events, notes=True)
+    notes = ["x-dot's error at the rough patch's edges is the designed impedance yielding to the friction force",
+             "F's error at the rough patch's edges is the force loop answering the friction force's step"]
+    assert _row_text(row, events, notes).endswith("pad on the rough patch (mu = 0.9), within 1 % from 2.808 s after "
+                                                  "contact on; see note 2")
+
+
+def test_a_row_points_only_at_the_notes_that_name_it():
+    """The default grinding run's notes name x-dot (its settled max at the patch's edges, its final error in
+    the surge after the patch) and F; theta-dot, whose settled max also falls on the patch, is in none."""
+    t = np.arange(0.0, 3.0005, 1e-3)
+    error = np.where(np.abs(t - 1.7) < 5e-4, 0.07, np.where(t > 2.9, 0.026, 0.0))[:, None]
+    (x_dot,) = row_errors(t, error, np.full((t.size, 1), 0.1), ["x-dot"], ["m/s"], since=0.0, settle_after=0.5)
+    (theta_dot,) = row_errors(t, error, np.zeros((t.size, 1)), ["theta-dot"], ["rad/s"], since=0.0,
+                              settle_after=0.5)
+    (force,) = row_errors(t, error, np.full((t.size, 1), 10.0), ["F, along E_f = [0 1 0]"], ["N"], since=0.0,
+                          settle_after=0.5)
+    events = [{"start": 1.67, "end": 2.80, "label": "pad on the rough patch (mu = 0.9)"}]
+    notes = ["x-dot's error at the rough patch's edges is the designed impedance yielding to the friction force "
+             "(F_v, measured by the F/T sensor)",
+             "F's error at the rough patch's edges is the force loop answering the friction force's step",
+             "the run ends 0.20 s after the pad left the rough patch: so x-dot's final error is that transient's"]
+    assert _row_text(x_dot, events, notes).endswith("not within 1 % at the end; see notes 1, 3")
+    assert "see note" not in _row_text(theta_dot, events, notes)
+    assert "0.03 s after the start of: pad on the rough patch" in _row_text(theta_dot, events, notes)
+    assert _row_text(force, events, notes).endswith("; see note 2")
 
 
 def test_impedance_grinding_explains_fs_error_at_the_rough_patchs_edges():

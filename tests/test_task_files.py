@@ -28,7 +28,7 @@ from drake_hybrid.experiments.simulation import simulate
 from drake_hybrid.experiments.sweep import read_results, run_sweep
 from drake_hybrid.experiments.sweep_spec import load_spec
 from drake_hybrid.scenario.config import dump_config
-from drake_hybrid.scenario.data_task import load_task_file
+from drake_hybrid.scenario.data_task import load_task_file, read_task_file
 from drake_hybrid.scenario.custom import CustomTask, add_rigid_workpiece
 from drake_hybrid.scenario.parsing import installed_model_packages, models_directory
 from drake_hybrid.scenario.robots import load_arm
@@ -561,3 +561,18 @@ def test_a_file_with_an_arm_from_a_model_package_sweeps_on_two_workers(ur10_pyth
     # about 1e-7, log(mu)/h to about 1e-4 1/s at h = 1 ms (more for a repeated eigenvalue). Checked
     # to be below ten times that in both, not compared.
     _assert_same_rows(rows, python_rows, marginal_noise=1e-3)
+
+
+def test_task_files_declare_cs_units_as_their_built_in_tasks_do(tmp_path):
+    """Every shipped file names its C rows' units (the summary's max |C(r)| reads "m", not "in the units of
+    C's rows"), the built-in task's where there is one; a file that declares none gets none."""
+    built_in = {"window_washing": "window-washing", "grinding": "grinding", "crank_turning": "crank-turning",
+                "sphere_polishing": "sphere-polishing"}
+    for path in sorted((models_directory() / "tasks").glob("*.yaml")):
+        units = read_task_file(path).labels.constraint_units
+        assert units, path.name
+        if path.stem in built_in:
+            assert units == get_task(built_in[path.stem]).labels()["constraint_units"], path.name
+    assert load_task_file(WINDOW_FILE)[0].labels()["constraint_units"] == "m"
+    path = _write(tmp_path, {"  constraint_units: m\n": ""}, "")
+    assert "constraint_units" not in load_task_file(path, register=False)[0].labels()

@@ -181,6 +181,7 @@ class LabelsSpec:
     velocity_units: str = "SI"
     force: List[str] = field(default_factory=list)          # one per C row (default F[i])
     force_units: str = "SI"
+    constraint_units: str = ""   # C(r)'s rows: "m", or one per row "m^2 | m | 1 | m" ("": not declared)
 
 
 @dataclass
@@ -590,6 +591,8 @@ def load_task_file(path, register=True, text=None):
     k, m = space.velocity_size, space.force_size
     labels["velocity"] = labels["velocity"] or [f"r-dot_p[{i}]" for i in range(k)]
     labels["force"] = labels["force"] or [f"F[{i}]" for i in range(m)]
+    if not labels["constraint_units"]:
+        del labels["constraint_units"]         # the summary then says "in the units of C's rows"
     task = DataTask(spec, path, text, hooks=hooks, continuous_plant=continuous_plant, name=spec.name,
                     add_robot=_robot_adder(spec, path, where, hooks, packages),
                     add_workpiece=_workpiece_adder(spec, path, where, hooks, packages), constraint_space=space,

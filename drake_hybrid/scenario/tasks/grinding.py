@@ -222,7 +222,7 @@ def rough_patch_notes(scenario, log, design_time_constant, rough_start, rough_en
         steady = left + 10 * design_time_constant
         return notes + [f"the run ends {after:.2f} s ({after / design_time_constant:.1f} design time constants) "
                         f"after the pad left the {where}: the released friction force is still accelerating it, "
-                        f"so the final speed error is that transient's; --duration {np.ceil(steady * 10) / 10:g} "
+                        f"so x-dot's final error is that transient's; --duration {np.ceil(steady * 10) / 10:g} "
                         "ends in steady sliding"]
     return notes + [f"the run ends in steady sliding, {after:.2f} s after the pad left the {where}"]
 
