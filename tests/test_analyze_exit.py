@@ -131,7 +131,7 @@ def test_analyze_says_which_sampled_loop_it_linearized(monkeypatch, capsys):
     ticks it every 1 ms: the output says both."""
     monkeypatch.setattr(cli, "linearize_discrete", lambda *args, **kwargs: _impedance_crank_result())
     assert cli.main(["analyze", "crank-turning", "--mode", "impedance-force", "--quiet"]) == 0
-    (line,) = [line for line in capsys.readouterr().out.splitlines() if "sampled loop" in line]
+    (line,) = [line for line in capsys.readouterr().out.splitlines() if "sampled loop linearized" in line]
     assert ("the sampled loop linearized at the plant's step h = 0.5 ms, with the controller at that rate "
             "(every update at the same instants: one map per step) and no wrench low-pass; simulate runs the "
             "controller every 1 ms (control_period), no low-pass either") in line

@@ -335,7 +335,8 @@ def set_config_value(config, path, value):
                      else [f.name for f in target.__fields__])
             if name not in names:
                 where = ".".join(segments[:depth]) or "the scenario config"
-                raise ValueError(f"config path '{path}': {where} has no field '{name}'; its fields are {', '.join(names)}")
+                raise ValueError(f"config path '{path}': {where} has no field '{name}'; its fields are "
+                                 f"{', '.join(names)}")
             child = getattr(target, name)
             if last and index is None:
                 if isinstance(child, list) and not isinstance(value, list):

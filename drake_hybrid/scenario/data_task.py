@@ -312,7 +312,8 @@ def resolve_model_file(url, path, packages, where):
     if url.startswith("package://"):
         name, _, rest = url[len("package://"):].partition("/")
         if name not in packages:
-            raise ConfigError(f"{where}: unknown package '{name}' in '{url}'; known packages: {', '.join(sorted(packages))} "
+            raise ConfigError(f"{where}: unknown package '{name}' in '{url}'; known packages: "
+                              f"{', '.join(sorted(packages))} "
                               "(add it to the file's packages: {name: folder})")
         file = Path(packages[name]) / rest
     elif url.startswith("file://"):
