@@ -296,9 +296,9 @@ def command_analyze(args):
     k, m = space.velocity_size, space.force_size
     print(f"{config.task} ({controller_mode.value}): {how} at a contact equilibrium "
           f"(residual {result.equilibrium_residual:.2g}; the linearization itself took {result.wall_time:.2f} s)")
-    # With the task's predicted shifts (physics the paper's model leaves out), pair against those.
     if period := getattr(result, "period", None):
         print(f"  {_sampled_loop_text(config, period)}")
+    # With the task's predicted shifts (physics the paper's model leaves out), pair against those.
     shown = result.shifted_match or match
     shifted = shift_indices(match.predicted, result.shifts)
     errors = np.abs(shown.partner - match.predicted) / np.abs(match.predicted)
