@@ -42,10 +42,10 @@ def test_constraint_residual_figure_draws_no_numeric_floor_and_names_a_dimension
     small[0] = 1e-17
     rows = dict(log, constraint=np.column_stack([log["constraint"][:, 0], small]))
     ax = plotting.constraint_residual_figure(rows, units="m | 1").axes[0]
-    assert ax.get_yscale() == "log" and ax.get_ylabel() == "|C(r)| (m | (no unit))"
+    assert ax.get_yscale() == "log" and ax.get_ylabel() == "|C(r)| (m | no unit)"
     assert np.isnan(ax.lines[1].get_ydata()[0]) and np.isfinite(ax.lines[1].get_ydata()[1:]).all()
     assert ax.get_ylim()[0] >= 1e-8 * 1e-3 / 2
-    assert [text.get_text() for text in ax.get_legend().get_texts()] == ["|C_1| (m)", "|C_2| ((no unit))"]
+    assert [text.get_text() for text in ax.get_legend().get_texts()] == ["|C_1| (m)", "|C_2| (no unit)"]
 
 
 def test_the_designed_decay_is_in_the_legend_when_row_0_has_none():

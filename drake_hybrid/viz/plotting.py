@@ -27,7 +27,7 @@ import numpy as np
 from matplotlib import cm, colors
 from matplotlib.colors import SymLogNorm
 
-from drake_hybrid.analysis.linearization import nyquist_split, shift_indices
+from drake_hybrid.analysis.linearization import nyquist_split
 from drake_hybrid.experiments.metrics import display_unit, row_units
 from drake_hybrid.experiments.sweep import theory_on_plane
 from drake_hybrid.scenario.config import load_config
@@ -176,7 +176,7 @@ def tracking_figure(log, summary, predicted, what, labels=(), units="", note=Non
     ax_values.legend(fontsize=7, loc="best")
     ax_errors.legend(fontsize=7, loc="best")
     title = f"{summary['task']} ({summary['mode']}): {what} tracking vs. the designed exponential"
-    fed = ("the controller was fed the paper's pseudo-velocity rows (E_p, (3.3-8)), whose error is the true rows' "
+    fed = ("the controller was fed the paper's E_p rows with their pseudo-velocity, whose error is the true rows' "
            "(docs/theory.md §6): drawn here, as the summary reports them, the true rows against the true command"
            if pseudo else None)
     caption = "\n".join(textwrap.fill(text, 120) for text in (fed, _start_text(log, summary, what), note) if text)
@@ -235,6 +235,18 @@ def _designed_window(predicted, margin=0.35):
     return (-(1 + margin) * radius, margin * radius), (-(0.6 + margin) * radius, (0.6 + margin) * radius)
 
 
+def _shifted_rows(designed, partner, shifts):
+    """{row: shift}: each ``EigenvalueShift`` on the row, among those with its designed value and not yet
+    taken, whose linearized partner is nearest its prediction (the miss it explains)."""
+    rows = {}
+    for shift in shifts:
+        same = [i for i in range(min(len(designed), len(partner))) if i not in rows
+                and abs(designed[i] - shift.designed) <= 1e-9 * max(1.0, abs(shift.designed))]
+        if same:
+            rows[min(same, key=lambda i: abs(partner[i] - shift.predicted))] = shift
+    return rows
+
+
 def eigenvalue_figure(match, title="closed-loop eigenvalues", zoom=None, period=None, shifts=()):
     """Predicted (crosses) and measured (dots) eigenvalues in the complex plane.
 
@@ -260,8 +272,8 @@ def eigenvalue_figure(match, title="closed-loop eigenvalues", zoom=None, period=
     if nyquist.size:
         ax_all.scatter(nyquist.real, np.full(nyquist.size, 0.97), s=40, marker="^", facecolor="none",
                        edgecolor="tab:purple", transform=ax_all.get_xaxis_transform(), clip_on=False,
-                       label=f"at the Nyquist frequency pi/h = {np.pi / period:.4g} rad/s\n(mu < 0; off scale, "
-                             f"Re drawn)")
+                       label=f"at the Nyquist frequency pi/h = {np.pi / period:.4g} rad/s\n(mu < 0): off scale, "
+                             "drawn at their Re on the top edge")
     ax_all.set_xscale("symlog", linthresh=10.0)
     _complex_axes(ax_all, f"{title}: all modes")
     ax_all.legend(fontsize=8, loc="best")
@@ -271,7 +283,7 @@ def eigenvalue_figure(match, title="closed-loop eigenvalues", zoom=None, period=
     ax_zoom.scatter(measured[inside].real, measured[inside].imag, s=30, color="tab:blue",
                     label="linearized closed loop")
     ax_zoom.scatter(predicted.real, predicted.imag, s=110, marker="x", color="tab:red", label="designed (gains)")
-    shifted = shift_indices(predicted, shifts) if len(shifts) else {}
+    shifted = _shifted_rows(predicted, partner, shifts)
     if shifted:
         values = np.array([shift.predicted for shift in shifted.values()], dtype=complex)
         ax_zoom.scatter(values.real, values.imag, s=70, marker="D", facecolor="none", edgecolor="tab:green",
@@ -351,13 +363,14 @@ def constraint_residual_figure(log, units="m", labels=None, title="constraint re
     magnitudes = _measured_on_log(np.abs(residual), sizes.max() if sizes.size else np.nan)
     for i in range(residual.shape[1]):
         label = labels[i] if labels and i < len(labels) else f"C_{i + 1}"
-        unit = f" ({units_per_row[i]})" if units_per_row[i] else ""
+        unit = f" {units_per_row[i]}" if units_per_row[i].startswith("(") else f" ({units_per_row[i]})"
+        unit = unit if units_per_row[i] else ""
         if logarithmic:
             ax.plot(log["t"], magnitudes[:, i], lw=1.4, label=f"|{label}|{unit}")
         else:
             ax.plot(log["t"], residual[:, i], lw=1.4, label=f"{label}{unit}")
     ax.set_xlabel("time t (s)")
-    unit_text = " | ".join(dict.fromkeys(u for u in units_per_row if u))
+    unit_text = " | ".join(dict.fromkeys(u.strip("()") for u in units_per_row if u))
     name = "|C(r)|" if logarithmic else "C(r)"
     if logarithmic:
         ax.set_yscale("log")
