@@ -23,8 +23,8 @@ import numpy as np
 from pydrake.lcm import DrakeLcm
 
 from drake_hybrid.analysis.derivatives import DerivativeMismatchWarning
-from drake_hybrid.analysis.linearization import (linearize_continuous, linearize_discrete, nyquist_split, predicted_match,
-                                                 shift_indices)
+from drake_hybrid.analysis.linearization import (linearize_continuous, linearize_discrete, nyquist_split,
+                                                 predicted_match, shift_indices)
 # DESCRIPTION (the top-level help) and each command's line live in the light drake_hybrid.commands,
 # which the entry point answers --help from; cli.DESCRIPTION stays the name tests and readers use.
 from drake_hybrid.commands import COMMAND_HELP, DESCRIPTION, top_level_parser  # noqa: F401

@@ -189,8 +189,8 @@ def test_eigenvalue_figures():
     # task's predicted shift is drawn and written next to the miss it explains.
     period = 5e-4
     shift = SimpleNamespace(designed=-8.0 + 0j, predicted=-8.05 + 0j)
-    fig = plotting.eigenvalue_figure(_linearization(measured + [-1645 + np.pi / period * 1j], [-10.0, -8.0, -10.0]).match,
-                                     period=period, shifts=[shift])
+    sampled = _linearization(measured + [-1645 + np.pi / period * 1j], [-10.0, -8.0, -10.0])
+    fig = plotting.eigenvalue_figure(sampled.match, period=period, shifts=[shift])
     ax_all, ax_zoom = fig.axes
     assert ax_all.get_ylim()[1] < 1000
     legend = [text.get_text() for text in ax_all.get_legend().get_texts()]

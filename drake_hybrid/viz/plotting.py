@@ -475,7 +475,8 @@ def _symlog_ticks(limit, linthresh=1.0):
     digits), with both signs."""
     decades = max(0, int(np.ceil(np.log10(max(limit, linthresh) / linthresh))))
     subs = (1, 2, 5) if decades <= 1 else (1, 3) if decades <= 3 else (1,)
-    positive = [linthresh * m * 10.0 ** d for d in range(decades + 1) for m in subs if linthresh * m * 10.0 ** d <= limit]
+    positive = [value for value in (linthresh * m * 10.0 ** d for d in range(decades + 1) for m in subs)
+                if value <= limit]
     end = float(f"{limit:.2g}")                        # the bar's end, so that its extreme is read too
     if not positive or (positive[-1] < 0.8 * limit and end <= limit):
         positive.append(end)
