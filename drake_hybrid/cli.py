@@ -25,12 +25,14 @@ import numpy as np
 from pydrake.lcm import DrakeLcm
 
 from drake_hybrid.analysis.derivatives import DerivativeMismatchWarning
-from drake_hybrid.analysis.linearization import linearize_continuous, linearize_discrete, predicted_match, shift_indices
+from drake_hybrid.analysis.linearization import (linearize_continuous, linearize_discrete, nyquist_split,
+                                                 predicted_match, shift_indices)
 # DESCRIPTION (the top-level help) and each command's line live in the light drake_hybrid.commands,
 # which the entry point answers --help from; cli.DESCRIPTION stays the name tests and readers use.
 from drake_hybrid.commands import COMMAND_HELP, DESCRIPTION, top_level_parser  # noqa: F401
 from drake_hybrid.control.gains import ControlMode
 from drake_hybrid.core.progress import Stages
+from drake_hybrid.experiments.metrics import display_unit
 from drake_hybrid.experiments.simulation import RunStopped, simulate
 from drake_hybrid.experiments.sweep import read_results, run_sweep
 from drake_hybrid.experiments.sweep_spec import SweepSpecError, load_spec
@@ -200,10 +202,6 @@ def _row_text(row, events=(), notes=()):
     return text + pointer
 
 
-def _unit(unit):
-    return "(no unit)" if unit == "1" else unit
-
-
 def _residual_text(summary):
     """max |C(r)| after contact in C's units: one figure if every row has the same unit, else one per row."""
     residual = summary["max_constraint_residual_after_contact"]
@@ -213,8 +211,8 @@ def _residual_text(summary):
     if not units or not rows:
         return f"max |C(r)| after contact {residual:.3g} (in the units of C's rows)"
     if len(set(units)) == 1:
-        return f"max |C(r)| after contact {residual:.3g} {_unit(units[0])}"
-    figures = ", ".join(f"{value:.3g} {_unit(unit)}" for value, unit in zip(rows, units))
+        return f"max |C(r)| after contact {residual:.3g} {display_unit(units[0])}"
+    figures = ", ".join(f"{value:.3g} {display_unit(unit)}" for value, unit in zip(rows, units))
     return f"max |C_i(r)| after contact, per row of C: {figures}"
 
 
@@ -254,17 +252,6 @@ def command_simulate(args):
         print(f"  note {n}: {note}")
     print(f"  wrote {', '.join(str(f) for f in files)}")
     return 0
-
-
-def _nyquist_split(modes, period):
-    """(modes, the ones at the discrete step's Nyquist frequency): for a one-period map of step ``period``
-    (None: a continuous linearization, nothing to split), log(mu)/h of a real multiplier mu < 0 has
-    imaginary part +-pi/h; such a mode has no conjugate partner (log's principal branch gives one sign)."""
-    modes = np.asarray(modes, dtype=complex)
-    if not period:
-        return modes, modes[:0]
-    at = np.abs(np.abs(modes.imag) - np.pi / period) <= 1e-6 * np.pi / period
-    return modes[~at], modes[at]
 
 
 def _sampled_loop_text(config, period):
@@ -313,7 +300,7 @@ def command_analyze(args):
         print(f"  [{n + 1}] {_fmt([shifted[i].designed])} -> {_fmt([shifted[i].predicted])}: {shifted[i].reason}")
     print(f"  marginal (theory: {len(match.marginal_partners)} x 0, unregulated positions): "
           f"{_fmt(match.marginal_partners)}")
-    other, nyquist = _nyquist_split(match.extra, period)
+    other, nyquist = nyquist_split(match.extra, period)
     print(f"  other modes (contact, filter, sampling, joint space): {_fmt(np.sort_complex(other))}")
     if nyquist.size:
         print(f"  at the step's Nyquist frequency pi/h = {np.pi / period:.4g} 1/s (multipliers mu < 0, which log(mu)/h "
@@ -355,7 +342,8 @@ def command_analyze(args):
     if step_check is not None:
         print(f"  {step_check.summary()}")
     if args.plot:
-        figure = eigenvalue_figure(match, title=f"{config.task}, {controller_mode.value}")
+        figure = eigenvalue_figure(match, title=f"{config.task}, {controller_mode.value}", period=period,
+                                   shifts=result.shifts)
         figure.savefig(args.plot, dpi=110)
         plt.close(figure)
         print(f"  wrote {args.plot}")

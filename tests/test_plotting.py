@@ -1,5 +1,7 @@
 """Figures: every axis says its unit; the limits and the designed eigenvalues are drawn where they belong."""
 
+from types import SimpleNamespace
+
 import numpy as np
 import pytest
 
@@ -21,15 +23,91 @@ def _labels(fig):
 def test_constraint_residual_figure(log):
     """One row (a pad's compression): signed, on a linear axis. Rows of sizes four decades apart: |C| on
     a log axis, without a numeric floor."""
-    fig = plotting.constraint_residual_figure(log, units="m", labels=["C = y - h"])
+    fig = plotting.constraint_residual_figure(log, units="m", labels=["C = y - h"], note="the contact's compression")
     ax = fig.axes[0]
     assert ax.get_yscale() == "linear" and ax.get_xlabel() == "time t (s)" and ax.get_ylabel() == "C(r) (m)"
     assert np.allclose(ax.lines[0].get_ydata(), log["constraint"][:, 0], rtol=1e-9)
-    assert "compression" in ax.get_title()
+    assert "the contact's compression" in ax.get_title()
     rows = dict(log, constraint=np.column_stack([log["constraint"][:, 0], 1e-7 * np.sin(10 * log["t"])]))
     ax = plotting.constraint_residual_figure(rows, units="m^2 | m").axes[0]
     assert ax.get_yscale() == "log" and ax.get_ylabel() == "|C(r)| (m^2 | m)"
     assert np.isnan(ax.lines[1].get_ydata()[0])                      # C = 0 at t = 0 is not drawn at a floor
+    assert "compression" not in ax.get_title()                        # a weld, say: the task's note says what C is
+
+
+def test_constraint_residual_figure_draws_no_numeric_floor_and_names_a_dimensionless_row(log):
+    """A row 1e-17 at t = 0 (a solved start) is not drawn and the log axis spans the measured values
+    (at most 8 decades below their max), not 1e-17; a row in "1" reads "(no unit)", as the summary prints."""
+    small = 1e-6 * (1.5 + np.sin(10 * log["t"]))
+    small[0] = 1e-17
+    rows = dict(log, constraint=np.column_stack([log["constraint"][:, 0], small]))
+    ax = plotting.constraint_residual_figure(rows, units="m | 1").axes[0]
+    assert ax.get_yscale() == "log" and ax.get_ylabel() == "|C(r)| (m | no unit)"
+    assert np.isnan(ax.lines[1].get_ydata()[0]) and np.isfinite(ax.lines[1].get_ydata()[1:]).all()
+    assert ax.get_ylim()[0] >= 1e-8 * 1e-3 / 2
+    assert [text.get_text() for text in ax.get_legend().get_texts()] == ["|C_1| (m)", "|C_2| (no unit)"]
+
+
+def test_the_designed_decay_is_in_the_legend_when_row_0_has_none():
+    """Row 0 commanded to zero with no designed error: the first decay drawn (row 1's) carries the label."""
+    t = np.linspace(0.0, 1.0, 101)
+    desired = np.column_stack([np.zeros_like(t), np.full_like(t, 0.5)])
+    error = np.column_stack([1e-5 * np.cos(t), 0.5 * np.exp(-10 * t)])
+    predicted = desired + np.column_stack([np.zeros_like(t), 0.5 * np.exp(-10 * t)])
+    summary = {"task": "test", "mode": "velocity-force", "design_time_constant": 0.1, "contact_time": 0.0}
+    fig = plotting.tracking_figure({"t": t, "velocity": desired + error, "desired_velocity": desired}, summary,
+                                   predicted, "velocity", labels=["psi-dot", "alpha-dot"], units="rad/s")
+    ax_errors = fig.axes[1]
+    dashed = [line for line in ax_errors.lines if line.get_linestyle() == "--" and line.get_color() == "k"]
+    assert len(dashed) == 1 and dashed[0].get_label() == "designed error decay"
+    assert "designed error decay" in {text.get_text() for text in ax_errors.get_legend().get_texts()}
+
+
+def test_a_held_force_row_is_drawn_as_measured_only():
+    """A held row (no force loop): its measured force only, said to be held; no command, no error line."""
+    t = np.linspace(0.0, 1.0, 101)
+    desired = np.column_stack([np.full_like(t, 10.0), np.zeros_like(t)])
+    force = desired + np.column_stack([0.1 * np.exp(-10 * t), 1e-3 * np.sin(t)])
+    summary = {"task": "test", "mode": "velocity-force", "design_time_constant": 0.1, "contact_time": 0.0,
+               "force_rows": [{"name": "normal", "held": False}, {"name": "orientation row 1", "held": True}]}
+    fig = plotting.tracking_figure({"t": t, "force": force, "desired_force": desired}, summary, desired, "force",
+                                   labels=["normal", "orientation row 1"], units="N")
+    ax_values, ax_errors = fig.axes
+    values = [line.get_label() for line in ax_values.lines]
+    assert "orientation row 1 (N): measured (held by the controller, no force loop)" in values
+    assert "orientation row 1: commanded" not in values and "normal: commanded" in values
+    assert not any("orientation" in line.get_label() for line in ax_errors.lines)
+
+
+def test_the_paper_rows_velocity_figure_draws_the_true_rows_the_summary_reports():
+    """With the paper's pseudo-velocity rows the velocity figure draws the true rows: measured = true command
+    + velocity_error, commanded = true_desired_velocity, and a caption says what the controller was fed."""
+    t = np.linspace(0.0, 1.0, 101)
+    true_command = np.column_stack([np.zeros_like(t), np.full_like(t, 0.035)])
+    error = np.column_stack([1e-5 * np.ones_like(t), -0.03 * np.ones_like(t)])
+    pseudo = np.column_stack([np.zeros_like(t), 0.4 * t + 0.04])
+    log = {"t": t, "velocity": pseudo + error, "desired_velocity": pseudo, "velocity_error": error,
+           "true_desired_velocity": true_command}
+    summary = {"task": "test", "mode": "velocity-force", "design_time_constant": 0.1, "contact_time": 0.0}
+    predicted = pseudo + error[0] * np.exp(-10 * t)[:, None]
+    fig = plotting.tracking_figure(log, summary, predicted, "velocity", labels=["psi-dot", "t_1 . p-dot"],
+                                   units="rad/s | m/s")
+    ax_values = fig.axes[0]
+    measured = next(line for line in ax_values.lines if line.get_label() == "t_1 . p-dot (m/s): measured")
+    commanded = next(line for line in ax_values.lines if line.get_label() == "t_1 . p-dot: commanded")
+    assert np.allclose(measured.get_ydata(), 0.005) and np.allclose(commanded.get_ydata(), 0.035)
+    designed = [line for line in ax_values.lines if line.get_label() == "designed response"][0]
+    assert np.allclose(designed.get_ydata(), true_command[:, 0] + error[0, 0] * np.exp(-10 * t))
+    assert "pseudo-velocity" in ax_values.get_title() and ax_values.get_ylabel() == "velocity (rad/s | m/s)"
+
+
+def test_the_stability_maps_colour_bar_can_be_read_between_decades():
+    """SymLogNorm's own ticks are only +-10^k: the bar gets 1, 2, 5 ticks and its end, so -4.9 can be read."""
+    rows = [{"x": x, "y": y, "worst_discrete_real": value, "stable_simulation": value < 0}
+            for (x, y), value in zip([(1, 1), (2, 1), (1, 2), (2, 2)], [-4.9, -2.0, -0.3, 1.5])]
+    fig = plotting.stability_map_figure(rows, "x", "y")
+    ticks = list(fig.axes[-1].get_yticks())
+    assert ticks == [-4.9, -2.0, -1.0, 0.0, 1.0, 2.0, 4.9]
 
 
 def test_tracking_figure_has_every_line_in_a_legend_and_no_floor():
@@ -107,6 +185,17 @@ def test_eigenvalue_figures():
     assert fig.axes[0].get_xscale() == "symlog"
     (re_min, re_max), (im_min, im_max) = fig.axes[1].get_xlim(), fig.axes[1].get_ylim()
     assert re_min < -10 < 0 < re_max and im_min < 0 < im_max
+    # A sampled loop's modes at its Nyquist frequency (Im = pi/h) are marked off scale, not drawn as modes; a
+    # task's predicted shift is drawn and written next to the miss it explains.
+    period = 5e-4
+    shift = SimpleNamespace(designed=-8.0 + 0j, predicted=-8.05 + 0j)
+    sampled = _linearization(measured + [-1645 + np.pi / period * 1j], [-10.0, -8.0, -10.0])
+    fig = plotting.eigenvalue_figure(sampled.match, period=period, shifts=[shift])
+    ax_all, ax_zoom = fig.axes
+    assert ax_all.get_ylim()[1] < 1000
+    legend = [text.get_text() for text in ax_all.get_legend().get_texts()]
+    assert any(text.startswith("at the Nyquist frequency pi/h = 6283 rad/s") for text in legend)
+    assert "-8 -> -8.03  (0.4 %); predicted -8.05" in ax_zoom.texts[-1].get_text()
     sweep = plotting.eigenvalue_sweep_figure([1e6, 5e6], [linearization, _linearization(measured, [-10.0, -8.0, -10.0])],
                                              "pad modulus E", units="Pa")
     assert any(ax.get_ylabel() == "pad modulus E (Pa)" for ax in sweep.axes)        # the colour bar

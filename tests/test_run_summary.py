@@ -3,6 +3,7 @@
 import json
 import math
 import re
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -288,8 +289,8 @@ def test_the_sphere_constraints_piece_switches_are_events():
 def test_a_held_row_prints_as_held_with_its_measured_force_not_as_an_error():
     """A row the controller holds kinematically (no force loop, no force commanded) has no force error to
     report; what it shows is the force measured along it."""
-    held = {"name": "orientation row 1", "units": "N", "command": 0.0, "final_error": 0.0, "held": True,
-            "final_error_percent": None, "max_error_after_5_time_constants": 0.0,
+    held = {"name": "orientation row 1", "units": "N", "command": 0.0, "final_error": None, "held": True,
+            "final_error_percent": None, "max_error_after_5_time_constants": None,
             "max_error_percent_after_5_time_constants": None, "settling_time_1_percent": None,
             "max_measured_force_after_contact": 0.00153}
     assert _row_text(held) == ("held by the controller (no force commanded); measured force up to 0.00153 N "
@@ -315,6 +316,10 @@ def test_the_sphere_summary_lists_its_held_rows_and_their_measured_force(tmp_pat
     for i, row in enumerate(summary["force_rows"]):
         assert row["held"] == (i in (1, 2))
         assert row["max_measured_force_after_contact"] == pytest.approx(np.abs(log["force"][after, i]).max())
+        # No command, so no error: a held row's error figures are null, not a measured 0.
+        errors = [key for key in row if "error" in key or key == "settling_time_1_percent"]
+        assert len(errors) == 6
+        assert all(row[key] is None for key in errors) if row["held"] else row["final_error_percent"] is not None
         if row["held"]:
             assert (f"force {row['name']}: held by the controller (no force commanded); measured force up to "
                     f"{row['max_measured_force_after_contact']:.3g} N after contact") in printed
@@ -371,3 +376,19 @@ def test_the_crank_paper_rows_error_is_reported_against_the_true_command_in_rad_
     assert rate["final_error_percent"] == pytest.approx(100 * abs(log["velocity_error"][-1, 1]) / 0.5)
     assert spin["units"] == "rad/s" and spin["command"] == 0.0
     assert "true_desired_velocity" not in simulate(get_task("crank-turning").default_config(duration=0.05)).log
+
+
+@pytest.mark.slow
+def test_the_sphere_paper_rows_note_gives_the_measured_shortfall_and_why():
+    """README: with the paper's (3.3-11) rows t_1 . p-dot ends 84 % short of its command after 0.6 s; the
+    run's note says so (the printed row's figure) and why (docs/theory.md §6), as the crank's does."""
+    config = get_task("sphere-polishing").default_config({"velocity_rows": "paper", "chart": "euler"})
+    config.duration = 0.6
+    summary = simulate(config).summary
+    (note,) = summary["notes"]
+    row = summary["velocity_rows"][1]
+    shortfall = float(re.search(r"t_1 . p-dot ends ([0-9]+) % short of its", note).group(1))
+    assert shortfall == pytest.approx(abs(row["final_error_percent"]), abs=0.5) and row["final_error"] < 0
+    assert 80 < shortfall < 90 and "pseudo-velocity" in note and "docs/theory.md §6" in note
+    default = get_task("sphere-polishing").default_config()
+    assert get_task("sphere-polishing").run_notes(SimpleNamespace(config=default), {"t": np.zeros(2)}, 0.1) == []

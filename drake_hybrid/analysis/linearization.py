@@ -210,6 +210,17 @@ def shift_indices(designed, shifts):
     return taken
 
 
+def nyquist_split(modes, period):
+    """(modes, the ones at the discrete step's Nyquist frequency): for a one-period map of step ``period``
+    (None: a continuous linearization, nothing to split), log(mu)/h of a real multiplier mu < 0 has
+    imaginary part +-pi/h; such a mode has no conjugate partner (log's principal branch gives one sign)."""
+    modes = np.asarray(modes, dtype=complex)
+    if not period:
+        return modes, modes[:0]
+    at = np.abs(np.abs(modes.imag) - np.pi / period) <= 1e-6 * np.pi / period
+    return modes[~at], modes[at]
+
+
 def shifted_design(designed, shifts):
     """The designed eigenvalues with, for each ``scenario.task.EigenvalueShift``, one equal designed
     eigenvalue replaced by the shift's prediction (order kept)."""

@@ -39,6 +39,11 @@ def row_units(units, count):
     return [parts[-1] if i >= len(parts) else parts[i] for i in range(count)] if len(parts) > 1 else parts * count
 
 
+def display_unit(unit):
+    """A row's unit as the summary and the plots print it: "(no unit)" for a dimensionless row ("1")."""
+    return "(no unit)" if str(unit).strip() == "1" else unit
+
+
 def row_commands(desired):
     """Each row's command: max |desired_i| over the run (in the row's units; 0 for a row commanded to zero)."""
     return np.max(np.abs(np.asarray(desired, dtype=float)), axis=0)

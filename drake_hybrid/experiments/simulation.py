@@ -244,6 +244,8 @@ def summarize(scenario, log, wall_time):
     measured = max_after(log["force"], t >= start)
     for i, row in enumerate(force_rows):      # a held row (controller.kinematic_rows) has no force loop
         row.update(held=i in controller.kinematic_rows, max_measured_force_after_contact=measured[i])
+        if row["held"]:                        # no command, so no error: its figures are null, not 0
+            row.update({key: None for key in row if "error" in key or key == "settling_time_1_percent"})
     constraint_units = row_units(labels["constraint_units"], log["constraint"].shape[1]) \
         if "constraint_units" in labels else None
     torque_ratio = np.max(np.abs(log["torque"]) / effort_limits(scenario), axis=0)

@@ -202,7 +202,9 @@ class Task(abc.ABC):
 
     def labels(self, config=None):
         """Plot labels of the velocity- and force-controlled coordinates (``config``: the run's, for a
-        task whose rows depend on its options). Optional: ``constraint_units`` (C's rows), and
+        task whose rows depend on its options). Optional: ``constraint_units`` (C's rows),
+        ``constraint_note`` (what the simulated C measures: a compliant contact's compression, a weld's
+        give, rows the controller holds; under the constraint residual plot's title), and
         ``velocity_error`` / ``velocity_error_units`` where the velocity error is not in the rows' own
         terms (the paper's pseudo-velocity rows, whose error is the true rows')."""
         return {"velocity": [], "velocity_units": "SI", "force": [], "force_units": "SI"}

@@ -39,7 +39,8 @@ def write_run(result, out_dir, plots=True, html_path=None):
         files += save_tracking_plots(result.log, result.summary, predicted_velocity, predicted_force, out,
                                      labels=labels)
         files += save_run_plots(result.log, effort_limits(result.scenario), out,
-                                constraint_units=labels.get("constraint_units", "units of C"))
+                                constraint_units=labels.get("constraint_units", "units of C"),
+                                constraint_note=labels.get("constraint_note"))
     if html_path and result.html:
         Path(html_path).write_text(result.html)
         files.append(Path(html_path))

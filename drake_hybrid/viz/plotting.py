@@ -8,7 +8,7 @@
   (all of them, and a zoom on the designed ones).
 * ``eigenvalue_sweep_figure``: how the measured eigenvalues move with a
   parameter (contact stiffness, a gain), against the design.
-* ``constraint_residual_figure``: |C(r)| along the run (the pad's compression).
+* ``constraint_residual_figure``: C(r) along the run (what it measures: the task's note).
 * ``torque_figure``: joint torques against the actuators' effort limits.
 * ``joint_servo_map_figure``: where the joint-servo hybrid controllers are unstable (issue 18).
 
@@ -27,7 +27,8 @@ import numpy as np
 from matplotlib import cm, colors
 from matplotlib.colors import SymLogNorm
 
-from drake_hybrid.experiments.metrics import row_units
+from drake_hybrid.analysis.linearization import nyquist_split
+from drake_hybrid.experiments.metrics import display_unit, row_units
 from drake_hybrid.experiments.sweep import theory_on_plane
 from drake_hybrid.scenario.config import load_config
 
@@ -50,28 +51,56 @@ def _positive(values):
     return np.where(values > 0, values, np.nan)
 
 
-def _tracking_axes(ax_values, ax_errors, t, actual, desired, predicted, labels, what, units=()):
+_LOG_DECADES = 8          # a log axis of measured values spans at most this many decades below their max
+
+
+def _measured_on_log(values, top):
+    """``values`` (>= 0) to draw on a log axis whose largest measured value is ``top``: zeros and the
+    numeric floor (below ``top`` / 10^(``_LOG_DECADES`` + 1), e.g. a solved start's 1e-15) masked as
+    NaN, so that no floor is drawn as data."""
+    values = _positive(values)
+    return np.where(values >= top * 10.0 ** -(_LOG_DECADES + 1), values, np.nan) if np.isfinite(top) else values
+
+
+def _set_log_limits(ax, measured):
+    """Limits of a log axis: the measured values (``_measured_on_log``), at most ``_LOG_DECADES`` decades."""
+    measured = np.asarray(measured, dtype=float)
+    if np.isfinite(measured).any():
+        top, bottom = np.nanmax(measured), np.nanmin(measured)
+        ax.set_ylim(max(bottom, 10.0 ** -_LOG_DECADES * top) / 2, 2 * top)
+
+
+def _tracking_axes(ax_values, ax_errors, t, actual, desired, predicted, labels, what, units=(), held=()):
+    held = set(held)
+    errors = np.abs(actual - desired)
+    errors[:, sorted(held)] = np.nan                # a held row has no command, hence no error to draw
+    top = np.nanmax(errors) if np.isfinite(errors).any() else np.nan
+    measured = _measured_on_log(errors, top)
+    designed_labelled = False
     for i in range(actual.shape[1]):
         label = labels[i] if i < len(labels) else f"{what} {i + 1}"
         unit = f" ({units[i]})" if i < len(units) and units[i] else ""
+        if i in held:
+            ax_values.plot(t, actual[:, i], lw=1.6,
+                           label=f"{label}{unit}: measured (held by the controller, no force loop)")
+            continue
         line, = ax_values.plot(t, actual[:, i], lw=1.6, label=f"{label}{unit}: measured")
         color = line.get_color()
         ax_values.plot(t, desired[:, i], color=color, ls=":", lw=1.2, label=f"{label}: commanded")
-        ax_values.plot(t, predicted[:, i], color="k", ls="--", lw=0.9, label="designed response" if i == 0 else None)
-        ax_errors.semilogy(t, _positive(np.abs(actual[:, i] - desired[:, i])), color=color, lw=1.4,
-                           label=f"|error| {label}{unit}")
+        first = i == min(set(range(actual.shape[1])) - held)
+        ax_values.plot(t, predicted[:, i], color="k", ls="--", lw=0.9, label="designed response" if first else None)
+        ax_errors.semilogy(t, measured[:, i], color=color, lw=1.4, label=f"|error| {label}{unit}")
         designed_error = _positive(np.abs(predicted[:, i] - desired[:, i]))
         if np.isfinite(designed_error).any():          # a zero prediction (no error designed) is not drawn
+            # The legend names the first decay drawn (row 0 may be commanded to zero: none drawn for it).
             ax_errors.semilogy(t, designed_error, color="k", ls="--", lw=0.9,
-                               label="designed error decay" if i == 0 else None)
+                               label=None if designed_labelled else "designed error decay")
+            designed_labelled = True
         command = float(np.max(np.abs(desired[:, i])))
         if command > 0:
             ax_errors.axhline(0.01 * command, color=color, lw=0.8, ls="-.", label=f"1 % of the {label} command")
-    measured = _positive(np.abs(actual - desired))
-    if np.isfinite(measured).any():
-        # The axis spans the measured errors (at most 8 decades): a designed decay far below them is cut.
-        top, bottom = np.nanmax(measured), np.nanmin(measured)
-        ax_errors.set_ylim(max(bottom, 1e-8 * top) / 2, 2 * top)
+    # The axis spans the measured errors (at most 8 decades): a designed decay far below them is cut.
+    _set_log_limits(ax_errors, measured)
     ax_errors.set_xlabel("time t (s)")
     ax_values.grid(alpha=0.3)
     ax_errors.grid(alpha=0.3, which="both")
@@ -117,12 +146,23 @@ def tracking_figure(log, summary, predicted, what, labels=(), units="", note=Non
     Every row in its own units; the designed response starts at contact (``summary["contact_time"]``);
     dash-dot lines: 1 % of each row's command; dotted: contact + five design time constants; shaded
     spans and dashed lines: the run's phases (``summary["events"]``). Under the title: what the force's
-    first samples are (a start in contact), and ``note`` (the task's words on its transients)."""
+    first samples are (a start in contact), and ``note`` (the task's words on its transients).
+
+    A held row (``summary["force_rows"][i]["held"]``: no force loop) shows its measured value only. With
+    the paper's pseudo-velocity rows (the log has ``true_desired_velocity``) the velocity figure shows
+    the true rows the summary reports (``labels``: the task's ``velocity_error`` labels)."""
     plt = _pyplot()
     fig, (ax_values, ax_errors) = plt.subplots(2, 1, figsize=(7.5, 6.0), sharex=True)
     actual, desired = log[what], log[f"desired_{what}"]
+    pseudo = what == "velocity" and "true_desired_velocity" in log
+    if pseudo:
+        # The paper's pseudo-velocity rows (collect_log): their error is the true rows' (docs/theory.md §6), the
+        # summary's rows; drawn as those: true velocity = true command + error, the designed decay about it.
+        actual, desired = log["true_desired_velocity"] + log["velocity_error"], log["true_desired_velocity"]
+        predicted = np.asarray(predicted) - log["desired_velocity"] + desired
+    held = [i for i, row in enumerate(summary.get(f"{what}_rows") or []) if row.get("held")]
     units_per_row = row_units(units or "", actual.shape[1])
-    _tracking_axes(ax_values, ax_errors, log["t"], actual, desired, predicted, labels, what, units_per_row)
+    _tracking_axes(ax_values, ax_errors, log["t"], actual, desired, predicted, labels, what, units_per_row, held)
     unit_text = " | ".join(dict.fromkeys(u for u in units_per_row if u))
     ax_values.set_ylabel(f"{what} ({unit_text})" if unit_text else what)
     ax_errors.set_ylabel(f"|{what} error| ({unit_text})" if unit_text else f"|{what} error|")
@@ -136,7 +176,10 @@ def tracking_figure(log, summary, predicted, what, labels=(), units="", note=Non
     ax_values.legend(fontsize=7, loc="best")
     ax_errors.legend(fontsize=7, loc="best")
     title = f"{summary['task']} ({summary['mode']}): {what} tracking vs. the designed exponential"
-    caption = "\n".join(textwrap.fill(text, 120) for text in (_start_text(log, summary, what), note) if text)
+    fed = ("the controller was fed the paper's E_p rows with their pseudo-velocity, whose error is the true rows' "
+           "(docs/theory.md §6): drawn here, as the summary reports them, the true rows against the true command"
+           if pseudo else None)
+    caption = "\n".join(textwrap.fill(text, 120) for text in (fed, _start_text(log, summary, what), note) if text)
     ax_values.set_title(title + ("\n" + caption if caption else ""), fontsize=10 if not caption else 7.5)
     fig.tight_layout()
     return fig
@@ -149,8 +192,11 @@ def save_tracking_plots(log, summary, predicted_velocity, predicted_force, out_d
     out = Path(out_dir)
     paths = []
     for what, predicted in (("velocity", predicted_velocity), ("force", predicted_force)):
-        fig = tracking_figure(log, summary, predicted, what, labels.get(what, ()),
-                              units=labels.get(f"{what}_units", ""), note=labels.get(f"{what}_note"))
+        # The paper's pseudo-velocity rows are drawn as the true rows (tracking_figure): in those rows' terms.
+        true_rows = what == "velocity" and "true_desired_velocity" in log and "velocity_error" in labels
+        fig = tracking_figure(log, summary, predicted, what, labels.get("velocity_error" if true_rows else what, ()),
+                              units=labels.get("velocity_error_units" if true_rows else f"{what}_units", ""),
+                              note=labels.get(f"{what}_note"))
         path = out / f"{what}_tracking.png"
         fig.savefig(path, dpi=120)
         plt.close(fig)
@@ -158,12 +204,13 @@ def save_tracking_plots(log, summary, predicted_velocity, predicted_force, out_d
     return paths
 
 
-def save_run_plots(log, effort_limits, out_dir, constraint_units="m", joint_names=None):
+def save_run_plots(log, effort_limits, out_dir, constraint_units="m", joint_names=None, constraint_note=None):
     """Write constraint_residual.png and torques.png; returns their paths."""
     plt = _pyplot()
     out = Path(out_dir)
     paths = []
-    for name, fig in (("constraint_residual", constraint_residual_figure(log, units=constraint_units)),
+    residual = constraint_residual_figure(log, units=constraint_units, note=constraint_note)
+    for name, fig in (("constraint_residual", residual),
                       ("torques", torque_figure(log, effort_limits, joint_names=joint_names))):
         path = out / f"{name}.png"
         fig.savefig(path, dpi=110)
@@ -188,21 +235,45 @@ def _designed_window(predicted, margin=0.35):
     return (-(1 + margin) * radius, margin * radius), (-(0.6 + margin) * radius, (0.6 + margin) * radius)
 
 
-def eigenvalue_figure(match, title="closed-loop eigenvalues", zoom=None):
+def _shifted_rows(designed, partner, shifts):
+    """{row: shift}: each ``EigenvalueShift`` on the row, among those with its designed value and not yet
+    taken, whose linearized partner is nearest its prediction (the miss it explains)."""
+    rows = {}
+    for shift in shifts:
+        same = [i for i in range(min(len(designed), len(partner))) if i not in rows
+                and abs(designed[i] - shift.designed) <= 1e-9 * max(1.0, abs(shift.designed))]
+        if same:
+            rows[min(same, key=lambda i: abs(partner[i] - shift.predicted))] = shift
+    return rows
+
+
+def eigenvalue_figure(match, title="closed-loop eigenvalues", zoom=None, period=None, shifts=()):
     """Predicted (crosses) and measured (dots) eigenvalues in the complex plane.
 
     Left: every eigenvalue of the linearized closed loop (symmetric-log real
     axis: the contact, filter and joint-space modes are 100 times faster than
-    the designed ones). Right: a zoom on the designed eigenvalues (``zoom`` =
+    the designed ones). For a sampled loop of step ``period`` (s), the modes at
+    its Nyquist frequency (log(mu)/h of a multiplier mu < 0: imaginary part
+    pi/h) are not drawn as ordinary modes: triangles on the top edge mark their
+    real parts, off scale. Right: a zoom on the designed eigenvalues (``zoom`` =
     ((re_min, re_max), (im_min, im_max)), default: around them), each joined
-    to the measured eigenvalue it was matched with.
+    to the measured eigenvalue it was matched with; ``shifts`` (the task's
+    ``EigenvalueShift`` predictions, e.g. a handle's inertia the paper leaves
+    out) adds each shifted eigenvalue's predicted value.
     """
     plt = _pyplot()
     fig, (ax_all, ax_zoom) = plt.subplots(1, 2, figsize=(11.0, 4.5), gridspec_kw={"width_ratios": [1.0, 1.2]})
     measured, predicted = np.asarray(match.measured), np.asarray(match.predicted)
     partner = np.asarray(getattr(match, "partner", np.zeros(0)))
-    ax_all.scatter(measured.real, measured.imag, s=22, color="tab:blue", label="linearized closed loop")
+    _, nyquist = nyquist_split(measured, period)
+    shown = measured[~np.isin(measured, nyquist)]
+    ax_all.scatter(shown.real, shown.imag, s=22, color="tab:blue", label="linearized closed loop")
     ax_all.scatter(predicted.real, predicted.imag, s=80, marker="x", color="tab:red", label="designed (gains)")
+    if nyquist.size:
+        ax_all.scatter(nyquist.real, np.full(nyquist.size, 0.97), s=40, marker="^", facecolor="none",
+                       edgecolor="tab:purple", transform=ax_all.get_xaxis_transform(), clip_on=False,
+                       label=f"at the Nyquist frequency pi/h = {np.pi / period:.4g} rad/s\n(mu < 0): off scale, "
+                             "drawn at their Re on the top edge")
     ax_all.set_xscale("symlog", linthresh=10.0)
     _complex_axes(ax_all, f"{title}: all modes")
     ax_all.legend(fontsize=8, loc="best")
@@ -212,6 +283,11 @@ def eigenvalue_figure(match, title="closed-loop eigenvalues", zoom=None):
     ax_zoom.scatter(measured[inside].real, measured[inside].imag, s=30, color="tab:blue",
                     label="linearized closed loop")
     ax_zoom.scatter(predicted.real, predicted.imag, s=110, marker="x", color="tab:red", label="designed (gains)")
+    shifted = _shifted_rows(predicted, partner, shifts)
+    if shifted:
+        values = np.array([shift.predicted for shift in shifted.values()], dtype=complex)
+        ax_zoom.scatter(values.real, values.imag, s=70, marker="D", facecolor="none", edgecolor="tab:green",
+                        linewidths=1.4, label="the task's prediction (physics beyond the paper's model)")
     for n, (p, q) in enumerate(zip(predicted, partner)):
         ax_zoom.annotate("", xy=(q.real, q.imag), xytext=(p.real, p.imag),
                          arrowprops=dict(arrowstyle="->", color="0.25", lw=1.2))
@@ -220,6 +296,10 @@ def eigenvalue_figure(match, title="closed-loop eigenvalues", zoom=None):
         errors = np.abs(partner - predicted) / np.abs(predicted)
         rows = [f"{p.real:.3g}{p.imag:+.3g}j -> {q.real:.4g}{q.imag:+.4g}j  ({100 * e:.1f} %)" if abs(p.imag) > 1e-9
                 else f"{p.real:.3g} -> {q.real:.4g}  ({100 * e:.1f} %)" for p, q, e in zip(predicted, partner, errors)]
+        for i, shift in shifted.items():
+            value = complex(shift.predicted)
+            rows[i] += (f"; predicted {value.real:.4g}{value.imag:+.4g}j" if abs(value.imag) > 1e-9
+                        else f"; predicted {value.real:.4g}")
         ax_zoom.text(0.98, 0.02, "designed -> linearized (rel. error)\n" + "\n".join(rows), transform=ax_zoom.transAxes,
                      ha="right", va="bottom", fontsize=7, family="monospace",
                      bbox=dict(boxstyle="round", facecolor="white", alpha=0.85, edgecolor="0.7"))
@@ -267,36 +347,41 @@ def eigenvalue_sweep_figure(values, linearizations, parameter, units="", title=N
     return fig
 
 
-def constraint_residual_figure(log, units="m", labels=None, title="constraint residual"):
-    """C(r) of every constraint row along the run. For a contact row it is the compression of the
-    compliant contact (the rigid model of the paper has C = 0): a steady offset while pressing, not an
-    error that grows; before contact, the gap. Signed on a linear axis, unless the rows' sizes differ
-    by more than two decades: then |C| on a log axis."""
+def constraint_residual_figure(log, units="m", labels=None, title="constraint residual", note=None):
+    """C(r) of every constraint row along the run: 0 on the paper's rigid constraint; what the simulated
+    one makes of it is the task's to say (``note``, its labels' ``constraint_note``: e.g. a compliant
+    contact's compression, a steady offset while pressing, and the gap before contact; a compliant weld's
+    stretch; rows the controller holds). Signed on a linear axis, unless the rows' sizes differ by more
+    than two decades: then |C| on a log axis spanning the measured values (no numeric floor drawn)."""
     plt = _pyplot()
     fig, ax = plt.subplots(figsize=(7.5, 3.4))
     residual = np.atleast_2d(np.asarray(log["constraint"]).T).T
     sizes = np.max(np.abs(residual), axis=0)
     sizes = sizes[sizes > 0]
     logarithmic = sizes.size > 1 and sizes.max() / sizes.min() > 100
-    units_per_row = row_units(units or "", residual.shape[1])
+    units_per_row = [display_unit(unit) for unit in row_units(units or "", residual.shape[1])]
+    magnitudes = _measured_on_log(np.abs(residual), sizes.max() if sizes.size else np.nan)
     for i in range(residual.shape[1]):
         label = labels[i] if labels and i < len(labels) else f"C_{i + 1}"
-        unit = f" ({units_per_row[i]})" if units_per_row[i] else ""
+        unit = f" {units_per_row[i]}" if units_per_row[i].startswith("(") else f" ({units_per_row[i]})"
+        unit = unit if units_per_row[i] else ""
         if logarithmic:
-            ax.plot(log["t"], _positive(np.abs(residual[:, i])), lw=1.4, label=f"|{label}|{unit}")
+            ax.plot(log["t"], magnitudes[:, i], lw=1.4, label=f"|{label}|{unit}")
         else:
             ax.plot(log["t"], residual[:, i], lw=1.4, label=f"{label}{unit}")
     ax.set_xlabel("time t (s)")
-    unit_text = " | ".join(dict.fromkeys(u for u in units_per_row if u))
+    unit_text = " | ".join(dict.fromkeys(u.strip("()") for u in units_per_row if u))
     name = "|C(r)|" if logarithmic else "C(r)"
     if logarithmic:
         ax.set_yscale("log")
+        _set_log_limits(ax, magnitudes)
     else:
         ax.axhline(0.0, color="k", lw=0.6)
     ax.set_ylabel(f"{name} ({unit_text})" if unit_text else name)
     ax.grid(alpha=0.3, which="both")
     ax.legend(fontsize=8, loc="best")
-    ax.set_title(f"{title}: the compliant contact's compression (C = 0 for the paper's rigid contact)", fontsize=9)
+    heading = f"{title} (C = 0 on the paper's rigid constraint)"
+    ax.set_title(heading + ("\n" + textwrap.fill(note, 110) if note else ""), fontsize=9 if not note else 7.5)
     fig.tight_layout()
     return fig
 
@@ -384,6 +469,20 @@ def _cell_edges(values):
     return edges, logarithmic
 
 
+def _symlog_ticks(limit, linthresh=1.0):
+    """Readable colour-bar ticks for a SymLogNorm over [-limit, limit]: 0, and 1, 2, 5 (fewer when the range
+    spans more decades) times each power of ten from ``linthresh`` up to ``limit``, and the bar's end (two
+    digits), with both signs."""
+    decades = max(0, int(np.ceil(np.log10(max(limit, linthresh) / linthresh))))
+    subs = (1, 2, 5) if decades <= 1 else (1, 3) if decades <= 3 else (1,)
+    positive = [value for value in (linthresh * m * 10.0 ** d for d in range(decades + 1) for m in subs)
+                if value <= limit]
+    end = float(f"{limit:.2g}")                        # the bar's end, so that its extreme is read too
+    if not positive or (positive[-1] < 0.8 * limit and end <= limit):
+        positive.append(end)
+    return [-value for value in reversed(positive)] + [0.0] + positive
+
+
 def stability_map_figure(rows, x, y, facet=None, color="worst_discrete_real", verdict="stable_simulation",
                          theory=None, title=None):
     """Heatmap of ``color`` over (x, y), one panel per value of ``facet``.
@@ -444,6 +543,8 @@ def stability_map_figure(rows, x, y, facet=None, color="worst_discrete_real", ve
         ax.set_title(f"{_label(facet).split(' (')[0]} = {facet_value:g}" if facet else (title or ""), fontsize=10,
                      pad=24)
     colorbar = fig.colorbar(image, ax=axes[0].tolist(), shrink=0.9)
+    colorbar.set_ticks(_symlog_ticks(limit))           # SymLogNorm's own ticks: only +-10^k, too few to read
+    colorbar.set_ticklabels([f"{tick:g}" for tick in _symlog_ticks(limit)])
     colorbar.set_label(_label(color))
     handles = [plt.Line2D([], [], ls="", marker="o", mfc="none", mec="k", label="simulation: settles"),
                plt.Line2D([], [], ls="", marker="x", color="k", label="simulation: does not settle"),

@@ -135,6 +135,8 @@ class CrankTurning(Task):
                 "velocity_units": "rad/s | m^2/s + rad/s" if paper else "rad/s",
                 "force": ["radial / 2 rho (row 1)", "vertical", "tilt torque", "tangential/yaw (row 4)"],
                 "force_units": "N/m | N | N m | N", "constraint_units": "m^2 | m | 1 | m",
+                "constraint_note": "No contact: the pad is welded to the handle (a SAP weld constraint, compliant), "
+                                   "so C is how far the weld gives under the force rows' loads",
                 "force_note": "Row 1 is the multiplier of C_1 = X^2 + Y^2 - rho^2 (m^2), hence N/m: the radial force "
                               f"in N is 2 rho = {2 * self.radius:g} m times it. The 43 Hz ringing over the first "
                               "0.3 s is the closed loop's slowest non-designed mode (-25 +- 267j 1/s at the 0.5 ms plant step: arm, weld "

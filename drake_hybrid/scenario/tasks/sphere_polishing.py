@@ -120,6 +120,9 @@ class SpherePolishing(Task):
         return {**velocity,
                 "force": ["normal force", "orientation row 1", "orientation row 2"], "force_units": "N | N | N",
                 "constraint_units": "m",
+                "constraint_note": "C_1: the compliant contact's compression while the pad presses (a steady "
+                                   "offset); C_2, C_3: the orientation rows, held by the controller (a point "
+                                   "contact cannot hold them)",
                 # Measured on the default runs: 13.5 Hz at 0.035 m/s (latitude), 24 Hz at 0.05 m/s (pole).
                 "force_note": "The ripple of 1e-4 to 1e-3 N once the start has decayed (about 0.01 % of the "
                               "command) repeats every 2-2.6 mm of the pad's travel, as its contact crosses the "
@@ -178,6 +181,24 @@ class SpherePolishing(Task):
                                         config.desired_force, constraint_space.force_size)
         return super().make_source(config.replace(desired_velocity=velocity), controller_plant, robot,
                                    constraint_space)
+
+    def run_notes(self, scenario, log, design_time_constant):
+        """With the paper's (3.3-11) rows (``velocity_rows=paper``): how far the pad's t_1 . p-dot ends from
+        its command, and why (docs/theory.md §6: the naive pseudo-velocity drops the unmeasurable Euler-angle
+        accelerations, so the designed loop is not realized; the Li & Sastry law only, as the crank's note)."""
+        if scenario.config.controller != "li-sastry" or "true_desired_velocity" not in log:
+            return []
+        t = log["t"]
+        command, error = float(log["true_desired_velocity"][-1, 1]), float(log["velocity_error"][-1, 1])
+        if command == 0:
+            return []
+        side = "short of" if error * command < 0 else "above"
+        return [f"with the paper's (3.3-11) E_p and its pseudo-velocity (naive), t_1 . p-dot ends "
+                f"{100 * abs(error / command):.0f} % {side} its {abs(command):.3g} m/s command after "
+                f"{t[-1] - t[0]:.2g} s: the controller is fed pseudo-velocity rows, t_i . p-dot (m/s) plus "
+                "beta_i . (phi-dot, theta-dot) (rad/s, beta_i in 1/m), whose desired acceleration needs the "
+                "unmeasurable Euler-angle accelerations; dropping them leaves the designed loop unrealized "
+                "(docs/theory.md §6; compare --option velocity_rows=true)"]
 
     # -- start ------------------------------------------------------------------------------------
     def pad_pose(self, config, arc_angle, depth=0.0):

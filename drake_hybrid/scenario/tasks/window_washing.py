@@ -90,7 +90,9 @@ class WindowWashing(Task):
     def labels(self, config=None):
         """Plot labels of the velocity-controlled and force-controlled coordinates."""
         return {"velocity": ["x-dot", "theta-dot"], "velocity_units": "m/s | rad/s",
-                "force": ["F, along E_f = [0 1 0]"], "force_units": "N", "constraint_units": "m"}
+                "force": ["F, along E_f = [0 1 0]"], "force_units": "N", "constraint_units": "m",
+                "constraint_note": "C = y - h: the compliant contact's compression while the pad presses (a steady "
+                                   "offset, not an error that grows); before contact, the gap"}
 
     # -- models --------------------------------------------------------------------------------
     def _arm(self, config):
