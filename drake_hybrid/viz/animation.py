@@ -100,9 +100,12 @@ SEEK_RENDER_WAIT_MS = 500     # after a seek, time for the viewer's render loop 
 
 
 def render_html(html_path, png_path=None, times=(1.5,), width=960, height=600, executable=None, style=None,
-                seek=False):
+                seek=False, restart=False):
     """Open ``html_path`` in headless Chromium and screenshot it ``times`` seconds after load
-    (or, with ``seek``, at those times of the recorded animation: it is paused and moved there).
+    (or, with ``seek``, at those times of the recorded animation: it is paused and moved there;
+    with ``restart``, ``times`` after the recording is started again from t = 0 once the page has
+    loaded: Meshcat plays a recording once on load, and on a busy machine loading the 2-3 MB page can
+    take longer than a short recording, which then shows its last frame at every screenshot).
 
     Only file:, data: and blob: URLs may load (the others are blocked and
     reported, proving the page works offline). ``style``: CSS added to the
@@ -144,6 +147,8 @@ def render_html(html_path, png_path=None, times=(1.5,), width=960, height=600, e
             page.wait_for_selector("canvas", timeout=30000)
             if style:
                 page.add_style_tag(content=style)
+            if restart:
+                page.evaluate("viewer.animator.pause(); viewer.animator.seek(0); viewer.animator.play();")
             elapsed = 0.0
             for i, moment in enumerate(times):
                 if seek:
