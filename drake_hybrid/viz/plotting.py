@@ -543,8 +543,9 @@ def stability_map_figure(rows, x, y, facet=None, color="worst_discrete_real", ve
         ax.set_title(f"{_label(facet).split(' (')[0]} = {facet_value:g}" if facet else (title or ""), fontsize=10,
                      pad=24)
     colorbar = fig.colorbar(image, ax=axes[0].tolist(), shrink=0.9)
-    colorbar.set_ticks(_symlog_ticks(limit))           # SymLogNorm's own ticks: only +-10^k, too few to read
-    colorbar.set_ticklabels([f"{tick:g}" for tick in _symlog_ticks(limit)])
+    ticks = _symlog_ticks(limit)                       # SymLogNorm's own ticks: only +-10^k, too few to read
+    colorbar.set_ticks(ticks)
+    colorbar.set_ticklabels([f"{tick:g}" for tick in ticks])
     colorbar.set_label(_label(color))
     handles = [plt.Line2D([], [], ls="", marker="o", mfc="none", mec="k", label="simulation: settles"),
                plt.Line2D([], [], ls="", marker="x", color="k", label="simulation: does not settle"),
