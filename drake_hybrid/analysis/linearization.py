@@ -33,6 +33,7 @@ from pydrake.systems.analysis import ApplySimulatorConfig, InitializeParams, Sim
 from pydrake.systems.primitives import Linearize
 
 from drake_hybrid.analysis.derivatives import JACOBIAN_TOLERANCE, JacobianCheck, checked_state_jacobian
+from drake_hybrid.analysis.environment import impedance_environment_shifts
 from drake_hybrid.analysis.modes import diagnose_unstable_modes, explained_modes
 from drake_hybrid.control.gains import ControlMode
 from drake_hybrid.control.law import impedance_blocks
@@ -247,9 +248,13 @@ def predicted_match(result, tolerance=0.05):
 
 
 def _task_shifts(task_name, scenario, root_context, predicted, measured, tolerance):
-    """The task's predicted shifts and the match against the shifted design (the plain match's
-    inputs when the task predicts none)."""
+    """The predicted shifts and the match against the shifted design (no shifts, no match): the
+    task's own (physics the paper's model leaves out, e.g. the crank's handle inertia), or else, in
+    impedance-force mode, those of the impedance meeting its contact's stiffness and damping
+    (``analysis.environment``)."""
     shifts = get_task(task_name).eigenvalue_shifts(scenario, root_context)
+    if not shifts and scenario.controller.mode is ControlMode.IMPEDANCE_FORCE:
+        shifts = impedance_environment_shifts(scenario, root_context, predicted.designed)
     if not shifts:
         return [], None
     match = match_eigenvalues(shifted_design(predicted.designed, shifts), measured, tolerance=tolerance,

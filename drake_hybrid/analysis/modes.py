@@ -48,6 +48,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from drake_hybrid.analysis.environment import row_directions, row_forces
 from drake_hybrid.control.gains import ControlMode
 
 UNSTABLE_RATE = 0.01                  # 1/s: a mode growing faster than 1 % per second is named
@@ -130,20 +131,6 @@ class DriftPrediction:
         return max(top, key=top.get)
 
 
-def _row_forces(scenario, context, q):
-    """[F_v; F] = E^-T w at the arm's positions ``q`` (the rest of ``context`` kept): the wrench
-    sensor's reading split as the law splits it (``ConstraintSpace.split_wrench``)."""
-    work = context.Clone()
-    plant, space = scenario.plant, scenario.constraint_space
-    plant_context = plant.GetMyMutableContextFromRoot(work)
-    plant.SetPositions(plant_context, q)
-    wrench = np.asarray(scenario.sensor.get_output_port(0).Eval(scenario.sensor.GetMyContextFromRoot(work)))
-    task = scenario.kinematics.evaluate(plant_context, check=False)
-    values = space.evaluate(task.configuration, task.velocity, check=False)
-    tangential, force = space.split_wrench(values, space.chart.generalized_force(task.configuration, wrench))
-    return np.concatenate([tangential, force])
-
-
 def row_force_drift(scenario, context, mode, step=DRIFT_STEP):
     """Predict the velocity rows' slow eigenvalues from the row forces the law leaves on the arm
     (module docstring): a ``DriftPrediction``, or None in impedance-force mode (whose K_0 takes
@@ -158,19 +145,16 @@ def row_force_drift(scenario, context, mode, step=DRIFT_STEP):
     plant = scenario.plant
     plant_context = plant.GetMyContextFromRoot(context)
     q0 = plant.GetPositions(plant_context).copy()
-    task = scenario.kinematics.evaluate(plant_context, check=False)
-    values = space.evaluate(task.configuration, task.velocity, check=False)
-    E = np.vstack([values.velocity_projection, values.force_projection])
-    J = task.jacobian
-    M = plant.CalcMassMatrix(plant_context)
-    if J.shape[1] != q0.size:
+    E, directions = row_directions(scenario, context)
+    if directions is None:
         return None                                  # positions and velocities differ (a free body)
-    mobility = E @ J @ np.linalg.solve(M, J.T) @ E.T
+    J = scenario.kinematics.evaluate(plant_context, check=False).jacobian
+    mobility = E @ J @ np.linalg.solve(plant.CalcMassMatrix(plant_context), J.T) @ E.T
     stiffness = np.zeros((E.shape[0], k))
     for i in range(k):
-        dq = np.linalg.pinv(J) @ np.linalg.solve(E, np.eye(E.shape[0])[i])
-        stiffness[:, i] = (_row_forces(scenario, context, q0 + step * dq)
-                           - _row_forces(scenario, context, q0 - step * dq)) / (2.0 * step)
+        dq = step * directions[:, i]
+        stiffness[:, i] = (row_forces(scenario, context, q=q0 + dq)
+                           - row_forces(scenario, context, q=q0 - dq)) / (2.0 * step)
     held = tuple(space.constraint.kinematic_rows)
     cancels = bool(getattr(scenario.config, "compensate_tangential_force", False))
     gains = scenario.controller.validated_gains()

@@ -1,0 +1,158 @@
+"""The contact as the impedance meets it: its stiffness and damping along the motion rows.
+
+In impedance-force mode the law makes every motion row a unit-mass impedance (3.2-11),
+
+    y-ddot + K_v y-dot + K_p y = F_v,
+
+y the position along the rows (y-dot = E_p r-dot; the held rows of a point contact count as
+motion rows with C-ddot + 3 w_c C-dot + 2 w_c^2 C = F). F_v is the measured force on those rows:
+an input the gains do not choose. The roots the gains design, those of s^2 + K_v s + K_p, are the
+impedance's alone. Where the contact itself makes F_v depend on where and how fast the pad is,
+linearized F_v = K_e y + B_e y-dot, the closed loop has the roots of
+
+    s^2 I + (K_v - B_e) s + (K_p - K_e) = 0                                  (impedance with its environment)
+
+and that is what an impedance is for: it yields to its environment. For a smooth, frictionless
+ball pad on a smooth workpiece both are zero (the contact force passes through the pad's centre
+along E_f). A hydroelastic contact on a small curved workpiece has both (docs/drake_notes.md,
+"The impedance and the contact's stiffness along the surface"):
+
+* K_e: the tessellated pad and workpiece turn the contact force at a slightly different rate than
+  the smooth surface's normal turns (the dk of ``analysis.modes``). UR10 on the 5 cm drum at the
+  default meshes: +2.6 N/m along x, a fifth of the designed K_p = 21 (unit mass); 0.9 N/m with
+  four times finer meshes.
+* B_e: the contact's dissipation along the face normals of a curved workpiece (the front of the
+  patch separates, the rear approaches): a drag although mu = 0. The continuous plant's
+  Hunt-Crossley pad (d = 10 s/m) gives -0.20 N s/m on the drum; SAP's relaxation time gives
+  the same mechanism on a discrete plant.
+
+``contact_environment`` measures K_e and B_e by central differences of the wrench sensor's reading,
+split by E^-T as the law splits it, with the arm's positions (velocities) moved along each motion
+row; ``impedance_environment_shifts`` turns them into the designed eigenvalues' predicted shifts
+(``scenario.task.EigenvalueShift``) that the linearizations match against. The velocity-force and
+position-force modes cancel the measured F_v (``control.law.tangential_compensation``): for them
+the environment's stiffness is ``analysis.modes.row_force_drift``'s business.
+"""
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.optimize import linear_sum_assignment
+
+from drake_hybrid.scenario.task import EigenvalueShift
+
+# m (rad) along a motion row, and m/s (rad/s) of its velocity: the central differences' steps.
+# The UR10 on the 5 cm drum: K_e agrees to 3 digits at 1e-5 and 1e-6 (facets straddled at 1e-4: 3 %).
+ENVIRONMENT_STEP = 1e-6
+# A designed eigenvalue the environment moves by less than this (relative) gets no predicted shift.
+SHIFT_THRESHOLD = 1e-3
+
+
+def row_forces(scenario, context, q=None, v=None):
+    """[F_v; F] = E^-T w: the wrench sensor's reading split as the law splits it
+    (``ConstraintSpace.split_wrench``), with the arm's positions ``q`` and velocities ``v`` (None:
+    those of ``context``; the rest of ``context`` kept, ``context`` itself untouched)."""
+    work = context.Clone()
+    plant, space = scenario.plant, scenario.constraint_space
+    plant_context = plant.GetMyMutableContextFromRoot(work)
+    if q is not None:
+        plant.SetPositions(plant_context, q)
+    if v is not None:
+        plant.SetVelocities(plant_context, v)
+    wrench = np.asarray(scenario.sensor.get_output_port(0).Eval(scenario.sensor.GetMyContextFromRoot(work)))
+    task = scenario.kinematics.evaluate(plant_context, check=False)
+    values = space.evaluate(task.configuration, task.velocity, check=False)
+    tangential, force = space.split_wrench(values, space.chart.generalized_force(task.configuration, wrench))
+    return np.concatenate([tangential, force])
+
+
+def row_directions(scenario, context):
+    """(E, dq per row): the stacked [E_p; E_f] at ``context`` and, as columns, the joint motions
+    J^+ E^-1 e_i that move the pad by 1 along each row i (None if the plant's positions and
+    velocities differ, a free body)."""
+    plant, space = scenario.plant, scenario.constraint_space
+    plant_context = plant.GetMyContextFromRoot(context)
+    task = scenario.kinematics.evaluate(plant_context, check=False)
+    values = space.evaluate(task.configuration, task.velocity, check=False)
+    E = np.vstack([values.velocity_projection, values.force_projection])
+    J = task.jacobian
+    if J.shape[1] != plant.num_positions():
+        return E, None
+    return E, np.linalg.pinv(J) @ np.linalg.inv(E)
+
+
+@dataclass
+class ContactEnvironment:
+    """The contact's linearized force on the motion rows, F = K_e y + B_e y-dot."""
+
+    rows: list                 # indices into [velocity rows; E_f rows]: the motion rows
+    stiffness: np.ndarray      # K_e = dF/dy
+    damping: np.ndarray        # B_e = dF/dy-dot
+
+
+def contact_environment(scenario, context, rows, step=ENVIRONMENT_STEP):
+    """K_e and B_e on ``rows`` (indices into [velocity rows; E_f rows]) by central differences of
+    ``row_forces`` at ``context``, or None for a free-body plant."""
+    plant = scenario.plant
+    plant_context = plant.GetMyContextFromRoot(context)
+    q0, v0 = plant.GetPositions(plant_context).copy(), plant.GetVelocities(plant_context).copy()
+    _, directions = row_directions(scenario, context)
+    if directions is None:
+        return None
+    rows = list(rows)
+    stiffness, damping = np.zeros((len(rows), len(rows))), np.zeros((len(rows), len(rows)))
+    for column, row in enumerate(rows):
+        dq = step * directions[:, row]
+        stiffness[:, column] = (row_forces(scenario, context, q=q0 + dq)[rows]
+                                - row_forces(scenario, context, q=q0 - dq)[rows]) / (2.0 * step)
+        damping[:, column] = (row_forces(scenario, context, v=v0 + dq)[rows]
+                              - row_forces(scenario, context, v=v0 - dq)[rows]) / (2.0 * step)
+    return ContactEnvironment(rows=rows, stiffness=stiffness, damping=damping)
+
+
+def impedance_loop(velocity_gain, position_gain, stiffness=None, damping=None):
+    """Eigenvalues of y-ddot = -(K_v - B_e) y-dot - (K_p - K_e) y (None: K_e, B_e = 0)."""
+    k = velocity_gain.shape[0]
+    K_e = np.zeros((k, k)) if stiffness is None else stiffness
+    B_e = np.zeros((k, k)) if damping is None else damping
+    return np.linalg.eigvals(np.block([[np.zeros((k, k)), np.eye(k)],
+                                       [K_e - position_gain, B_e - velocity_gain]]))
+
+
+def impedance_environment_shifts(scenario, context, designed, step=ENVIRONMENT_STEP):
+    """The designed eigenvalues of an impedance-force loop that its contact moves, and where:
+    [EigenvalueShift] (module docstring; empty when none moves by SHIFT_THRESHOLD or more, or for
+    a free-body plant). ``designed``: the controller's designed eigenvalues (the shifts take theirs)."""
+    gains = scenario.controller.validated_gains()
+    k = scenario.constraint_space.velocity_size
+    held = list(scenario.constraint_space.constraint.kinematic_rows)
+    rows = list(range(k)) + [k + i for i in held]
+    if not rows:
+        return []
+    environment = contact_environment(scenario, context, rows, step)
+    if environment is None:
+        return []
+    w_c = gains.constraint_frequency
+    velocity_gain = np.diag(np.concatenate([np.zeros(k), np.full(len(held), 3.0 * w_c)]))
+    position_gain = np.diag(np.concatenate([np.zeros(k), np.full(len(held), 2.0 * w_c**2)]))
+    velocity_gain[:k, :k], position_gain[:k, :k] = gains.velocity, gains.position
+    alone = impedance_loop(velocity_gain, position_gain)
+    coupled = impedance_loop(velocity_gain, position_gain, environment.stiffness, environment.damping)
+    # Each root of the impedance alone is the designed eigenvalue nearest to it; its partner with the
+    # contact, the coupled root nearest to it (Hungarian, as match_eigenvalues pairs).
+    designed = np.asarray(designed, dtype=complex)
+    cost = np.abs(coupled[None, :] - alone[:, None]) / np.abs(alone)[:, None]
+    pairs = zip(*linear_sum_assignment(cost))
+    K_e, B_e = environment.stiffness, environment.damping
+    reason = (f"the unit-mass impedance (3.2-11) meets the contact's own stiffness and damping along its rows "
+              f"(central differences: dF/dy up to {np.max(np.abs(K_e)):.3g}, dF/dy-dot up to "
+              f"{np.max(np.abs(B_e)):.3g}, row units): roots of s^2 + (K_v - B_e) s + (K_p - K_e); a tessellated "
+              f"curved workpiece's facets and normal dissipation (analysis.environment)")
+    shifts = []
+    for i, j in pairs:
+        nearest = designed[np.argmin(np.abs(designed - alone[i]))]
+        if abs(nearest - alone[i]) > 1e-6 * abs(nearest):
+            continue                                  # not a designed eigenvalue (e.g. a zero)
+        if abs(coupled[j] - nearest) >= SHIFT_THRESHOLD * abs(nearest):
+            shifts.append(EigenvalueShift(designed=nearest, predicted=complex(coupled[j]), reason=reason))
+    return shifts
