@@ -19,13 +19,14 @@ logging.getLogger("drake").setLevel(logging.ERROR)
 
 
 def table(results):
-    lines = ["| arm | shape | mode | velocity error (%) | force error (%) | eigenvalue error (%) | largest real part (1/s) "
-             "| Jacobian check | meets issue 12 |",
-             "|---|---|---|---|---|---|---|---|---|"]
+    lines = ["| arm | shape | mode | velocity error (%) | force error (%) | eigenvalue error (%) | against the prediction (%) "
+             "| largest real part (1/s) | Jacobian check | meets issue 12 |",
+             "|---|---|---|---|---|---|---|---|---|---|"]
     for r in results:
+        predicted = f"{100 * r['eigenvalue_error_predicted']:.2f}" if r["predicted_shifts"] else "(no shift)"
         check = "agrees" if "agree" in r["jacobian_check"] and "DISAGREE" not in r["jacobian_check"] else "central differences"
         lines.append(f"| {r['arm']} | {r['shape']} | {r['mode']} | {r['velocity_error_percent']:.2f} | "
-                     f"{r['force_error_percent']:.3f} | {100 * r['eigenvalue_error']:.2f} | {r['max_real_part']:.2g} | "
+                     f"{r['force_error_percent']:.3f} | {100 * r['eigenvalue_error']:.2f} | {predicted} | {r['max_real_part']:.2g} | "
                      f"{check} | {'yes' if r['passed'] else '**no**'} |")
     return "\n".join(lines)
 

@@ -297,7 +297,11 @@ def command_analyze(args):
                      f"({100 * shown.relative_error[i]:.2f} % from it): see [{sorted(shifted).index(i) + 1}]")
         print(line)
     for n, i in enumerate(sorted(shifted)):
-        print(f"  [{n + 1}] {_fmt([shifted[i].designed])} -> {_fmt([shifted[i].predicted])}: {shifted[i].reason}")
+        # one reason per run of shifts that share it (an impedance's rows meeting one contact)
+        following = sorted(shifted)[n + 1] if n + 1 < len(shifted) else None
+        last = following is None or shifted[following].reason != shifted[i].reason
+        print(f"  [{n + 1}] {_fmt([shifted[i].designed])} -> {_fmt([shifted[i].predicted])}"
+              + (f": {shifted[i].reason}" if last else ";"))
     print(f"  marginal (theory: {len(match.marginal_partners)} x 0, unregulated positions): "
           f"{_fmt(match.marginal_partners)}")
     other, nyquist = nyquist_split(match.extra, period)

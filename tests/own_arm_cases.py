@@ -123,6 +123,10 @@ def run(arm_name, shape, mode, cache_dir):
         "duration": cfg.duration,
         "eigenvalue_error": float(np.max(match.relative_error)),
         "eigenvalues_matched": bool(match.matched),
+        # impedance-force: against the design with the contact's measured stiffness and damping
+        # along the rows (analysis.environment), where they move a designed root
+        "eigenvalue_error_predicted": float(np.max((linearization.shifted_match or match).relative_error)),
+        "predicted_shifts": len(linearization.shifts),
         "max_real_part": float(np.max(linearization.eigenvalues.real)),
         "jacobian_check": linearization.jacobian_check.summary(),
         "seconds": time.perf_counter() - started,
