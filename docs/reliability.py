@@ -40,9 +40,11 @@ EXPLANATIONS = """\
 `HybridController`). A start off the surface (`start.in_contact: false`) or a surface that moves
 away is handled by a state machine TARE -> APPROACH -> CONTACT (-> APPROACH on loss, -> HOLD when
 no surface is found within `max_travel`). Off the surface the controller replaces the force rows'
-a_f = 0 by the guarded move C-ddot = -K_a (C-dot - s n_C) (n_C = -F_d / |F_d|), sends no force
-feedforward along them and freezes the force integral (anti-windup: a lost contact does not wind
-it up). Contact is declared when the force along F_d reaches 30 % of |F_d|, lost when it stays below
+a_f = 0 by the guarded move C-ddot = -2 K_a (C-dot - s n_C) - K_a^2 (C - C_r) (n_C = -F_d / |F_d|;
+C_r the supervisor's approach reference, moving at s n_C from C at the start of APPROACH: a
+velocity servo with integral action, double pole at -K_a, which cannot stall against the surface
+below the contact threshold), sends no force feedforward along them and freezes the force
+integral (anti-windup: a lost contact does not wind it up). Contact is declared when the force along F_d reaches 30 % of |F_d|, lost when it stays below
 10 % for 10 ms. The re-contact bound is the time the guarded move needs in the worst case:
 the loss dwell, the lift at the approach speed, and three time constants 1/K_a of the servo.
 The impact grows with the approach speed (the speed sweep rows): with this pad (5 MPa, 20 mm ball)

@@ -70,6 +70,7 @@ def _random_inputs(controller, q0, rng, spread):
               "desired_acceleration": rng.normal(scale=0.5, size=k), "desired_force": rng.normal(-10, 5, size=m)}
     if controller.get_contact_phase_input_port() is not None:
         inputs["contact_phase"] = np.array([float(rng.integers(4))])
+        inputs["approach_reference"] = rng.normal(scale=0.01, size=m)
     return inputs
 
 

@@ -96,11 +96,14 @@ def test_the_compensations_cancel_the_forces_the_paper_assumes_zero():
 def test_guarded_move_approaches_along_the_pressing_direction():
     mask = np.array([1.0, 0.0])
     desired_force = np.array([-10.0, 5.0])                         # F on the robot: it pushes along +C
-    at_rest = np.zeros(2)
-    approach = guarded_acceleration(at_rest, desired_force, mask, ContactPhase.APPROACH, 0.02, 30.0)
-    np.testing.assert_allclose(approach, [30.0 * 0.02, 0.0])        # -K_a (0 - s n_C), n_C = +1, row 1 held
-    hold = guarded_acceleration(np.array([0.1, 0.0]), desired_force, mask, ContactPhase.HOLD, 0.02, 30.0)
-    np.testing.assert_allclose(hold, [-3.0, 0.0])                  # s = 0 in HOLD: brake C-dot
+    at_rest, C, C_r = np.zeros(2), np.array([0.002, 0.5]), np.array([0.003, -0.5])
+    approach = guarded_acceleration(C, at_rest, C, desired_force, mask, ContactPhase.APPROACH, 0.02, 30.0)
+    np.testing.assert_allclose(approach, [2 * 30.0 * 0.02, 0.0])    # -2 K_a (0 - s n_C), n_C = +1, row 1 held
+    # Behind the reference by 1 mm: - K_a^2 (C - C_r) adds 900 * 0.001 (integral action).
+    behind = guarded_acceleration(C, at_rest, C_r, desired_force, mask, ContactPhase.APPROACH, 0.02, 30.0)
+    np.testing.assert_allclose(behind, [2 * 30.0 * 0.02 + 900.0 * 0.001, 0.0])
+    hold = guarded_acceleration(C, np.array([0.1, 0.0]), C, desired_force, mask, ContactPhase.HOLD, 0.02, 30.0)
+    np.testing.assert_allclose(hold, [-6.0, 0.0])                  # s = 0 in HOLD: brake C-dot
 
 
 def test_impedance_compensation_splits_k0_over_motion_rows(rng):

@@ -108,13 +108,14 @@ def step(dut, state, force, constraint=0.0, valid=True, steps=1):
 
 def test_supervisor_declares_contact_at_the_threshold_and_loss_after_the_dwell():
     dut = supervisor(contact_threshold=0.3, loss_threshold=0.1, loss_dwell=0.01)
-    approach = np.array([float(ContactPhase.APPROACH), 0.0, 0.0, -0.01])
+    approach = np.array([float(ContactPhase.APPROACH), 0.0, 0.0, -0.01, -0.01])
     assert step(dut, approach, -2.9)[0] == ContactPhase.APPROACH           # p = 2.9 N < 3 N
     contact = step(dut, approach, -3.0)
     assert contact[0] == ContactPhase.CONTACT and contact[2] == 1          # one contact made
     assert step(dut, contact, -0.5, steps=9)[0] == ContactPhase.CONTACT     # 9 ms below 1 N: not yet
     lost = step(dut, contact, -0.5, constraint=0.004, steps=10)
     assert lost[0] == ContactPhase.APPROACH and lost[3] == pytest.approx(0.004)   # C_entry recorded
+    assert lost[4] == pytest.approx(0.004)                                        # C_r reset to C
     # A force back above the loss threshold resets the dwell timer.
     interrupted = step(dut, step(dut, contact, -0.5, steps=9), -5.0)
     assert step(dut, interrupted, -0.5, steps=9)[0] == ContactPhase.CONTACT
@@ -122,22 +123,38 @@ def test_supervisor_declares_contact_at_the_threshold_and_loss_after_the_dwell()
 
 def test_supervisor_makes_no_decision_on_an_invalid_wrench():
     dut = supervisor()
-    contact = np.array([float(ContactPhase.CONTACT), 0.0, 1.0, 0.0])
+    contact = np.array([float(ContactPhase.CONTACT), 0.0, 1.0, 0.0, 0.0])
     assert np.array_equal(step(dut, contact, 0.0, valid=False, steps=100), contact)
-    approach = np.array([float(ContactPhase.APPROACH), 0.0, 0.0, 0.0])
+    approach = np.array([float(ContactPhase.APPROACH), 0.0, 0.0, 0.0, 0.0])
     assert step(dut, approach, -10.0, valid=False)[0] == ContactPhase.APPROACH
 
 
 def test_supervisor_holds_after_the_allowed_travel_and_tares_first():
     dut = supervisor(max_travel=0.01, tare_time=0.05)
-    approach = np.array([float(ContactPhase.APPROACH), 0.0, 0.0, -0.03])
+    approach = np.array([float(ContactPhase.APPROACH), 0.0, 0.0, -0.03, -0.03])
     assert step(dut, approach, 0.0, constraint=-0.0205)[0] == ContactPhase.APPROACH   # 9.5 mm travelled
     hold = step(dut, approach, 0.0, constraint=-0.0195)
     assert hold[0] == ContactPhase.HOLD
     assert step(dut, hold, -4.0)[0] == ContactPhase.CONTACT                          # the surface came to us
-    tare = np.array([float(ContactPhase.TARE), 0.0, 0.0, 0.0])
+    tare = np.array([float(ContactPhase.TARE), 0.0, 0.0, 0.0, 0.0])
     assert step(dut, tare, 0.0, steps=49)[0] == ContactPhase.TARE
     assert step(dut, tare, 0.0, constraint=-0.01, steps=50)[0] == ContactPhase.APPROACH
+
+
+def test_supervisor_reference_moves_at_the_approach_speed_in_approach_only():
+    """C_r: C when APPROACH begins, then + h s n_C per period (n_C = +1 for F_d = -10 N), standing in HOLD
+    and CONTACT: C - C_r is the integral of the guarded move's velocity error since APPROACH began."""
+    dut = supervisor(approach_speed=0.02, max_travel=0.01)
+    tare = np.array([float(ContactPhase.TARE), 0.0, 0.0, 0.0, 0.0])
+    entered = step(dut, tare, 0.0, constraint=-0.01)                           # tare_time 0: APPROACH now
+    assert entered[0] == ContactPhase.APPROACH and entered[4] == pytest.approx(-0.01)
+    moving = step(dut, entered, 0.0, constraint=-0.01, steps=100)                # the arm stays put
+    assert moving[0] == ContactPhase.APPROACH and moving[4] == pytest.approx(-0.01 + 100 * 1e-3 * 0.02)
+    hold = step(dut, moving, 0.0, constraint=0.0005)                              # 10.5 mm travelled
+    assert hold[0] == ContactPhase.HOLD and hold[4] == moving[4]
+    assert step(dut, hold, 0.0, steps=50)[4] == moving[4]                         # standing in HOLD
+    contact = step(dut, moving, -3.0, constraint=-0.009)
+    assert contact[0] == ContactPhase.CONTACT and contact[4] == moving[4]
 
 
 # ------------------------------------------------------------------------------------------------
@@ -243,7 +260,7 @@ def controller(window_parts, **arguments):
                             control_period=1e-3, **arguments)
 
 
-def fix(dut, context, q, v, wrench=np.zeros(6), phase=None, desired_force=-10.0):
+def fix(dut, context, q, v, wrench=np.zeros(6), phase=None, desired_force=-10.0, reference=0.0):
     dut.GetInputPort("estimated_state").FixValue(context, np.concatenate([q, v]))
     dut.GetInputPort("measured_wrench").FixValue(context, wrench)
     dut.GetInputPort("desired_velocity").FixValue(context, [0.1, 0.0])
@@ -251,12 +268,13 @@ def fix(dut, context, q, v, wrench=np.zeros(6), phase=None, desired_force=-10.0)
     dut.GetInputPort("desired_force").FixValue(context, [desired_force])
     if phase is not None:
         dut.GetInputPort("contact_phase").FixValue(context, [float(phase)])
+        dut.GetInputPort("approach_reference").FixValue(context, [reference])
 
 
 @pytest.mark.parametrize("phase", [ContactPhase.APPROACH, ContactPhase.HOLD, ContactPhase.TARE])
 def test_guarded_move_produces_its_constraint_acceleration_in_free_space(window_parts, phase, rng):
-    """Off the surface, the torque makes C-ddot = -K_a (C-dot - s n_C) and the velocity rows' designed
-    acceleration, checked with the plant's forward dynamics; xi does not integrate."""
+    """Off the surface, the torque makes C-ddot = -2 K_a (C-dot - s n_C) - K_a^2 (C - C_r) and the
+    velocity rows' designed acceleration, checked with the plant's forward dynamics; xi does not integrate."""
     plant, robot, space = window_parts
     supervision = SupervisionConfig(approach_speed=0.02, approach_gain=30.0)
     dut = controller(window_parts, guarded_move=supervision)
@@ -264,7 +282,7 @@ def test_guarded_move_produces_its_constraint_acceleration_in_free_space(window_
     context.SetDiscreteState(0, np.array([0.3, 0.0, 0.0, 0.0]))
     q = WINDOW.inverse_kinematics(WINDOW.default_config(), 0.9, 0.97, 1.5)
     v = rng.normal(size=3) * 0.2
-    fix(dut, context, q, v, phase=phase)
+    fix(dut, context, q, v, phase=phase, reference=0.004)
     update = dut.EvalUniquePeriodicDiscreteUpdate(context).get_vector(0).value()
     tau, xi = update[1:], update[0]
     assert xi == 0.3                                                    # frozen off the surface
@@ -279,8 +297,9 @@ def test_guarded_move_produces_its_constraint_acceleration_in_free_space(window_
     r_ddot = task.jacobian @ q_ddot + task.bias
     C_dot = values.force_projection @ task.velocity
     speed = 0.02 if phase is ContactPhase.APPROACH else 0.0
+    C = values.constraint_value
     np.testing.assert_allclose(values.force_projection @ r_ddot + values.force_curvature,
-                               -30.0 * (C_dot - speed * 1.0), atol=1e-9)          # n_C = +1: up, into the window
+                               -60.0 * (C_dot - speed * 1.0) - 900.0 * (C - 0.004), atol=1e-9)  # n_C = +1: up
     velocity_error = values.velocity_projection @ task.velocity - [0.1, 0.0]
     np.testing.assert_allclose(values.velocity_projection @ r_ddot + values.velocity_curvature,
                                -np.diag([10.0, 8.0]) @ velocity_error, atol=1e-9)

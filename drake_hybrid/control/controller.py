@@ -69,6 +69,7 @@ def HybridController_(T):
             - desired_acceleration
             - desired_force
             - contact_phase (only with guarded_move)
+            - approach_reference (only with guarded_move)
             output_ports:
             - actuation
             - velocity_error
@@ -89,6 +90,7 @@ def HybridController_(T):
         desired_acceleration  k     r-ddot_pd (its derivative along the trajectory)
         desired_force         m     F_d, in the coordinates of the constraint's E_f
         contact_phase         1     phases.ContactPhase (only with ``guarded_move``)
+        approach_reference    m     C_r, the guarded move's reference (only with ``guarded_move``)
         actuation             n_u   joint torques mapped to the actuators
         velocity_error        k     e_p' = E_p r-dot - r-dot_pd
         force_error           m     e_f = F - F_d
@@ -167,8 +169,10 @@ def HybridController_(T):
           ``KinematicSingularityWarning`` the first time;
         * contact not there (``guarded_move`` given): with ``contact_phase`` not
           CONTACT the force-controlled rows of [a_p; a_f] become the guarded move
-          a_f = -K_a (C-dot - s n_C) (n_C = -F_d / |F_d|, the pressing direction;
-          s = approach_speed in APPROACH, 0 in TARE and HOLD), u_f = 0 on them and
+          a_f = -2 K_a (C-dot - s n_C) - K_a^2 (C - C_r) (n_C = -F_d / |F_d|, the
+          pressing direction; s = approach_speed in APPROACH, 0 in TARE and HOLD; C_r
+          from ``approach_reference``, moving at s n_C in APPROACH: integral action,
+          ``law.guarded_acceleration``), u_f = 0 on them and
           xi is frozen (anti-windup while off the surface). The velocity rows keep
           their law.
 
@@ -193,7 +197,7 @@ def HybridController_(T):
             guarded_move: None, or an object with ``approach_speed`` (units of C
                 per second, >= 0) and ``approach_gain`` (K_a, 1/s), e.g. a
                 ``supervision.SupervisionConfig``: declares the ``contact_phase``
-                input and the guarded move off the surface.
+                and ``approach_reference`` inputs and the guarded move off the surface.
             plant_time_step: the simulated plant's step h (0: continuous). On a discrete plant the
                 model's joint damping B is compensated on the predicted end-of-step velocity,
                 B (v + h a*), as the solver applies it implicitly (``control.damping``); a
@@ -315,9 +319,10 @@ def HybridController_(T):
             self._velocity_port = self.DeclareVectorInputPort("desired_velocity", k)
             self._acceleration_port = self.DeclareVectorInputPort("desired_acceleration", k)
             self._force_port = self.DeclareVectorInputPort("desired_force", m)
-            self._phase_port = None
+            self._phase_port = self._reference_port = None
             if guarded_move is not None:
                 self._phase_port = self.DeclareVectorInputPort("contact_phase", 1)
+                self._reference_port = self.DeclareVectorInputPort("approach_reference", m)
 
             integrated = m + (k if self.mode.integrates_position else 0)
             self._integrated_size = integrated
@@ -378,6 +383,10 @@ def HybridController_(T):
             """The ``contact_phase`` input (only with ``guarded_move``; else None)."""
             return self._phase_port
 
+        def get_approach_reference_input_port(self):
+            """The ``approach_reference`` input (only with ``guarded_move``; else None)."""
+            return self._reference_port
+
         def diagnostics(self, context):
             """What the protections did in the evaluation at ``context``: a dict with the contact
             phase, the saturation scale s, whether an actuator was clipped, sigma_min(J) (None
@@ -428,17 +437,20 @@ def HybridController_(T):
             integrals = self._integrals(context)
             wrench = self._wrench_port.Eval(context)
             phase = self._contact_phase(context)
+            # C_r, read off the surface only (in CONTACT the law does not use it).
+            reference = (self._reference_port.Eval(context) if phase is not ContactPhase.CONTACT
+                         else np.zeros(self.force_size))
             solution = None
             if self.fast_law is not None:              # None: a check failed, the generic law raises (or copes)
                 solution = self.fast_law.evaluate(plant_context, forces, state[self.num_joints:], integrals,
                                                   desired_velocity, desired_acceleration, desired_force, wrench,
-                                                  phase)
+                                                  phase, reference)
             if solution is None:
                 self._check_finite_commands(desired_velocity, desired_acceleration, desired_force)
                 solution = evaluate_law(
                     self._law, self.constraint_space, self.kinematics.evaluate(plant_context), self._plant,
                     plant_context, forces, integrals, desired_velocity, desired_acceleration, desired_force, wrench,
-                    phase)
+                    phase, reference)
             if solution.singularity_damping > 0:
                 warn_singularity(self, solution.smallest_singular_value, self._max_joint_acceleration)
             return solution

@@ -569,7 +569,8 @@ def finish_inverse_dynamics(out, inverse_dynamics, base_torque, reals, ints):
 
 @compiled
 def law_kernel(x, nu, J, bias, C, E_f, curvature, E_f_dot, E_p, E_p_dot_nu, v, desired_velocity,
-               desired_acceleration, desired_force, wrench, integrals, phase, M, base_torque, reals, ints):
+               desired_acceleration, desired_force, wrench, integrals, phase, approach_reference, M, base_torque,
+               reals, ints):
     """(status, out): DONE (``out`` complete), FALLBACK (run the generic law: it raises or handles the
     case) or NEEDS_INVERSE_DYNAMICS (n = d: q-ddot and tau_f are at the end of ``out``; call
     ``finish_inverse_dynamics`` with ID(q, q-dot, q-ddot))."""
@@ -665,7 +666,8 @@ def law_kernel(x, nu, J, bias, C, E_f, curvature, E_f_dot, E_p, E_p_dot_nu, v, d
         norm = math.sqrt(pressing @ pressing)
         direction = pressing / norm if norm > 0 else pressing
         speed = reals[R_APPROACH_SPEED] if phase == PHASE_APPROACH else 0.0
-        a_f = a_f + -reals[R_APPROACH_GAIN] * (C_dot - speed * direction) * mask
+        gain = reals[R_APPROACH_GAIN]                                  # - K_a^2 (C - C_r): integral action
+        a_f = a_f + (-2.0 * gain * (C_dot - speed * direction) - gain * gain * (C - approach_reference)) * mask
     rhs = np.empty(d)
     rhs[:k] = a_p - E_p_dot_nu
     rhs[k:] = -curvature + a_f
@@ -771,8 +773,8 @@ def store_terms(terms, x, nu, J, bias, C, E_f, curvature, E_f_dot, E_p, E_p_dot_
 
 
 @compiled
-def law_from_terms(terms, v, desired_velocity, desired_acceleration, desired_force, wrench, integrals, phase, M,
-                   base_torque, reals, ints):
+def law_from_terms(terms, v, desired_velocity, desired_acceleration, desired_force, wrench, integrals, phase,
+                   approach_reference, M, base_torque, reals, ints):
     """``law_kernel`` on the quantities ``store_terms`` wrote."""
     n, d, m, k, configuration = ints[I_N], ints[I_D], ints[I_M], ints[I_K], ints[I_CONFIGURATION]
     s = 0
@@ -795,4 +797,5 @@ def law_from_terms(terms, v, desired_velocity, desired_acceleration, desired_for
     E_p = terms[s:s + k * d].reshape((k, d))
     E_p_dot_nu = terms[s + k * d:s + k * d + k]
     return law_kernel(x, nu, J, bias, C, E_f, curvature, E_f_dot, E_p, E_p_dot_nu, v, desired_velocity,
-                      desired_acceleration, desired_force, wrench, integrals, phase, M, base_torque, reals, ints)
+                      desired_acceleration, desired_force, wrench, integrals, phase, approach_reference, M,
+                      base_torque, reals, ints)

@@ -284,9 +284,10 @@ class FastLaw:
         return cls(load_generated(source), constants[0], constants[1], controller)
 
     def evaluate(self, plant_context, forces, v, integrals, desired_velocity, desired_acceleration, desired_force,
-                 wrench, phase):
+                 wrench, phase, approach_reference):
         """The ControlSolution, or None when the generic law must run (it raises or handles the case);
-        ``v``: the plant context's generalized velocities (from the state the controller set)."""
+        ``v``: the plant context's generalized velocities (from the state the controller set);
+        ``approach_reference``: the guarded move's C_r (m)."""
         plant, world, frame, point = self._plant, self._world, self._frame, self._point
         X = plant.CalcRelativeTransform(plant_context, world, frame).GetAsMatrix34()
         J_g = plant.CalcJacobianSpatialVelocity(plant_context, JacobianWrtVariable.kV, frame, point, world, world)
@@ -307,8 +308,8 @@ class FastLaw:
             start = time.perf_counter()
             try:
                 self._terms_into(terms, X, J_g, A_bias, v, reals, ints)
-                self._law(terms, v, desired_velocity, desired_acceleration, desired_force, wrench, integrals, phase, M,
-                          base, reals, ints)
+                self._law(terms, v, desired_velocity, desired_acceleration, desired_force, wrench, integrals, phase,
+                          approach_reference, M, base, reals, ints)
             except Exception as error:
                 self.disabled = True
                 message = " ".join(str(error).split())[:200]
@@ -320,7 +321,7 @@ class FastLaw:
             self.fallbacks += 1                       # the chart's singularity: the generic law raises
             return None
         status, out = self._law(terms, v, desired_velocity, desired_acceleration, desired_force, wrench, integrals,
-                                phase, M, base, reals, ints)
+                                phase, approach_reference, M, base, reals, ints)
         if status == NEEDS_INVERSE_DYNAMICS:
             torque = plant.CalcInverseDynamics(plant_context, out[self._joint_acceleration_slice], forces)
             status = self._finish(out, torque, base, reals, ints)

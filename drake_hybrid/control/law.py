@@ -17,7 +17,7 @@ force on the robot, §0; k = d - m velocity rows, m force rows)::
     F_c = -F_v                          (velocity and position modes)        tangential_compensation
     F_h = -F on the held rows           (velocity and position modes)        held_row_compensation
     a_f = -3 w_c C-dot - 2 w_c^2 C      (kinematic rows)             held_row_acceleration
-    a_f = -K_a (C-dot - s n_C)          (off the surface)            guarded_acceleration
+    a_f = -2 K_a (C-dot - s n_C) - K_a^2 (C - C_r)   (off the surface)   guarded_acceleration
     r-ddot* = E^-1 ([a_p; a_f] - E-dot r-dot)             (3.0-11)   ConstraintSpace.task_acceleration
     u_f = -F_d + K_fp e_f + K_fi xi (+ F_h)               (3.1-12)   force_command
     tau_f = J^T (E_f^T u_f + E_p^T (F_m + F_c))                      force_torque
@@ -268,17 +268,26 @@ def held_row_acceleration(constraint_value, constraint_rate, constraint_frequenc
     return (-3.0 * w_c * constraint_rate - 2.0 * w_c * w_c * constraint_value) * (1.0 - force_controlled)
 
 
-def guarded_acceleration(constraint_rate, desired_force, force_controlled, phase, approach_speed, approach_gain):
-    """a_f = -K_a (C-dot - s n_C) on the force-controlled rows, off the surface (0 on kinematic rows).
+def guarded_acceleration(constraint_value, constraint_rate, approach_reference, desired_force, force_controlled,
+                         phase, approach_speed, approach_gain):
+    """a_f = -2 K_a (C-dot - s n_C) - K_a^2 (C - C_r) on the force-controlled rows, off the surface
+    (0 on kinematic rows): a critically damped servo to the reference C_r, double pole at -K_a.
 
-    n_C = -F_d / |F_d| is the way the robot pushes; s = ``approach_speed`` in APPROACH, 0 in TARE
-    and HOLD.
+    n_C = -F_d / |F_d| is the way the robot pushes; s = ``approach_speed`` in APPROACH, 0 in TARE and
+    HOLD; C_r = ``approach_reference``, the supervisor's reference: C at the start of APPROACH, then
+    moving at s n_C (standing in TARE and HOLD). C - C_r is the integral of the velocity error
+    C-dot - s n_C since APPROACH began: integral action. A velocity servo alone, -K_a (C-dot - s n_C),
+    stalls against the surface at the pressing force Lambda K_a s, which may lie below the contact
+    threshold (1.45 N against 3 N for the UR5e on the sphere); with the integral the force keeps
+    rising, at Lambda K_a^2 s per second, until the supervisor declares contact, whatever the arm's
+    task inertia Lambda and the contact's damping. In free space C tracks the ramp C_r with no lag.
     """
     pressing = -value(desired_force) * force_controlled
     norm = np.linalg.norm(pressing)
     direction = pressing / norm if norm > 0 else pressing
     speed = approach_speed if phase is ContactPhase.APPROACH else 0.0
-    return -approach_gain * (constraint_rate - speed * direction) * force_controlled
+    return (-2.0 * approach_gain * (constraint_rate - speed * direction)
+            - approach_gain * approach_gain * (constraint_value - approach_reference)) * force_controlled
 
 
 def force_command(desired_force, gains, force_error, force_integral, force_controlled, in_contact):
@@ -344,12 +353,13 @@ def integral_rates(velocity_error, force_error, frozen, in_contact):
 # ------------------------------------------------------------------------------------------------
 
 def evaluate_law(constants, space, kinematics, plant, plant_context, forces, integrals, desired_velocity,
-                 desired_acceleration, desired_force, wrench, phase):
+                 desired_acceleration, desired_force, wrench, phase, approach_reference=None):
     """One evaluation of the law (the lines of the module docstring, in order) -> ControlSolution.
 
     ``kinematics``: a core.kinematics evaluation (configuration r, velocity r-dot, J, J-dot q-dot);
     ``integrals``: [xi; e_p] (e_p only in position and impedance modes); ``wrench``: the measured
-    SpatialForce vector [n; f] on the end effector by the environment; ``phase``: ContactPhase.
+    SpatialForce vector [n; f] on the end effector by the environment; ``phase``: ContactPhase;
+    ``approach_reference``: the guarded move's C_r (needed off the surface only).
     Raises FloatingPointError if the actuation is not finite.
     """
     gains, mode, mask = constants.gains, constants.mode, constants.force_controlled
@@ -384,8 +394,8 @@ def evaluate_law(constants, space, kinematics, plant, plant_context, forces, int
         a_p = a_p + on_velocity_rows
         a_f = a_f + on_force_rows
     if not in_contact:
-        a_f = a_f + guarded_acceleration(C_dot, desired_force, mask, phase, constants.approach_speed,
-                                         constants.approach_gain)
+        a_f = a_f + guarded_acceleration(values.constraint_value, C_dot, approach_reference, desired_force, mask,
+                                         phase, constants.approach_speed, constants.approach_gain)
     task_acceleration = space.task_acceleration(values, a_p, a_f)       # (3.0-11)
 
     u_f = force_command(desired_force, gains, e_f, xi, mask, in_contact)

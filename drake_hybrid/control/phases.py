@@ -7,8 +7,9 @@ class ContactPhase(enum.IntEnum):
     """Phases of ``supervision.ContactSupervisor``; the value travels on its ``contact_phase`` port.
 
     In every phase but CONTACT the controller runs the guarded move on the force-controlled rows
-    of C: C-ddot = -K_a (C-dot - s n_C) with n_C the pressing direction in C's coordinates and
-    s the approach speed (APPROACH) or 0 (TARE, HOLD); no force feedback, integrals frozen.
+    of C: C-ddot = -2 K_a (C-dot - s n_C) - K_a^2 (C - C_r) with n_C the pressing direction in C's
+    coordinates, s the approach speed (APPROACH) or 0 (TARE, HOLD) and C_r the supervisor's approach
+    reference (moving at s n_C in APPROACH); no force feedback, the controller's integrals frozen.
     """
 
     TARE = 0        # in free space, holding still while the wrench conditioner measures the sensor's bias

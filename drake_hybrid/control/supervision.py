@@ -22,6 +22,16 @@ a sensor dropout longer than it bridges) nothing changes and the timers hold. An
 the surface: the controller freezes xi in every phase but CONTACT, so a lost contact does not
 wind up the force integral; on re-contact xi resumes from its value before the loss.
 
+The guarded move servoes C to the approach reference C_r (the ``approach_reference`` output):
+C_r = C_entry when APPROACH begins, C_r += h s n_C every period in APPROACH (it moves at the
+approach speed s into the surface whether C follows or not; also while the wrench is invalid),
+and C_r stands still in TARE, HOLD and CONTACT. The controller's guarded move,
+C-ddot = -2 K_a (C-dot - s n_C) - K_a^2 (C - C_r) (``law.guarded_acceleration``), is a velocity
+servo with integral action: C - C_r is the integral of its velocity error since APPROACH began
+(reset there, unused in CONTACT). Against the surface the pressing force keeps rising, at
+Lambda K_a^2 s per second, until it crosses the contact threshold, whatever the arm's task inertia
+Lambda and the contact's damping; the velocity servo alone stalls at a force proportional to Lambda.
+
 A lost contact is re-acquired by the same guarded move: the arm moves along n_C at the
 approach speed s until the force exceeds the contact threshold. The impact at re-contact is
 that of a pad arriving at speed s (the peak force grows with s and the pad's stiffness; the
@@ -51,7 +61,8 @@ class SupervisionConfig:
 
     approach_speed: s, along the pressing direction, in units of C per second (m/s for the
         window and the sphere).
-    approach_gain: K_a (1/s), the guarded move's velocity gain.
+    approach_gain: K_a (1/s), the guarded move's bandwidth: its servo to the approach reference has a
+        double pole at -K_a.
     contact_threshold: p at which contact is declared, as a fraction of |F_d|.
     loss_threshold: p below which (for ``loss_dwell`` seconds) contact is declared lost.
     max_travel: how far (units of C) the guarded move may go without finding the surface.
@@ -95,6 +106,7 @@ def ContactSupervisor_(T):
             output_ports:
             - contact_phase
             - contact_count
+            - approach_reference
 
         ==================  ====  ==============================================================
         force               m     F (the controller's ``force`` output)
@@ -103,9 +115,10 @@ def ContactSupervisor_(T):
         measured_wrench     6     the wrench the controller reads (NaN entries: no decision)
         contact_phase       1     phases.ContactPhase (state)
         contact_count       1     how many times CONTACT was entered (state)
+        approach_reference  m     C_r, the guarded move's reference (state)
         ==================  ====  ==============================================================
 
-        Discrete state [phase, timer, contact count, C_entry (m)], updated every ``period`` at
+        Discrete state [phase, timer, contact count, C_entry (m), C_r (m)], updated every ``period`` at
         the controller's tick (k h - SAMPLE_LEAD h), from the controller's outputs at that tick:
         a transition takes effect at the next tick (one period of latency).
 
@@ -140,12 +153,14 @@ def ContactSupervisor_(T):
             self._desired_force_port = self.DeclareVectorInputPort("desired_force", m)
             self._constraint_port = self.DeclareVectorInputPort("constraint_value", m)
             self._wrench_port = self.DeclareVectorInputPort("measured_wrench", 6)
-            initial = np.zeros(3 + m)
+            initial = np.zeros(3 + 2 * m)
             initial[0] = float(self.initial_phase)
             self._state_index = self.DeclareDiscreteState(initial)
             self.DeclarePeriodicDiscreteUpdateEvent(self.period, self.period * (1.0 - SAMPLE_LEAD), self._update)
             self.DeclareVectorOutputPort("contact_phase", 1, self._calc_phase, prerequisites_of_calc={self.xd_ticket()})
             self.DeclareVectorOutputPort("contact_count", 1, self._calc_count, prerequisites_of_calc={self.xd_ticket()})
+            self.DeclareVectorOutputPort("approach_reference", m, self._calc_reference,
+                                         prerequisites_of_calc={self.xd_ticket()})
 
         def _construct_copy(self, other, converter=None):
             Impl._construct(self, other.config, other.force_size, other.kinematic_rows, other.period,
@@ -155,13 +170,14 @@ def ContactSupervisor_(T):
             return self.GetOutputPort("contact_phase")
 
         def set_initial_state(self, context, phase, constraint_value):
-            """Start in ``phase`` with C_entry = ``constraint_value`` (C at the start: the travel of a
-            first APPROACH counts from there), timers and count reset."""
+            """Start in ``phase`` with C_entry = C_r = ``constraint_value`` (C at the start: the travel
+            and the reference of a first APPROACH count from there), timers and count reset."""
             constraint_value = np.asarray(value(constraint_value), dtype=float)
             if constraint_value.shape != (self.force_size,):
                 raise ValueError(f"ContactSupervisor: constraint_value must have {self.force_size} entries, got "
                                  f"{constraint_value.shape}")
-            context.SetDiscreteState(0, np.concatenate([[float(ContactPhase(phase)), 0.0, 0.0], constraint_value]))
+            context.SetDiscreteState(0, np.concatenate([[float(ContactPhase(phase)), 0.0, 0.0], constraint_value,
+                                                        constraint_value]))
 
         def _calc_phase(self, context, output):
             output.SetFromVector(context.get_discrete_state(0).CopyToVector()[:1])
@@ -169,15 +185,18 @@ def ContactSupervisor_(T):
         def _calc_count(self, context, output):
             output.SetFromVector(context.get_discrete_state(0).CopyToVector()[2:3])
 
+        def _calc_reference(self, context, output):
+            output.SetFromVector(context.get_discrete_state(0).CopyToVector()[3 + self.force_size:])
+
         def next_state(self, state, force, desired_force, constraint_value, wrench_valid):
             """The transition of the module docstring (floats): the state after one period."""
-            config, h = self.config, self.period
+            config, h, m = self.config, self.period, self.force_size
             phase, timer, count = ContactPhase(int(state[0])), float(state[1]), float(state[2])
-            entry = np.array(state[3:], dtype=float)
+            entry, reference = np.array(state[3:3 + m], dtype=float), np.array(state[3 + m:], dtype=float)
             commanded = desired_force * self._force_controlled
             magnitude = float(np.linalg.norm(commanded))
             if magnitude == 0:                      # no pressing direction: nothing to supervise
-                return np.concatenate([[float(phase), timer, count], entry])
+                return np.concatenate([[float(phase), timer, count], entry, reference])
             pressing = float(force @ commanded) / magnitude if wrench_valid else None     # p
             direction = -commanded / magnitude                                             # n_C
             touching = pressing is not None and pressing >= config.contact_threshold * magnitude
@@ -185,19 +204,23 @@ def ContactSupervisor_(T):
                 timer += h
                 if timer >= config.tare_time - 0.5 * h:
                     phase, timer, entry = ContactPhase.APPROACH, 0.0, constraint_value.copy()
+                    reference = entry.copy()
             elif phase in (ContactPhase.APPROACH, ContactPhase.HOLD):
                 if touching:
                     phase, timer, count = ContactPhase.CONTACT, 0.0, count + 1
                 elif phase is ContactPhase.APPROACH and direction @ (constraint_value - entry) > config.max_travel:
                     phase, timer = ContactPhase.HOLD, 0.0
+                elif phase is ContactPhase.APPROACH:
+                    reference = reference + h * config.approach_speed * direction     # C_r moves at s n_C
             elif pressing is not None:              # CONTACT, with a valid measurement
                 if pressing < config.loss_threshold * magnitude:
                     timer += h
                     if timer >= config.loss_dwell - 0.5 * h:
                         phase, timer, entry = ContactPhase.APPROACH, 0.0, constraint_value.copy()
+                        reference = entry.copy()
                 else:
                     timer = 0.0
-            return np.concatenate([[float(phase), timer, count], entry])
+            return np.concatenate([[float(phase), timer, count], entry, reference])
 
         def _update(self, context, discrete_state):
             state = value(context.get_discrete_state(0).CopyToVector())

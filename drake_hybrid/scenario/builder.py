@@ -13,6 +13,7 @@ and, when the config asks for them (parts in brackets are optional)::
 
     sensor ─► [SensorFaultInjector] ─faulty_wrench, sequence─► [WrenchConditioner] ─► controller
     controller ─force, constraint_value─► [ContactSupervisor] ─contact_phase─► controller, conditioner
+                                          [ContactSupervisor] ─approach_reference─► controller
     plant ─state─► [JointFriction] ─generalized_force─► plant (model error, simulation only)
 
 with named handles to every part. The same config builds the same diagram in
@@ -218,6 +219,7 @@ def build_scenario(config, meshcat=None, with_loggers=True, sampled_plant_output
         builder.Connect(source.GetOutputPort("desired_force"), supervisor.GetInputPort("desired_force"))
         builder.Connect(wrench_output, supervisor.GetInputPort("measured_wrench"))
         builder.Connect(supervisor.GetOutputPort("contact_phase"), controller.get_contact_phase_input_port())
+        builder.Connect(supervisor.GetOutputPort("approach_reference"), controller.get_approach_reference_input_port())
         if tare:
             builder.Connect(supervisor.GetOutputPort("contact_phase"), conditioner.GetInputPort("contact_phase"))
 

@@ -117,8 +117,8 @@ class ContactConfig:
     # which SAP adds (< 0: Drake's default, 0.1 s each). SAP damps along each face normal of the
     # workpiece, which drags a pad sliding over a curved one (0.24 N at 10 N, 2 cm/s, R 5 cm with
     # Drake's 0.2 s pair; 0.015 N with 0.01 + 0 s): docs/drake_notes.md. Drake's default is kept:
-    # with the lighter damping the guarded move stalls below its contact threshold (it reached it
-    # on the impact's damping force) and two dropout cases exceed their bounds (docs/reliability.md).
+    # with the lighter damping the force misses a 50 ms force step by 0.755 N while the arm
+    # compresses the pad, over the 0.75 N bound of two dropout cases (docs/drake_notes.md).
     relaxation_time: float = -1.0                # s, the pad's
     workpiece_relaxation_time: float = -1.0      # s, the workpiece's
     friction: float = 0.0                        # Coulomb mu (static = dynamic) of pad and workpiece
