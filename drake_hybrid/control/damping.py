@@ -30,12 +30,13 @@ measured contact force J^T F, the constraint's reaction) still meets the implici
     (M + h B)(v+ - v) = h (M + h B) a* + h J^T F    ->    (v+ - v) / h = a* + (M + h B)^-1 J^T F
 
 so within a step the arm answers a force through (M + h B)^-1, not M^-1. The impedance law's K_0
-(3.2-6) cancels that answer (its "- M_p F_v" term, with the force rows' reaction (3.2-9) through
-M_f and M_fp): built from J M^-1 J^T it over-cancels on a joint with large b h / M (the xArm7's
-wrist, b h / M = 11.8: 2.1 % velocity error on a 5 cm sphere against 0.8 %). The law builds
-K_0's blocks from the step's task mobility J (M + h B)^-1 J^T (``step_task_mobility``, same
-condition as ``damping_compensation``); the task inertia that turns a* into torque keeps
-Lambda = (J M^-1 J^T)^-1, since the compensation above already makes the commanded step exact.
+(3.2-6) cancels that answer (its "- S F_v" term, S = M_p - M_fp^T M_f^-1 M_fp: the force rows'
+reaction (3.2-9) acts through the same step): built from J M^-1 J^T it over-cancels on a joint
+with large b h / M (the xArm7's wrist, b h / M = 11.8: 2.07 % velocity error on a 5 cm sphere
+against 0.64 %). The law builds K_0's blocks from the step's task mobility J (M + h B)^-1 J^T
+(``step_task_mobility``, same condition as ``damping_compensation``); the task inertia that turns
+a* into torque keeps Lambda = (J M^-1 J^T)^-1, since the compensation above already makes the
+commanded step exact.
 
 Conditioning: where b h / M_ii > 1, the joint's step is dominated by its damping and the row
 relies on this compensation (a torque 1 + b h / M times the inertial one, so errors in the
