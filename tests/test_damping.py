@@ -302,3 +302,32 @@ def test_k0_from_the_continuous_mobility_misses_the_impedance_on_the_damped_step
     impedance, F_v, _, _, K_0_F_v, K_0_step_F_v = impedance_step(damped_task, False)
     np.testing.assert_allclose(impedance - F_v, K_0_F_v - K_0_step_F_v, atol=1e-9 * np.linalg.norm(F_v))
     assert np.linalg.norm(impedance - F_v) > 0.5 * np.linalg.norm(F_v)
+
+
+def test_the_autodiff_law_builds_k0_from_the_damped_step_too(damped_task):
+    """The AutoDiffXd copy of the impedance controller on the damped discrete step (h = 1 ms) runs
+    step_task_mobility on AutoDiffXd M and gives the float law's actuation; h changes it (K_0 and
+    h B a*), so the equality is not that of two undamped laws."""
+    config = damped_task.default_config(mode="impedance-force")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", JointDampingWarning)
+        scenario = build_scenario(config, with_loggers=False)
+    q = np.asarray(damped_task.start_positions(scenario), dtype=float)
+    inputs = {"estimated_state": np.concatenate([q, [0.1, -0.2, 0.3]]), "desired_velocity": np.array([0.05, 0.0]),
+              "desired_acceleration": np.zeros(2), "desired_force": np.array([10.0]),
+              "measured_wrench": np.array([0.1, -0.3, 0.2, 4.0, -3.0, 2.0])}
+    actuation = {}
+    for h in (1e-3, 0.0):
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", JointDampingWarning)
+            controller = HybridController(scenario.controller_plant, scenario.robot.end_effector_frame,
+                                          scenario.robot.end_effector_point, scenario.constraint_space, config.gains,
+                                          "impedance-force", plant_time_step=h)
+        for system in (controller, controller.ToAutoDiffXd()):
+            context = system.CreateDefaultContext()
+            for name, value in inputs.items():
+                system.GetInputPort(name).FixValue(context, value)
+            u = system.GetOutputPort("actuation").Eval(context)
+            actuation[h, system is controller] = np.array([a.value() if hasattr(a, "value") else a for a in u])
+    np.testing.assert_allclose(actuation[1e-3, False], actuation[1e-3, True], rtol=1e-12, atol=1e-12)
+    assert np.abs(actuation[1e-3, True] - actuation[0.0, True]).max() > 0.1
