@@ -11,7 +11,8 @@ contact face along the workpiece's face normal, which drags the pad over a tesse
 workpiece although mu = 0, and the tessellated contact is stiff along the surface
 (docs/drake_notes.md):
 - impedance-force on the 5 cm cylinder and sphere: the unit-mass impedance yields to both, as
-  designed: its velocity errors are 6.6-27 % and its roots move (21.7-21.8 % on the cylinder,
+  designed: its velocity errors are 6.6-6.9 % (6.6-27 % before K_0 answered the xArm7's damped
+  wrist through the plant's step, control.damping) and its roots move (21.7-21.8 % on the cylinder,
   4.3-4.4 % on the sphere, in the matrix).
 Position-force on the sphere (and the xArm7's cylinder) used to miss its pair (-3, -7) by 7.6-12 %:
 the law split the wrench, which the linearization's 200 Hz low-pass delays, with the current E(x).
