@@ -22,14 +22,19 @@ from pydrake.geometry import HalfSpace
 from pydrake.math import RigidTransform, RotationMatrix
 from pydrake.multibody.parsing import Parser
 from pydrake.multibody.plant import MultibodyPlant
+from pydrake.multibody.tree import JacobianWrtVariable
+from pydrake.systems.analysis import Simulator
 
 from drake_hybrid import ConstraintSpace, GivenVelocityProjection, PoseChart, surface_constraint
 from drake_hybrid.control import law as law_module
+from drake_hybrid.control.controller import HybridController
 from drake_hybrid.control.damping import (JointDampingWarning, damped_joints, damping_compensation, joint_damping,
                                           warn_damped_joints)
 from drake_hybrid.control.fast_law import FastLaw
 from drake_hybrid.control.gains import HybridGains
+from drake_hybrid.control.law import impedance_blocks, impedance_gain
 from drake_hybrid.experiments.simulation import simulate
+from drake_hybrid.scenario.builder import build_scenario
 from drake_hybrid.scenario.custom import (CustomTask, add_actuators, add_rigid_workpiece, attach_pad_tool,
                                           urdf_effort_limits)
 from drake_hybrid.scenario.tasks import register_task
@@ -199,3 +204,130 @@ def test_the_xarm7_spin_row_stalls_without_it(xarm_table_task, monkeypatch):
     # Measured 66.9 %: the spin row lags by 0.33 of 0.5 rad/s.
     assert result.summary["max_velocity_error_percent_after_5_time_constants"] > 30.0
     assert np.abs(result.log["velocity_error"][-1, 4]) > 0.1
+
+
+# -- the impedance's answer to a measured force through the damped step (K_0 from J (M + h B)^-1 J^T) --
+
+def impedance_step(damped_task, fast_law, h=1e-3):
+    """One step of a discrete plant (the damped-wrist 3R arm, b h / M = 9.7, no contact geometry)
+    under the impedance law's actuation and a wrench W = W_0 + lambda W_1 that acts on the arm and is
+    the law's measured wrench, lambda chosen so that the contact row holds: E_f r-ddot + E_f-dot r-dot
+    = 0 (a rigid contact), r-ddot = J (v+ - v) / h + J-dot q-dot. Returns (the velocity rows'
+    e_p'' + K_v e_p' + K_p e_p, F_v, the force loop g_f, its prediction -M_f^-1 M_fp F_v (3.2-9) with
+    the step's blocks, the law's K_0 applied to F_v from J M^-1 J^T and from J (M + h B)^-1 J^T)."""
+    config = damped_task.default_config(mode="impedance-force")
+    step_plant = MultibodyPlant(h)
+    robot = damped_task.add_robot(step_plant, config)
+    step_plant.Finalize()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", JointDampingWarning)
+        scenario = build_scenario(config, with_loggers=False)
+        plant, space, gains = scenario.controller_plant, scenario.constraint_space, config.gains
+        controller = HybridController(plant, robot.end_effector_frame, robot.end_effector_point, space, gains,
+                                      "impedance-force", plant_time_step=h, fast_law=fast_law)
+    q = np.asarray(damped_task.start_positions(scenario), dtype=float) + [0.02, -0.03, 0.04]
+    v = np.array([0.1, -0.2, 0.3])
+    K = controller.validated_gains()
+    context = controller.CreateDefaultContext()
+    xi, e_p = np.array([0.3]), np.array([0.004, -0.02])
+    context.SetContinuousState(np.concatenate([xi, e_p]))
+    desired = {"estimated_state": np.concatenate([q, v]), "desired_velocity": np.array([0.05, 0.0]),
+               "desired_acceleration": np.array([0.1, -0.2]), "desired_force": np.array([10.0])}
+    for name, value in desired.items():
+        controller.GetInputPort(name).FixValue(context, value)
+    frame = step_plant.GetFrameByName(robot.end_effector_frame)
+    step_context = step_plant.CreateDefaultContext()
+    step_plant.SetPositions(step_context, q)
+    J_6 = step_plant.CalcJacobianSpatialVelocity(step_context, JacobianWrtVariable.kV, frame,
+                                                 robot.end_effector_point, step_plant.world_frame(),
+                                                 step_plant.world_frame())
+    plant_context = plant.CreateDefaultContext()
+    plant.SetPositions(plant_context, q)
+    plant.SetVelocities(plant_context, v)
+    task = controller.kinematics.evaluate(plant_context)
+    values = space.evaluate(task.configuration, task.velocity)
+    E_p, E_f, J = values.velocity_projection, values.force_projection, task.jacobian
+
+    def outcome(W):
+        """(step's r-ddot, F_v, F) under the measured wrench W = [n; f] (world, at the point)."""
+        controller.GetInputPort("measured_wrench").FixValue(context, W)
+        u = controller.GetOutputPort("actuation").Eval(context).copy()
+        step_context = step_plant.CreateDefaultContext()
+        step_plant.SetPositions(step_context, q)
+        step_plant.SetVelocities(step_context, v)
+        step_plant.get_actuation_input_port().FixValue(step_context, u)
+        step_plant.get_applied_generalized_force_input_port().FixValue(step_context, J_6.T @ W)
+        Simulator(step_plant, step_context).AdvanceTo(h)                           # one step
+        v_next = step_plant.GetVelocities(step_context)
+        r_ddot = J @ (v_next - v) / h + task.bias
+        return (r_ddot, controller.GetOutputPort("tangential_force").Eval(context).copy(),
+                controller.GetOutputPort("force").Eval(context).copy())
+
+    W_0 = np.array([0.1, -0.3, 0.2, 4.0, -3.0, 2.0])
+    W_1 = np.array([0.05, 0.1, -0.02, 1.0, 2.0, -3.0])
+    (r_0, F_v0, F_0), (r_1, F_v1, F_1) = outcome(W_0), outcome(W_0 + W_1)
+    row = lambda r: E_f @ r + values.force_curvature
+    lam = -row(r_0)[0] / (row(r_1) - row(r_0))[0]
+    r_ddot, F_v, F = r_0 + lam * (r_1 - r_0), F_v0 + lam * (F_v1 - F_v0), F_0 + lam * (F_1 - F_0)
+    np.testing.assert_allclose(row(outcome(W_0 + lam * W_1)[0]), 0.0, atol=1e-9)      # affine: lambda exact
+    velocity_error = E_p @ task.velocity - desired["desired_velocity"]
+    impedance = (E_p @ r_ddot + values.velocity_curvature - desired["desired_acceleration"]
+                 + K.velocity @ velocity_error + K.position @ e_p)
+    g_f = (1.0 + K.force_proportional[0, 0]) * (F[0] - 10.0) + K.force_integral[0, 0] * xi[0]
+    M = plant.CalcMassMatrix(plant_context)
+    mobility = J @ np.linalg.solve(M, J.T)
+    step_mobility = J @ np.linalg.solve(M + h * np.diag(joint_damping(plant)), J.T)
+    M_f, M_fp, _ = impedance_blocks(E_p, E_f, step_mobility)
+    return (impedance, F_v, g_f, -np.linalg.solve(M_f, M_fp @ F_v)[0],
+            impedance_gain(E_p, E_f, mobility) @ F_v, impedance_gain(E_p, E_f, step_mobility) @ F_v)
+
+
+@pytest.mark.parametrize("fast_law", [True, False], ids=["compiled", "generic"])
+def test_the_impedance_answers_a_force_through_the_damped_step(damped_task, fast_law):
+    """On the discrete plant the arm answers a force through (M + h B)^-1 (control.damping): with K_0
+    and the force rows' blocks from J (M + h B)^-1 J^T the step realizes the unit-mass impedance
+    e_p'' + K_v e_p' + K_p e_p = F_v and g_f = -M_f^-1 M_fp F_v (3.2-11) to rounding (measured
+    1e-13 against |F_v| = 2.4)."""
+    impedance, F_v, g_f, g_f_predicted, _, _ = impedance_step(damped_task, fast_law)
+    assert np.linalg.norm(F_v) > 1.0                                          # a real tangential force
+    np.testing.assert_allclose(impedance, F_v, atol=1e-9 * np.linalg.norm(F_v))
+    np.testing.assert_allclose(g_f, g_f_predicted, atol=1e-9 * abs(g_f_predicted))
+
+
+def test_k0_from_the_continuous_mobility_misses_the_impedance_on_the_damped_step(damped_task, monkeypatch):
+    """The law before: K_0 from J M^-1 J^T (the generic law with step_task_mobility bypassed) leaves
+    (K_0 - K_0,step) F_v in e_p'' + K_v e_p' + K_p e_p - F_v: measured (0.41, -2.31) against
+    F_v = (2.40, 0.46) on this wrist (b h / M = 9.7)."""
+    monkeypatch.setattr(law_module, "step_task_mobility", lambda J, M, mobility, damping, step: mobility)
+    impedance, F_v, _, _, K_0_F_v, K_0_step_F_v = impedance_step(damped_task, False)
+    np.testing.assert_allclose(impedance - F_v, K_0_F_v - K_0_step_F_v, atol=1e-9 * np.linalg.norm(F_v))
+    assert np.linalg.norm(impedance - F_v) > 0.5 * np.linalg.norm(F_v)
+
+
+def test_the_autodiff_law_builds_k0_from_the_damped_step_too(damped_task):
+    """The AutoDiffXd copy of the impedance controller on the damped discrete step (h = 1 ms) runs
+    step_task_mobility on AutoDiffXd M and gives the float law's actuation; h changes it (K_0 and
+    h B a*), so the equality is not that of two undamped laws."""
+    config = damped_task.default_config(mode="impedance-force")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", JointDampingWarning)
+        scenario = build_scenario(config, with_loggers=False)
+    q = np.asarray(damped_task.start_positions(scenario), dtype=float)
+    inputs = {"estimated_state": np.concatenate([q, [0.1, -0.2, 0.3]]), "desired_velocity": np.array([0.05, 0.0]),
+              "desired_acceleration": np.zeros(2), "desired_force": np.array([10.0]),
+              "measured_wrench": np.array([0.1, -0.3, 0.2, 4.0, -3.0, 2.0])}
+    actuation = {}
+    for h in (1e-3, 0.0):
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", JointDampingWarning)
+            controller = HybridController(scenario.controller_plant, scenario.robot.end_effector_frame,
+                                          scenario.robot.end_effector_point, scenario.constraint_space, config.gains,
+                                          "impedance-force", plant_time_step=h)
+        for system in (controller, controller.ToAutoDiffXd()):
+            context = system.CreateDefaultContext()
+            for name, value in inputs.items():
+                system.GetInputPort(name).FixValue(context, value)
+            u = system.GetOutputPort("actuation").Eval(context)
+            actuation[h, system is controller] = np.array([a.value() if hasattr(a, "value") else a for a in u])
+    np.testing.assert_allclose(actuation[1e-3, False], actuation[1e-3, True], rtol=1e-12, atol=1e-12)
+    assert np.abs(actuation[1e-3, True] - actuation[0.0, True]).max() > 0.1

@@ -157,10 +157,11 @@ def _damped_start(name, start, rng, joints=None):
 @pytest.mark.parametrize("mode", MODES)
 def test_both_paths_agree_with_the_mechanism_force_the_damping_compensation_and_the_tangential_force(
         task, mode, compensate_tangential_force, rng):
-    """law.mechanism_force (an I_v, symmetric positive definite), damping.damping_compensation (joint
-    damping in the model, a plant step h = 1 ms), law.tangential_compensation on or off and a wrench
-    0.8 ms late (law.measured_forces splits it where it was measured): the controller runs compiled
-    (no fallback) and equals the generic law."""
+    """law.mechanism_force (an I_v, symmetric positive definite), damping.damping_compensation and, in
+    impedance mode, K_0 from damping.step_task_mobility (joint damping in the model, a plant step
+    h = 1 ms), law.tangential_compensation on or off and a wrench 0.8 ms late (law.measured_forces
+    splits it where it was measured): the controller runs compiled (no fallback) and equals the
+    generic law."""
     name, start = task
     damped = _damped_start(name, start, rng, joints=4 if name == "window-washing-4r" else None)
     assert np.all(joint_damping(damped[0]) > 0)

@@ -35,6 +35,7 @@ from pydrake.systems.primitives import Linearize
 from drake_hybrid.analysis.derivatives import JACOBIAN_TOLERANCE, JacobianCheck, checked_state_jacobian
 from drake_hybrid.analysis.environment import impedance_environment_shifts
 from drake_hybrid.analysis.modes import diagnose_unstable_modes, explained_modes
+from drake_hybrid.control.damping import step_task_mobility
 from drake_hybrid.control.gains import ControlMode
 from drake_hybrid.control.law import impedance_blocks
 from drake_hybrid.control.sampling import SAMPLE_LEAD
@@ -526,7 +527,8 @@ def impedance_realization(scenario, log):
     * ``force_loop`` and ``force_loop_predicted``: g_f = (I + K_fp) e_f + K_fi xi on the
       force-controlled rows (xi rebuilt from the logged e_f and xi(0)) and its prediction
       -M_f^-1 M_fp F_v (3.2-11, second line), with the partition of HybridController (kinematic
-      rows count as motion rows, their measured force with F_v).
+      rows count as motion rows, their measured force with F_v) and its blocks (from
+      J (M + h B)^-1 J^T on a discrete plant with joint damping, control.damping).
     """
     controller = scenario.controller
     gains = controller.validated_gains()
@@ -550,7 +552,10 @@ def impedance_realization(scenario, log):
         plant.SetVelocities(context, v)
         task = controller.kinematics.evaluate(context)
         values = scenario.constraint_space.evaluate(task.configuration, task.velocity)
-        mobility = task.jacobian @ np.linalg.solve(plant.CalcMassMatrix(context), task.jacobian.T)
+        M = plant.CalcMassMatrix(context)
+        mobility = task.jacobian @ np.linalg.solve(M, task.jacobian.T)
+        # the law's: J (M + h B)^-1 J^T on a discrete plant with joint damping (control.damping)
+        mobility = step_task_mobility(task.jacobian, M, mobility, controller._damping, controller.plant_time_step)
         M_f, M_fp, _ = impedance_blocks(values.velocity_projection, values.force_projection, mobility, kinematic)
         motion_force = np.concatenate([F_tangent, F[kinematic]])
         predicted.append(-np.linalg.solve(M_f, M_fp @ motion_force))

@@ -24,6 +24,20 @@ the law adds it to its torque (``HybridController``, ``plant_time_step``). On a 
 (h = 0) it vanishes. With a control period of several plant steps the held torque uses the
 tick's a* for each of them: exact in the first step, to O(h) after.
 
+The compensation makes the *commanded* step exact; a force the law does not command (the
+measured contact force J^T F, the constraint's reaction) still meets the implicit damping::
+
+    (M + h B)(v+ - v) = h (M + h B) a* + h J^T F    ->    (v+ - v) / h = a* + (M + h B)^-1 J^T F
+
+so within a step the arm answers a force through (M + h B)^-1, not M^-1. The impedance law's K_0
+(3.2-6) cancels that answer (its "- S F_v" term, S = M_p - M_fp^T M_f^-1 M_fp: the force rows'
+reaction (3.2-9) acts through the same step): built from J M^-1 J^T it over-cancels on a joint
+with large b h / M (the xArm7's wrist, b h / M = 11.8: 2.07 % velocity error on a 5 cm sphere
+against 0.64 %). The law builds K_0's blocks from the step's task mobility J (M + h B)^-1 J^T
+(``step_task_mobility``, same condition as ``damping_compensation``); the task inertia that turns
+a* into torque keeps Lambda = (J M^-1 J^T)^-1, since the compensation above already makes the
+commanded step exact.
+
 Conditioning: where b h / M_ii > 1, the joint's step is dominated by its damping and the row
 relies on this compensation (a torque 1 + b h / M times the inertial one, so errors in the
 modelled damping or in the time step scale with it). ``damped_joints`` finds such joints and
@@ -33,6 +47,8 @@ modelled damping or in the time step scale with it). ``damped_joints`` finds suc
 import warnings
 
 import numpy as np
+
+from drake_hybrid.core.linalg import inv
 
 # b h / M above which a joint's step is dominated by its damping (warned).
 DAMPING_DOMINATED = 1.0
@@ -55,12 +71,27 @@ def joint_damping(plant):
     return damping
 
 
+def damped_step(damping, time_step):
+    """True when the plant's step damps implicitly: a discrete plant (h > 0) and joint damping B in
+    the model (``damping``: B's diagonal or None)."""
+    return time_step > 0 and damping is not None and bool(np.any(damping))
+
+
 def damping_compensation(damping, joint_acceleration, time_step):
     """h B a*: the torque that makes a discrete plant's implicit damping B v+ match the law's
     explicit B v (tau_damping = B v+ with v+ = v + h a* predicted; module docstring)."""
-    if not time_step > 0 or not np.any(damping):
+    if not damped_step(damping, time_step):
         return joint_acceleration * 0.0
     return time_step * damping * joint_acceleration
+
+
+def step_task_mobility(jacobian, M, task_mobility, damping, time_step):
+    """J (M + h B)^-1 J^T: how the task answers a force within one step of a discrete plant with
+    joint damping B (module docstring); ``task_mobility`` (J M^-1 J^T) itself when the step does not
+    damp (``damped_step``: a continuous plant, no damping). Float or AutoDiffXd."""
+    if not damped_step(damping, time_step):
+        return task_mobility
+    return jacobian @ inv(M + time_step * np.diag(damping)) @ jacobian.T
 
 
 def damped_joints(plant, time_step, context=None, threshold=DAMPING_DOMINATED):

@@ -5,10 +5,10 @@ user's C, E_f, E_f-dot (and a given E_p, E_p-dot nu) compiled from sympy and the
 ``law_kernel`` below: the chart maps, the kernel E_p, the rank margins, E = [E_p; E_f] factored
 once for the wrench split (3.0-8) and r-ddot* (3.0-11), the three laws (3.1-12), Remark 3,
 (3.2-6), the mechanism force F_m = I_v a_p, the compensations F_c = -F_v and F_h = -F on the held
-rows, the held and guarded rows, u_f, tau_f, J^-1 (bounded) or the dynamically consistent Lambda (bounded), the
-discrete step's damping compensation h B a*, the saturation and the integral rates. Every function
-mirrors one of control/law.py, control/damping.py, core/projections.py, core/charts.py or
-control/safety.py line by line, so the two
+rows, the held and guarded rows, u_f, tau_f, J^-1 (bounded) or the dynamically consistent Lambda
+(bounded), the discrete step's damping compensation h B a* and its task mobility J (M + h B)^-1 J^T
+(for K_0), the saturation and the integral rates. Every function mirrors one of control/law.py,
+control/damping.py, core/projections.py, core/charts.py or control/safety.py line by line, so the two
 paths agree to rounding (tests/test_fast_law.py checks every output port to 1e-12).
 
 Small matrices (d <= 6, n <= 7) are multiplied and factored by hand-written loops: a LAPACK or
@@ -47,7 +47,7 @@ I_CONFIGURATION = 21          # size of the chart's configuration x
 I_COMPENSATE_TANGENTIAL = 22  # 1: cancel the measured F_v and the held rows' F (law.tangential_compensation,
 #                               law.held_row_compensation)
 I_MECHANISM = 23              # 1: the mechanism force F_m = I_v a_p (law.mechanism_force)
-I_DAMPING = 24                # 1: the discrete step's damping compensation h B a* (control.damping)
+I_DAMPING = 24                # 1: a damped discrete step: h B a* and K_0's J (M + h B)^-1 J^T (control.damping)
 I_OFFSET_MECHANISM, I_OFFSET_DAMPING = 25, 26   # offsets of I_v (k x k) and h B (n) in ``reals``
 INT_SIZE = 27
 # -- scalars at the start of ``reals`` -------------------------------------------------------------
@@ -553,6 +553,22 @@ def damping_compensation(joint_acceleration, reals, ints):
 
 
 @compiled
+def step_task_mobility(J, M, mobility, reals, ints):
+    """damping.step_task_mobility: (ok, J (M + h B)^-1 J^T) on a discrete plant with joint damping
+    (``reals`` holds h B), else (True, ``mobility``); ok False if M + h B is singular."""
+    if ints[I_DAMPING] == 0:
+        return True, mobility
+    n = ints[I_N]
+    step_inertia = M.copy()
+    for i in range(n):
+        step_inertia[i, i] += reals[ints[I_OFFSET_DAMPING] + i]
+    step_inverse, singular = inverse(step_inertia)
+    if singular:
+        return False, mobility
+    return True, matmul(matmul(J, step_inverse), transpose(J))
+
+
+@compiled
 def finish_inverse_dynamics(out, inverse_dynamics, base_torque, reals, ints):
     """n = d: tau = ID(q, q-dot, q-ddot) + tau_f (tau_f stored in ``out``), then ``finish``."""
     n = ints[I_N]
@@ -634,6 +650,10 @@ def law_kernel(x, nu, J, bias, C, E_f, curvature, E_f_dot, E_p, E_p_dot_nu, v, d
             return FALLBACK, out
         mobility = matmul(matmul(J, M_inverse), transpose(J))          # J M^-1 J^T = Lambda^-1
     if ints[I_IMPEDANCE] != 0:                                         # K_0 [F_v; F_kinematic] (3.2-6)
+        # the arm's answer to a force, through a damped discrete step's (M + h B)^-1 (control.damping)
+        ok, response = step_task_mobility(J, M, mobility, reals, ints)
+        if not ok:
+            return FALLBACK, out
         kinematic = np.nonzero(mask == 0.0)[0]
         physical = np.nonzero(mask != 0.0)[0]
         motion_rows = np.empty((k + kinematic.size, d))
@@ -643,12 +663,12 @@ def law_kernel(x, nu, J, bias, C, E_f, curvature, E_f_dot, E_p, E_p_dot_nu, v, d
         force_rows = np.empty((physical.size, d))
         for i in range(physical.size):
             force_rows[i] = E_f[physical[i]]
-        mobility_motion_T = matmul(mobility, transpose(motion_rows))
+        mobility_motion_T = matmul(response, transpose(motion_rows))
         M_fp = matmul(force_rows, mobility_motion_T)
         M_p = matmul(motion_rows, mobility_motion_T)
         K_0 = np.eye(M_p.shape[0]) - M_p
         if physical.size:
-            M_f = matmul(matmul(force_rows, mobility), transpose(force_rows))
+            M_f = matmul(matmul(force_rows, response), transpose(force_rows))
             correction, singular = solve_matrix(M_f, M_fp)
             if singular:
                 return FALLBACK, out

@@ -36,6 +36,7 @@ import sympy
 
 from pydrake.multibody.tree import JacobianWrtVariable
 
+from drake_hybrid.control.damping import damped_step
 from drake_hybrid.control.gains import ControlMode
 from drake_hybrid.core.charts import EulerZXZChart, PlanarChart, PoseChart
 from drake_hybrid.core.constraints import SelectingConstraint
@@ -192,8 +193,8 @@ def pack_constants(controller, law, space):
                         gains.null_space_damping, law.singularity_threshold, law.max_joint_acceleration,
                         law.approach_speed or 0.0, law.approach_gain or 0.0, law.wrench_lag])
     mechanism = law.velocity_row_inertia is not None
-    # damping.damping_compensation's condition: a discrete plant and damping in the model.
-    damped = law.plant_time_step > 0 and law.joint_damping is not None and bool(np.any(law.joint_damping))
+    # damping.damping_compensation's and damping.step_task_mobility's condition: a discrete plant, damping in the model.
+    damped = damped_step(law.joint_damping, law.plant_time_step)
     blocks = [gains.velocity, gains.position, gains.force_proportional, gains.force_integral, law.force_controlled,
               law.actuation_from_torque, law.effort_limits, controller._end_effector_point, chart_values,
               projection.basis if kernel else np.zeros(0), projection._half_lower if kernel else np.zeros(0),

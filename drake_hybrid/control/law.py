@@ -13,6 +13,7 @@ force on the robot, §0; k = d - m velocity rows, m force rows)::
     a_p = r-ddot_pd - K_v e_p'                            (3.1-12)   motion_acceleration
           ... - K_p e_p                                  (Remark 3)
           ... + K_0 (F_v + F_m)                           (3.2-6)   impedance_compensation
+          K_0 from J (M + h B)^-1 J^T   (discrete plant, joint damping B)   damping.step_task_mobility
     F_m = I_v a_p                       (a mechanism on the velocity rows)   mechanism_force
     F_c = -F_v                          (velocity and position modes)        tangential_compensation
     F_h = -F on the held rows           (velocity and position modes)        held_row_compensation
@@ -43,7 +44,7 @@ Size: the law's single home, one small function per line, each with the derivati
 
 import numpy as np
 
-from drake_hybrid.control.damping import damping_compensation
+from drake_hybrid.control.damping import damping_compensation, step_task_mobility
 from drake_hybrid.control.gains import ControlMode
 from drake_hybrid.control.phases import ContactPhase
 from drake_hybrid.control.safety import bounded_solve, bounded_task_inertia, saturate
@@ -217,7 +218,9 @@ def impedance_blocks(velocity_projection, force_projection, task_mobility, kinem
     Motion rows: [E_p; E_f[kinematic_rows]]; force rows: the other rows of E_f. With the task
     mobility L = J M^-1 J^T (= Lambda^-1, also for redundant arms), returns
     (M_f, M_fp, M_p) = (F L F^T, F L P^T, P L P^T) for force rows F and motion rows P
-    (M_f and M_fp have no rows when every row of E_f is kinematic). Float or AutoDiffXd.
+    (M_f and M_fp have no rows when every row of E_f is kinematic). Float or AutoDiffXd. The law
+    passes the step's L = J (M + h B)^-1 J^T on a discrete plant with joint damping B: the blocks
+    say how the arm answers a force (control.damping).
     """
     kinematic = list(kinematic_rows)
     physical = [i for i in range(force_projection.shape[0]) if i not in kinematic]
@@ -388,8 +391,11 @@ def evaluate_law(constants, space, kinematics, plant, plant_context, forces, int
         task_mobility = J @ M_inverse @ J.T                               # J M^-1 J^T = Lambda^-1
         dynamics = (M, M_inverse, task_mobility)
     if mode is ControlMode.IMPEDANCE_FORCE:
+        # K_0 (3.2-6) cancels the arm's answer to F_v, the force rows' reaction (3.2-9) included: on a
+        # discrete plant it answers through (M + h B)^-1, its damping implicit (control.damping).
+        response = step_task_mobility(J, M, task_mobility, constants.joint_damping, constants.plant_time_step)
         external = tangential_force if F_m is None else tangential_force + F_m
-        on_velocity_rows, on_force_rows = impedance_compensation(values, task_mobility, external, force,
+        on_velocity_rows, on_force_rows = impedance_compensation(values, response, external, force,
                                                                  constants.kinematic_rows)
         a_p = a_p + on_velocity_rows
         a_f = a_f + on_force_rows
