@@ -6,14 +6,19 @@ Per case: errors after five design time constants <= 2 % (velocity and force, % 
 every designed eigenvalue within 5 % of its linearized partner, no real part above 0.01 1/s, and
 the Jacobian check in the linearization's output. Nothing is tuned per robot but its frames.
 
-Known failures, kept visible (strict xfail: they fail the run the day they pass). SAP damps each
-contact face along the workpiece's face normal, which drags the pad over a tessellated curved
+Every case's linearized eigenvalues are also checked against the prediction (analysis.environment):
+in impedance-force mode the design with the contact's own stiffness and damping along the rows,
+measured by central differences of the wrench sensor; elsewhere the design itself.
+
+Known misses, kept visible (each fails the run the day it is met, so KNOWN is kept true). SAP damps
+each contact face along the workpiece's face normal, which drags the pad over a tessellated curved
 workpiece although mu = 0, and the tessellated contact is stiff along the surface
 (docs/drake_notes.md):
 - impedance-force on the 5 cm cylinder and sphere: the unit-mass impedance yields to both, as
   designed: its velocity errors are 6.6-6.9 % (6.6-27 % before K_0 answered the xArm7's damped
-  wrist through the plant's step, control.damping) and its roots move (21.7-21.8 % on the cylinder,
-  4.3-4.4 % on the sphere, in the matrix).
+  wrist through the plant's step, control.damping), and on the cylinder its pair (-3, -7) moves
+  21.7-21.8 % from the gains' design (4.3-4.4 % on the sphere), within 0.5 % of the prediction with
+  the contact's measured stiffness (+2.6 N/m) and damping (-0.2 N s/m).
 Position-force on the sphere (and the xArm7's cylinder) used to miss its pair (-3, -7) by 7.6-12 %:
 the law split the wrench, which the linearization's 200 Hz low-pass delays, with the current E(x).
 It now splits it where it was measured (control.law.measured_forces), within 0.71 %.
@@ -27,16 +32,13 @@ import own_arm_cases as cases
 
 logging.getLogger("drake").setLevel(logging.ERROR)
 
+# (shape, mode): the figures of issue 12 that the case is known to miss (module docstring)
 KNOWN = {
-    ("cylinder", "impedance-force"): "the unit-mass impedance yields to the tessellated contact's stiffness",
-    ("sphere", "impedance-force"): "the unit-mass impedance yields to the tessellated contact's stiffness",
+    ("cylinder", "impedance-force"): {"velocity_error_percent", "eigenvalue_error"},
+    ("sphere", "impedance-force"): {"velocity_error_percent"},
 }
-
-
-def _case(arm, shape, mode):
-    reason = KNOWN.get((shape, mode))
-    marks = [pytest.mark.xfail(strict=True, reason=reason)] if reason else []
-    return pytest.param(arm, shape, mode, marks=marks, id=f"{arm}-{shape}-{mode}")
+LIMITS = {"velocity_error_percent": cases.MAX_ERROR_PERCENT, "force_error_percent": cases.MAX_ERROR_PERCENT,
+          "eigenvalue_error": cases.EIGENVALUE_TOLERANCE}
 
 
 @pytest.fixture(scope="module")
@@ -45,14 +47,18 @@ def cache(tmp_path_factory):
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("arm, shape, mode", [_case(*case) for case in cases.latin_square()])
+@pytest.mark.parametrize("arm, shape, mode", cases.latin_square(), ids=["-".join(case) for case in cases.latin_square()])
 def test_own_arm_on_own_surface(arm, shape, mode, cache):
     figures = cases.run(arm, shape, mode, cache)
     assert "Jacobian check" in figures["jacobian_check"]
     assert figures["max_real_part"] <= cases.MAX_REAL_PART, figures
-    assert figures["velocity_error_percent"] <= cases.MAX_ERROR_PERCENT, figures
-    assert figures["force_error_percent"] <= cases.MAX_ERROR_PERCENT, figures
-    assert figures["eigenvalue_error"] <= cases.EIGENVALUE_TOLERANCE, figures
+    assert figures["eigenvalue_error_predicted"] <= cases.EIGENVALUE_TOLERANCE, figures
+    known = KNOWN.get((shape, mode), set())
+    for name, limit in LIMITS.items():
+        if name in known:
+            assert figures[name] > limit, f"{name} is now met ({figures[name]:.4g} <= {limit}): update KNOWN"
+        else:
+            assert figures[name] <= limit, figures
 
 
 def test_the_latin_square_covers_every_pair():
