@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 import own_arm_cases as cases
-from drake_hybrid.analysis.environment import impedance_loop
+from drake_hybrid.analysis.environment import impedance_loop, impedance_response
 from drake_hybrid.analysis.linearization import linearize_continuous, predicted_match
 
 logging.getLogger("drake").setLevel(logging.ERROR)
@@ -54,3 +54,13 @@ def test_a_flat_workpiece_moves_no_designed_eigenvalue(cache):
     result = linearize_continuous(config)
     assert result.shifts == [] and result.shifted_match is None
     assert result.match.matched                     # within 0.16 % (docs/own_arms.md)
+
+
+def test_impedance_response_to_a_force_step_is_the_designed_one():
+    """F_v = F from rest, s^2 + 10 s + 21 = (s + 3)(s + 7): e_p'(t) = F (e^-3t - e^-7t) / 4; a second row
+    without force stays at rest."""
+    t = np.linspace(0.0, 2.0, 2001)
+    force = np.column_stack([np.full_like(t, 0.5), np.zeros_like(t)])
+    response = impedance_response(np.diag([10.0, 10.0]), np.diag([21.0, 21.0]), t, force, np.zeros(2), np.zeros(2))
+    np.testing.assert_allclose(response[:, 0], 0.5 * (np.exp(-3 * t) - np.exp(-7 * t)) / 4, atol=1e-9)
+    assert np.all(response[:, 1] == 0.0)

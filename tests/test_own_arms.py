@@ -8,7 +8,9 @@ the Jacobian check in the linearization's output. Nothing is tuned per robot but
 
 Every case's linearized eigenvalues are also checked against the prediction (analysis.environment):
 in impedance-force mode the design with the contact's own stiffness and damping along the rows,
-measured by central differences of the wrench sensor; elsewhere the design itself.
+measured by central differences of the wrench sensor; elsewhere the design itself. An impedance-force
+run's velocity errors are checked against those of the designed impedance (3.2-11) driven by the
+run's measured F_v (within 2 % of the command; measured 0.08-0.09 % where the drag is 0.24 N).
 
 Known misses, kept visible (each fails the run the day it is met, so KNOWN is kept true). SAP damps
 each contact face along the workpiece's face normal, which drags the pad over a tessellated curved
@@ -53,6 +55,8 @@ def test_own_arm_on_own_surface(arm, shape, mode, cache):
     assert "Jacobian check" in figures["jacobian_check"]
     assert figures["max_real_part"] <= cases.MAX_REAL_PART, figures
     assert figures["eigenvalue_error_predicted"] <= cases.EIGENVALUE_TOLERANCE, figures
+    if mode == "impedance-force":         # the run realizes the designed impedance, driven by its measured F_v
+        assert figures["velocity_error_against_impedance_percent"] <= cases.MAX_ERROR_PERCENT, figures
     known = KNOWN.get((shape, mode), set())
     for name, limit in LIMITS.items():
         if name in known:
