@@ -202,6 +202,17 @@ def _row_text(row, events=(), notes=()):
     return text + pointer
 
 
+def _impedance_text(check):
+    """summary["impedance"] in one line: the run against the designed impedance driven by its measured F_v."""
+    forces = ", ".join(f"{force:.3g}" for force in check["max_tangential_force"])
+    percent = check["max_difference_percent"]
+    agreement = (f"within {percent:.2g} % of the command" if percent is not None else
+                 "within " + ", ".join(f"{d:.3g}" for d in check["max_difference"]) + " (rows' units)")
+    return (f"impedance (3.2-11) driven by the measured F_v (settled max |F_v| per row: {forces}): the velocity "
+            f"errors it predicts are {agreement} of the measured ones (settled): the rows' errors above are "
+            f"the designed impedance's answer to its start and to F_v")
+
+
 def _residual_text(summary):
     """max |C(r)| after contact in C's units: one figure if every row has the same unit, else one per row."""
     residual = summary["max_constraint_residual_after_contact"]
@@ -247,6 +258,8 @@ def command_simulate(args):
     for what, rows in (("velocity", s["velocity_rows"]), ("force", s["force_rows"])):
         for row in rows:
             print(f"    {what} {row['name']}: {_row_text(row, s.get('events'), s.get('notes'))}")
+    if s.get("impedance"):
+        print(f"  {_impedance_text(s['impedance'])}")
     print(f"  {_residual_text(s)}")
     for n, note in enumerate(s.get("notes", []), start=1):
         print(f"  note {n}: {note}")

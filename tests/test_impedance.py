@@ -3,10 +3,14 @@
 import numpy as np
 import pytest
 
+from drake_hybrid.analysis.environment import impedance_response
 from drake_hybrid.analysis.linearization import impedance_realization, linearize_continuous
+from drake_hybrid.cli import _impedance_text
 from drake_hybrid.control.controller import HybridController
+from drake_hybrid.control.gains import HybridGains
 from drake_hybrid.control.law import impedance_blocks, impedance_gain
 from drake_hybrid.core.linalg import null_space_basis
+from drake_hybrid.experiments.metrics import impedance_check
 from drake_hybrid.experiments.simulation import simulate
 from drake_hybrid.scenario.plant import build_controller_plant
 from drake_hybrid.scenario.tasks import get_task
@@ -178,3 +182,38 @@ def test_velocity_force_stalls_where_impedance_force_slides():
         speeds[mode] = log["velocity"][late, 0].mean()
     assert speeds["impedance-force"] > 0.095                     # commanded 0.1 m/s
     assert speeds["velocity-force"] < 0.02
+
+
+def test_impedance_check_of_a_run_that_realizes_the_impedance():
+    """A log whose velocity errors are the designed impedance's answer to its F_v (a force step at
+    0.5 s on one row): the check finds them within round-off of its own prediction; a log without
+    position errors (velocity-force mode) has no check."""
+    gains = HybridGains(velocity=[10.0], position=[21.0], force_proportional=[0.5],
+                        force_integral=[15.0]).matrices(2, 1, "impedance-force")
+    t = np.linspace(0.0, 3.0, 3001)
+    force = np.column_stack([np.where(t >= 0.5, 0.2, 0.0), np.zeros_like(t)])
+    velocity_error = impedance_response(gains.velocity, gains.position, t, force, [0.0, 0.0], [-0.1, 0.0])
+    position_error = np.vstack([np.zeros(2), np.cumsum(0.5 * (velocity_error[1:] + velocity_error[:-1])
+                                                       * np.diff(t)[:, None], axis=0)])
+    log = {"t": t, "tangential_force": force, "velocity_error": velocity_error, "position_error": position_error,
+           "desired_velocity": np.column_stack([np.full_like(t, 0.1), np.zeros_like(t)])}
+    check = impedance_check(log, gains, 0.0, 1.0)
+    assert check["max_difference_percent"] < 1e-6
+    assert check["max_tangential_force"] == pytest.approx([0.2, 0.0])
+    assert "within" in _impedance_text(check) and "answer to its start and to F_v" in _impedance_text(check)
+    del log["position_error"]
+    assert impedance_check(log, gains, 0.0, 1.0) is None
+
+
+@pytest.mark.slow                # several seconds: not in the fast loop (-m 'not slow')
+def test_grinding_sticks_on_the_rough_patch_as_its_impedance_predicts():
+    """The window grinding run: x-dot misses its command by 75 % on the rough patch (the pad sticks:
+    the impedance yields to friction, by design), and the designed impedance driven by the run's
+    measured F_v predicts the run's velocity errors within 1.28 % of the command (summary["impedance"])."""
+    summary = simulate(GRINDING.default_config()).summary
+    assert summary["max_velocity_error_percent_after_5_time_constants"] > 50.0
+    assert summary["impedance"]["max_difference_percent"] < 2.0
+    assert max(summary["impedance"]["max_tangential_force"]) > 8.0      # the patch's mu = 0.9 at 10 N
+    velocity_force = GRINDING.default_config()
+    velocity_force.mode, velocity_force.duration = "velocity-force", 0.2
+    assert simulate(velocity_force).summary["impedance"] is None

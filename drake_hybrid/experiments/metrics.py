@@ -8,6 +8,7 @@ import math
 
 import numpy as np
 
+from drake_hybrid.analysis.environment import impedance_response
 from drake_hybrid.control.phases import ContactPhase
 
 
@@ -102,3 +103,31 @@ def worst(rows, key):
     """The largest figure of ``key`` over the rows that have it (None if none has)."""
     values = [row[key] for row in rows if row[key] is not None]
     return max(values) if values else None
+
+
+def impedance_check(log, gains, since, settle_after):
+    """Impedance-force mode: how closely the run realizes the designed impedance (3.2-11), whatever its
+    measured F_v does. The impedance is driven by the run's logged F_v from its logged errors at
+    ``since`` (contact; ``analysis.environment.impedance_response``) and compared with the run's
+    velocity errors from ``settle_after`` on:
+
+    {"max_difference": per row, in its units; "max_difference_percent": the largest in % of its
+    row's command (None if no row has a command); "max_tangential_force": per row, max |F_v|}
+
+    None without a position error in the log (not impedance mode), with the paper's pseudo-velocity
+    rows (the log's errors are then the true rows'), or without a sample that late."""
+    t = np.asarray(log["t"], dtype=float)
+    if "position_error" not in log or "true_desired_velocity" in log or not np.any(t >= settle_after):
+        return None
+    first = int(np.argmax(t >= since))
+    predicted = impedance_response(gains.velocity, gains.position, t[first:] - t[first],
+                                   log["tangential_force"][first:], log["position_error"][first],
+                                   log["velocity_error"][first])
+    difference = np.zeros_like(np.asarray(log["velocity_error"], dtype=float))
+    difference[first:] = predicted - log["velocity_error"][first:]
+    figures = max_row_errors(t, difference, log["desired_velocity"], settle_after)
+    percents = [percent for _, percent in figures if percent is not None]
+    return {"max_difference": [worst for worst, _ in figures],
+            "max_difference_percent": max(percents) if percents else None,
+            "max_tangential_force": np.max(np.abs(np.asarray(log["tangential_force"])[t >= settle_after]),
+                                           axis=0).tolist()}

@@ -40,8 +40,9 @@ from pydrake.systems.framework import EventStatus
 
 from drake_hybrid.analysis.linearization import controller_prediction, design_time_constant, predicted_errors
 from drake_hybrid.control.fast_law import kernels_loaded
+from drake_hybrid.control.gains import ControlMode
 from drake_hybrid.core.progress import quiet
-from drake_hybrid.experiments.metrics import contact_time, max_after, row_errors, row_units, worst
+from drake_hybrid.experiments.metrics import contact_time, impedance_check, max_after, row_errors, row_units, worst
 from drake_hybrid.scenario.builder import build_scenario
 from drake_hybrid.scenario.start import set_initial_conditions
 
@@ -276,6 +277,9 @@ def summarize(scenario, log, wall_time):
         "force_settling_time_1_percent": worst(force_rows, "settling_time_1_percent"),
         "velocity_rows": velocity_rows,
         "force_rows": force_rows,
+        # impedance-force: the run against the designed impedance driven by its measured F_v (None otherwise)
+        "impedance": impedance_check(log, gains, start, settle_after)
+        if controller.mode is ControlMode.IMPEDANCE_FORCE else None,
         "max_constraint_residual": float(np.max(np.abs(log["constraint"]))),
         # From contact on: before it, C is the start's gap, not a residual.
         "max_constraint_residual_after_contact":
