@@ -202,15 +202,21 @@ def _row_text(row, events=(), notes=()):
     return text + pointer
 
 
+IMPEDANCE_REALIZED = 2.0      # % of the command: a run this close to its driven impedance realizes it
+
+
 def _impedance_text(check):
     """summary["impedance"] in one line: the run against the designed impedance driven by its measured F_v."""
     forces = ", ".join(f"{force:.3g}" for force in check["max_tangential_force"])
     percent = check["max_difference_percent"]
     agreement = (f"within {percent:.2g} % of the command" if percent is not None else
                  "within " + ", ".join(f"{d:.3g}" for d in check["max_difference"]) + " (rows' units)")
+    verdict = ("the rows' errors above are the designed impedance's answer to its start and to F_v"
+               if percent is not None and percent <= IMPEDANCE_REALIZED else
+               "the run does not realize the designed impedance that closely (contact transients, saturation, a "
+               "model error?)")
     return (f"impedance (3.2-11) driven by the measured F_v (settled max |F_v| per row: {forces}): the velocity "
-            f"errors it predicts are {agreement} of the measured ones (settled): the rows' errors above are "
-            f"the designed impedance's answer to its start and to F_v")
+            f"errors it predicts are {agreement} of the measured ones (settled): {verdict}")
 
 
 def _residual_text(summary):

@@ -9,7 +9,6 @@ from drake_hybrid.cli import _impedance_text
 from drake_hybrid.control.controller import HybridController
 from drake_hybrid.control.gains import HybridGains
 from drake_hybrid.control.law import impedance_blocks, impedance_gain
-from drake_hybrid.core.linalg import null_space_basis
 from drake_hybrid.experiments.metrics import impedance_check
 from drake_hybrid.experiments.simulation import simulate
 from drake_hybrid.scenario.plant import build_controller_plant
@@ -184,25 +183,35 @@ def test_velocity_force_stalls_where_impedance_force_slides():
     assert speeds["velocity-force"] < 0.02
 
 
-def test_impedance_check_of_a_run_that_realizes_the_impedance():
+def test_impedance_check_of_a_run_that_realizes_the_impedance_and_of_one_that_does_not():
     """A log whose velocity errors are the designed impedance's answer to its F_v (a force step at
-    0.5 s on one row): the check finds them within round-off of its own prediction; a log without
-    position errors (velocity-force mode) has no check."""
+    1.0 s) from contact at 0.3 s, before which the pad approaches (errors that are no impedance's):
+    the check, started at contact, finds them within round-off of its prediction. The same log with
+    the force step left out of F_v (the run answered a force the log does not show) misses by the
+    step's answer, 0.2 N x max of (e^-3t - e^-7t)/4 = 0.0136 m/s, 13.6 % of the 0.1 m/s command."""
     gains = HybridGains(velocity=[10.0], position=[21.0], force_proportional=[0.5],
                         force_integral=[15.0]).matrices(2, 1, "impedance-force")
     t = np.linspace(0.0, 3.0, 3001)
-    force = np.column_stack([np.where(t >= 0.5, 0.2, 0.0), np.zeros_like(t)])
-    velocity_error = impedance_response(gains.velocity, gains.position, t, force, [0.0, 0.0], [-0.1, 0.0])
+    contact = t >= 0.3
+    force = np.column_stack([np.where(t >= 1.0, 0.2, 0.0), np.zeros_like(t)])
+    velocity_error = np.column_stack([np.full_like(t, -0.1), np.zeros_like(t)])     # approaching: stopped
+    velocity_error[contact] = impedance_response(gains.velocity, gains.position, t[contact] - 0.3, force[contact],
+                                                 [0.0, 0.0], [-0.1, 0.0])
     position_error = np.vstack([np.zeros(2), np.cumsum(0.5 * (velocity_error[1:] + velocity_error[:-1])
                                                        * np.diff(t)[:, None], axis=0)])
+    position_error[contact] -= position_error[np.argmax(contact)]                   # e_p counts from contact
+    position_error[~contact] = 0.0
     log = {"t": t, "tangential_force": force, "velocity_error": velocity_error, "position_error": position_error,
            "desired_velocity": np.column_stack([np.full_like(t, 0.1), np.zeros_like(t)])}
-    check = impedance_check(log, gains, 0.0, 1.0)
+    check = impedance_check(log, gains, 0.3, 1.0)
     assert check["max_difference_percent"] < 1e-6
     assert check["max_tangential_force"] == pytest.approx([0.2, 0.0])
-    assert "within" in _impedance_text(check) and "answer to its start and to F_v" in _impedance_text(check)
-    del log["position_error"]
-    assert impedance_check(log, gains, 0.0, 1.0) is None
+    assert "answer to its start and to F_v" in _impedance_text(check)
+    unseen = dict(log, tangential_force=np.zeros_like(force))
+    missed = impedance_check(unseen, gains, 0.3, 1.0)
+    peak = 0.2 * np.max(np.exp(-3 * t) - np.exp(-7 * t)) / 4
+    assert missed["max_difference_percent"] == pytest.approx(100 * peak / 0.1, rel=1e-3)
+    assert "does not realize the designed impedance" in _impedance_text(missed)
 
 
 @pytest.mark.slow                # several seconds: not in the fast loop (-m 'not slow')

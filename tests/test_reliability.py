@@ -157,6 +157,18 @@ def test_supervisor_reference_moves_at_the_approach_speed_in_approach_only():
     assert contact[0] == ContactPhase.CONTACT and contact[4] == moving[4]
 
 
+def test_supervisor_reference_stands_on_an_invalid_wrench_and_stops_at_the_travel_bound():
+    """Blocked short of the threshold (the arm does not move, the sensor reads nothing), C_r stops at
+    max_travel + 2 s / K_a from C_entry, so the guarded move's push is bounded; with an invalid wrench
+    it does not move at all."""
+    dut = supervisor(approach_speed=0.02, approach_gain=30.0, max_travel=0.01)
+    approach = np.array([float(ContactPhase.APPROACH), 0.0, 0.0, -0.01, -0.01])
+    assert np.array_equal(step(dut, approach, 0.0, constraint=-0.01, valid=False, steps=50), approach)
+    blocked = step(dut, approach, 0.0, constraint=-0.01, steps=2000)          # 2 s at 2 cm/s: 40 mm asked
+    assert blocked[0] == ContactPhase.APPROACH                                  # the arm never travelled
+    assert blocked[4] == pytest.approx(-0.01 + 0.01 + 2 * 0.02 / 30.0)          # C_r: 11.33 mm, no further
+
+
 # ------------------------------------------------------------------------------------------------
 # Wrench conditioner and fault injector
 # ------------------------------------------------------------------------------------------------

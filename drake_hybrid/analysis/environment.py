@@ -129,7 +129,11 @@ def impedance_loop(velocity_gain, position_gain, stiffness=None, damping=None):
 def impedance_environment_shifts(scenario, context, designed, step=ENVIRONMENT_STEP):
     """The designed eigenvalues of an impedance-force loop that its contact moves, and where:
     [EigenvalueShift] (module docstring; empty when none moves by SHIFT_THRESHOLD or more, or for
-    a free-body plant). ``designed``: the controller's designed eigenvalues (the shifts take theirs)."""
+    a plant with joints beyond the arm's, a mechanism). ``designed``: the controller's designed eigenvalues
+    (the shifts take theirs)."""
+    plant = scenario.plant
+    if plant.num_positions() != plant.num_positions(scenario.robot.arm):
+        return []      # a mechanism (the crank's handle): moving the arm alone would measure its joints, not a contact
     gains = scenario.controller.validated_gains()
     k = scenario.constraint_space.velocity_size
     held = list(scenario.constraint_space.constraint.kinematic_rows)

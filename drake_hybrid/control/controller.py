@@ -302,6 +302,7 @@ def HybridController_(T):
                 if I_v.shape != (k, k) or not np.all(np.isfinite(I_v)):
                     raise DimensionError(f"HybridController: velocity_row_inertia must be a finite {k}x{k} matrix, "
                                          f"got shape {I_v.shape}")
+            self.velocity_row_inertia = I_v
             zero_acceleration = np.zeros(n) if T == float else np.array([AutoDiffXd(0.0)] * n, dtype=object)
             self._law = LawConstants(self._gains, self.mode, self.kinematic_rows, m, singularity_threshold,
                                      self._max_joint_acceleration, self.effort_limits, anti_windup,

@@ -24,8 +24,10 @@ wind up the force integral; on re-contact xi resumes from its value before the l
 
 The guarded move servoes C to the approach reference C_r (the ``approach_reference`` output):
 C_r = C_entry when APPROACH begins, C_r += h s n_C every period in APPROACH (it moves at the
-approach speed s into the surface whether C follows or not; also while the wrench is invalid),
-and C_r stands still in TARE, HOLD and CONTACT. The controller's guarded move,
+approach speed s into the surface whether C follows or not), and C_r stands still in TARE, HOLD
+and CONTACT, while the wrench is invalid, and once it is max_travel + 2 s / K_a from C_entry
+(the travel's bound: a guarded move blocked short of the threshold, by an obstacle or a sensor
+that reads nothing, then presses with at most about Lambda K_a^2 times that, not ever harder). The controller's guarded move,
 C-ddot = -2 K_a (C-dot - s n_C) - K_a^2 (C - C_r) (``law.guarded_acceleration``), is a velocity
 servo with integral action: C - C_r is the integral of its velocity error since APPROACH began
 (reset there, unused in CONTACT). Against the surface the pressing force keeps rising, at
@@ -210,8 +212,13 @@ def ContactSupervisor_(T):
                     phase, timer, count = ContactPhase.CONTACT, 0.0, count + 1
                 elif phase is ContactPhase.APPROACH and direction @ (constraint_value - entry) > config.max_travel:
                     phase, timer = ContactPhase.HOLD, 0.0
-                elif phase is ContactPhase.APPROACH:
-                    reference = reference + h * config.approach_speed * direction     # C_r moves at s n_C
+                elif phase is ContactPhase.APPROACH and wrench_valid:
+                    # C_r moves at s n_C, no further than max_travel + 2 s / K_a from C_entry (the travel's
+                    # documented bound): blocked short of the threshold (an obstacle, a sensor reading 0),
+                    # the guarded move presses with at most about Lambda K_a^2 times that, not more and more.
+                    limit = config.max_travel + 2.0 * config.approach_speed / config.approach_gain
+                    travel = min(direction @ (reference - entry) + h * config.approach_speed, limit)
+                    reference = entry + travel * direction
             elif pressing is not None:              # CONTACT, with a valid measurement
                 if pressing < config.loss_threshold * magnitude:
                     timer += h

@@ -114,8 +114,9 @@ def impedance_check(log, gains, since, settle_after):
     {"max_difference": per row, in its units; "max_difference_percent": the largest in % of its
     row's command (None if no row has a command); "max_tangential_force": per row, max |F_v|}
 
-    None without a position error in the log (not impedance mode), with the paper's pseudo-velocity
-    rows (the log's errors are then the true rows'), or without a sample that late."""
+    The caller checks the mode (every log has position errors, zeros outside position and impedance
+    mode). None without position errors, with the paper's pseudo-velocity rows (the log's errors are
+    then the true rows'), or without a sample that late."""
     t = np.asarray(log["t"], dtype=float)
     if "position_error" not in log or "true_desired_velocity" in log or not np.any(t >= settle_after):
         return None

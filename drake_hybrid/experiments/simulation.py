@@ -277,9 +277,10 @@ def summarize(scenario, log, wall_time):
         "force_settling_time_1_percent": worst(force_rows, "settling_time_1_percent"),
         "velocity_rows": velocity_rows,
         "force_rows": force_rows,
-        # impedance-force: the run against the designed impedance driven by its measured F_v (None otherwise)
+        # impedance-force: the run against the designed impedance driven by its measured F_v (None otherwise,
+        # and with a mechanism's inertia in the law, whose F_m drives the impedance too)
         "impedance": impedance_check(log, gains, start, settle_after)
-        if controller.mode is ControlMode.IMPEDANCE_FORCE else None,
+        if controller.mode is ControlMode.IMPEDANCE_FORCE and controller.velocity_row_inertia is None else None,
         "max_constraint_residual": float(np.max(np.abs(log["constraint"]))),
         # From contact on: before it, C is the start's gap, not a residual.
         "max_constraint_residual_after_contact":
