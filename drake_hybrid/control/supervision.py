@@ -173,7 +173,9 @@ def ContactSupervisor_(T):
 
         def set_initial_state(self, context, phase, constraint_value):
             """Start in ``phase`` with C_entry = C_r = ``constraint_value`` (C at the start: the travel
-            and the reference of a first APPROACH count from there), timers and count reset."""
+            and the reference of a first APPROACH count from there), timers and count reset. A loop built
+            by hand must call it (``scenario.start`` does): the default state has C_r = 0, the surface,
+            which a start in TARE or HOLD would be servoed to."""
             constraint_value = np.asarray(value(constraint_value), dtype=float)
             if constraint_value.shape != (self.force_size,):
                 raise ValueError(f"ContactSupervisor: constraint_value must have {self.force_size} entries, got "
