@@ -117,13 +117,17 @@ def contact_environment(scenario, context, rows, step=ENVIRONMENT_STEP):
     return ContactEnvironment(rows=rows, stiffness=stiffness, damping=damping)
 
 
-def impedance_loop(velocity_gain, position_gain, stiffness=None, damping=None):
-    """Eigenvalues of y-ddot = -(K_v - B_e) y-dot - (K_p - K_e) y (None: K_e, B_e = 0)."""
+def impedance_matrix(velocity_gain, position_gain, stiffness=None, damping=None):
+    """A of d/dt [y; y-dot] = A [y; y-dot] for y-ddot = -(K_v - B_e) y-dot - (K_p - K_e) y (None: K_e, B_e = 0)."""
     k = velocity_gain.shape[0]
     K_e = np.zeros((k, k)) if stiffness is None else stiffness
     B_e = np.zeros((k, k)) if damping is None else damping
-    return np.linalg.eigvals(np.block([[np.zeros((k, k)), np.eye(k)],
-                                       [K_e - position_gain, B_e - velocity_gain]]))
+    return np.block([[np.zeros((k, k)), np.eye(k)], [K_e - position_gain, B_e - velocity_gain]])
+
+
+def impedance_loop(velocity_gain, position_gain, stiffness=None, damping=None):
+    """Eigenvalues of ``impedance_matrix``: the impedance's roots, with its environment if given."""
+    return np.linalg.eigvals(impedance_matrix(velocity_gain, position_gain, stiffness, damping))
 
 
 def impedance_environment_shifts(scenario, context, designed, step=ENVIRONMENT_STEP):
@@ -174,7 +178,7 @@ def impedance_response(velocity_gain, position_gain, t, tangential_force, positi
     F_v (``tangential_force``, samples at ``t``, linear between them) from e_p(0), e_p'(0): the
     velocity errors a run realizing the impedance has (module docstring)."""
     k = velocity_gain.shape[0]
-    A = np.block([[np.zeros((k, k)), np.eye(k)], [-position_gain, -velocity_gain]])
+    A = impedance_matrix(velocity_gain, position_gain)
     B = np.vstack([np.zeros((k, k)), np.eye(k)])
     C = np.hstack([np.zeros((k, k)), np.eye(k)])
     x0 = np.concatenate([position_error0, velocity_error0])
