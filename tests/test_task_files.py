@@ -221,11 +221,19 @@ TIMING_COLUMNS = {"wall_time", "simulation_wall_time", "linearization_wall_time"
                   "discrete_step_check"}  # its text quotes rates near the resolution; stable_discrete is compared
 
 
+# What central differences (step 1e-5) of the one-period map resolve of a rate near zero: a
+# multiplier mu near 1 to about 1e-7, so log(mu) / h to about 1e-4 1/s at h = 1 ms.
+DISCRETE_RATE_RESOLUTION = 1.0e-4
+
+
 def _assert_same_rows(ours, theirs, marginal_noise=0.0):
     """The same verdicts, and the numbers to 1e-6 relative (the file's start comes from numeric
     inverse kinematics, the built-in task's from the closed form: equal to ~1e-11). With
     ``marginal_noise`` > 0, the marginal modes' real parts (zero in theory; what central differences
-    of the one-period map leave) are only checked to be below it in both."""
+    of the one-period map leave) are only checked to be below it in both. A discrete real part is
+    compared to the map's resolution (DISCRETE_RATE_RESOLUTION): on the UR10 plate the worst
+    regulated partner sits at -1.2e-4 1/s, and two starts 1e-11 apart gave -1.2207e-4 and
+    -1.2062e-4."""
     assert len(ours) == len(theirs)
     for a, b in zip(ours, theirs):
         for name in a:
@@ -235,7 +243,8 @@ def _assert_same_rows(ours, theirs, marginal_noise=0.0):
                 assert abs(a[name]) < marginal_noise and abs(b[name]) < marginal_noise, (a["point"], name)
                 continue
             if isinstance(a[name], float) and isinstance(b[name], float):
-                assert a[name] == pytest.approx(b[name], rel=1e-6, abs=1e-8), (a["point"], name)
+                resolution = DISCRETE_RATE_RESOLUTION if name == "worst_discrete_real" else 1e-8
+                assert a[name] == pytest.approx(b[name], rel=1e-6, abs=resolution), (a["point"], name)
             else:
                 assert a[name] == b[name], (a["point"], name)
 

@@ -114,13 +114,14 @@ class ContactConfig:
     pad_modulus: float = 5.0e6                   # Pa, the pad's hydroelastic modulus
     pad_dissipation: float = 10.0                # s/m, Hunt-Crossley dissipation (continuous, similar, lagged)
     # SAP's linear dissipation (discrete plants): the pad's and the workpiece's relaxation times,
-    # which SAP adds (< 0: Drake's default, 0.1 s each). SAP damps along each face normal of the
-    # workpiece, which drags a pad sliding over a curved one (0.24 N at 10 N, 2 cm/s, R 5 cm with
-    # Drake's 0.2 s pair; 0.015 N with 0.01 + 0 s): docs/drake_notes.md. Drake's default is kept:
-    # with the lighter damping the force misses a 50 ms force step by 0.755 N while the arm
-    # compresses the pad, over the 0.75 N bound of two dropout cases (docs/drake_notes.md).
-    relaxation_time: float = -1.0                # s, the pad's
-    workpiece_relaxation_time: float = -1.0      # s, the workpiece's
+    # which SAP adds (< 0: the model's own, Drake's default 0.1 s each). The default pair, 0.03 s,
+    # damps the arm-on-pad mode about critically (zeta ~ 1.5 on the window). Drake's 0.2 s pair damps
+    # it ten times critically and drags a pad sliding over a curved workpiece (0.24 N at 10 N,
+    # 2 cm/s, R 5 cm: 6.6-6.9 % velocity error in impedance-force mode); a lighter pair, 0.01 s,
+    # misses a 50 ms force step by 0.755 N while the arm compresses the pad (docs/drake_notes.md,
+    # "Choosing the pair's dissipation").
+    relaxation_time: float = 0.03                # s, the pad's
+    workpiece_relaxation_time: float = 0.0       # s, the workpiece's
     friction: float = 0.0                        # Coulomb mu (static = dynamic) of pad and workpiece
     pad_resolution: float = 0.003                # m, mesh resolution hint of the pad (see docs: tessellation torque)
 
