@@ -44,9 +44,10 @@ failure, the error text of every stage that failed (never dropped):
 * ``stable``: the simulation's verdict and the linearization that models the
   simulated loop (discrete when the controller is sampled, continuous when
   it is not), both True; if one of them is missing, the other.
-* ``worst_*_real``: the largest Re(s) over the non-marginal eigenvalues (1/s);
-  ``marginal_*_real``: the largest over the marginal ones (a slow drift of
-  the unregulated positions; reported, not part of the verdict);
+* ``worst_*_real``: the largest Re(s) over the non-marginal eigenvalues and
+  every growing one (faster than the match's 0.05 1/s; 1/s);
+  ``marginal_*_real``: the largest over the other marginal ones (a slow drift
+  of the unregulated positions; reported, not part of the verdict);
   ``spectral_radius``: the largest |mu| over all multipliers.
 
 Execution: ``workers=N`` starts a Dask ``LocalCluster`` of N single-threaded
