@@ -230,7 +230,8 @@ def _assert_same_rows(ours, theirs, marginal_noise=0.0):
     """The same verdicts, and the numbers to 1e-6 relative (the file's start comes from numeric
     inverse kinematics, the built-in task's from the closed form: equal to ~1e-11). With
     ``marginal_noise`` > 0, the marginal modes' real parts (zero in theory; what central differences
-    of the one-period map leave) are only checked to be below it in both. A discrete real part is
+    of the one-period map leave) are only checked to be below it in both, or, in the discrete map, to
+    be the SAP map's kink that the step check did not confirm. A discrete real part is
     compared to the map's resolution (DISCRETE_RATE_RESOLUTION): on the UR10 plate the worst
     regulated partner sits at -1.2e-4 1/s, and two starts 1e-11 apart gave -1.2207e-4 and
     -1.2062e-4."""
@@ -240,7 +241,9 @@ def _assert_same_rows(ours, theirs, marginal_noise=0.0):
             if name in TIMING_COLUMNS:
                 continue
             if marginal_noise and name.startswith("marginal_"):
-                assert abs(a[name]) < marginal_noise and abs(b[name]) < marginal_noise, (a["point"], name)
+                for row in (a, b):   # or the SAP map's kink, which the step check finds (sweep._discrete_verdict)
+                    assert abs(row[name]) < marginal_noise or (
+                        name == "marginal_discrete_real" and "NOT confirmed" in (row["discrete_step_check"] or "")), (row["point"], name)
                 continue
             if isinstance(a[name], float) and isinstance(b[name], float):
                 resolution = DISCRETE_RATE_RESOLUTION if name == "worst_discrete_real" else 1e-8
