@@ -430,8 +430,9 @@ def test_peak_force_is_per_row_in_its_units_and_names_the_row():
 def test_an_unstable_looking_one_period_map_is_checked_at_a_larger_step():
     """The UR10 on a plate at rest: at the default step 1e-5 the sampled loop's map shows +3.87 1/s
     (multiplier 1.0039), at 1e-4 nothing above 1e-4 1/s (docs/drake_notes.md): a kink of the SAP
-    map, not a mode (a kicked simulation decays). The check says so and the sweep gives no
-    discrete verdict for it."""
+    map, not a mode (a kicked simulation decays). The check says so; the sweep then keeps the
+    regulated modes' verdict where the kink is on a predicted zero's partner, and gives none where it
+    is on a regulated mode (sweep._discrete_verdict)."""
     from drake_hybrid.scenario.data_task import load_task_file
     from drake_hybrid.scenario.parsing import models_directory
 
@@ -440,3 +441,24 @@ def test_an_unstable_looking_one_period_map_is_checked_at_a_larger_step():
     check = linear.step_check
     assert check is not None and check.worst_real > 1.0 and check.larger_worst_real < 0.01
     assert not check.confirmed and "NOT confirmed" in check.summary()
+
+
+@pytest.mark.parametrize("worst, check, margin, verdict", [
+    (-1.0, None, 0.0, True),                       # no rate above 0.01 1/s anywhere: no check made
+    (0.005, None, 0.0, False),                     # a slow regulated growth below the check's rate
+    (-1.0, (3.86, 1e-4), 0.0, True),               # a kink on a predicted zero's partner alone
+    (3.86, (3.86, 1e-4), 0.0, None),               # a kink on a regulated mode: no verdict
+    (0.005, (0.3, 1e-5), 0.0, False),              # a regulated growth the margin refuses, not the kink's
+    (-0.3, (0.3, 1e-5), -0.5, False),              # the user's margin refuses the regulated modes
+    (-1.0, (0.109, 0.107), 0.0, False),            # a predicted zero's partner grows at both steps
+    (0.03, (0.03, 0.03), 0.05, True),              # a confirmed growth inside the user's margin
+    (3.0, (3.0, 2.9), 0.0, False),                 # a regulated instability, confirmed
+])
+def test_the_discrete_verdict_weighs_the_step_check(worst, check, margin, verdict):
+    """experiments.sweep._discrete_verdict: the sampled loop's verdict from the regulated modes'
+    worst rate and the step check at a ten times larger step (figures from docs/stability.md)."""
+    from drake_hybrid.analysis.linearization import StepCheck
+    from drake_hybrid.experiments.sweep import _discrete_verdict
+
+    step_check = None if check is None else StepCheck(1e-5, check[0], 1e-4, check[1])
+    assert _discrete_verdict(worst, step_check, margin) is verdict

@@ -242,8 +242,8 @@ def _assert_same_rows(ours, theirs, marginal_noise=0.0):
                 continue
             if marginal_noise and name.startswith("marginal_"):
                 for row in (a, b):   # or the SAP map's kink, which the step check finds (sweep._discrete_verdict)
-                    assert abs(row[name]) < marginal_noise or (
-                        name == "marginal_discrete_real" and "NOT confirmed" in (row["discrete_step_check"] or "")), (row["point"], name)
+                    kink = name == "marginal_discrete_real" and "NOT confirmed" in (row["discrete_step_check"] or "")
+                    assert abs(row[name]) < marginal_noise or kink, (row["point"], name)
                 continue
             if isinstance(a[name], float) and isinstance(b[name], float):
                 resolution = DISCRETE_RATE_RESOLUTION if name == "worst_discrete_real" else 1e-8

@@ -28,8 +28,9 @@ along E_f). A hydroelastic contact on a small curved workpiece has both (docs/dr
 
 In a run, the same holds with the measured F_v as the input: ``impedance_response`` integrates
 (3.2-11) driven by a logged F_v(t) from the logged start, the velocity errors the designed impedance
-predicts for that run. On the own-arm matrix's curved workpieces SAP's drag (0.24 N) makes them
-6.6-6.9 % of the command, and the runs' measured ones are within 0.1 % of the command of them.
+predicts for that run. On the own-arm matrix's curved workpieces SAP's drag made them 6.6-6.9 % of
+the command with Drake's 0.2 s pair relaxation (0.24 N), 0.49-0.68 % with the package's 0.03 s
+(0.04 N), and the runs' measured ones are within 0.1 % of the command of them.
 
 ``contact_environment`` measures K_e and B_e by central differences of the wrench sensor's reading,
 split by E^-T as the law splits it, with the arm's positions (velocities) moved along each motion

@@ -33,7 +33,7 @@ from pydrake.systems.analysis import ApplySimulatorConfig, InitializeParams, Sim
 from pydrake.systems.primitives import Linearize
 
 from drake_hybrid.analysis.derivatives import JACOBIAN_TOLERANCE, JacobianCheck, checked_state_jacobian
-from drake_hybrid.analysis.environment import impedance_environment_shifts
+from drake_hybrid.analysis.environment import impedance_environment_shifts, impedance_matrix
 from drake_hybrid.analysis.modes import diagnose_unstable_modes, explained_modes
 from drake_hybrid.control.damping import step_task_mobility
 from drake_hybrid.control.gains import ControlMode
@@ -66,11 +66,9 @@ class PredictedEigenvalues:
 
 def velocity_loop_matrix(gains, mode):
     """A of the velocity loop: e_p'-dot = A e_p' (velocity mode) or d/dt [e_p; e_p'] = A [e_p; e_p']."""
-    K_v, K_p = gains.velocity, gains.position
-    k = K_v.shape[0]
     if ControlMode.parse(mode).integrates_position:
-        return np.block([[np.zeros((k, k)), np.eye(k)], [-K_p, -K_v]])
-    return -K_v
+        return impedance_matrix(gains.velocity, gains.position)      # (3.2-11) with no environment
+    return -gains.velocity
 
 
 def predicted_eigenvalues(gains, mode, kinematic_rows=0, redundancy=0):
@@ -555,7 +553,7 @@ def impedance_realization(scenario, log):
         M = plant.CalcMassMatrix(context)
         mobility = task.jacobian @ np.linalg.solve(M, task.jacobian.T)
         # the law's: J (M + h B)^-1 J^T on a discrete plant with joint damping (control.damping)
-        mobility = step_task_mobility(task.jacobian, M, mobility, controller._damping, controller.plant_time_step)
+        mobility = step_task_mobility(task.jacobian, M, mobility, controller.joint_damping, controller.plant_time_step)
         M_f, M_fp, _ = impedance_blocks(values.velocity_projection, values.force_projection, mobility, kinematic)
         motion_force = np.concatenate([F_tangent, F[kinematic]])
         predicted.append(-np.linalg.solve(M_f, M_fp @ motion_force))

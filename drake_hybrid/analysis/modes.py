@@ -48,7 +48,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from drake_hybrid.analysis.environment import row_directions, row_forces
+from drake_hybrid.analysis.environment import impedance_matrix, row_directions, row_forces
 from drake_hybrid.control.gains import ControlMode
 
 UNSTABLE_RATE = 0.01                  # 1/s: a mode growing faster than 1 % per second is named
@@ -105,7 +105,7 @@ def drift_eigenvalues(mobility, stiffness, velocity_gain, position_gain=None):
     k = G.shape[0]
     K_v = np.asarray(velocity_gain, dtype=float)
     K_p = np.zeros((k, k)) if position_gain is None else np.asarray(position_gain, dtype=float)
-    values = np.linalg.eigvals(np.block([[np.zeros((k, k)), np.eye(k)], [G - K_p, -K_v]]))
+    values = np.linalg.eigvals(impedance_matrix(K_v, K_p, stiffness=G))       # G acts as the environment's K_e
     return values[np.argsort(-values.real)]
 
 

@@ -269,7 +269,7 @@ def HybridController_(T):
             if not float(wrench_lag) >= 0:
                 raise ValueError(f"HybridController: wrench_lag must be >= 0 (s), got {wrench_lag}")
             self.wrench_lag = float(wrench_lag)
-            self._damping = joint_damping(plant)
+            self.joint_damping = joint_damping(plant)   # B per velocity, which the plant's step applies implicitly
             if T == float:                        # once, not again for the AutoDiffXd copy
                 warn_damped_joints(plant, self.plant_time_step)
             self.sampled_diagnostics = bool(sampled_diagnostics)
@@ -307,7 +307,7 @@ def HybridController_(T):
             self._law = LawConstants(self._gains, self.mode, self.kinematic_rows, m, singularity_threshold,
                                      self._max_joint_acceleration, self.effort_limits, anti_windup,
                                      actuation_from_torque, zero_acceleration, speed, gain, I_v,
-                                     self._damping, self.plant_time_step, bool(compensate_tangential_force),
+                                     self.joint_damping, self.plant_time_step, bool(compensate_tangential_force),
                                      self.wrench_lag)
 
             # -- ports ------------------------------------------------------------------

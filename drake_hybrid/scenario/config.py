@@ -120,8 +120,8 @@ class ContactConfig:
     # 2 cm/s, R 5 cm: 6.6-6.9 % velocity error in impedance-force mode); a lighter pair, 0.01 s,
     # misses a 50 ms force step by 0.755 N while the arm compresses the pad (docs/drake_notes.md,
     # "Choosing the pair's dissipation").
-    relaxation_time: float = 0.03                # s, the pad's
-    workpiece_relaxation_time: float = 0.0       # s, the workpiece's
+    relaxation_time: float = 0.03                # s, the pad's (SAP); replaces the tool model's own; < 0 keeps it
+    workpiece_relaxation_time: float = 0.0       # s, each workpiece geometry's, directives' too; < 0: the model's own
     friction: float = 0.0                        # Coulomb mu (static = dynamic) of pad and workpiece
     pad_resolution: float = 0.003                # m, mesh resolution hint of the pad (see docs: tessellation torque)
 
