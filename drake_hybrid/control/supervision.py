@@ -27,12 +27,13 @@ C_r = C_entry when APPROACH begins, C_r += h s n_C every period in APPROACH (it 
 approach speed s into the surface whether C follows or not), and C_r stands still in TARE, HOLD
 and CONTACT, while the wrench is invalid, and once it is max_travel + 2 s / K_a from C_entry
 (the travel's bound: a guarded move blocked short of the threshold, by an obstacle or a sensor
-that reads nothing, then presses with at most about Lambda K_a^2 times that, not ever harder). The controller's guarded move,
-C-ddot = -2 K_a (C-dot - s n_C) - K_a^2 (C - C_r) (``law.guarded_acceleration``), is a velocity
-servo with integral action: C - C_r is the integral of its velocity error since APPROACH began
-(reset there, unused in CONTACT). Against the surface the pressing force keeps rising, at
-Lambda K_a^2 s per second, until it crosses the contact threshold, whatever the arm's task inertia
-Lambda and the contact's damping; the velocity servo alone stalls at a force proportional to Lambda.
+that reads nothing, then presses with at most about Lambda K_a^2 times that, not ever harder).
+The controller's guarded move, C-ddot = -2 K_a (C-dot - s n_C) - K_a^2 (C - C_r)
+(``law.guarded_acceleration``), is a velocity servo with integral action: C - C_r is the integral
+of its velocity error since APPROACH began (reset there, unused in CONTACT). Against the surface
+the pressing force keeps rising, at Lambda K_a^2 s per second, until it crosses the contact
+threshold, whatever the arm's task inertia Lambda and the contact's damping; the velocity servo
+alone stalls at a force proportional to Lambda.
 
 A lost contact is re-acquired by the same guarded move: the arm moves along n_C at the
 approach speed s until the force exceeds the contact threshold. The impact at re-contact is
