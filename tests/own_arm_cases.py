@@ -15,11 +15,13 @@ from pathlib import Path
 
 import numpy as np
 import sympy
+from scipy.optimize import linear_sum_assignment
 
 from pydrake.geometry import Box, Cylinder, Sphere
 from pydrake.math import RigidTransform, RotationMatrix
 
 from drake_hybrid import ConstraintSpace, GivenVelocityProjection, PoseChart, surface_constraint
+from drake_hybrid.analysis.environment import impedance_loop
 from drake_hybrid.analysis.linearization import design_time_constant, linearize_continuous
 from drake_hybrid.control.gains import ControlMode
 from drake_hybrid.experiments.simulation import simulate
@@ -113,8 +115,10 @@ def run(arm_name, shape, mode, cache_dir):
     custom = task(arm_name, shape, cache_dir)
     cfg = config(custom, mode)
     linearization = linearize_continuous(cfg)
-    summary = simulate(cfg).summary
+    result = simulate(cfg)
+    summary = result.summary
     match = linearization.match
+    drag, drag_error = run_drag(result.log, cfg, mode, summary["design_time_constant"])
     figures = {
         "arm": arm_name, "shape": shape, "mode": mode,
         "velocity_error_percent": summary["max_velocity_error_percent_after_5_time_constants"],
@@ -131,6 +135,10 @@ def run(arm_name, shape, mode, cache_dir):
         "jacobian_check": linearization.jacobian_check.summary(),
         # impedance-force: the run against the designed impedance driven by its measured F_v (% of the command)
         "velocity_error_against_impedance_percent": (summary["impedance"] or {}).get("max_difference_percent"),
+        # the simulated (SAP) contact's steady drag along x, F_v / x-dot (N s/m), and in impedance-force mode
+        # how far the designed roots move when the impedance closes through a damping that size
+        "run_drag": drag,
+        "eigenvalue_error_with_run_drag": drag_error,
         "seconds": time.perf_counter() - started,
     }
     figures["passed"] = bool(figures["velocity_error_percent"] <= MAX_ERROR_PERCENT
@@ -138,6 +146,24 @@ def run(arm_name, shape, mode, cache_dir):
                              and figures["eigenvalue_error"] <= EIGENVALUE_TOLERANCE
                              and figures["max_real_part"] <= MAX_REAL_PART)
     return figures
+
+
+def run_drag(log, cfg, mode, time_constant):
+    """(B, error): the run's steady drag along x, the mean measured F_v over the last five design time
+    constants' settled window divided by SPEED (N s/m; negative opposes the motion), and in
+    impedance-force mode the largest relative distance of the designed roots of s^2 + K_v s + K_p from
+    those of s^2 + (K_v - B) s + K_p, B on the x row alone (None in the other modes, which cancel F_v)."""
+    settled = log["t"] >= 5.0 * time_constant
+    drag = float(np.mean(log["tangential_force"][settled, 0]) / SPEED)
+    if ControlMode.parse(mode) is not ControlMode.IMPEDANCE_FORCE:
+        return drag, None
+    gains = cfg.gains.matrices(5, 1, mode)
+    damping = np.zeros((5, 5))
+    damping[0, 0] = drag
+    designed = impedance_loop(gains.velocity, gains.position)
+    closed = impedance_loop(gains.velocity, gains.position, damping=damping)
+    cost = np.abs(closed[None, :] - designed[:, None]) / np.abs(designed)[:, None]
+    return drag, float(cost[linear_sum_assignment(cost)].max())
 
 
 def latin_square():

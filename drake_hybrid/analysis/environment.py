@@ -24,7 +24,9 @@ along E_f). A hydroelastic contact on a small curved workpiece has both (docs/dr
 * B_e: the contact's dissipation along the face normals of a curved workpiece (the front of the
   patch separates, the rear approaches): a drag although mu = 0. The continuous plant's
   Hunt-Crossley pad (d = 10 s/m) gives -0.20 N s/m on the drum; SAP's relaxation time gives
-  the same mechanism on a discrete plant.
+  the same mechanism on a discrete plant, about nine times stronger with the package's 0.03 s pair
+  (a steady drag of -1.85 N s/m on the 5 cm drum and ball; docs/drake_notes.md, "The simulated
+  contact's drag and the impedance's roots"). The prediction here is the continuous twin's.
 
 In a run, the same holds with the measured F_v as the input: ``impedance_response`` integrates
 (3.2-11) driven by a logged F_v(t) from the logged start, the velocity errors the designed impedance

@@ -110,7 +110,7 @@ RESULTS_FILE = "results.csv"
 # One point
 # ------------------------------------------------------------------------------------------------
 
-def _worst_real(match, marginal_count):
+def _worst_real(match):
     """(worst Re over the designed partners and the extra modes, worst Re over the marginal modes:
     the measured partners of the predicted zeros; see ``analysis.match_eigenvalues``)."""
     regulated = np.concatenate([np.asarray(match.partner), np.asarray(match.extra)])
@@ -237,16 +237,14 @@ def evaluate_point(config_yaml, criteria=None, continuous=True, discrete=True, t
     if continuous:
         try:
             linear = linearize_continuous(config)
-            row["worst_continuous_real"], row["marginal_continuous_real"] = _worst_real(
-                linear.match, linear.predicted.marginal)
+            row["worst_continuous_real"], row["marginal_continuous_real"] = _worst_real(linear.match)
             row["stable_continuous"] = row["worst_continuous_real"] < criteria.eigenvalue_margin
         except Exception as error:
             errors.append(_stage_error("continuous linearization", error))
     if discrete and config.control_period > 0:
         try:
             linear = linearize_sampled_loop(config)
-            row["worst_discrete_real"], row["marginal_discrete_real"] = _worst_real(
-                linear.match, linear.predicted.marginal)
+            row["worst_discrete_real"], row["marginal_discrete_real"] = _worst_real(linear.match)
             row["spectral_radius"] = float(np.max(np.abs(linear.multipliers)))
             row["discrete_equilibrium_residual"] = linear.equilibrium_residual
             row["stable_discrete"] = _discrete_verdict(row["worst_discrete_real"], linear.step_check,
