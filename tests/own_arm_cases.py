@@ -152,7 +152,8 @@ def run_drag(log, cfg, mode, time_constant):
     """(B, error): the run's steady drag along x, the mean measured F_v over the last five design time
     constants' settled window divided by SPEED (N s/m; negative opposes the motion), and in
     impedance-force mode the largest relative distance of the designed roots of s^2 + K_v s + K_p from
-    those of s^2 + (K_v - B) s + K_p, B on the x row alone (None in the other modes, which cancel F_v)."""
+    those of s^2 + (K_v - M_d^-1 B) s + K_p, B on the x row alone (None in the other modes, which cancel
+    F_v)."""
     settled = log["t"] >= 5.0 * time_constant
     drag = float(np.mean(log["tangential_force"][settled, 0]) / SPEED)
     if ControlMode.parse(mode) is not ControlMode.IMPEDANCE_FORCE:
@@ -161,7 +162,7 @@ def run_drag(log, cfg, mode, time_constant):
     damping = np.zeros((5, 5))
     damping[0, 0] = drag
     designed = impedance_loop(gains.velocity, gains.position)
-    closed = impedance_loop(gains.velocity, gains.position, damping=damping)
+    closed = impedance_loop(gains.velocity, gains.position, damping=damping, inverse_mass=gains.impedance_inverse_mass)
     cost = np.abs(closed[None, :] - designed[:, None]) / np.abs(designed)[:, None]
     return drag, float(cost[linear_sum_assignment(cost)].max())
 

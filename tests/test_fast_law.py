@@ -3,6 +3,7 @@ diagnostic equal to 1e-12 on every built-in task in every mode, a redundant arm,
 near the singularity bound, in saturation and in the guarded move, and with the law's later lines
 (the mechanism force, the discrete step's damping compensation, the tangential compensation)."""
 
+import dataclasses
 import warnings
 
 import numpy as np
@@ -230,3 +231,25 @@ def test_a_constraint_that_does_not_compile_leaves_the_controller_on_the_generic
         fast.GetOutputPort("actuation").Eval(context)
     assert fast.fast_law.disabled
     _compare(fast, generic, inputs, np.zeros(fast.integral_state_slices()[1].stop), "not compiled")
+
+
+@pytest.mark.slow                # several seconds: not in the fast loop (-m 'not slow')
+def test_both_paths_agree_with_an_impedance_mass(task, rng):
+    """Impedance mode with a full symmetric positive definite impedance mass M_d (HybridGains.impedance_mass;
+    K_0 = M_d^-1 - S on the velocity rows, law.impedance_gain): the compiled law reads M_d^-1 from its
+    constants and equals the generic law."""
+    name, start = task
+    plant, frame, point, space, gains, q0 = start
+    k = space.velocity_size
+    root = rng.normal(size=(k, k))
+    mass = root @ root.T + 0.5 * np.eye(k)
+    heavy = dataclasses.replace(gains, impedance_mass=mass)
+    fast, generic = _pair((plant, frame, point, space, heavy, q0), "impedance-force")
+    offset = fast.fast_law.ints[fast_kernels.I_OFFSET_INVERSE_MASS]
+    np.testing.assert_allclose(fast.fast_law.reals[offset:offset + k * k].reshape(k, k), np.linalg.inv(mass),
+                               rtol=1e-12)
+    for i in range(4):
+        inputs = _random_inputs(fast, q0, rng, spread=0.02)
+        integrals = rng.normal(scale=0.05, size=fast.integral_state_slices()[1].stop)
+        _compare(fast, generic, inputs, integrals, f"{name} impedance mass state {i}")
+    assert fast.fast_law.fallbacks == 0

@@ -31,9 +31,11 @@ It now splits it where it was measured (control.law.measured_forces), within 0.7
 
 import logging
 
+import numpy as np
+import own_arm_cases as cases
 import pytest
 
-import own_arm_cases as cases
+from drake_hybrid.analysis.linearization import linearize_continuous
 
 logging.getLogger("drake").setLevel(logging.ERROR)
 
@@ -95,3 +97,19 @@ def test_the_xarm7_impedance_answers_a_force_through_its_damped_wrist(cache):
     assert summary["max_force_error_percent_after_5_time_constants"] < 1.0, summary
     rotation = [row["max_error_after_5_time_constants"] for row in summary["velocity_rows"][2:]]   # wx, wy, wz
     assert max(rotation) < 1e-3, rotation
+
+
+@pytest.mark.slow
+def test_a_heavier_impedance_keeps_its_designed_roots_on_the_drum(cache):
+    """The figure the 5 cm cylinder misses (KNOWN) is the unit-mass impedance yielding to the contact's
+    own stiffness and damping. With the impedance's mass M_d = 10 (HybridGains.impedance_mass, one value
+    for every row; the roots K_v and K_p design are unchanged) they move the designed roots about ten
+    times less: UR10, measured 2.57 % from the gains' design (21.76 % at the paper's unit mass) and 0.38 %
+    from the prediction with the measured K_e and B_e."""
+    cfg = cases.config(cases.task("ur10", "cylinder", cache), "impedance-force")
+    cfg.gains.impedance_mass = [10.0]
+    linearization = linearize_continuous(cfg)
+    assert float(np.max(linearization.match.relative_error)) <= cases.EIGENVALUE_TOLERANCE
+    assert linearization.shifted_match is not None                  # the contact still moves them, by less
+    assert float(np.max(linearization.shifted_match.relative_error)) <= 0.01
+    assert float(np.max(linearization.eigenvalues.real)) <= cases.MAX_REAL_PART

@@ -1,8 +1,10 @@
 """The contact as the impedance meets it: its stiffness and damping along the motion rows.
 
-In impedance-force mode the law makes every motion row a unit-mass impedance (3.2-11),
+In impedance-force mode the law makes every motion row an impedance (3.2-11),
 
-    y-ddot + K_v y-dot + K_p y = F_v,
+    y-ddot + K_v y-dot + K_p y = M_d^-1 F_v,
+
+of unit mass in the paper and by default (M_d, ``HybridGains.impedance_mass``, on the velocity rows),
 
 y the position along the rows (y-dot = E_p r-dot; the held rows of a point contact count as
 motion rows with C-ddot + 3 w_c C-dot + 2 w_c^2 C = F). F_v is the measured force on those rows:
@@ -10,7 +12,7 @@ an input the gains do not choose. The roots the gains design, those of s^2 + K_v
 impedance's alone. Where the contact itself makes F_v depend on where and how fast the pad is,
 linearized F_v = K_e y + B_e y-dot, the closed loop has the roots of
 
-    s^2 I + (K_v - B_e) s + (K_p - K_e) = 0                                  (impedance with its environment)
+    s^2 I + (K_v - M_d^-1 B_e) s + (K_p - M_d^-1 K_e) = 0                    (impedance with its environment)
 
 and that is what an impedance is for: it yields to its environment. For a smooth, frictionless
 ball pad on a smooth workpiece both are zero (the contact force passes through the pad's centre
@@ -120,17 +122,20 @@ def contact_environment(scenario, context, rows, step=ENVIRONMENT_STEP):
     return ContactEnvironment(rows=rows, stiffness=stiffness, damping=damping)
 
 
-def impedance_matrix(velocity_gain, position_gain, stiffness=None, damping=None):
-    """A of d/dt [y; y-dot] = A [y; y-dot] for y-ddot = -(K_v - B_e) y-dot - (K_p - K_e) y (None: K_e, B_e = 0)."""
+def impedance_matrix(velocity_gain, position_gain, stiffness=None, damping=None, inverse_mass=None):
+    """A of d/dt [y; y-dot] = A [y; y-dot] for y-ddot = -(K_v - M_d^-1 B_e) y-dot - (K_p - M_d^-1 K_e) y
+    (None: K_e, B_e = 0; ``inverse_mass`` M_d^-1, None: the paper's unit mass)."""
     k = velocity_gain.shape[0]
     K_e = np.zeros((k, k)) if stiffness is None else stiffness
     B_e = np.zeros((k, k)) if damping is None else damping
+    if inverse_mass is not None:
+        K_e, B_e = inverse_mass @ K_e, inverse_mass @ B_e
     return np.block([[np.zeros((k, k)), np.eye(k)], [K_e - position_gain, B_e - velocity_gain]])
 
 
-def impedance_loop(velocity_gain, position_gain, stiffness=None, damping=None):
+def impedance_loop(velocity_gain, position_gain, stiffness=None, damping=None, inverse_mass=None):
     """Eigenvalues of ``impedance_matrix``: the impedance's roots, with its environment if given."""
-    return np.linalg.eigvals(impedance_matrix(velocity_gain, position_gain, stiffness, damping))
+    return np.linalg.eigvals(impedance_matrix(velocity_gain, position_gain, stiffness, damping, inverse_mass))
 
 
 def impedance_environment_shifts(scenario, context, designed, step=ENVIRONMENT_STEP):
@@ -154,17 +159,20 @@ def impedance_environment_shifts(scenario, context, designed, step=ENVIRONMENT_S
     velocity_gain = np.diag(np.concatenate([np.zeros(k), np.full(len(held), 3.0 * w_c)]))
     position_gain = np.diag(np.concatenate([np.zeros(k), np.full(len(held), 2.0 * w_c**2)]))
     velocity_gain[:k, :k], position_gain[:k, :k] = gains.velocity, gains.position
+    inverse_mass = np.eye(len(rows))
+    inverse_mass[:k, :k] = gains.impedance_inverse_mass
     alone = impedance_loop(velocity_gain, position_gain)
-    coupled = impedance_loop(velocity_gain, position_gain, environment.stiffness, environment.damping)
+    coupled = impedance_loop(velocity_gain, position_gain, environment.stiffness, environment.damping, inverse_mass)
     # Each root of the impedance alone is the designed eigenvalue nearest to it; its partner with the
     # contact, the coupled root nearest to it (Hungarian, as match_eigenvalues pairs).
     designed = np.asarray(designed, dtype=complex)
     cost = np.abs(coupled[None, :] - alone[:, None]) / np.abs(alone)[:, None]
     pairs = zip(*linear_sum_assignment(cost))
     K_e, B_e = environment.stiffness, environment.damping
-    reason = (f"the unit-mass impedance (3.2-11) meets the contact's own stiffness and damping along its rows "
+    reason = (f"the impedance (3.2-11) meets the contact's own stiffness and damping along its rows "
               f"(central differences: dF/dy up to {np.max(np.abs(K_e)):.3g}, dF/dy-dot up to "
-              f"{np.max(np.abs(B_e)):.3g}, row units): roots of s^2 + (K_v - B_e) s + (K_p - K_e); a tessellated "
+              f"{np.max(np.abs(B_e)):.3g}, row units): roots of s^2 + (K_v - M_d^-1 B_e) s + (K_p - M_d^-1 K_e); "
+              f"a tessellated "
               f"curved workpiece's facets and normal dissipation (analysis.environment)")
     shifts = []
     for i, j in pairs:
@@ -176,13 +184,15 @@ def impedance_environment_shifts(scenario, context, designed, step=ENVIRONMENT_S
     return shifts
 
 
-def impedance_response(velocity_gain, position_gain, t, tangential_force, position_error0, velocity_error0):
-    """e_p'(t) of the designed impedance (3.2-11), e_p'' + K_v e_p' + K_p e_p = F_v, driven by a logged
-    F_v (``tangential_force``, samples at ``t``, linear between them) from e_p(0), e_p'(0): the
-    velocity errors a run realizing the impedance has (module docstring)."""
+def impedance_response(velocity_gain, position_gain, t, tangential_force, position_error0, velocity_error0,
+                       inverse_mass=None):
+    """e_p'(t) of the designed impedance (3.2-11), e_p'' + K_v e_p' + K_p e_p = M_d^-1 F_v, driven by a
+    logged F_v (``tangential_force``, samples at ``t``, linear between them) from e_p(0), e_p'(0): the
+    velocity errors a run realizing the impedance has (module docstring; ``inverse_mass`` M_d^-1,
+    None: the paper's unit mass)."""
     k = velocity_gain.shape[0]
     A = impedance_matrix(velocity_gain, position_gain)
-    B = np.vstack([np.zeros((k, k)), np.eye(k)])
+    B = np.vstack([np.zeros((k, k)), np.eye(k) if inverse_mass is None else inverse_mass])
     C = np.hstack([np.zeros((k, k)), np.eye(k)])
     x0 = np.concatenate([position_error0, velocity_error0])
     _, response, _ = lsim((A, B, C, np.zeros((k, k))), np.asarray(tangential_force, dtype=float),

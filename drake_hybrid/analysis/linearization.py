@@ -519,8 +519,8 @@ def impedance_realization(scenario, log):
 
     Returns a dict of arrays over the log:
 
-    * ``impedance_residual``: e_p'' + K_v e_p' + K_p e_p - F_v (3.2-11, first line), with e_p''
-      from central differences of the logged e_p';
+    * ``impedance_residual``: e_p'' + K_v e_p' + K_p e_p - M_d^-1 F_v (3.2-11, first line; M_d the
+      impedance's mass, 1 in the paper), with e_p'' from central differences of the logged e_p';
     * ``tangential_force``: F_v;
     * ``force_loop`` and ``force_loop_predicted``: g_f = (I + K_fp) e_f + K_fi xi on the
       force-controlled rows (xi rebuilt from the logged e_f and xi(0)) and its prediction
@@ -533,7 +533,7 @@ def impedance_realization(scenario, log):
     t = log["t"]
     e_p, e_p_dot, F_v = log["position_error"], log["velocity_error"], log["tangential_force"]
     e_p_ddot = np.gradient(e_p_dot, t, axis=0)
-    residual = e_p_ddot + e_p_dot @ gains.velocity.T + e_p @ gains.position.T - F_v
+    residual = e_p_ddot + e_p_dot @ gains.velocity.T + e_p @ gains.position.T - F_v @ gains.impedance_inverse_mass.T
     m = controller.force_size
     physical = [i for i in range(m) if i not in controller.kinematic_rows]
     kinematic = list(controller.kinematic_rows)

@@ -113,7 +113,8 @@ def HybridController_(T):
                    - N^T M K_n q-dot,  Lambda = (J M^-1 J^T)^-1                  (n > d)
 
         with K_0 = I + M_fp^T M_f^-1 M_fp - M_p recomputed every evaluation
-        (docs/theory.md §5).
+        (docs/theory.md §5); with the impedance's mass M_d (``gains.impedance_mass``,
+        the paper's 1 by default) the velocity rows' I is M_d^-1.
 
         In impedance mode the kinematic rows count as motion-controlled rows:
         K_0 is built on the partition [E_p; kinematic rows of E_f] / (force-

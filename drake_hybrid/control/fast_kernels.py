@@ -49,7 +49,8 @@ I_COMPENSATE_TANGENTIAL = 22  # 1: cancel the measured F_v and the held rows' F 
 I_MECHANISM = 23              # 1: the mechanism force F_m = I_v a_p (law.mechanism_force)
 I_DAMPING = 24                # 1: a damped discrete step: h B a* and K_0's J (M + h B)^-1 J^T (control.damping)
 I_OFFSET_MECHANISM, I_OFFSET_DAMPING = 25, 26   # offsets of I_v (k x k) and h B (n) in ``reals``
-INT_SIZE = 27
+I_OFFSET_INVERSE_MASS = 27    # offset of M_d^-1 (k x k), the impedance's inverse mass (law.impedance_gain)
+INT_SIZE = 28
 # -- scalars at the start of ``reals`` -------------------------------------------------------------
 (R_RANK_TOLERANCE, R_KERNEL_TOLERANCE, R_INVERTIBILITY_TOLERANCE, R_CHART_TOLERANCE, R_CONSTRAINT_FREQUENCY,
  R_NULL_SPACE_DAMPING, R_SINGULARITY_THRESHOLD, R_MAX_ACCELERATION, R_APPROACH_SPEED, R_APPROACH_GAIN,
@@ -667,6 +668,8 @@ def law_kernel(x, nu, J, bias, C, E_f, curvature, E_f_dot, E_p, E_p_dot_nu, v, d
         M_fp = matmul(force_rows, mobility_motion_T)
         M_p = matmul(motion_rows, mobility_motion_T)
         K_0 = np.eye(M_p.shape[0]) - M_p
+        inverse_mass = reals[ints[I_OFFSET_INVERSE_MASS]:ints[I_OFFSET_INVERSE_MASS] + k * k].reshape((k, k))
+        K_0[:k, :k] += inverse_mass - np.eye(k)                        # M_d^-1 on the velocity rows
         if physical.size:
             M_f = matmul(matmul(force_rows, response), transpose(force_rows))
             correction, singular = solve_matrix(M_f, M_fp)

@@ -199,7 +199,8 @@ def pack_constants(controller, law, space):
               law.actuation_from_torque, law.effort_limits, controller._end_effector_point, chart_values,
               projection.basis if kernel else np.zeros(0), projection._half_lower if kernel else np.zeros(0),
               law.velocity_row_inertia if mechanism else np.zeros(0),
-              law.plant_time_step * np.asarray(law.joint_damping, dtype=float) if damped else np.zeros(0)]
+              law.plant_time_step * np.asarray(law.joint_damping, dtype=float) if damped else np.zeros(0),
+              gains.impedance_inverse_mass]
     reals, offsets, position = [scalars], [], scalars.size
     for block in blocks:
         block = np.ascontiguousarray(block, dtype=float).reshape(-1)
@@ -211,7 +212,7 @@ def pack_constants(controller, law, space):
                                     int(law.mode is ControlMode.IMPEDANCE_FORCE), int(kernel), int(law.anti_windup),
                                     int(law.approach_speed is not None)]
     ints[kernels.I_OFFSET_KV:kernels.I_OFFSET_HALF_LOWER + 1] = offsets[:11]
-    ints[kernels.I_OFFSET_MECHANISM], ints[kernels.I_OFFSET_DAMPING] = offsets[11:]
+    ints[kernels.I_OFFSET_MECHANISM], ints[kernels.I_OFFSET_DAMPING], ints[kernels.I_OFFSET_INVERSE_MASS] = offsets[11:]
     ints[kernels.I_MECHANISM], ints[kernels.I_DAMPING] = int(mechanism), int(damped)
     ints[kernels.I_CONFIGURATION] = chart.configuration_size
     ints[kernels.I_COMPENSATE_TANGENTIAL] = int(law.compensate_tangential_force)

@@ -9,6 +9,7 @@ velocity          K_v         (d-m) x (d-m)           velocity loop, eigenvalues
 position          K_p         (d-m) x (d-m)           position/impedance modes (Remark 3, 3.2-6)
 force_proportional K_fp       m x m                   force loop, (I + K_fp) xi-dot + K_fi xi = 0
 force_integral    K_fi        m x m                   force loop
+impedance_mass    M_d         (d-m) x (d-m)           impedance mode: M_d (e'' + K_v e' + K_p e) = F_v
 null_space_damping K_n        scalar (1/s)            n > d only: q-ddot_0 = -K_n q-dot
 constraint_frequency w_c      scalar (rad/s)          kinematic rows: C-ddot + 3 w_c C-dot + 2 w_c^2 C = 0
 ================  ==========  ======================  =================================
@@ -16,8 +17,14 @@ constraint_frequency w_c      scalar (rad/s)          kinematic rows: C-ddot + 3
 Each gain may be given as a scalar (times I), a vector (diagonal) or a matrix.
 ``HybridGains`` stores them as flat lists (YAML-friendly): one entry means a
 scalar times I, k entries a diagonal, k*k entries a full matrix (row-major).
-K_v, K_p and K_fi must be symmetric positive definite and K_fp symmetric
+K_v, K_p, K_fi and M_d must be symmetric positive definite and K_fp symmetric
 positive semidefinite; anything else raises ``GainError`` naming the gain.
+
+M_d is the impedance's mass along the velocity rows (kg, kg m^2 on a turning row). The paper's
+impedance (3.2-1) has unit mass, the default: e'' + K_v e' + K_p e = F_v. A heavier M_d keeps
+the roots K_v and K_p design and divides the force the impedance yields to by M_d
+(K_0 = M_d^-1 - S, docs/theory.md §5): what keeps the roots where they are designed on a contact
+that drags (docs/drake_notes.md, "The simulated contact's drag and the impedance's roots").
 """
 
 import enum
@@ -108,9 +115,10 @@ class HybridGains:
     force_integral: List[float] = field(default_factory=lambda: [15.0])
     null_space_damping: float = 10.0
     constraint_frequency: float = 15.0
+    impedance_mass: List[float] = field(default_factory=lambda: [1.0])   # M_d, impedance mode; 1: the paper's
 
     def __post_init__(self):
-        for name in ("velocity", "position", "force_proportional", "force_integral"):
+        for name in ("velocity", "position", "force_proportional", "force_integral", "impedance_mass"):
             try:
                 setattr(self, name, _flat(getattr(self, name)))
             except (TypeError, ValueError):
@@ -126,13 +134,16 @@ class HybridGains:
         K_fi = gain_matrix(self.force_integral, force_size, "force_integral (K_fi)")
         check_fields(self, "gain ", positive=("constraint_frequency",), nonnegative=("null_space_damping",),
                      error=GainError)
-        return ValidatedGains(K_v, K_p, K_fp, K_fi, float(self.null_space_damping), float(self.constraint_frequency))
+        M_d = gain_matrix(self.impedance_mass, velocity_size, "impedance_mass (M_d)")
+        return ValidatedGains(K_v, K_p, K_fp, K_fi, float(self.null_space_damping), float(self.constraint_frequency),
+                              M_d)
 
     def as_lists(self, velocity_size, force_size, mode):
         """The gains as nested lists (for summary.json), keyed as in the CLI's summary."""
         g = self.matrices(velocity_size, force_size, mode)
         return {"velocity": g.velocity.tolist(), "position": g.position.tolist(),
-                "force_proportional": g.force_proportional.tolist(), "force_integral": g.force_integral.tolist()}
+                "force_proportional": g.force_proportional.tolist(), "force_integral": g.force_integral.tolist(),
+                "impedance_mass": g.impedance_mass.tolist()}
 
 
 @dataclass
@@ -143,9 +154,14 @@ class ValidatedGains:
     force_integral: np.ndarray
     null_space_damping: float
     constraint_frequency: float
+    impedance_mass: np.ndarray = None          # M_d (k x k); None: the paper's unit mass
     force_rate: np.ndarray = field(init=False)
+    impedance_inverse_mass: np.ndarray = field(init=False)     # M_d^-1, the law's and the analyses'
 
     def __post_init__(self):
+        if self.impedance_mass is None:
+            self.impedance_mass = np.eye(self.velocity.shape[0])
+        self.impedance_inverse_mass = np.linalg.inv(self.impedance_mass)
         # G = (I + K_fp)^-1 K_fi: the force loop's rate matrix (3.1-14).
         m = self.force_proportional.shape[0]
         self.force_rate = np.linalg.solve(np.eye(m) + self.force_proportional, self.force_integral)

@@ -230,28 +230,35 @@ def impedance_blocks(velocity_projection, force_projection, task_mobility, kinem
             motion_rows @ task_mobility @ motion_rows.T)
 
 
-def impedance_gain(velocity_projection, force_projection, task_mobility, kinematic_rows=()):
+def impedance_gain(velocity_projection, force_projection, task_mobility, kinematic_rows=(), inverse_mass=None):
     """K_0 = I + M_fp^T M_f^-1 M_fp - M_p of the impedance/force law (3.2-6), docs/theory.md §5.
 
     K_0 = I - S with S = M_p - M_fp^T M_f^-1 M_fp, the Schur complement of M_f (the inverse of the
-    constrained task inertia in the motion-row coordinates); blocks from ``impedance_blocks``.
+    constrained task inertia in the motion-row coordinates); blocks from ``impedance_blocks``. With
+    the impedance's mass M_d on the velocity rows (``inverse_mass`` = M_d^-1, k x k; None: the paper's
+    unit mass) the velocity rows' block of I is M_d^-1: e'' + K_v e' + K_p e = M_d^-1 F_v.
     """
     M_f, M_fp, M_p = impedance_blocks(velocity_projection, force_projection, task_mobility, kinematic_rows)
-    K_0 = np.eye(M_p.shape[0]) - M_p
+    target = np.eye(M_p.shape[0])
+    if inverse_mass is not None:
+        k = velocity_projection.shape[0]
+        target[:k, :k] = inverse_mass
+    K_0 = target - M_p
     if M_f.shape[0]:
         K_0 = K_0 + M_fp.T @ solve(M_f, M_fp)
     return K_0
 
 
-def impedance_compensation(values, task_mobility, tangential_force, force, kinematic_rows):
+def impedance_compensation(values, task_mobility, tangential_force, force, kinematic_rows, inverse_mass=None):
     """K_0 [F_v; F_kinematic] (3.2-6), split into its velocity rows (k) and its rows of E_f (m).
 
     In impedance mode the kinematic rows count as motion rows: K_0 is built on the partition
     [E_p; kinematic rows of E_f] / (force-controlled rows), and the measured force along them is
-    compensated like F_v, giving them the unit-mass impedance C-ddot + 3 w_c C-dot + 2 w_c^2 C = F.
+    compensated like F_v, giving them the unit-mass impedance C-ddot + 3 w_c C-dot + 2 w_c^2 C = F
+    (the velocity rows get M_d^-1 F_v, ``inverse_mass``; ``impedance_gain``).
     """
     kinematic = list(kinematic_rows)
-    K_0 = impedance_gain(values.velocity_projection, values.force_projection, task_mobility, kinematic)
+    K_0 = impedance_gain(values.velocity_projection, values.force_projection, task_mobility, kinematic, inverse_mass)
     motion_force = np.concatenate([tangential_force, force[kinematic]]) if kinematic else tangential_force
     compensation = K_0 @ motion_force
     k = tangential_force.shape[0]
@@ -396,7 +403,7 @@ def evaluate_law(constants, space, kinematics, plant, plant_context, forces, int
         response = step_task_mobility(J, M, task_mobility, constants.joint_damping, constants.plant_time_step)
         external = tangential_force if F_m is None else tangential_force + F_m
         on_velocity_rows, on_force_rows = impedance_compensation(values, response, external, force,
-                                                                 constants.kinematic_rows)
+                                                                 constants.kinematic_rows, gains.impedance_inverse_mass)
         a_p = a_p + on_velocity_rows
         a_f = a_f + on_force_rows
     if not in_contact:

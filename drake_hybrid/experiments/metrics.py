@@ -123,7 +123,7 @@ def impedance_check(log, gains, since, settle_after):
     first = int(np.argmax(t >= since))
     predicted = impedance_response(gains.velocity, gains.position, t[first:] - t[first],
                                    log["tangential_force"][first:], log["position_error"][first],
-                                   log["velocity_error"][first])
+                                   log["velocity_error"][first], gains.impedance_inverse_mass)
     difference = np.zeros_like(np.asarray(log["velocity_error"], dtype=float))
     difference[first:] = predicted - log["velocity_error"][first:]
     figures = max_row_errors(t, difference, log["desired_velocity"], settle_after)

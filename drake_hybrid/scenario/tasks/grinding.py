@@ -92,7 +92,7 @@ def impedance_step_peak(damping, stiffness):
 
 
 def friction_step_notes(t, x, x_dot_error, command, normal_force, damping, stiffness, rough_start, rough_end, mu,
-                        rough_friction):
+                        rough_friction, inverse_mass=1.0):
     """In impedance/force mode, the x-dot error at the rough patch's edges: each edge steps the friction
     force by (rough_friction - mu) |F_n|, and the designed impedance (3.2-6) yields to the step with a
     speed error that peaks at ``impedance_step_peak`` times the step (with K_v = 40, K_p = 300 and a 4 N
@@ -100,13 +100,15 @@ def friction_step_notes(t, x, x_dot_error, command, normal_force, damping, stiff
     its first five design time constants: the impedance is the design, not a speed error to settle. One
     note naming the measured peak after each edge crossed (``t``, ``x`` the pad's position along the
     pane, ``x_dot_error`` its row of the velocity error, ``command`` its command in m/s) against that
-    prediction; none if the pad crosses no edge."""
+    prediction; none if the pad crosses no edge. ``inverse_mass``: the row's M_d^-1 (1: the paper's unit
+    mass), which scales the force the impedance yields to."""
     on_patch = (x >= rough_start) & (x <= rough_end)
     crossings = np.nonzero(np.diff(on_patch.astype(int)))[0] + 1
     if crossings.size == 0 or not command > 0:
         return []
     step = abs(rough_friction - mu) * normal_force
-    predicted = impedance_step_peak(damping, stiffness) * step
+    predicted = impedance_step_peak(damping, stiffness) * inverse_mass * step
+    force, mass = ("F_v", "") if inverse_mass == 1.0 else ("M_d^-1 F_v", f", M_d = {1.0 / inverse_mass:g}")
     measured = []
     for n, i in enumerate(crossings):
         end = crossings[n + 1] if n + 1 < crossings.size else len(t)
@@ -116,7 +118,8 @@ def friction_step_notes(t, x, x_dot_error, command, normal_force, damping, stiff
                         f"(t = {t[i]:.2f} s, peak at {t[j]:.2f} s)")
     return [f"x-dot's error at the rough patch's edges is the designed impedance yielding to the friction force: "
             f"each edge steps it by ({rough_friction:g} - {mu:g}) x {normal_force:.3g} N = {step:.3g} N, and "
-            f"e_p'' + K_v e_p' + K_p e_p = F_v (3.2-6; K_v = {damping:g}, K_p = {stiffness:g}) answers with a speed "
+            f"e_p'' + K_v e_p' + K_p e_p = {force} (3.2-6; K_v = {damping:g}, K_p = {stiffness:g}{mass}) answers "
+            f"with a speed "
             f"error peaking at {predicted:.3g} m/s ({100 * predicted / command:.0f} % of the command); measured "
             f"{'; '.join(measured)}. Impedance/force regulates that impedance, not the speed: these peaks are no "
             "tracking failure, and they are the x-dot row's 'settled max' whenever the pad crosses an edge after "
@@ -199,12 +202,14 @@ def rough_patch_notes(scenario, log, design_time_constant, rough_start, rough_en
                      "(the default mode) slides (docs/impedance.md)")
     if scenario.controller.mode.value == "impedance-force":
         gains = scenario.controller.validated_gains()
-        coupled = np.count_nonzero(gains.velocity[0, 1:]) + np.count_nonzero(gains.position[0, 1:])
+        coupled = (np.count_nonzero(gains.velocity[0, 1:]) + np.count_nonzero(gains.position[0, 1:])
+                   + np.count_nonzero(gains.impedance_mass[0, 1:]))
         if not coupled:            # the x-dot row's impedance is its own (diagonal gains, the default)
             notes += friction_step_notes(t, x, log["velocity_error"][:, 0], command,
                                          float(np.max(np.abs(log["desired_force"]))), float(gains.velocity[0, 0]),
                                          float(gains.position[0, 0]), rough_start, rough_end,
-                                         float(config.contact.friction), rough_friction)
+                                         float(config.contact.friction), rough_friction,
+                                         float(gains.impedance_inverse_mass[0, 0]))
         force_command = float(np.max(np.abs(log["desired_force"][:, 0])))
         note = force_step_note(t, log["force_error"][:, 0], force_command, (x >= rough_start) & (x <= rough_end),
                                float(t[0]) + 5 * design_time_constant)
