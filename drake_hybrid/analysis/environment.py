@@ -138,11 +138,39 @@ def impedance_loop(velocity_gain, position_gain, stiffness=None, damping=None, i
     return np.linalg.eigvals(impedance_matrix(velocity_gain, position_gain, stiffness, damping, inverse_mass))
 
 
-def impedance_environment_shifts(scenario, context, designed, step=ENVIRONMENT_STEP):
+def mass_factor_within(velocity_gain, position_gain, stiffness, damping, inverse_mass, tolerance, velocity_rows):
+    """The smallest factor c (two significant digits, rounded up) such that the impedance of mass c M_d on
+    the first ``velocity_rows`` rows (the held rows keep theirs) closed through the contact's
+    ``stiffness`` and ``damping`` keeps every root of s^2 + K_v s + K_p within ``tolerance`` (relative)
+    of its designed value; 1 if the current mass does, None if no c up to 1e4 does. The shift falls as
+    1 / c for small shifts."""
+    alone = impedance_loop(velocity_gain, position_gain)
+    rows = np.arange(inverse_mass.shape[0]) < velocity_rows
+
+    def miss(factor):
+        scaled = inverse_mass @ np.diag(np.where(rows, 1.0 / factor, 1.0))
+        coupled = impedance_loop(velocity_gain, position_gain, stiffness, damping, scaled)
+        cost = np.abs(coupled[None, :] - alone[:, None]) / np.abs(alone)[:, None]
+        return float(cost[linear_sum_assignment(cost)].max())
+
+    if miss(1.0) <= tolerance:
+        return 1.0
+    low, high = 1.0, 1e4
+    if miss(high) > tolerance:
+        return None
+    while high / low > 1.001:
+        middle = np.sqrt(low * high)
+        low, high = (low, middle) if miss(middle) <= tolerance else (middle, high)
+    digits = 10.0 ** (np.floor(np.log10(high)) - 1)
+    return float(np.ceil(high / digits) * digits)
+
+
+def impedance_environment_shifts(scenario, context, designed, step=ENVIRONMENT_STEP, tolerance=0.05):
     """The designed eigenvalues of an impedance-force loop that its contact moves, and where:
     [EigenvalueShift] (module docstring; empty when none moves by SHIFT_THRESHOLD or more, or for
     a plant with joints beyond the arm's, a mechanism). ``designed``: the controller's designed eigenvalues
-    (the shifts take theirs)."""
+    (the shifts take theirs). Where a root moves by more than ``tolerance``, the reason names the
+    impedance mass that would keep every root within it (``mass_factor_within``)."""
     plant = scenario.plant
     if plant.num_positions() != plant.num_positions(scenario.robot.arm):
         return []      # a mechanism (the crank's handle): moving the arm alone would measure its joints, not a contact
@@ -172,8 +200,11 @@ def impedance_environment_shifts(scenario, context, designed, step=ENVIRONMENT_S
     reason = (f"the impedance (3.2-11) meets the contact's own stiffness and damping along its rows "
               f"(central differences: dF/dy up to {np.max(np.abs(K_e)):.3g}, dF/dy-dot up to "
               f"{np.max(np.abs(B_e)):.3g}, row units): roots of s^2 + (K_v - M_d^-1 B_e) s + (K_p - M_d^-1 K_e); "
-              f"a tessellated "
-              f"curved workpiece's facets and normal dissipation (analysis.environment)")
+              f"a tessellated curved workpiece's facets and normal dissipation (analysis.environment)")
+    factor = mass_factor_within(velocity_gain, position_gain, K_e, B_e, inverse_mass, tolerance, k)
+    if factor is not None and factor > 1.0:
+        reason += (f"; an impedance mass {factor:g} times the current one (gains.impedance_mass) would keep "
+                   f"every designed root within {100 * tolerance:g} %")
     shifts = []
     for i, j in pairs:
         nearest = designed[np.argmin(np.abs(designed - alone[i]))]

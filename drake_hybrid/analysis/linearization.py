@@ -253,7 +253,7 @@ def _task_shifts(task_name, scenario, root_context, predicted, measured, toleran
     (``analysis.environment``)."""
     shifts = get_task(task_name).eigenvalue_shifts(scenario, root_context)
     if not shifts and scenario.controller.mode is ControlMode.IMPEDANCE_FORCE:
-        shifts = impedance_environment_shifts(scenario, root_context, predicted.designed)
+        shifts = impedance_environment_shifts(scenario, root_context, predicted.designed, tolerance=tolerance)
     if not shifts:
         return [], None
     match = match_eigenvalues(shifted_design(predicted.designed, shifts), measured, tolerance=tolerance,
