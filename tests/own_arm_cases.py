@@ -156,8 +156,8 @@ def run(arm_name, shape, mode, cache_dir, impedance_mass=None):
 
 
 def run_drag(log, cfg, mode, time_constant):
-    """(B, error): the run's steady drag along x, the mean measured F_v over the last five design time
-    constants' settled window divided by SPEED (N s/m; negative opposes the motion), and in
+    """(B, error): the run's steady drag along x, the mean measured F_v from five design time constants
+    on (the settled window) divided by SPEED (N s/m; negative opposes the motion), and in
     impedance-force mode the largest relative distance of the designed roots of s^2 + K_v s + K_p from
     those of s^2 + (K_v - M_d^-1 B) s + K_p, B on the x row alone (None in the other modes, which cancel
     F_v)."""

@@ -87,7 +87,7 @@ def test_K0_with_an_impedance_mass_gives_its_velocity_rows_the_inverse_mass(rng)
 def test_a_heavier_impedance_yields_less_to_the_same_friction():
     """Window grinding with mu = 0.5 on the smooth pane, before the rough patch: the impedance answers
     the friction F_v (-4.98 N) with e_p = M_d^-1 F_v / K_p once settled (K_p = 300). Measured with M_d = 1
-    and 4: -16.60 and -4.15 mm, each within 0.05 % of its prediction from the run's own F_v, and the run
+    and 4: -16.60 and -4.15 mm, each within 0.05 % of its prediction (asserted: 0.1 %) from the run's own F_v, and the run
     realizes e'' + K_v e' + K_p e = M_d^-1 F_v (impedance_realization: RMS residual 1.7 and 2.7 % of
     |M_d^-1 F_v| after one design time constant)."""
     settled = {}
@@ -101,12 +101,12 @@ def test_a_heavier_impedance_yields_less_to_the_same_friction():
         F_v, e_p = log["tangential_force"][late, 0].mean(), log["position_error"][late, 0].mean()
         K_p = result.scenario.controller.validated_gains().position[0, 0]
         assert abs(F_v) > 4.0                                    # mu = 0.5 at 10 N: real friction
-        assert e_p == pytest.approx(F_v / (mass * K_p), rel=0.005), (mass, e_p, F_v)
+        assert e_p == pytest.approx(F_v / (mass * K_p), rel=0.001), (mass, e_p, F_v)
         out = impedance_realization(result.scenario, result.log)
         after_tau = log["t"] >= result.summary["design_time_constant"]
         assert ratio(out["impedance_residual"], out["tangential_force"] / mass, after_tau) < 0.05
         settled[mass] = e_p
-    assert settled[4.0] / settled[1.0] == pytest.approx(0.25, rel=0.005)
+    assert settled[4.0] / settled[1.0] == pytest.approx(0.25, rel=0.002)
 
 
 @pytest.mark.slow                # several seconds: not in the fast loop (-m 'not slow')

@@ -140,15 +140,15 @@ def impedance_loop(velocity_gain, position_gain, stiffness=None, damping=None, i
 
 def mass_factor_within(velocity_gain, position_gain, stiffness, damping, inverse_mass, tolerance, velocity_rows):
     """The smallest factor c (two significant digits, rounded up) such that the impedance of mass c M_d on
-    the first ``velocity_rows`` rows (the held rows keep theirs) closed through the contact's
-    ``stiffness`` and ``damping`` keeps every root of s^2 + K_v s + K_p within ``tolerance`` (relative)
-    of its designed value; 1 if the current mass does, None if no c up to 1e4 does. The shift falls as
-    1 / c for small shifts."""
+    the first ``velocity_rows`` rows (``inverse_mass`` block-diagonal; the held rows keep theirs) closed
+    through the contact's ``stiffness`` and ``damping`` keeps every root of s^2 + K_v s + K_p within
+    ``tolerance`` (relative) of its designed value; 1 if the current mass does, None if no c up to 1e4
+    does. The shift falls as 1 / c for small shifts."""
     alone = impedance_loop(velocity_gain, position_gain)
     rows = np.arange(inverse_mass.shape[0]) < velocity_rows
 
     def miss(factor):
-        scaled = inverse_mass @ np.diag(np.where(rows, 1.0 / factor, 1.0))
+        scaled = np.diag(np.where(rows, 1.0 / factor, 1.0)) @ inverse_mass     # block-diagonal: M_d^-1 / c, I
         coupled = impedance_loop(velocity_gain, position_gain, stiffness, damping, scaled)
         cost = np.abs(coupled[None, :] - alone[:, None]) / np.abs(alone)[:, None]
         return float(cost[linear_sum_assignment(cost)].max())
@@ -162,7 +162,7 @@ def mass_factor_within(velocity_gain, position_gain, stiffness, damping, inverse
         middle = np.sqrt(low * high)
         low, high = (low, middle) if miss(middle) <= tolerance else (middle, high)
     digits = 10.0 ** (np.floor(np.log10(high)) - 1)
-    return float(np.ceil(high / digits) * digits)
+    return round(float(np.ceil(high / digits) * digits), 12)
 
 
 def impedance_environment_shifts(scenario, context, designed, step=ENVIRONMENT_STEP, tolerance=0.05):

@@ -132,7 +132,7 @@ def HybridController_(T):
         feedforward -F_d (normally 0). With an exact model and rigid contact the closed loop
         is (3.1-13)-(3.1-15)::
 
-            e_p'-dot + K_v e_p' (+ K_p e_p) = 0 (+ F_v in impedance mode)
+            e_p'-dot + K_v e_p' (+ K_p e_p) = 0 (+ M_d^-1 F_v in impedance mode)
             (I + K_fp) e_f + K_fi xi = 0  ->  xi-dot = -(I + K_fp)^-1 K_fi xi
 
         so the designed eigenvalues are -eig(K_v) (or the roots of

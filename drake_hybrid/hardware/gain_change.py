@@ -13,7 +13,8 @@ be chosen to give the same a_p and u_f, hence the same torque, at the change::
 
 after which the integrals evolve under the new gains and the errors decay with the new design.
 In velocity-force mode there is no e_p to absorb a change of K_v: the step (K_v - K_v') e_v remains
-(the torque-rate limit spreads it). Other gain fields (null-space damping, ...) are not transferred.
+(the torque-rate limit spreads it). Other gain fields (null-space damping, ...) are not transferred;
+nor is the impedance mass M_d: changing it steps a_p by (M_d'^-1 - M_d^-1) F_v in impedance mode.
 
 ``GainSelector`` passes on the actuation of the law active at each tick; each gain set is its own
 ``HybridController`` (unchanged), all fed the same inputs, and ``bumpless_integrals`` gives the new

@@ -279,10 +279,14 @@ class CrankTurning(Task):
                       f"paper): roots of (1 + M_p I_h) s^2 + K_v s + K_p, M_p = {M_p:.3g}; mechanism: {{source: plant}} puts it in the law")
         else:
             I_t = scenario.plant.GetBodyByName("tool").default_rotational_inertia().get_moments()[2]
-            factor = 1.0 + I_h + I_t - M_p * I_t
+            if np.count_nonzero(gains.impedance_mass[0, 1:]):
+                return []            # an impedance mass coupling the spin row to others: no one-row prediction
+            inverse_mass = float(gains.impedance_inverse_mass[0, 0])     # 1: the paper's unit mass
+            factor = 1.0 + inverse_mass * (I_h + I_t) - M_p * I_t
             reason = (f"spin pair moved by the handle's inertia I_h = {I_h:.3g} and the tool's I_t = {I_t:.3g} "
-                      f"kg m^2 in the wrist sensor's reading, fed forward: roots of (1 + I_h + I_t - M_p I_t) s^2 "
-                      f"+ K_v s + K_p, M_p = {M_p:.3g}; mechanism: {{source: plant}} puts it in the law")
+                      f"kg m^2 in the wrist sensor's reading, fed forward: roots of (1 + M_d^-1 (I_h + I_t) - M_p "
+                      f"I_t) s^2 + K_v s + K_p, M_p = {M_p:.3g}, M_d^-1 = {inverse_mass:.3g}; mechanism: "
+                      f"{{source: plant}} puts it in the law")
         designed = np.sort_complex(np.roots([1.0, K_v, K_p]).astype(complex))
         predicted = np.sort_complex(np.roots([factor, K_v, K_p]).astype(complex))
         return [EigenvalueShift(d, p, reason) for d, p in zip(designed, predicted)]
