@@ -15,13 +15,12 @@ from pathlib import Path
 
 import numpy as np
 import sympy
-from scipy.optimize import linear_sum_assignment
 
 from pydrake.geometry import Box, Cylinder, Sphere
 from pydrake.math import RigidTransform, RotationMatrix
 
 from drake_hybrid import ConstraintSpace, GivenVelocityProjection, PoseChart, surface_constraint
-from drake_hybrid.analysis.environment import impedance_loop
+from drake_hybrid.analysis.environment import impedance_loop, root_pairs
 from drake_hybrid.analysis.linearization import design_time_constant, linearize_continuous
 from drake_hybrid.control.gains import ControlMode
 from drake_hybrid.experiments.simulation import simulate
@@ -170,8 +169,7 @@ def run_drag(log, cfg, mode, time_constant):
     damping[0, 0] = drag
     designed = impedance_loop(gains.velocity, gains.position)
     closed = impedance_loop(gains.velocity, gains.position, damping=damping, inverse_mass=gains.impedance_inverse_mass)
-    cost = np.abs(closed[None, :] - designed[:, None]) / np.abs(designed)[:, None]
-    return drag, float(cost[linear_sum_assignment(cost)].max())
+    return drag, float(root_pairs(designed, closed)[1].max())
 
 
 def latin_square():

@@ -138,6 +138,14 @@ def impedance_loop(velocity_gain, position_gain, stiffness=None, damping=None, i
     return np.linalg.eigvals(impedance_matrix(velocity_gain, position_gain, stiffness, damping, inverse_mass))
 
 
+def root_pairs(designed, moved):
+    """Each root of ``designed`` paired with one of ``moved`` (Hungarian, on the relative distance, as
+    match_eigenvalues pairs): (index pairs, relative distances of the pairs)."""
+    cost = np.abs(moved[None, :] - designed[:, None]) / np.abs(designed)[:, None]
+    rows, columns = linear_sum_assignment(cost)
+    return list(zip(rows, columns)), cost[rows, columns]
+
+
 def mass_factor_within(velocity_gain, position_gain, stiffness, damping, inverse_mass, tolerance, velocity_rows):
     """The smallest factor c (two significant digits, rounded up) such that the impedance of mass c M_d on
     the first ``velocity_rows`` rows (``inverse_mass`` block-diagonal; the held rows keep theirs) closed
@@ -150,8 +158,7 @@ def mass_factor_within(velocity_gain, position_gain, stiffness, damping, inverse
     def miss(factor):
         scaled = np.diag(np.where(rows, 1.0 / factor, 1.0)) @ inverse_mass     # block-diagonal: M_d^-1 / c, I
         coupled = impedance_loop(velocity_gain, position_gain, stiffness, damping, scaled)
-        cost = np.abs(coupled[None, :] - alone[:, None]) / np.abs(alone)[:, None]
-        return float(cost[linear_sum_assignment(cost)].max())
+        return float(root_pairs(alone, coupled)[1].max())
 
     if miss(1.0) <= tolerance:
         return 1.0
@@ -194,8 +201,7 @@ def impedance_environment_shifts(scenario, context, designed, step=ENVIRONMENT_S
     # Each root of the impedance alone is the designed eigenvalue nearest to it; its partner with the
     # contact, the coupled root nearest to it (Hungarian, as match_eigenvalues pairs).
     designed = np.asarray(designed, dtype=complex)
-    cost = np.abs(coupled[None, :] - alone[:, None]) / np.abs(alone)[:, None]
-    pairs = zip(*linear_sum_assignment(cost))
+    pairs, _ = root_pairs(alone, coupled)
     K_e, B_e = environment.stiffness, environment.damping
     reason = (f"the impedance (3.2-11) meets the contact's own stiffness and damping along its rows "
               f"(central differences: dF/dy up to {np.max(np.abs(K_e)):.3g}, dF/dy-dot up to "
