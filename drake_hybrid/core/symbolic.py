@@ -48,8 +48,10 @@ class _Printer(PythonCodePrinter):
         # Small integer powers as products: faster for float, exact for AutoDiffXd.
         base, exponent = expr.as_base_exp()
         if exponent.is_Integer and 2 <= int(exponent) <= 4:
+            # The product is parenthesized as a whole: a Pow may stand in a denominator, where
+            # "a/b*b" would be read as (a/b)*b.
             b = self.parenthesize(base, 1000)
-            return "*".join([b] * int(exponent))
+            return "(" + "*".join([b] * int(exponent)) + ")"
         if exponent == sympy.Rational(1, 2):
             return f"sqrt({self._print(base)})"
         return super()._print_Pow(expr, rational=rational)
