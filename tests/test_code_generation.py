@@ -91,6 +91,10 @@ class Oracle:
         self.symbols = list(X_SYMBOLS) + list(NU_SYMBOLS)
         modules = [{"DiracDelta": lambda *a: mpmath.mpf(0), "sign": mpmath.sign, "Abs": abs}, "mpmath"]
         self._in_doubles = [self._lambdify(entry, modules) for entry in self.entries]
+        # C's sub-terms that can leave the reals (sqrt(x) at x < 0): a real path is undefined wherever one
+        # does, even if sympy's whole value is real (atan2 of two imaginary numbers)
+        self._subterms = [term for term in sympy.preorder_traversal(C)
+                          if term.free_symbols and isinstance(term, (sympy.Function, sympy.Pow))]
 
     def _lambdify(self, entry, modules):
         try:
@@ -110,10 +114,13 @@ class Oracle:
             return None
         return real
 
+    def _real_everywhere(self, substitutions):
+        return all(self._exact(term, substitutions) is not None for term in self._subterms)
+
     def values(self, point):
         """The 30-digit value of each entry, or None where it is undefined or where 53-bit arithmetic on
         sympy's own tree is more than 1e-11 off (ill-conditioned for any floating-point code); and
-        whether each is defined at all (a finite real number)."""
+        whether each is defined at all (a finite real number, with every sub-term of C real)."""
         substitutions = {s: sympy.Float(float(v), 30) for s, v in zip(self.symbols, point)}
         arguments = [mpmath.mpf(float(v)) for v in point]
         doubles = []
@@ -124,8 +131,9 @@ class Oracle:
                 except Exception:          # mpmath on a complex intermediate (atan2 of a complex): undefined
                     doubles.append(None)
         values, defined = [], []
+        real_everywhere = self._real_everywhere(substitutions)
         for expression, double in zip(self.entries, doubles):
-            exact = self._exact(expression, substitutions)
+            exact = self._exact(expression, substitutions) if real_everywhere else None
             defined.append(exact is not None)
             if exact is None or double is None or double.imag != 0 or \
                     abs(double.real - exact) > CONDITIONING * abs(exact):
@@ -314,7 +322,8 @@ def test_constants_and_functions_every_path_evaluates(expression, value):
 
 @pytest.mark.parametrize("constant, words", [
     (sympy.nan, "nan"), (sympy.oo, "infinity"), (sympy.zoo, "zoo"), (sympy.I, "imaginary unit"),
-    (sympy.Float("inf"), "infinity"),
+    (sympy.Float("inf"), "infinity"), (sympy.acos(sympy.pi), "acos.pi. is not a finite real number"),
+    (sympy.asin(7) * X_SYMBOLS[0], "asin.7. is not a finite real number"),
 ])
 def test_refused_constants(constant, words):
     _, y, _ = X_SYMBOLS

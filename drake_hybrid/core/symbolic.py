@@ -189,6 +189,7 @@ def prepare_expression(expression, what="expression"):
         if not math.isfinite(float(number)):
             raise ExpressionError(f"{what}: {describe(expression)} contains the constant {number}, which is not a "
                                   "finite float")
+    check_constant_terms(expression, what)
     replacements = {}
     for function in expression.atoms(sympy.Function):
         rewrite = _REWRITES.get(type(function))
@@ -199,6 +200,21 @@ def prepare_expression(expression, what="expression"):
         return prepare_expression(expression, what)       # a rewritten argument may hold another rewrite
     check_functions(expression, what)
     return expression
+
+
+def check_constant_terms(expression, what="expression"):
+    """ExpressionError naming ``what`` and the term if a constant sub-term (no symbol in it) is not a finite
+    real number: acos(pi) or log(-1) is complex, and no real path evaluates it."""
+    for term in sympy.preorder_traversal(expression):
+        if term.free_symbols or not isinstance(term, (sympy.Function, sympy.Pow)):
+            continue
+        try:
+            value = complex(term.evalf(30))
+        except (TypeError, ValueError, ArithmeticError):
+            value = complex("nan")
+        if not (math.isfinite(value.real) and abs(value.imag) <= 1e-25 * max(1.0, abs(value.real))):
+            raise ExpressionError(f"{what}: the constant term {describe(term)} is not a finite real number; "
+                                  "expressions must be real")
 
 
 def check_functions(expression, what="expression"):
