@@ -264,6 +264,9 @@ def command_simulate(args):
     for what, rows in (("velocity", s["velocity_rows"]), ("force", s["force_rows"])):
         for row in rows:
             print(f"    {what} {row['name']}: {_row_text(row, s.get('events'), s.get('notes'))}")
+    if s.get("invalid_wrench_samples"):
+        print(f"  {s['invalid_wrench_samples']} logged sample(s) with an invalid measured wrench (a sensor dropout): "
+              "the force figures leave them out (their F, e_f and F_v read NaN in log.npz)")
     if s.get("impedance"):
         print(f"  {_impedance_text(s['impedance'])}")
     print(f"  {_residual_text(s)}")
