@@ -43,7 +43,7 @@ def test_profile_source_acceleration_is_the_time_derivative(profile):
 
 
 def test_profile_validation():
-    with pytest.raises(DimensionError, match="velocity profile: value must have 2 entries, got 1"):
+    with pytest.raises(DimensionError, match="velocity_profile: value must have 2 entries, got 1"):
         ProfileSource(Profile(value=[0.1]), Profile(value=[-1.0]), 2, 1)
     with pytest.raises(ValueError, match=r"profile.kind must be one of constant, smooth_step, sine, got 'ramp'"):
         ProfileSource(Profile(kind="ramp", value=[0.1, 0]), Profile(value=[-1.0]), 2, 1)

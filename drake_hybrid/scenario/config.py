@@ -338,6 +338,10 @@ class ScenarioConfig:
         if not self.start.in_contact and not self.supervision.approach_speed > 0:
             raise ConfigError("supervision.approach_speed must be > 0 with start.in_contact: false (the tool "
                               "would never reach the surface)")
+        if not self.start.in_contact and self.start.gap >= self.supervision.max_travel:
+            raise ConfigError(f"start.gap ({self.start.gap:g} m) must be shorter than supervision.max_travel "
+                              f"({self.supervision.max_travel:g}, units of C): the guarded move stops (HOLD) after "
+                              "max_travel, before it reaches the surface; raise max_travel or start closer")
         self.mechanism.validate()
         self.baseline.validate()
         if self.controller not in CONTROLLERS:

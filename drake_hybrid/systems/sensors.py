@@ -42,6 +42,7 @@ from pydrake.systems.scalar_conversion import TemplateSystem
 
 from drake_hybrid.control.phases import ContactPhase
 from drake_hybrid.control.sampling import SAMPLE_LEAD
+from drake_hybrid.core.arguments import vector
 from drake_hybrid.core.errors import DimensionError
 from drake_hybrid.core.kinematics import resolve_frame
 from drake_hybrid.core.linalg import all_finite, value
@@ -67,10 +68,7 @@ def reaction_force_slot(plant, joint):
 
 
 def _point(point, owner):
-    point = np.asarray(point, dtype=float)
-    if point.shape != (3,):
-        raise DimensionError(f"{owner}: end_effector_point must be a 3-vector, got shape {point.shape}")
-    return point
+    return vector(point, "end_effector_point", owner, 3, unit="m", error=DimensionError)
 
 
 def _shift(F_coefficients, p_from_to_W):
