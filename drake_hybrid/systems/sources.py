@@ -99,9 +99,11 @@ class Profile:
         lowest, highest = self.bounds()
         for row, (low, high) in enumerate(zip(lowest, highest)):
             if low < 0 < high:
-                course = {"smooth_step": f"a smooth_step from {self.value[row]:g} to {self.final_value[row]:g} "
-                                         f"over t = {self.start_time:g}..{self.start_time + self.duration:g} s",
-                          "sine": f"a sine of {self.value[row]:g} +- {abs(self.amplitude[row]):g}"}[self.kind]
+                if self.kind == "smooth_step":
+                    course = (f"a smooth_step from {self.value[row]:g} to {self.final_value[row]:g} over "
+                              f"t = {self.start_time:g}..{self.start_time + self.duration:g} s")
+                else:
+                    course = f"a sine of {self.value[row]:g} +- {abs(self.amplitude[row]):g}"
                 raise ForceSignError(
                     f"{what}: row {row} changes sign over its course ({course}: from {low:g} to {high:g}); a contact "
                     "only pushes, so F_d (the force ON the robot in E_f's coordinates) must keep one sign on every row "
