@@ -63,9 +63,32 @@ def read_yaml_file(path, what, error=ConfigError, max_size=MAX_YAML_SIZE):
     return text
 
 
+MAX_YAML_DEPTH = 100         # levels of [ and { a YAML text may nest (a config needs fewer than ten)
+
+
+def flow_depth(text):
+    """The deepest nesting of [ and { in ``text`` (a linear scan, before any parsing)."""
+    depth = deepest = 0
+    for character in text:
+        if character in "[{":
+            depth += 1
+            deepest = max(deepest, depth)
+        elif character in "]}":
+            depth -= 1
+    return deepest
+
+
+def check_depth(text, where="", error=ConfigError):
+    """``error`` if ``text`` nests [ and { deeper than MAX_YAML_DEPTH: refused before a parser recurses into it."""
+    if isinstance(text, str) and flow_depth(text) > MAX_YAML_DEPTH:
+        raise error(f"{where}the YAML nests too deeply (more than {MAX_YAML_DEPTH} levels of [ and {{)")
+
+
 def check_yaml_against_schema(text, schema, where="", error=ConfigError):
-    """``error`` (one line, prefixed by ``where``) for a repeated key, invalid YAML, or a value that does
-    not fit ``schema`` (``type_mismatch``); returns the parsed YAML."""
+    """``error`` (one line, prefixed by ``where``) for a text that nests too deeply (``check_depth``), a
+    repeated key, invalid YAML, or a value that does not fit ``schema`` (``type_mismatch``); returns the
+    parsed YAML."""
+    check_depth(text, where, error)
     try:
         parsed = yaml.load(text, Loader=_UniqueKeyLoader)
     except ConfigError as problem:
