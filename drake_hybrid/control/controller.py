@@ -30,7 +30,7 @@ from pydrake.systems.scalar_conversion import TemplateSystem
 
 from drake_hybrid.control.damping import joint_damping, warn_damped_joints
 from drake_hybrid.control.fast_law import FastLaw
-from drake_hybrid.control.gains import ControlMode, HybridGains, check_rate
+from drake_hybrid.control.gains import ControlMode, HybridGains, check_poles
 from drake_hybrid.control.law import LawConstants, evaluate_law
 from drake_hybrid.control.law_system import LawSystemParts, declare_diagnostic_outputs, reported_diagnostics_vector
 from drake_hybrid.control.phases import ContactPhase
@@ -312,8 +312,7 @@ def HybridController_(T):
                                     owner, unit="units of C per s")
                 gain = positive(getattr(guarded_move, "approach_gain", None), "guarded_move.approach_gain", owner,
                                 unit="1/s")
-                if self.control_period is not None:
-                    check_rate([gain], "guarded_move.approach_gain (K_a)", self.control_period)
+                check_poles([-gain], "guarded_move.approach_gain (K_a)", self.control_period)
             # The mechanism's inertia along the velocity rows (None: the paper's massless constraint).
             I_v = None
             if velocity_row_inertia is not None:

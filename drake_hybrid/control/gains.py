@@ -19,9 +19,10 @@ Each gain may be given as a scalar (times I), a vector (diagonal) or a matrix.
 scalar times I, k entries a diagonal, k*k entries a full matrix (row-major).
 K_v, K_p, K_fi and M_d must be symmetric positive definite and K_fp symmetric
 positive semidefinite; anything else raises ``GainError`` naming the gain. Each loop the gains
-design must also have a sane rate: within [1e-6, 1e6] 1/s (``MIN_RATE``, ``MAX_RATE``; a gain of
-1e-300 is positive definite in name only) and, for a sampled controller of period h, below 1/h
-(``ValidatedGains.check_rates``); K_fp and M_d within a factor 1e6 of 1.
+design must also be sane (``ValidatedGains.check_rates``, ``check_poles``): decay at ``MIN_RATE`` =
+1e-6 1/s or faster (a gain of 1e-300 is positive definite in name only), be no faster than
+``MAX_RATE`` = 1e6 1/s and, for a sampled controller of period h, than its sampling rate 1/h; K_fp
+and M_d stay within a factor 1e6 of 1.
 
 M_d is the impedance's mass along the velocity rows (kg, kg m^2 on a turning row). The paper's
 impedance (3.2-1) has unit mass, the default: e'' + K_v e' + K_p e = F_v. A heavier M_d keeps
@@ -38,7 +39,7 @@ from typing import List
 import numpy as np
 
 from drake_hybrid.core.arguments import number, numeric_array
-from drake_hybrid.core.errors import GainError
+from drake_hybrid.core.errors import ArgumentError, GainError
 
 
 class ControlMode(enum.Enum):
@@ -55,7 +56,8 @@ class ControlMode(enum.Enum):
         try:
             return cls(str(mode))
         except ValueError:
-            raise ValueError(f"unknown control mode '{mode}'; use one of {[m.value for m in cls]}") from None
+            raise ArgumentError(f"unknown control mode '{mode}'; mode must be one of {[m.value for m in cls]}") \
+                from None
 
     @property
     def integrates_position(self):
@@ -63,11 +65,11 @@ class ControlMode(enum.Enum):
         return self is not ControlMode.VELOCITY_FORCE
 
 
-# Sane bounds of a gain (docs: the module docstring). A designed rate |s| (1/s) outside
-# [MIN_RATE, MAX_RATE] is not a design: 1e-6 1/s takes eleven days to converge, 1e6 1/s is faster than
-# any actuator. A sampled controller also realizes no rate at or above its sampling rate 1/h: forward
-# Euler's pole 1 - s h of a loop at s is then <= 0 (it overshoots at every tick, and is unstable
-# beyond 2/h), so every designed rate must stay below MAX_RATE_PERIOD / h.
+# Sane bounds of a gain (the module docstring). A designed loop that decays slower than MIN_RATE (1/s)
+# takes eleven days to converge, one faster than MAX_RATE is faster than any actuator. A sampled
+# controller also realizes no loop as fast as its sampling rate 1/h: forward Euler's pole 1 - s h of a
+# loop at s is then <= 0 (it overshoots at every tick, and is unstable beyond 2/h), so every designed
+# |s| must stay within MAX_RATE_PERIOD / h.
 MIN_RATE, MAX_RATE = 1e-6, 1e6
 MAX_RATE_PERIOD = 1.0
 MAX_RATIO = 1e6            # dimensionless gains (K_fp) and the impedance mass M_d (kg) relative to 1
@@ -191,16 +193,6 @@ class HybridGains:
                 "impedance_mass": g.impedance_mass.tolist()}
 
 
-def _check_within(values, name, low, high, what, unit, why=""):
-    """GainError naming ``name`` if any |value| (``what``: "a loop rate", "an eigenvalue") is outside
-    [low, high] ``unit`` (``why``: what the bound is)."""
-    magnitudes = np.abs(np.atleast_1d(values))
-    outside = [float(v) for v in magnitudes if not low <= v <= high]
-    if outside:
-        raise GainError(f"gain {name} gives {what} of {outside[0]:.3g} {unit}; it must be within "
-                        f"[{low:g}, {high:.4g}] {unit}{why}")
-
-
 @dataclass
 class ValidatedGains:
     velocity: np.ndarray
@@ -221,45 +213,56 @@ class ValidatedGains:
         m = self.force_proportional.shape[0]
         self.force_rate = np.linalg.solve(np.eye(m) + self.force_proportional, self.force_integral)
 
-    def designed_rates(self, mode):
-        """{gain: |s| of the loop it designs (1/s)}: the velocity rows' -eig(K_v) (or the roots of
-        s^2 + K_v s + K_p), the force rows' eig((I + K_fp)^-1 K_fi), the kinematic rows' w_c and 2 w_c,
-        the null space's K_n (when > 0)."""
+    def designed_poles(self, mode):
+        """{gain: the poles s (1/s) of the loops it designs}: the velocity rows' -eig(K_v) (or the roots of
+        s^2 + K_v s + K_p), the force rows' -eig((I + K_fp)^-1 K_fi), the kinematic rows' -w_c and -2 w_c,
+        the null space's -K_n (when > 0)."""
         k = self.velocity.shape[0]
-        if ControlMode.parse(mode).integrates_position and k:
+        integrates = ControlMode.parse(mode).integrates_position
+        if integrates and k:
             companion = np.block([[np.zeros((k, k)), np.eye(k)], [-self.position, -self.velocity]])
-            velocity_rows = np.abs(np.linalg.eigvals(companion))
+            velocity_rows = np.linalg.eigvals(companion)
         else:
-            velocity_rows = np.abs(np.linalg.eigvals(self.velocity)) if k else np.zeros(0)
-        rates = {"velocity (K_v)" + (" and position (K_p)" if ControlMode.parse(mode).integrates_position else ""):
-                 velocity_rows,
+            velocity_rows = -np.linalg.eigvals(self.velocity) if k else np.zeros(0)
+        poles = {"velocity (K_v)" + (" and position (K_p)" if integrates else ""): velocity_rows,
                  "force_proportional (K_fp) and force_integral (K_fi)":
-                     np.abs(np.linalg.eigvals(self.force_rate)) if self.force_rate.size else np.zeros(0),
-                 "constraint_frequency (w_c)": np.array([self.constraint_frequency, 2 * self.constraint_frequency])}
+                     -np.linalg.eigvals(self.force_rate) if self.force_rate.size else np.zeros(0),
+                 "constraint_frequency (w_c)": -np.array([self.constraint_frequency, 2 * self.constraint_frequency])}
         if self.null_space_damping > 0:
-            rates["null_space_damping (K_n)"] = np.array([self.null_space_damping])
-        return rates
+            poles["null_space_damping (K_n)"] = -np.array([self.null_space_damping])
+        return poles
 
     def check_rates(self, mode, control_period=None):
-        """GainError naming the gain whose designed rate is outside [MIN_RATE, MAX_RATE] 1/s, or (with a
-        ``control_period`` h) not below MAX_RATE_PERIOD / h (``check_rate``); or whose K_fp or M_d is beyond
-        MAX_RATIO."""
-        for name, rates in self.designed_rates(mode).items():
-            check_rate(rates, name, control_period)
-        if self.force_proportional.size:
-            _check_within(np.linalg.eigvalsh(self.force_proportional), "force_proportional (K_fp)", 0.0, MAX_RATIO,
-                          "an eigenvalue", "(dimensionless)")
-        if self.impedance_mass.size:
-            _check_within(np.linalg.eigvalsh(self.impedance_mass), "impedance_mass (M_d)", 1.0 / MAX_RATIO, MAX_RATIO,
-                          "an eigenvalue", "kg (the paper's unit mass is 1)")
+        """GainError naming the gain whose designed loop is too fast or too slow (``check_poles``), or whose
+        K_fp or M_d is beyond a factor MAX_RATIO of 1."""
+        for name, poles in self.designed_poles(mode).items():
+            check_poles(poles, name, control_period)
+        for name, matrix, low, unit in (("force_proportional (K_fp)", self.force_proportional, 0.0, "(dimensionless)"),
+                                        ("impedance_mass (M_d)", self.impedance_mass, 1.0 / MAX_RATIO,
+                                         "kg (the paper's unit mass is 1)")):
+            outside = [float(v) for v in np.linalg.eigvalsh(matrix) if not low <= v <= MAX_RATIO] if matrix.size else []
+            if outside:
+                raise GainError(f"gain {name} has an eigenvalue of {outside[0]:.3g} {unit}; it must be within "
+                                f"[{low:g}, {MAX_RATIO:g}]")
 
 
-def check_rate(rates, name, control_period=None):
-    """GainError naming ``name`` if a loop rate |s| (1/s) it designs is outside [MIN_RATE, MAX_RATE], or
-    not below MAX_RATE_PERIOD / h for a sampled controller of period h (``control_period``)."""
+def check_poles(poles, name, control_period=None):
+    """GainError naming the gain ``name`` if a loop it designs (poles s, 1/s) is faster than MAX_RATE, or, for
+    a sampled controller of period h (``control_period``), not slower than MAX_RATE_PERIOD / h; or decays
+    slower than MIN_RATE (-Re s < MIN_RATE: a time constant of more than eleven days is not a design)."""
+    poles = np.atleast_1d(np.asarray(poles, dtype=complex))
+    if not poles.size:
+        return
     high, why = MAX_RATE, ""
     if control_period is not None:
         high = min(MAX_RATE, MAX_RATE_PERIOD / float(control_period))
-        why = (f" (below the sampling rate 1/h = {1.0 / float(control_period):.4g} 1/s of this sampled controller: "
-               "faster loops overshoot at every tick and are unstable beyond 2/h)")
-    _check_within(rates, name, MIN_RATE, high, "a loop rate", "1/s", why)
+        why = (f" (the sampling rate 1/h of this controller's control_period h = {float(control_period):g} s: a loop "
+               "as fast overshoots at every tick, and twice as fast is unstable)")
+    fastest = float(np.max(np.abs(poles)))
+    if not fastest <= high:
+        raise GainError(f"gain {name} designs a loop of rate {fastest:.3g} 1/s, faster than {high:.4g} 1/s{why}")
+    slowest = float(np.min(-poles.real))
+    if not slowest >= MIN_RATE:
+        raise GainError(f"gain {name} designs a loop that decays at {slowest:.3g} 1/s (a time constant of "
+                        f"{1.0 / slowest if slowest > 0 else math.inf:.3g} s), slower than {MIN_RATE:g} 1/s: "
+                        "not a design")

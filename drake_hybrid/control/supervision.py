@@ -51,7 +51,7 @@ from pydrake.systems.scalar_conversion import TemplateSystem
 
 from drake_hybrid.control.phases import ContactPhase
 from drake_hybrid.control.sampling import SAMPLE_LEAD
-from drake_hybrid.core.arguments import describe, instance, number, positive, vector
+from drake_hybrid.core.arguments import MAX_TASK_SIZE, describe, instance, number, positive, vector
 from drake_hybrid.core.errors import ArgumentError, ConfigError, check_fields
 from drake_hybrid.core.linalg import all_finite, value
 
@@ -143,7 +143,7 @@ def ContactSupervisor_(T):
             owner = "ContactSupervisor"
             instance(config, "config", owner, SupervisionConfig).validate()
             period = positive(period, "period", owner, unit="s")
-            m = number(force_size, "force_size", owner, low=1, integer=True)
+            m = number(force_size, "force_size", owner, low=1, high=MAX_TASK_SIZE, integer=True)
             self.config, self.force_size, self.period = config, m, period
             rows = vector(kinematic_rows, "kinematic_rows", owner)
             if any(not (row.is_integer() and 0 <= row < m) for row in rows):

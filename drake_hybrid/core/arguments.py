@@ -22,6 +22,7 @@ import numpy as np
 from drake_hybrid.core.errors import ArgumentError
 
 _SHOWN_ENTRIES = 9          # an array with more entries is described by its shape only
+MAX_TASK_SIZE = 6           # the most coordinates a task has (a pose's d): a bound on k and m
 
 
 def _entries(array):

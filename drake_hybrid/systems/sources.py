@@ -27,7 +27,7 @@ from pydrake.autodiffutils import AutoDiffXd
 from pydrake.systems.framework import LeafSystem_
 from pydrake.systems.scalar_conversion import TemplateSystem
 
-from drake_hybrid.core.arguments import describe, instance, nonnegative, number, positive, vector
+from drake_hybrid.core.arguments import MAX_TASK_SIZE, describe, instance, nonnegative, number, positive, vector
 from drake_hybrid.core.errors import ConfigError, DimensionError, ForceSignError
 from drake_hybrid.core.kinematics import declare_cached_value, declare_task_input
 from drake_hybrid.core.linalg import value
@@ -128,8 +128,8 @@ class Profile:
 
 def _checked_profiles(owner, velocity_profile, force_profile, velocity_size, force_size):
     """The sizes (k, m) as integers, both profiles checked (Profile, validated for their sizes)."""
-    velocity_size = number(velocity_size, "velocity_size", owner, low=0, integer=True)
-    force_size = number(force_size, "force_size", owner, low=1, integer=True)
+    velocity_size = number(velocity_size, "velocity_size", owner, low=0, high=MAX_TASK_SIZE, integer=True)
+    force_size = number(force_size, "force_size", owner, low=1, high=MAX_TASK_SIZE, integer=True)
     for name, profile, size in (("velocity_profile", velocity_profile, velocity_size),
                                 ("force_profile", force_profile, force_size)):
         instance(profile, name, owner, Profile, what="a Profile (e.g. Profile(kind='constant', value=[...]))")
