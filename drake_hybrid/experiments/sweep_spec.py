@@ -51,8 +51,8 @@ import yaml
 from pydrake.common.yaml import yaml_dump_typed, yaml_load_typed
 
 from drake_hybrid.core.schema import check_yaml_against_schema, read_yaml_file
+from drake_hybrid.scenario.builder import prepare_config
 from drake_hybrid.scenario.config import dump_config, load_config
-from drake_hybrid.scenario.tasks import get_task
 
 GRID_KINDS = ("values", "linspace", "logspace")
 RANDOM_KINDS = ("uniform", "loguniform", "normal", "choice")
@@ -423,8 +423,9 @@ def _field_allows(current, value):
 def check_axis_values(spec, base):
     """SweepSpecError naming ``parameters.PATH.KIND[i]`` for a value of an axis that its config field does
     not take, checked like a config field: its type, then the config with that value alone set on ``base``
-    (``ScenarioConfig.validate`` and the task's options). Grid values and choices are checked one by one, a
-    distribution by its bounds (uniform, loguniform) or its mean (normal)."""
+    as a build checks it (``scenario.builder.prepare_config``: every field, the task's options, the gains
+    against the task's sizes). Grid values and choices are checked one by one, a distribution by its bounds
+    (uniform, loguniform) or its mean (normal)."""
     for axis in spec.parameters:
         if axis.kind in ("values", "choice"):
             candidates = list(enumerate(axis.arguments))
@@ -443,9 +444,7 @@ def check_axis_values(spec, base):
                         else "a number")
                 raise SweepSpecError(f"{where}: {axis.path} takes {kind}, like {current!r}")
             try:
-                point = apply_parameters(base, {axis.path: value})
-                point.validate()
-                get_task(point.task).options(point)
+                prepare_config(apply_parameters(base, {axis.path: value}))
             except ValueError as error:
                 message = str(error).strip().splitlines()[0] if str(error).strip() else type(error).__name__
                 raise SweepSpecError(f"{where}: {message}") from None

@@ -121,6 +121,9 @@ def prepare_config(config):
     config.desired_force.validate(constraint_space.force_size, "desired_force")   # (a task may fill desired_velocity)
     if config.supervised:          # a guarded approach to a surface, which only pushes: over the whole course
         config.desired_force.check_keeps_sign("desired_force")
+    if config.controller == "li-sastry":     # the gains against the task's sizes and the control rate
+        config.gains.matrices(constraint_space.velocity_size, constraint_space.force_size, mode,
+                              config.control_period if config.control_period > 0 else None)
     return task, mode, constraint_space, config
 
 
