@@ -86,8 +86,8 @@ from drake_hybrid.control.gains import ControlMode
 from drake_hybrid.core.errors import GainError
 from drake_hybrid.experiments.metrics import max_row_errors, row_commands
 from drake_hybrid.experiments.simulation import RunStopped, simulate
-from drake_hybrid.experiments.sweep_spec import (StabilityCriteria, SweepSpecError, apply_parameters, check_axis_values,
-                                                 parameters_digest, set_config_value)
+from drake_hybrid.experiments.config_paths import apply_parameters, set_config_value
+from drake_hybrid.experiments.sweep_spec import StabilityCriteria, SweepSpecError, check_axis_values, parameters_digest
 from drake_hybrid.scenario.config import dump_config, load_config
 from drake_hybrid.scenario.tasks import BUILT_IN_TASKS, TASKS, get_task, register_task
 
