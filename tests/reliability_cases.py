@@ -239,10 +239,12 @@ def case_surface_moves_away(quick=False):
 
 
 def case_no_surface(quick=False):
-    """The surface is 30 mm away but the guarded move may travel 10 mm: it must stop and hold."""
-    config = window_config(1.0)
+    """The surface is 30 mm away but the guarded move may travel 10 mm: it must stop and hold. (The start is
+    5 mm off the pane, within reach; the pane then lifts 25 mm before the pad arrives: a start 30 mm off
+    is refused, since the config says the approach cannot reach it.)"""
+    config = window_config(1.0, window_lift=0.025, window_lift_time=0.001, window_lift_duration=0.01)
     config.start.in_contact = False
-    config.start.gap = 0.03
+    config.start.gap = 0.005
     config.supervision.max_travel = 0.01
     result = simulate(config)
     hold = first_time(result.log, ContactPhase.HOLD)

@@ -34,14 +34,14 @@ from xml.etree import ElementTree
 
 import numpy as np
 
-from pydrake.geometry import (AddRigidHydroelasticProperties, Capsule, Cylinder, Ellipsoid, ProximityProperties,
+from pydrake.geometry import (AddRigidHydroelasticProperties, Capsule, Cylinder, Ellipsoid, ProximityProperties, Shape,
                              Sphere)
 from pydrake.math import RigidTransform, RollPitchYaw
 from pydrake.multibody.parsing import Parser
 from pydrake.multibody.plant import CoulombFriction
 
 from drake_hybrid.control.gains import HybridGains
-from drake_hybrid.core.arguments import describe, function, instance, text, vector
+from drake_hybrid.core.arguments import describe, function, instance, positive, text, vector
 from drake_hybrid.core.errors import ArgumentError, OffConstraintError
 from drake_hybrid.core.kinematics import inverse_kinematics
 from drake_hybrid.scenario.config import ScenarioConfig, StartConfig
@@ -116,6 +116,7 @@ def attach_pad_tool(plant, arm, flange_frame, X_flange_tool=None):
     Returns the RobotModel that ``CustomTask``'s ``add_robot`` returns, with ``only_pad_contact``:
     the arm's own collision shapes touch neither each other nor the workpiece (watch the
     animation for clearance), so only the pad makes contact."""
+    instance(X_flange_tool, "X_flange_tool", "attach_pad_tool", RigidTransform, allow_none=True)
     parser = ConfigureParser(Parser(plant))
     frame = get_frame(plant, flange_frame, arm, "flange_frame") if isinstance(flange_frame, str) else flange_frame
     tool, weld, pad = add_pad_tool(plant, parser, frame, X_flange_tool if X_flange_tool is not None
@@ -149,6 +150,11 @@ def add_rigid_workpiece(plant, shape, X_WG, name="workpiece", resolution_hint=No
     hydroelastic collision geometry (mesh resolution ``resolution_hint``, m; default
     ``default_resolution``: tied to the curvature) and a visual one. Returns the collision
     geometry ids. Contact friction is set from the scenario config."""
+    owner = "add_rigid_workpiece"
+    instance(shape, "shape", owner, Shape, what="a pydrake.geometry Shape (Box, Sphere, Cylinder, Ellipsoid, ...)")
+    instance(X_WG, "X_WG", owner, RigidTransform)
+    resolution_hint = positive(resolution_hint, "resolution_hint", owner, unit="m", allow_none=True)
+    color = vector(color, "color", owner, 4)
     world = plant.world_body()
     properties = ProximityProperties()
     AddRigidHydroelasticProperties(default_resolution(shape) if resolution_hint is None else resolution_hint,
