@@ -66,21 +66,22 @@ def read_yaml_file(path, what, error=ConfigError, max_size=MAX_YAML_SIZE):
 MAX_YAML_DEPTH = 100         # levels of [ and { a YAML text may nest (a config needs fewer than ten)
 
 
-def flow_depth(text):
-    """The deepest nesting of [ and { in ``text`` (a linear scan, before any parsing)."""
+def nesting_depth(text, opening="[{", closing="]}"):
+    """The deepest nesting of the ``opening`` brackets in ``text`` (a linear scan, before any parsing;
+    YAML's flow collections by default)."""
     depth = deepest = 0
     for character in text:
-        if character in "[{":
+        if character in opening:
             depth += 1
             deepest = max(deepest, depth)
-        elif character in "]}":
+        elif character in closing:
             depth -= 1
     return deepest
 
 
 def check_depth(text, where="", error=ConfigError):
     """``error`` if ``text`` nests [ and { deeper than MAX_YAML_DEPTH: refused before a parser recurses into it."""
-    if isinstance(text, str) and flow_depth(text) > MAX_YAML_DEPTH:
+    if isinstance(text, str) and nesting_depth(text) > MAX_YAML_DEPTH:
         raise error(f"{where}the YAML nests too deeply (more than {MAX_YAML_DEPTH} levels of [ and {{)")
 
 
