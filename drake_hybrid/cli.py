@@ -31,6 +31,7 @@ from drake_hybrid.analysis.linearization import (linearize_continuous, linearize
 # which the entry point answers --help from; cli.DESCRIPTION stays the name tests and readers use.
 from drake_hybrid.commands import COMMAND_HELP, DESCRIPTION, top_level_parser  # noqa: F401
 from drake_hybrid.control.gains import ControlMode
+from drake_hybrid.core.errors import ConfigError
 from drake_hybrid.core.progress import Stages
 from drake_hybrid.experiments.metrics import display_unit
 from drake_hybrid.experiments.simulation import RunStopped, simulate
@@ -131,7 +132,10 @@ def _config(args):
         task = get_task(args.task)
         config = task.default_config(options) if options else task.default_config()
     if getattr(args, "config", None):
-        config = load_config(path=args.config, defaults=config)
+        try:
+            config = load_config(path=args.config, defaults=config)
+        except ConfigError as error:
+            raise UsageError(f"--config: {error}") from None
         if config.task != task.name:
             raise UsageError(f"--config is for task '{config.task}', not '{task.name}'")
     if getattr(args, "mode", None):
@@ -264,6 +268,9 @@ def command_simulate(args):
     for what, rows in (("velocity", s["velocity_rows"]), ("force", s["force_rows"])):
         for row in rows:
             print(f"    {what} {row['name']}: {_row_text(row, s.get('events'), s.get('notes'))}")
+    if s.get("invalid_wrench_samples"):
+        print(f"  {s['invalid_wrench_samples']} logged sample(s) with an invalid measured wrench (a sensor dropout): "
+              "the force figures leave them out (their F, e_f and F_v read NaN in log.npz)")
     if s.get("impedance"):
         print(f"  {_impedance_text(s['impedance'])}")
     print(f"  {_residual_text(s)}")
@@ -283,6 +290,8 @@ def _sampled_loop_text(config, period):
 
 
 def command_analyze(args):
+    if not 0 < args.tolerance <= 1:
+        raise UsageError(f"--tolerance must be a relative tolerance in (0, 1] (0.05: within 5 %), got {args.tolerance}")
     config = _config(args)
     task = get_task(config.task)
     stages = Stages(enabled=not args.quiet)
@@ -410,9 +419,15 @@ def command_sweep(args):
     task_name = load_task_file(args.task)[0].name if is_task_file(args.task) else args.task
     out = Path(args.out) if args.out else Path("runs") / f"sweep-{task_name}"
     try:
-        spec = load_spec(path=args.grid)
-        run = run_sweep(task_name, spec, out, scheduler=args.scheduler, workers=args.workers, resume=args.resume,
-                        retry_failed=args.retry_failed, progress=not args.no_progress)
+        try:
+            spec = load_spec(path=args.grid)
+        except SweepSpecError as error:
+            raise SweepSpecError(f"--grid: {error}") from None
+        try:
+            run = run_sweep(task_name, spec, out, scheduler=args.scheduler, workers=args.workers, resume=args.resume,
+                            retry_failed=args.retry_failed, progress=not args.no_progress)
+        except SweepSpecError as error:                 # a value of the spec the config does not take
+            raise SweepSpecError(f"--grid: sweep spec '{args.grid}': {error}") from None
     except (SweepSpecError, ValueError) as error:
         print(f"drake-hybrid sweep: {_one_line(error)}", file=sys.stderr)
         return 2
@@ -597,7 +612,7 @@ def make_parser():
     analyze.add_argument("--plot", metavar="FILE.png",
                          help="write the eigenvalue figure (designed vs. linearized) to this PNG")
     analyze.add_argument("--tolerance", type=float, default=0.05, metavar="REL",
-                         help="relative tolerance of the match (default 0.05)")
+                         help="relative tolerance of the match, in (0, 1] (default 0.05: within 5 %%)")
     analyze.add_argument("--strict", action="store_true",
                          help="exit 1 on any miss, also where it is predicted (a designed eigenvalue the task "
                               "predicts shifted, an unstable mode its diagnosis predicts; default: exit 0 when "

@@ -109,7 +109,7 @@ def test_baselines_have_the_controller_ports_and_convert_scalars(controller):
             for i in range(dut.num_input_ports())} == sizes
     outputs = {dut.get_output_port(i).get_name(): dut.get_output_port(i).size() for i in range(dut.num_output_ports())}
     assert outputs == {"actuation": n, "velocity_error": k, "force_error": m, "constraint_value": m,
-                       "projected_velocity": k, "force": m, "tangential_force": k, "position_error": k}
+                       "projected_velocity": k, "force": m, "tangential_force": k, "wrench_valid": 1, "position_error": k}
     converted = dut.ToAutoDiffXd()
     assert converted.num_output_ports() == dut.num_output_ports()
 
@@ -144,7 +144,7 @@ def test_bad_inputs_name_the_field():
 
 def test_velocity_row_inertia_is_checked():
     scenario = build_scenario(CRANK.default_config(), with_loggers=False)
-    with pytest.raises(DimensionError, match="velocity_row_inertia must be a finite 2x2 matrix"):
+    with pytest.raises(DimensionError, match="velocity_row_inertia must be a 2x2 matrix of finite numbers"):
         type(scenario.controller)(scenario.controller_plant, scenario.robot.end_effector_frame,
                                   scenario.robot.end_effector_point, scenario.constraint_space,
                                   velocity_row_inertia=np.eye(3))

@@ -79,7 +79,7 @@ def test_euler_singularity_raises_typed_error(theta):
 
 
 def test_euler_singularity_tolerance_must_be_positive():
-    with pytest.raises(ValueError, match="singularity_tolerance must be positive"):
+    with pytest.raises(ValueError, match=r"singularity_tolerance must be a finite number > 0 and < 1, got 0"):
         EulerZXZChart(singularity_tolerance=0.0)
 
 

@@ -21,7 +21,7 @@ from drake_hybrid.scenario.tasks import get_task
 MODES = ["velocity-force", "position-force", "impedance-force"]
 INPUTS = ["estimated_state", "measured_wrench", "desired_velocity", "desired_acceleration", "desired_force"]
 OUTPUTS = ["actuation", "velocity_error", "force_error", "constraint_value", "projected_velocity", "force",
-           "tangential_force", "position_error"]
+           "tangential_force", "wrench_valid", "position_error"]
 
 
 def window_parts(joints=3):
@@ -55,7 +55,7 @@ def test_port_names_and_sizes():
     assert [dut.get_input_port(i).get_name() for i in range(dut.num_input_ports())] == INPUTS
     assert [dut.get_input_port(i).size() for i in range(dut.num_input_ports())] == [6, 6, 2, 2, 1]
     assert [dut.get_output_port(i).get_name() for i in range(dut.num_output_ports())] == OUTPUTS
-    assert [dut.get_output_port(i).size() for i in range(dut.num_output_ports())] == [3, 2, 1, 1, 2, 1, 2, 2]
+    assert [dut.get_output_port(i).size() for i in range(dut.num_output_ports())] == [3, 2, 1, 1, 2, 1, 2, 1, 2]
     assert dut.CreateDefaultContext().num_continuous_states() == 1 + 2           # xi and e_p
     velocity_dut, _, _ = make_dut("velocity-force")
     assert velocity_dut.CreateDefaultContext().num_continuous_states() == 1       # xi only
@@ -218,6 +218,13 @@ def test_nan_wrench_gives_finite_torque_and_holds_the_integral(rng):
     update = dut.EvalUniquePeriodicDiscreteUpdate(context).get_vector(0).value()
     assert np.all(np.isfinite(update))
     assert update[0] == pytest.approx(0.1)              # xi held during a dropout
+    # What the wrench gives reads NaN, never a perfect match; wrench_valid says why.
+    for name in ("force_error", "force", "tangential_force"):
+        assert np.all(np.isnan(dut.GetOutputPort(name).Eval(context))), name
+    assert dut.GetOutputPort("wrench_valid").Eval(context)[0] == 0.0
+    assert np.all(np.isfinite(dut.GetOutputPort("velocity_error").Eval(context)))
+    fix_inputs(dut, context, q, v, np.array([0, 0, 0, 0, 0, -5.0]))
+    assert dut.GetOutputPort("wrench_valid").Eval(context)[0] == 1.0
     assert np.all(np.isfinite(dut.GetOutputPort("force_error").Eval(context)))
 
 
@@ -232,7 +239,7 @@ def test_bad_inputs_raise_clear_errors():
     task, config, plant, robot, space = window_parts()
     with pytest.raises(GainError, match=r"gain velocity \(K_v\) must be positive definite; its eigenvalues are"):
         HybridController(plant, "tip", np.zeros(3), space, HybridGains(velocity=[5.0, -1.0]))
-    with pytest.raises(GainError, match=r"gain force_integral \(K_fi\) has 2 diagonal entries; it must have 1"):
+    with pytest.raises(GainError, match=r"gain force_integral \(K_fi\) has 2 diagonal entries; for 1 row it must be a scalar"):
         HybridController(plant, "tip", np.zeros(3), space, HybridGains(force_integral=[1.0, 2.0]))
     with pytest.raises(GainError, match=r"gain position \(K_p\) must be symmetric"):
         HybridController(plant, "tip", np.zeros(3), space, HybridGains(position=[1.0, 2.0, 0.0, 1.0]),
@@ -243,11 +250,11 @@ def test_bad_inputs_raise_clear_errors():
         HybridController(plant, "flange", np.zeros(3), space)
     with pytest.raises(ValueError, match="unknown control mode 'force'"):
         HybridController(plant, "tip", np.zeros(3), space, mode="force")
-    with pytest.raises(ValueError, match="control_period must be positive or None"):
+    with pytest.raises(ValueError, match=r"control_period must be a finite number > 0 \(s\) or None, got -0.001"):
         HybridController(plant, "tip", np.zeros(3), space, control_period=-1e-3)
     with pytest.raises(ValueError, match="sampled_diagnostics needs a control_period"):
         HybridController(plant, "tip", np.zeros(3), space, sampled_diagnostics=True)
-    with pytest.raises(ValueError, match="point_in_frame must be a 3-vector"):
+    with pytest.raises(ValueError, match=r"end_effector_point must be a vector of 3 finite numbers \(m\), got \[0, 0\]"):
         HybridController(plant, "tip", np.zeros(2), space)
     from drake_hybrid import ConstraintSpace, EulerZXZChart, KernelVelocityProjection, crank_constraint
     chart = EulerZXZChart()

@@ -15,6 +15,7 @@ import yaml
 
 from drake_hybrid.cli import main
 from drake_hybrid.core.errors import DrakeHybridError, ForceSignError
+from drake_hybrid.experiments.sweep import sweep_points
 from drake_hybrid.experiments.sweep_spec import SweepSpecError, load_spec
 from drake_hybrid.scenario.builder import build_scenario
 from drake_hybrid.scenario.config import ALLOWED_INFINITE, load_config
@@ -116,6 +117,7 @@ RELATIONS = [
     ("sensor: !NoSuchSensor {}", "NoSuchSensor"),
     ("mode: sideways", "sideways"),
     ("duration: 1.0e9", "max_duration"),
+    ("start: {in_contact: false, gap: 1.0}", "start.gap"),
 ]
 
 
@@ -153,6 +155,8 @@ CLI_CASES = [
     (["analyze", TASK, flag, value], flag) for flag in ("--json", "--plot") for value in ("/no/such/dir/a", "/")
 ] + [
     (["sweep", TASK, "--grid", value], value) for value in ("/no/such/spec.yaml",)
+] + [
+    (["analyze", TASK, "--tolerance", value], "--tolerance") for value in ("-1", "nan", "inf", "0", "2")
 ]
 
 
@@ -201,6 +205,14 @@ SPEC_CASES = [
     "parameters: [1, 2]",
     "- a\n- b",
     "parameters: {duration: {values: [1]}",
+    "parameters: {duration: {values: [1]}}\nstability: {eigenvalue_margin: .nan}",
+    "parameters: {duration: {values: [1]}}\nstability: {eigenvalue_margin: .inf}",
+    "parameters: {duration: {values: [1]}}\nstability: {steady_tolerance: .inf}",
+    "parameters: {duration: {linspace: [.nan, 2, 3]}}",
+    "parameters: {duration: {uniform: [1, .inf]}}",
+    "",
+    "# only a comment",
+    "just a word",
 ]
 
 
@@ -212,8 +224,48 @@ def test_a_bad_sweep_spec_is_one_line(text):
     assert "\n" not in message.strip() and len(message) < 400, message
 
 
+# Files that are not YAML configs, given to the flags that take one: (name, bytes or a folder).
+BAD_FILES = [("a-folder", None), ("binary.yaml", bytes(range(256)) * 4), ("empty.yaml", b""),
+             ("comments.yaml", b"# nothing but a comment\n"), ("latin-1.yaml", "duration: 2.0 # \u00e9".encode("latin-1")),
+             ("a-list.yaml", b"- 1\n- 2\n")]
+
+
+@pytest.mark.parametrize("flag, command", [("--config", "simulate"), ("--config", "analyze"), ("--grid", "sweep")])
+@pytest.mark.parametrize("name, content", BAD_FILES, ids=[name for name, _ in BAD_FILES])
+def test_a_bad_file_names_the_flag_and_the_file(tmp_path, capsys, flag, command, name, content):
+    path = tmp_path / name
+    if content is None:
+        path.mkdir()
+    else:
+        path.write_bytes(content)
+    assert main([command, TASK, flag, str(path)]) == 2
+    error = capsys.readouterr().err.strip()
+    assert len(error.splitlines()) == 1 and "Traceback" not in error, error
+    assert flag in error and str(path) in error, error
+
+
+# Sweep values checked like the config fields they set (against the task's default config).
+SPEC_VALUE_CASES = [
+    ("parameters: {sensor.condition: {values: [maybe, 2]}}", r"sensor.condition.values\[0\] = 'maybe': .* true or false"),
+    ("parameters: {sensor.condition: {values: [true, 2]}}", r"sensor.condition.values\[1\] = 2.0"),
+    ("parameters: {contact.pad_modulus: {values: [1.0e6, -5]}}", r"pad_modulus.values\[1\] = -5.0: .*must be positive"),
+    ("parameters: {mode: {values: [velocity-force, sideways]}}", r"mode.values\[1\] = 'sideways'"),
+    ("parameters: {duration: {uniform: [0.5, 1.0e9]}}", r"duration.uniform\[1\] = 1000000000.0: .*max_duration"),
+    ("parameters: {control_period: {choice: [0.001, abc]}}", r"control_period.choice\[1\] = 'abc': .* a number"),
+    ("parameters: {gains.velocity: {values: [10, -1]}}", r"gains.velocity.values\[1\]"),
+]
+
+
+@pytest.mark.parametrize("text, match", SPEC_VALUE_CASES)
+def test_sweep_values_are_checked_like_config_fields(text, match):
+    with pytest.raises(SweepSpecError, match=match) as raised:
+        sweep_points(TASK, load_spec(text=text))
+    assert "\n" not in str(raised.value)
+
+
 def test_the_fuzz_suite_has_at_least_300_cases():
-    total = len(config_cases()) + len(RELATIONS) + 1 + len(CLI_CASES) + len(SPEC_CASES)
+    total = (len(config_cases()) + len(RELATIONS) + 1 + len(CLI_CASES) + len(SPEC_CASES) + 3 * len(BAD_FILES)
+             + len(SPEC_VALUE_CASES))
     assert total >= 300, total
     print(f"{total} bad inputs")
 

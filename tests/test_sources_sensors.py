@@ -43,7 +43,7 @@ def test_profile_source_acceleration_is_the_time_derivative(profile):
 
 
 def test_profile_validation():
-    with pytest.raises(DimensionError, match="velocity profile: value must have 2 entries, got 1"):
+    with pytest.raises(DimensionError, match="velocity_profile: value must have 2 entries, got 1"):
         ProfileSource(Profile(value=[0.1]), Profile(value=[-1.0]), 2, 1)
     with pytest.raises(ValueError, match=r"profile.kind must be one of constant, smooth_step, sine, got 'ramp'"):
         ProfileSource(Profile(kind="ramp", value=[0.1, 0]), Profile(value=[-1.0]), 2, 1)
@@ -130,7 +130,7 @@ def test_low_pass_filter_step_response(period):
         # which equal the continuous response at 20 ms.
         expected = 1 - math.exp(-2 * math.pi * bandwidth * period) ** 20
         np.testing.assert_allclose(dut.get_output_port(0).Eval(context), [expected, -2 * expected], rtol=1e-9)
-    with pytest.raises(ValueError, match="bandwidth_hz must be positive"):
+    with pytest.raises(ValueError, match=r"bandwidth_hz must be a finite number > 0 \(Hz\)"):
         LowPassFilter(2, 0.0)
 
 

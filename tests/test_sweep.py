@@ -17,8 +17,8 @@ from drake_hybrid.experiments.metrics import row_errors
 from drake_hybrid.experiments.sweep import (RESULT_COLUMNS, read_results, rigid_contact_theory_stable, run_sweep,
                                           simulation_metrics)
 from drake_hybrid.experiments.sweep_spec import StabilityCriteria
-from drake_hybrid.experiments.sweep_spec import (SweepSpecError, apply_parameters, load_spec,
-                                                 set_config_value)
+from drake_hybrid.experiments.config_paths import apply_parameters, set_config_value
+from drake_hybrid.experiments.sweep_spec import SweepSpecError, load_spec
 from drake_hybrid.scenario.builder import build_scenario
 from drake_hybrid.scenario.config import dump_config, load_config
 from drake_hybrid.scenario.start import set_initial_conditions

@@ -48,7 +48,7 @@ from pydrake.systems.framework import LeafSystem_, ValueProducer
 from pydrake.systems.scalar_conversion import TemplateSystem
 
 from drake_hybrid.control.gains import ControlMode, HybridGains
-from drake_hybrid.control.law_system import LawSystemParts, MultibodyForcesHolder
+from drake_hybrid.control.law_system import LawSystemParts, MultibodyForcesHolder, declare_diagnostic_outputs
 from drake_hybrid.control.sampling import SAMPLE_LEAD
 from drake_hybrid.core.errors import ConfigError, DimensionError, check_fields
 from drake_hybrid.core.kinematics import declare_task_input, resolve_frame
@@ -113,7 +113,7 @@ def joint_servo_eigenvalues(jacobian, velocity_projection, matrix, joint_gains, 
 
 class BaselineSolution:
     __slots__ = ("actuation", "velocity_error", "force_error", "constraint_value", "projected_velocity", "force",
-                 "tangential_force", "rates")
+                 "tangential_force", "rates", "wrench_valid")
 
 
 def _declare_common(system, T, plant, end_effector_frame, end_effector_point, constraint_space, gains,
@@ -170,12 +170,7 @@ def _declare_common(system, T, plant, end_effector_frame, end_effector_point, co
     else:
         system.DeclareVectorOutputPort("actuation", n, lambda c, o: o.SetFromVector(
             c.get_discrete_state(0).CopyToVector()[integrated:]), prerequisites_of_calc={system.xd_ticket()})
-    system._diagnostic_slices, start = {}, 0
-    for name, size in [("velocity_error", k), ("force_error", m), ("constraint_value", m),
-                       ("projected_velocity", k), ("force", m), ("tangential_force", k)]:
-        system.DeclareVectorOutputPort(name, size, system._make_output(name), prerequisites_of_calc=ticket)
-        system._diagnostic_slices[name] = slice(start, start + size)
-        start += size
+    declare_diagnostic_outputs(system, k, m, system._solution, ticket)
     system.DeclareVectorOutputPort("position_error", k, lambda c, o: o.SetFromVector(system._integrals(c)[m:]),
                                    prerequisites_of_calc={state_ticket})
 
@@ -189,9 +184,6 @@ class _BaselineMixin(LawSystemParts):
 
     def _solution(self, context):
         return self._solution_cache.Eval(context)
-
-    def _make_output(self, name):
-        return lambda context, output: output.SetFromVector(getattr(self._solution(context), name))
 
     def DoCalcTimeDerivatives(self, context, derivatives):
         if self.control_period is None:
@@ -225,6 +217,7 @@ class _BaselineMixin(LawSystemParts):
         else:
             tangential_force, force = np.zeros(self.velocity_size), desired_force
         solution = BaselineSolution()
+        solution.wrench_valid = all_finite(wrench)
         solution.projected_velocity = values.velocity_projection @ kin.velocity
         solution.velocity_error = solution.projected_velocity - desired_velocity
         solution.force_error = force - desired_force
@@ -260,6 +253,7 @@ def JointServoHybridController_(T):
             - projected_velocity
             - force
             - tangential_force
+            - wrench_valid
             - position_error
 
         Ports as HybridController's. Law (module docstring)::
@@ -342,6 +336,7 @@ def AxisPDOpenLoopForceController_(T):
             - projected_velocity
             - force
             - tangential_force
+            - wrench_valid
             - position_error
 
         Law (the manipulation course's hybrid_force_position exercise, in the task's rows)::

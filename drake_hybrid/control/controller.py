@@ -25,18 +25,20 @@ import numpy as np
 from pydrake.autodiffutils import AutoDiffXd
 from pydrake.common.value import AbstractValue
 from pydrake.multibody.tree import MultibodyForces_
-from pydrake.systems.framework import LeafSystem_, ValueProducer
+from pydrake.systems.framework import EventStatus, LeafSystem_, ValueProducer
 from pydrake.systems.scalar_conversion import TemplateSystem
 
 from drake_hybrid.control.damping import joint_damping, warn_damped_joints
 from drake_hybrid.control.fast_law import FastLaw
-from drake_hybrid.control.gains import ControlMode, HybridGains
+from drake_hybrid.control.gains import ControlMode, HybridGains, check_poles
 from drake_hybrid.control.law import LawConstants, evaluate_law
-from drake_hybrid.control.law_system import LawSystemParts
+from drake_hybrid.control.law_system import LawSystemParts, declare_diagnostic_outputs, reported_diagnostics_vector
 from drake_hybrid.control.phases import ContactPhase
 from drake_hybrid.control.safety import SafetyConfig, warn_singularity
 from drake_hybrid.control.sampling import SAMPLE_LEAD
-from drake_hybrid.core.errors import DimensionError
+from drake_hybrid.core.arguments import boolean, describe, instance, matrix, nonnegative, positive, vector
+from drake_hybrid.core.errors import ArgumentError, DimensionError
+from drake_hybrid.core.preconditions import check_generic_rank, check_pushing_force
 from drake_hybrid.core.kinematics import declare_task_input, resolve_frame, set_plant_state
 from drake_hybrid.core.linalg import all_finite, value
 
@@ -78,6 +80,7 @@ def HybridController_(T):
             - projected_velocity
             - force
             - tangential_force
+            - wrench_valid
             - position_error
 
         Ports (k = d - m velocity-controlled and m force-controlled coordinates):
@@ -98,6 +101,8 @@ def HybridController_(T):
         projected_velocity    k     r-dot_p = E_p r-dot
         force                 m     F, from [F_v; F] = E^-T w (w: the wrench in chart coordinates)
         tangential_force      k     F_v
+        wrench_valid          1     1 if the measured wrench was finite, 0 if not (then force,
+                                    force_error and tangential_force read NaN)
         position_error        k     e_p = integral of e_p' (zero in velocity-force mode)
         ====================  ====  ===================================================
 
@@ -153,10 +158,21 @@ def HybridController_(T):
         held actuation from the initial state.
 
         A measured wrench with a NaN or inf entry (sensor dropout) is ignored
-        for that evaluation: the force error is taken as zero and the force
+        for that evaluation: the law takes the force error as zero and the force
         integral xi holds (e_p keeps integrating the velocity error), so the
-        torque stays finite. A non-finite state or command raises ValueError
+        torque stays finite; the ports that report what the wrench gives (force,
+        force_error, tangential_force) read NaN, never a perfect match, and
+        wrench_valid reads 0. A non-finite state or command raises ValueError
         naming the port.
+
+        Before the first step (an initialization event, or ``check_start`` on a context
+        you set up) the controller checks that the law can start there: E_f and E of
+        full rank (``ConstraintRankError``, also when it is built: a constraint whose rows
+        are dependent everywhere is refused then) and a desired force that pushes
+        (``core.preconditions.check_pushing_force``: ``ForceSignError`` if the measured
+        force pushes against F_d, or, off the surface with ``guarded_move``, if -F_d
+        leads away from C = 0; ``OffConstraintError`` if C = 0 is beyond the guarded
+        move's ``max_travel``).
 
         Protections (``safety``; none changes the law where it is not active):
 
@@ -240,21 +256,23 @@ def HybridController_(T):
             self._arguments = {name: arguments[name] for name in code.co_varnames[1:code.co_argcount]
                                if name != "converter"}
             LeafSystem_[T].__init__(self, converter)
+            owner = "HybridController"
             if not hasattr(plant, "is_finalized") or not hasattr(plant, "MakeActuationMatrix"):
-                raise TypeError(f"HybridController: plant must be a MultibodyPlant, got {type(plant).__name__}")
+                raise ArgumentError(f"{owner}: plant must be a MultibodyPlant, got {describe(plant)}")
             if plant.is_finalized() is False:
-                raise ValueError("HybridController: the plant must be finalized")
+                raise ArgumentError(f"{owner}: the plant must be finalized")
             if not all(hasattr(constraint_space, name) for name in ("chart", "force_size", "velocity_size", "evaluate")):
-                raise TypeError("HybridController: constraint_space must be a ConstraintSpace (a constraint with its "
-                                f"velocity projection), got {type(constraint_space).__name__}")
+                raise ArgumentError(f"{owner}: constraint_space must be a ConstraintSpace (a constraint with its "
+                                    f"velocity projection), got {describe(constraint_space)}")
             self._float_plant = plant
             self._float_frame = resolve_frame(plant, end_effector_frame)
-            self._end_effector_point = np.asarray(end_effector_point, dtype=float)
+            self._end_effector_point = vector(end_effector_point, "end_effector_point", owner, 3, unit="m")
             self.constraint_space = constraint_space
-            self.gains = gains if gains is not None else HybridGains()
+            self.gains = instance(gains, "gains", owner, HybridGains, allow_none=True,
+                                  what="a HybridGains (e.g. HybridGains(velocity=[10.0]))") or HybridGains()
             self.mode = ControlMode.parse(mode)
-            self.control_period = control_period
-            self.sample_lead = bool(sample_lead)
+            self.control_period = positive(control_period, "control_period", owner, unit="s", allow_none=True)
+            self.sample_lead = boolean(sample_lead, "sample_lead", owner)
             chart = constraint_space.chart
             d, m, k = chart.velocity_size, constraint_space.force_size, constraint_space.velocity_size
             n = plant.num_velocities()
@@ -263,52 +281,48 @@ def HybridController_(T):
                 raise DimensionError(
                     f"HybridController: the task has d = {d} coordinates ({chart.name} chart) but the plant has "
                     f"only n = {n} joints; the law needs n >= d")
-            if control_period is not None and not float(control_period) > 0:
-                raise ValueError(f"HybridController: control_period must be positive or None, got {control_period}")
             # Joint damping of the model, compensated at the simulated plant's step (control.damping).
-            self.plant_time_step = float(plant_time_step)
-            if not float(wrench_lag) >= 0:
-                raise ValueError(f"HybridController: wrench_lag must be >= 0 (s), got {wrench_lag}")
-            self.wrench_lag = float(wrench_lag)
+            self.plant_time_step = nonnegative(plant_time_step, "plant_time_step", owner, unit="s")
+            self.wrench_lag = nonnegative(wrench_lag, "wrench_lag", owner, unit="s")
             self.joint_damping = joint_damping(plant)   # B per velocity, which the plant's step applies implicitly
             if T == float:                        # once, not again for the AutoDiffXd copy
                 warn_damped_joints(plant, self.plant_time_step)
-            self.sampled_diagnostics = bool(sampled_diagnostics)
+            self.sampled_diagnostics = boolean(sampled_diagnostics, "sampled_diagnostics", owner)
             if self.sampled_diagnostics and control_period is None:
-                raise ValueError("HybridController: sampled_diagnostics needs a control_period (a sampled controller)")
-            self._gains = self.gains.matrices(k, m, self.mode)
+                raise ArgumentError(f"{owner}: sampled_diagnostics needs a control_period (a sampled controller)")
+            compensate_tangential_force = boolean(compensate_tangential_force, "compensate_tangential_force", owner)
+            fast_law = boolean(fast_law, "fast_law", owner)
+            self._gains = self.gains.matrices(k, m, self.mode, self.control_period)
             self.kinematic_rows = tuple(constraint_space.constraint.kinematic_rows)
+            check_generic_rank(constraint_space)
             actuation_matrix = plant.MakeActuationMatrix()
             if actuation_matrix.shape != (n, n) or abs(np.linalg.det(actuation_matrix)) < 0.5:
-                raise ValueError(
+                raise ArgumentError(
                     f"HybridController needs one actuator per joint; the plant has {plant.num_actuators()} actuators "
                     f"for {n} joints")
             actuation_from_torque = np.linalg.inv(actuation_matrix)   # u = B^-1 tau (a permutation here)
-            self.safety = safety if safety is not None else SafetyConfig()
+            self.safety = instance(safety, "safety", owner, SafetyConfig, allow_none=True) or SafetyConfig()
             plant_limits = [plant.get_joint_actuator(i).effort_limit() for i in plant.GetJointActuatorIndices()]
             (self.effort_limits, anti_windup, singularity_threshold,
              self._max_joint_acceleration) = self.safety.validated(n, plant_limits)
             self.guarded_move = guarded_move
             speed = gain = None
             if guarded_move is not None:
-                speed, gain = float(guarded_move.approach_speed), float(guarded_move.approach_gain)
-                if not speed >= 0:
-                    raise ValueError(f"HybridController: approach_speed must be >= 0, got {speed}")
-                if not gain > 0:
-                    raise ValueError(f"HybridController: approach_gain must be positive, got {gain}")
+                speed = nonnegative(getattr(guarded_move, "approach_speed", None), "guarded_move.approach_speed",
+                                    owner, unit="units of C per s")
+                gain = positive(getattr(guarded_move, "approach_gain", None), "guarded_move.approach_gain", owner,
+                                unit="1/s")
+                check_poles([-gain], "guarded_move.approach_gain (K_a)", self.control_period)
             # The mechanism's inertia along the velocity rows (None: the paper's massless constraint).
             I_v = None
             if velocity_row_inertia is not None:
-                I_v = np.asarray(velocity_row_inertia, dtype=float)
-                if I_v.shape != (k, k) or not np.all(np.isfinite(I_v)):
-                    raise DimensionError(f"HybridController: velocity_row_inertia must be a finite {k}x{k} matrix, "
-                                         f"got shape {I_v.shape}")
+                I_v = matrix(velocity_row_inertia, "velocity_row_inertia", owner, (k, k), error=DimensionError)
             self.velocity_row_inertia = I_v
             zero_acceleration = np.zeros(n) if T == float else np.array([AutoDiffXd(0.0)] * n, dtype=object)
             self._law = LawConstants(self._gains, self.mode, self.kinematic_rows, m, singularity_threshold,
                                      self._max_joint_acceleration, self.effort_limits, anti_windup,
                                      actuation_from_torque, zero_acceleration, speed, gain, I_v,
-                                     self.joint_damping, self.plant_time_step, bool(compensate_tangential_force),
+                                     self.joint_damping, self.plant_time_step, compensate_tangential_force,
                                      self.wrench_lag)
 
             # -- ports ------------------------------------------------------------------
@@ -348,13 +362,7 @@ def HybridController_(T):
             else:
                 self.DeclareVectorOutputPort("actuation", n, self._calc_held_actuation,
                                              prerequisites_of_calc={self.xd_ticket()})
-            self._diagnostic_slices, start = {}, 0
-            for name, size in [("velocity_error", k), ("force_error", m), ("constraint_value", m),
-                               ("projected_velocity", k), ("force", m), ("tangential_force", k)]:
-                self.DeclareVectorOutputPort(name, size, self._make_solution_output(name),
-                                             prerequisites_of_calc=solution_ticket)
-                self._diagnostic_slices[name] = slice(start, start + size)
-                start += size
+            start = declare_diagnostic_outputs(self, k, m, self._solution, solution_ticket)
             if self.sampled_diagnostics:
                 # Discrete state group 1: the diagnostics of the last tick.
                 self.DeclareDiscreteState(start)
@@ -362,6 +370,8 @@ def HybridController_(T):
                                              prerequisites_of_calc={self.xd_ticket()})
             self.DeclareVectorOutputPort("position_error", k, self._calc_position_error,
                                          prerequisites_of_calc={state_ticket})
+            # Before the first step: the law's preconditions at the start (check_start).
+            self.DeclareInitializationPublishEvent(self._check_start_event)
             # The float fast path (control/fast_law.py): the same law compiled; None = the generic law.
             self.fast_law = FastLaw.build(self, self._law, constraint_space) if T == float and fast_law else None
 
@@ -388,6 +398,26 @@ def HybridController_(T):
         def get_approach_reference_input_port(self):
             """The ``approach_reference`` input (only with ``guarded_move``; else None)."""
             return self._reference_port
+
+        def check_start(self, context):
+            """Raise a typed error if the law cannot start at ``context`` (this controller's): E_f or E
+            singular there (``ConstraintRankError``, ``ChartSingularityError``), a desired force that pulls
+            (``ForceSignError``: the measured force pushes against F_d; or, off the surface with a guarded
+            move, -F_d leads away from C = 0) or a surface beyond the guarded move's reach
+            (``OffConstraintError``). An initialization event calls it when a Simulator initializes;
+            call it yourself on a context you have set up (``core.preconditions``)."""
+            solution = self._solution(context)
+            phase = ContactPhase(solution.contact_phase)
+            check_pushing_force(
+                self._force_port.Eval(context), force=solution.force if solution.wrench_valid else None,
+                constraint_value=solution.constraint_value, force_controlled=self._law.force_controlled,
+                off_surface=phase is not ContactPhase.CONTACT,
+                max_travel=getattr(self.guarded_move, "max_travel", None),
+                where=f"the controller's first tick (t = {float(value(context.get_time())):g} s, {phase.name})")
+
+        def _check_start_event(self, context):
+            self.check_start(context)
+            return EventStatus.Succeeded()
 
         def diagnostics(self, context):
             """What the protections did in the evaluation at ``context``: a dict with the contact
@@ -460,11 +490,6 @@ def HybridController_(T):
         def _solution(self, context):
             return self._solution_cache.Eval(context).solution
 
-        def _make_solution_output(self, field):
-            def calc(context, output):
-                output.SetFromVector(getattr(self._solution(context), field))
-            return calc
-
         def _calc_actuation(self, context, output):
             output.SetFromVector(self._solution(context).actuation)
 
@@ -476,7 +501,7 @@ def HybridController_(T):
 
         def _store_diagnostics(self, solution, discrete_state):
             if self.sampled_diagnostics:
-                discrete_state.get_mutable_vector(1).SetFromVector(solution.diagnostics_vector())
+                discrete_state.get_mutable_vector(1).SetFromVector(reported_diagnostics_vector(solution))
 
         def _calc_position_error(self, context, output):
             m, k = self.force_size, self.velocity_size

@@ -18,7 +18,11 @@ Each gain may be given as a scalar (times I), a vector (diagonal) or a matrix.
 ``HybridGains`` stores them as flat lists (YAML-friendly): one entry means a
 scalar times I, k entries a diagonal, k*k entries a full matrix (row-major).
 K_v, K_p, K_fi and M_d must be symmetric positive definite and K_fp symmetric
-positive semidefinite; anything else raises ``GainError`` naming the gain.
+positive semidefinite; anything else raises ``GainError`` naming the gain. Each loop the gains
+design must also be sane (``ValidatedGains.check_rates``, ``check_poles``): decay at ``MIN_RATE`` =
+1e-6 1/s or faster (a gain of 1e-300 is positive definite in name only), be no faster than
+``MAX_RATE`` = 1e6 1/s and, for a sampled controller of period h, than its sampling rate 1/h; K_fp
+and M_d stay within a factor 1e6 of 1.
 
 M_d is the impedance's mass along the velocity rows (kg, kg m^2 on a turning row). The paper's
 impedance (3.2-1) has unit mass, the default: e'' + K_v e' + K_p e = F_v. A heavier M_d keeps
@@ -28,12 +32,14 @@ that drags (docs/drake_notes.md, "The simulated contact's drag and the impedance
 """
 
 import enum
+import math
 from dataclasses import dataclass, field
 from typing import List
 
 import numpy as np
 
-from drake_hybrid.core.errors import GainError, check_fields
+from drake_hybrid.core.arguments import number, numeric_array
+from drake_hybrid.core.errors import ArgumentError, GainError
 
 
 class ControlMode(enum.Enum):
@@ -50,7 +56,8 @@ class ControlMode(enum.Enum):
         try:
             return cls(str(mode))
         except ValueError:
-            raise ValueError(f"unknown control mode '{mode}'; use one of {[m.value for m in cls]}") from None
+            raise ArgumentError(f"unknown control mode '{mode}'; mode must be one of {[m.value for m in cls]}") \
+                from None
 
     @property
     def integrates_position(self):
@@ -58,52 +65,77 @@ class ControlMode(enum.Enum):
         return self is not ControlMode.VELOCITY_FORCE
 
 
-def gain_matrix(gain, size, name, semidefinite=False):
+# Sane bounds of a gain (the module docstring). A designed loop that decays slower than MIN_RATE (1/s)
+# takes eleven days to converge, one faster than MAX_RATE is faster than any actuator. A sampled
+# controller also realizes no loop as fast as its sampling rate 1/h: forward Euler's pole 1 - s h of a
+# loop at s is then <= 0 (it overshoots at every tick, and is unstable beyond 2/h), so every designed
+# |s| must stay within MAX_RATE_PERIOD / h.
+MIN_RATE, MAX_RATE = 1e-6, 1e6
+MAX_RATE_PERIOD = 1.0
+MAX_RATIO = 1e6            # dimensionless gains (K_fp) and the impedance mass M_d (kg) relative to 1
+
+
+def _given_form(array, given_shape):
+    """How a gain was given, for a message: "is a scalar", "has k diagonal entries", "is a k x k matrix"."""
+    shape = tuple(given_shape) if given_shape is not None else array.shape
+    if len(shape) == 2:
+        return f"is a {shape[0]}x{shape[1]} matrix"
+    if len(shape) == 0 or array.size == 1:
+        return "is a scalar"
+    side = math.isqrt(array.size)
+    if given_shape is None and side > 1 and side * side == array.size:
+        return f"has {array.size} entries (a {side}x{side} matrix, flattened, or {array.size} diagonal entries)"
+    return f"has {array.size} diagonal entries"
+
+
+def gain_matrix(gain, size, name, semidefinite=False, given_shape=None):
     """``gain`` as a symmetric size x size matrix; GainError if it is not (semi)definite.
 
     Accepts a scalar, a vector (diagonal), a matrix, or the flat lists that
-    HybridGains stores (1, size or size*size entries)."""
-    try:
-        array = np.asarray(gain, dtype=float)
-    except (TypeError, ValueError):
-        raise GainError(f"gain {name} must be numeric, got {gain!r}") from None
+    HybridGains stores (1, size or size*size entries); ``given_shape``: the shape the user gave
+    (HybridGains keeps it), for the message. ``size`` 0 (no rows) gives the empty matrix."""
+    size = number(size, "size", f"gain {name}", low=0, integer=True, error=GainError)
+    array = numeric_array(gain, f"gain {name}", "HybridGains", error=GainError)
+    wanted = (f"a scalar, {size} diagonal entries or a {size}x{size} matrix"
+              + (f" ({size * size} entries, row-major)" if size > 1 else ""))
     if array.ndim == 1 and array.size == 1:
         array = array.reshape(())
     elif array.ndim == 1 and array.size == size * size and size > 1:
         array = array.reshape(size, size)
     if array.ndim == 0:
         matrix = float(array) * np.eye(size)
-    elif array.ndim == 1:
-        if array.size != size:
-            raise GainError(f"gain {name} has {array.size} diagonal entries; it must have {size}")
+    elif array.ndim == 1 and array.size == size:
         matrix = np.diag(array)
-    elif array.ndim == 2:
-        if array.shape != (size, size):
-            raise GainError(f"gain {name} is {array.shape[0]}x{array.shape[1]}; it must be {size}x{size}")
+    elif array.ndim == 2 and array.shape == (size, size):
         matrix = array.copy()
     else:
-        raise GainError(f"gain {name} must be a scalar, a vector or a matrix, got an array of shape {array.shape}")
-    if not np.all(np.isfinite(matrix)):
-        raise GainError(f"gain {name} has non-finite entries: {matrix.tolist()}")
+        rows = f"{size} row" + ("" if size == 1 else "s")
+        raise GainError(f"gain {name} {_given_form(array, given_shape)}; for {rows} it must be {wanted}")
+    if size == 0:
+        return matrix
     if not np.allclose(matrix, matrix.T, rtol=0, atol=1e-12 * max(1.0, np.abs(matrix).max())):
         raise GainError(f"gain {name} must be symmetric, got {matrix.tolist()}")
-    eigenvalues = np.linalg.eigvalsh(matrix) if size else np.zeros(0)
-    if semidefinite and eigenvalues.size and eigenvalues.min() < 0:
+    eigenvalues = np.linalg.eigvalsh(matrix)
+    if semidefinite and eigenvalues.min() < 0:
         raise GainError(f"gain {name} must be positive semidefinite; its eigenvalues are {eigenvalues.tolist()}")
-    if not semidefinite and eigenvalues.size and eigenvalues.min() <= 0:
+    if not semidefinite and eigenvalues.min() <= 0:
         raise GainError(f"gain {name} must be positive definite; its eigenvalues are {eigenvalues.tolist()}")
     return matrix
 
 
 def _flat(gain):
-    array = np.asarray(gain, dtype=float)
-    return [float(v) for v in array.reshape(-1)]
+    return [float(v) for v in np.asarray(gain, dtype=float).reshape(-1)]
+
+
+GAIN_LISTS = ("velocity", "position", "force_proportional", "force_integral", "impedance_mass")
 
 
 @dataclass
 class HybridGains:
     """The paper's gains (see the module docstring). Give scalars, vectors or
-    matrices; they are stored as flat lists (1, k or k*k entries)."""
+    matrices; they are stored as flat lists (1, k or k*k entries). Every gain is checked here
+    (numbers, finite; the scalars' signs) and against the task's sizes, definiteness and sane
+    rates by ``matrices`` (GainError naming the gain)."""
 
     velocity: List[float] = field(default_factory=lambda: [10.0])
     # K_p = 21: the position rows' roots s^2 + 10 s + 21 at -3 and -7, distinct (not the critically
@@ -118,25 +150,40 @@ class HybridGains:
     impedance_mass: List[float] = field(default_factory=lambda: [1.0])   # M_d, impedance mode; 1: the paper's
 
     def __post_init__(self):
-        for name in ("velocity", "position", "force_proportional", "force_integral", "impedance_mass"):
-            try:
-                setattr(self, name, _flat(getattr(self, name)))
-            except (TypeError, ValueError):
-                raise GainError(f"gain {name} must be numeric, got {getattr(self, name)!r}") from None
+        shapes = {}
+        for name in GAIN_LISTS:
+            array = numeric_array(getattr(self, name), name, "HybridGains", error=GainError)
+            shapes[name] = array.shape
+            setattr(self, name, _flat(array))
+        self._check_scalars()
+        self._given_shapes = shapes          # how each gain was given (a k x k matrix or k entries), for messages
 
-    def matrices(self, velocity_size, force_size, mode):
-        """Validated matrices (K_v, K_p, K_fp, K_fi) for d - m = velocity_size, m = force_size."""
+    def _check_scalars(self):
+        """K_n >= 0 and w_c > 0, numbers within the sane rates (also after a field was set anew)."""
+        self.null_space_damping = number(self.null_space_damping, "null_space_damping", "HybridGains", low=0.0,
+                                         high=MAX_RATE, unit="1/s", error=GainError)
+        self.constraint_frequency = number(self.constraint_frequency, "constraint_frequency", "HybridGains",
+                                           low=MIN_RATE, high=MAX_RATE, unit="rad/s", error=GainError)
+
+    def _matrix(self, name, size, label, semidefinite=False):
+        return gain_matrix(getattr(self, name), size, label, semidefinite,
+                           getattr(self, "_given_shapes", {}).get(name))
+
+    def matrices(self, velocity_size, force_size, mode, control_period=None):
+        """Validated matrices (K_v, K_p, K_fp, K_fi) for d - m = velocity_size, m = force_size; with a
+        ``control_period`` h, every designed rate is also checked to stay below 1/h."""
         mode = ControlMode.parse(mode)
-        K_v = gain_matrix(self.velocity, velocity_size, "velocity (K_v)")
-        K_p = (gain_matrix(self.position, velocity_size, "position (K_p)") if mode.integrates_position
+        K_v = self._matrix("velocity", velocity_size, "velocity (K_v)")
+        K_p = (self._matrix("position", velocity_size, "position (K_p)") if mode.integrates_position
                else np.zeros((velocity_size, velocity_size)))
-        K_fp = gain_matrix(self.force_proportional, force_size, "force_proportional (K_fp)", semidefinite=True)
-        K_fi = gain_matrix(self.force_integral, force_size, "force_integral (K_fi)")
-        check_fields(self, "gain ", positive=("constraint_frequency",), nonnegative=("null_space_damping",),
-                     error=GainError)
-        M_d = gain_matrix(self.impedance_mass, velocity_size, "impedance_mass (M_d)")
-        return ValidatedGains(K_v, K_p, K_fp, K_fi, float(self.null_space_damping), float(self.constraint_frequency),
-                              M_d)
+        K_fp = self._matrix("force_proportional", force_size, "force_proportional (K_fp)", semidefinite=True)
+        K_fi = self._matrix("force_integral", force_size, "force_integral (K_fi)")
+        self._check_scalars()
+        M_d = self._matrix("impedance_mass", velocity_size, "impedance_mass (M_d)")
+        gains = ValidatedGains(K_v, K_p, K_fp, K_fi, float(self.null_space_damping), float(self.constraint_frequency),
+                               M_d)
+        gains.check_rates(mode, control_period)
+        return gains
 
     def as_lists(self, velocity_size, force_size, mode):
         """The gains as nested lists (for summary.json), keyed as in the CLI's summary."""
@@ -165,3 +212,57 @@ class ValidatedGains:
         # G = (I + K_fp)^-1 K_fi: the force loop's rate matrix (3.1-14).
         m = self.force_proportional.shape[0]
         self.force_rate = np.linalg.solve(np.eye(m) + self.force_proportional, self.force_integral)
+
+    def designed_poles(self, mode):
+        """{gain: the poles s (1/s) of the loops it designs}: the velocity rows' -eig(K_v) (or the roots of
+        s^2 + K_v s + K_p), the force rows' -eig((I + K_fp)^-1 K_fi), the kinematic rows' -w_c and -2 w_c,
+        the null space's -K_n (when > 0)."""
+        k = self.velocity.shape[0]
+        integrates = ControlMode.parse(mode).integrates_position
+        if integrates and k:
+            companion = np.block([[np.zeros((k, k)), np.eye(k)], [-self.position, -self.velocity]])
+            velocity_rows = np.linalg.eigvals(companion)
+        else:
+            velocity_rows = -np.linalg.eigvals(self.velocity) if k else np.zeros(0)
+        poles = {"velocity (K_v)" + (" and position (K_p)" if integrates else ""): velocity_rows,
+                 "force_proportional (K_fp) and force_integral (K_fi)":
+                     -np.linalg.eigvals(self.force_rate) if self.force_rate.size else np.zeros(0),
+                 "constraint_frequency (w_c)": -np.array([self.constraint_frequency, 2 * self.constraint_frequency])}
+        if self.null_space_damping > 0:
+            poles["null_space_damping (K_n)"] = -np.array([self.null_space_damping])
+        return poles
+
+    def check_rates(self, mode, control_period=None):
+        """GainError naming the gain whose designed loop is too fast or too slow (``check_poles``), or whose
+        K_fp or M_d is beyond a factor MAX_RATIO of 1."""
+        for name, poles in self.designed_poles(mode).items():
+            check_poles(poles, name, control_period)
+        for name, matrix, low, unit in (("force_proportional (K_fp)", self.force_proportional, 0.0, "(dimensionless)"),
+                                        ("impedance_mass (M_d)", self.impedance_mass, 1.0 / MAX_RATIO,
+                                         "kg (the paper's unit mass is 1)")):
+            outside = [float(v) for v in np.linalg.eigvalsh(matrix) if not low <= v <= MAX_RATIO] if matrix.size else []
+            if outside:
+                raise GainError(f"gain {name} has an eigenvalue of {outside[0]:.3g} {unit}; it must be within "
+                                f"[{low:g}, {MAX_RATIO:g}]")
+
+
+def check_poles(poles, name, control_period=None):
+    """GainError naming the gain ``name`` if a loop it designs (poles s, 1/s) is faster than MAX_RATE, or, for
+    a sampled controller of period h (``control_period``), not slower than MAX_RATE_PERIOD / h; or decays
+    slower than MIN_RATE (-Re s < MIN_RATE: a time constant of more than eleven days is not a design)."""
+    poles = np.atleast_1d(np.asarray(poles, dtype=complex))
+    if not poles.size:
+        return
+    high, why = MAX_RATE, ""
+    if control_period is not None:
+        high = min(MAX_RATE, MAX_RATE_PERIOD / float(control_period))
+        why = (f" (the sampling rate 1/h of this controller's control_period h = {float(control_period):g} s: a loop "
+               "as fast overshoots at every tick, and twice as fast is unstable)")
+    fastest = float(np.max(np.abs(poles)))
+    if not fastest <= high:
+        raise GainError(f"gain {name} designs a loop of rate {fastest:.3g} 1/s, faster than {high:.4g} 1/s{why}")
+    slowest = float(np.min(-poles.real))
+    if not slowest >= MIN_RATE:
+        raise GainError(f"gain {name} designs a loop that decays at {slowest:.3g} 1/s (a time constant of "
+                        f"{1.0 / slowest if slowest > 0 else math.inf:.3g} s), slower than {MIN_RATE:g} 1/s: "
+                        "not a design")

@@ -41,7 +41,8 @@ import numpy as np
 
 from pydrake.autodiffutils import AutoDiffXd
 
-from drake_hybrid.core.errors import DimensionError, KinematicSingularityWarning
+from drake_hybrid.core.arguments import boolean, describe, number, numeric_array
+from drake_hybrid.core.errors import ArgumentError, DimensionError, KinematicSingularityWarning
 from drake_hybrid.core.linalg import inv, solve, value
 
 
@@ -69,16 +70,22 @@ class SafetyConfig:
     def validated(self, num_actuators, plant_limits):
         """(limits, anti_windup, singularity_threshold, max_joint_acceleration); ValueError naming the
         bad field."""
-        limits = np.asarray(self.effort_limits if len(self.effort_limits) else plant_limits, dtype=float)
+        owner = "SafetyConfig"
+        given = numeric_array(self.effort_limits, "safety.effort_limits", owner, finite=False,
+                              what="a vector with one limit per actuator (N m; inf: none; empty: the plant's)")
+        limits = given if given.size else np.asarray(plant_limits, dtype=float)
+        if given.ndim > 1:
+            raise DimensionError(f"{owner}: safety.effort_limits must be a vector with one entry per actuator "
+                                 f"({num_actuators}), not a matrix: got {describe(self.effort_limits)}")
         if limits.shape != (num_actuators,):
             raise DimensionError(f"safety.effort_limits must have one entry per actuator ({num_actuators}), "
-                                 f"got {len(self.effort_limits)}")
-        if np.any(np.isnan(limits)) or np.any(limits <= 0):
-            raise ValueError(f"safety.effort_limits must be positive, got {limits.tolist()}")
-        if not float(self.max_joint_acceleration) > 0:
-            raise ValueError(f"safety.max_joint_acceleration must be positive, got {self.max_joint_acceleration}")
-        if not float(self.singularity_threshold) >= 0:
-            raise ValueError(f"safety.singularity_threshold must be >= 0, got {self.singularity_threshold}")
+                                 f"got {given.size}")
+        if np.any(limits <= 0):
+            raise ArgumentError(f"safety.effort_limits must be positive, got {limits.tolist()}")
+        number(self.max_joint_acceleration, "safety.max_joint_acceleration", owner, low=0.0, low_inclusive=False,
+               unit="rad/s^2")
+        number(self.singularity_threshold, "safety.singularity_threshold", owner, low=0.0)
+        boolean(self.anti_windup, "safety.anti_windup", owner)
         return limits, bool(self.anti_windup), float(self.singularity_threshold), float(self.max_joint_acceleration)
 
 

@@ -51,7 +51,8 @@ from pydrake.systems.scalar_conversion import TemplateSystem
 
 from drake_hybrid.control.phases import ContactPhase
 from drake_hybrid.control.sampling import SAMPLE_LEAD
-from drake_hybrid.core.errors import ConfigError, check_fields
+from drake_hybrid.core.arguments import MAX_TASK_SIZE, describe, instance, number, positive, vector
+from drake_hybrid.core.errors import ArgumentError, ConfigError, check_fields
 from drake_hybrid.core.linalg import all_finite, value
 
 
@@ -139,16 +140,19 @@ def ContactSupervisor_(T):
         def _construct(self, config, force_size, kinematic_rows, period, initial_phase=ContactPhase.CONTACT,
                        converter=None):
             LeafSystem_[T].__init__(self, converter)
-            config.validate()
-            if not (period is not None and float(period) > 0):
-                raise ValueError(f"ContactSupervisor: period must be positive, got {period}")
-            m = int(force_size)
-            if m < 1:
-                raise ValueError(f"ContactSupervisor: force_size must be >= 1, got {force_size}")
-            self.config, self.force_size, self.period = config, m, float(period)
-            self.kinematic_rows = tuple(int(i) for i in kinematic_rows)
-            if any(not 0 <= i < m for i in self.kinematic_rows):
-                raise ValueError(f"ContactSupervisor: kinematic_rows {self.kinematic_rows} out of range 0..{m - 1}")
+            owner = "ContactSupervisor"
+            instance(config, "config", owner, SupervisionConfig).validate()
+            period = positive(period, "period", owner, unit="s")
+            m = number(force_size, "force_size", owner, low=1, high=MAX_TASK_SIZE, integer=True)
+            self.config, self.force_size, self.period = config, m, period
+            rows = vector(kinematic_rows, "kinematic_rows", owner)
+            if any(not (row.is_integer() and 0 <= row < m) for row in rows):
+                raise ArgumentError(f"{owner}: kinematic_rows must be row indices in 0..{m - 1}, got "
+                                    f"{describe(kinematic_rows)}")
+            self.kinematic_rows = tuple(int(i) for i in rows)
+            if initial_phase not in tuple(ContactPhase) + tuple(int(phase) for phase in ContactPhase):
+                raise ArgumentError(f"{owner}: initial_phase must be a ContactPhase "
+                                    f"({', '.join(phase.name for phase in ContactPhase)}), got {describe(initial_phase)}")
             self.initial_phase = ContactPhase(initial_phase)
             self._force_controlled = np.ones(m)
             self._force_controlled[list(self.kinematic_rows)] = 0.0

@@ -51,6 +51,7 @@ import pydrake.math as drake_math
 from pydrake.common.eigen_geometry import AngleAxis
 from pydrake.math import RigidTransform, RotationMatrix
 
+from drake_hybrid.core.arguments import number, vector
 from drake_hybrid.core.errors import ChartSingularityError, DimensionError
 from drake_hybrid.core.linalg import is_autodiff, value
 from drake_hybrid.core.symbolic import CompiledFunction
@@ -171,13 +172,11 @@ class PlanarChart(Chart):
 
     def __init__(self, origin=(0.0, 0.0, 0.0), axis_x=(1.0, 0.0, 0.0), axis_y=(0.0, 0.0, 1.0),
                  reference_rotation=None):
-        e1 = np.asarray(axis_x, dtype=float)
-        e2 = np.asarray(axis_y, dtype=float)
-        if e1.shape != (3,) or e2.shape != (3,):
-            raise DimensionError("PlanarChart: axis_x and axis_y must be 3-vectors")
+        e1 = vector(axis_x, "axis_x", "PlanarChart", 3, error=DimensionError)
+        e2 = vector(axis_y, "axis_y", "PlanarChart", 3, error=DimensionError)
         if abs(np.linalg.norm(e1) - 1) > 1e-9 or abs(np.linalg.norm(e2) - 1) > 1e-9 or abs(e1 @ e2) > 1e-9:
             raise DimensionError(f"PlanarChart: axis_x {e1} and axis_y {e2} must be orthonormal")
-        self.origin = np.asarray(origin, dtype=float)
+        self.origin = vector(origin, "origin", "PlanarChart", 3, unit="m")
         self.axis_x, self.axis_y = e1, e2
         self.normal = np.cross(e1, e2)
         self.reference_rotation = RotationMatrix() if reference_rotation is None else RotationMatrix(reference_rotation)
@@ -291,9 +290,8 @@ class EulerZXZChart(Chart):
     NEAR_SINGULARITY = 0.1
 
     def __init__(self, singularity_tolerance=1e-2):
-        if not singularity_tolerance > 0:
-            raise ValueError(f"EulerZXZChart: singularity_tolerance must be positive, got {singularity_tolerance}")
-        self.singularity_tolerance = float(singularity_tolerance)
+        self.singularity_tolerance = number(singularity_tolerance, "singularity_tolerance", "EulerZXZChart", low=0.0,
+                                            low_inclusive=False, high=1.0, high_inclusive=False)
         (symbols, velocity, T, T_inverse, T_dot_eta_dot, rotation) = _euler_zxz_symbolic()
         self.configuration_symbols = symbols
         self.velocity_symbols = velocity

@@ -18,6 +18,12 @@ class ConfigError(DrakeHybridError):
     names the field (dotted, as in the YAML) and what is allowed."""
 
 
+class ArgumentError(DrakeHybridError):
+    """An argument of a public constructor or function has a type, shape or value that is not
+    allowed; the message names the callee and the argument, what it got and what is allowed
+    (``core.arguments`` checks every argument the same way)."""
+
+
 class ChartSingularityError(DrakeHybridError):
     """A coordinate chart was evaluated at (or too near) its singular set.
 

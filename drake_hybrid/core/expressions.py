@@ -28,6 +28,7 @@ import math
 import sympy
 
 from drake_hybrid.core.errors import ConfigError
+from drake_hybrid.core.schema import nesting_depth
 
 MAX_LENGTH = 2000          # characters of one expression
 MAX_DEPTH = 40             # nesting levels (brackets, operators, calls)
@@ -65,17 +66,6 @@ def check_parameter_names(parameters, symbols, where="parameters"):
             raise ConfigError(f"{where}.{name} must be a finite number, got {number!r}")
 
 
-def _nesting_depth(text):
-    depth = deepest = 0
-    for character in text:
-        if character in "([{":
-            depth += 1
-            deepest = max(deepest, depth)
-        elif character in ")]}":
-            depth -= 1
-    return deepest
-
-
 def expression_to_sympy(text, symbols=(), parameters=None, where="expression", row=False):
     """The sympy expression of ``text`` (see the module docstring for the grammar).
 
@@ -101,7 +91,7 @@ def expression_to_sympy(text, symbols=(), parameters=None, where="expression", r
         _refuse(where, f"the expression is longer than {MAX_LENGTH} characters:", text[:40] + "...")
     if not text.strip():
         _refuse(where, "the expression is empty:", text)
-    if _nesting_depth(text) > MAX_DEPTH:
+    if nesting_depth(text, "([{", ")]}") > MAX_DEPTH:
         _refuse(where, f"the expression nests brackets deeper than {MAX_DEPTH} levels:", text[:40] + "...")
     try:
         tree = ast.parse(text.strip(), mode="eval")

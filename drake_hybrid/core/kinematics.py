@@ -17,7 +17,8 @@ from pydrake.math import RotationMatrix
 from pydrake.multibody.tree import FrameIndex, JacobianWrtVariable
 from pydrake.systems.framework import ValueProducer
 
-from drake_hybrid.core.errors import DimensionError
+from drake_hybrid.core.arguments import describe, vector
+from drake_hybrid.core.errors import ArgumentError, DimensionError, UnknownFrameError
 from drake_hybrid.core.linalg import all_finite, value
 
 
@@ -39,19 +40,20 @@ def frame_names(plant):
     return sorted({plant.get_frame(FrameIndex(i)).name() for i in range(plant.num_frames())})
 
 
-def resolve_frame(plant, frame):
-    """The Frame of ``plant`` given one of its Frames or a frame name. Raises
-    ValueError naming the plant's frames if it is not there."""
+def resolve_frame(plant, frame, what="end_effector_frame"):
+    """The Frame of ``plant`` given one of its Frames or a frame name (the argument ``what``). Raises
+    UnknownFrameError naming the plant's frames if it is not there, ArgumentError for anything else."""
     if isinstance(frame, str):
         if not plant.HasFrameNamed(frame):
-            raise ValueError(f"frame '{frame}' is not in the plant; its frames are {frame_names(plant)}")
+            raise UnknownFrameError(f"{what}: frame '{frame}' is not in the plant; its frames are {frame_names(plant)}")
         return plant.GetFrameByName(frame)
     try:
         name = frame.name()
+        parent = frame.GetParentPlant()
     except AttributeError:
-        raise TypeError(f"expected a Frame or a frame name, got {type(frame).__name__}") from None
-    if frame.GetParentPlant() is not plant:
-        raise ValueError(f"frame '{name}' is not in the plant; its frames are {frame_names(plant)}")
+        raise ArgumentError(f"{what} must be a Frame of the plant or a frame name, got {describe(frame)}") from None
+    if parent is not plant:
+        raise UnknownFrameError(f"{what}: frame '{name}' is not in the plant; its frames are {frame_names(plant)}")
     return frame
 
 
@@ -72,9 +74,7 @@ class EndEffectorKinematics:
             raise ValueError(
                 f"EndEffectorKinematics needs q-dot = v (nq == nv); the plant has nq = {plant.num_positions()}, "
                 f"nv = {plant.num_velocities()}")
-        point = np.asarray(point_in_frame, dtype=float)
-        if point.shape != (3,):
-            raise DimensionError(f"point_in_frame must be a 3-vector, got shape {point.shape}")
+        point = vector(point_in_frame, "point_in_frame", "EndEffectorKinematics", 3, unit="m", error=DimensionError)
         self.plant = plant
         self.frame = resolve_frame(plant, frame)
         self.point_in_frame = point

@@ -25,6 +25,7 @@ import sympy
 from drake_hybrid.core.charts import EulerZXZChart
 from drake_hybrid.core.errors import ChartSingularityError, ConstraintRankError, DimensionError
 from drake_hybrid.core.linalg import LUFactorization, cholesky, inv, rank_margin_from_cholesky
+from drake_hybrid.core.preconditions import check_generic_rank
 from drake_hybrid.core.symbolic import CompiledFunction, compiled_time_derivative, to_sympy_matrix
 
 
@@ -187,6 +188,7 @@ class ConstraintSpace:
         self.force_size = m
         self.velocity_size = d - m
         self.invertibility_tolerance = float(invertibility_tolerance)
+        check_generic_rank(self)          # rows dependent everywhere (e.g. two identical rows): refused now
 
     def evaluate(self, x, nu, check=True):
         """All of E's pieces at (x, nu); checks the chart, rank E_f and invertibility of E."""

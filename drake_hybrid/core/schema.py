@@ -9,6 +9,7 @@ naming the dotted field; Drake's loader then reads the text as usual.
 
 import dataclasses
 import typing
+from pathlib import Path
 from typing import Dict, List, Union
 
 import yaml
@@ -34,9 +35,61 @@ _UniqueKeyLoader.add_multi_constructor("!", lambda loader, suffix, node: (
     loader.construct_mapping(node) if isinstance(node, yaml.MappingNode) else None))
 
 
+MAX_YAML_SIZE = 1_000_000     # characters of a YAML file the package reads (a config, a sweep spec, a task file)
+
+
+def read_yaml_file(path, what, error=ConfigError, max_size=MAX_YAML_SIZE):
+    """The text of the YAML file ``path``; ``error`` (one line, naming ``what`` and the path) if it does
+    not exist, is a directory, cannot be read, is not UTF-8 text (a binary file), is larger than
+    ``max_size`` characters or holds nothing but whitespace and comments."""
+    path = Path(path)
+    if path.is_dir():
+        raise error(f"{what} '{path}' is a directory, not a YAML file")
+    if not path.exists():
+        raise error(f"{what} '{path}' does not exist")
+    try:
+        data = path.read_bytes()
+    except OSError as problem:
+        raise error(f"{what} '{path}' cannot be read ({problem.strerror or type(problem).__name__})") from None
+    try:
+        text = data.decode("utf-8")
+    except UnicodeDecodeError as problem:
+        raise error(f"{what} '{path}' is not UTF-8 text (a binary file?): byte 0x{data[problem.start]:02x} at "
+                    f"offset {problem.start}") from None
+    if len(text) > max_size:
+        raise error(f"{what} '{path}' is larger than {max_size // 1000} kB")
+    if not any(line.split("#", 1)[0].strip() for line in text.splitlines()):
+        raise error(f"{what} '{path}' is empty (no YAML mapping, only whitespace or comments)")
+    return text
+
+
+MAX_YAML_DEPTH = 100         # levels of [ and { a YAML text may nest (a config needs fewer than ten)
+
+
+def nesting_depth(text, opening="[{", closing="]}"):
+    """The deepest nesting of the ``opening`` brackets in ``text`` (a linear scan, before any parsing;
+    YAML's flow collections by default)."""
+    depth = deepest = 0
+    for character in text:
+        if character in opening:
+            depth += 1
+            deepest = max(deepest, depth)
+        elif character in closing:
+            depth -= 1
+    return deepest
+
+
+def check_depth(text, where="", error=ConfigError):
+    """``error`` if ``text`` nests [ and { deeper than MAX_YAML_DEPTH: refused before a parser recurses into it."""
+    if isinstance(text, str) and nesting_depth(text) > MAX_YAML_DEPTH:
+        raise error(f"{where}the YAML nests too deeply (more than {MAX_YAML_DEPTH} levels of [ and {{)")
+
+
 def check_yaml_against_schema(text, schema, where="", error=ConfigError):
-    """``error`` (one line, prefixed by ``where``) for a repeated key, invalid YAML, or a value that does
-    not fit ``schema`` (``type_mismatch``); returns the parsed YAML."""
+    """``error`` (one line, prefixed by ``where``) for a text that nests too deeply (``check_depth``), a
+    repeated key, invalid YAML, or a value that does not fit ``schema`` (``type_mismatch``); returns the
+    parsed YAML."""
+    check_depth(text, where, error)
     try:
         parsed = yaml.load(text, Loader=_UniqueKeyLoader)
     except ConfigError as problem:

@@ -50,14 +50,29 @@ def row_commands(desired):
     return np.max(np.abs(np.asarray(desired, dtype=float)), axis=0)
 
 
+def last_valid(values):
+    """The last row of ``values`` (samples x columns) without NaN (None if every row has one): a sample
+    taken while the measured wrench was invalid reads NaN (control.law_system) and is no figure."""
+    values = np.asarray(values, dtype=float)
+    valid = np.nonzero(~np.isnan(values).any(axis=1))[0]
+    return values[valid[-1]] if valid.size else None
+
+
+def invalid_samples(values):
+    """How many samples (rows of ``values``) read NaN: taken while the measured wrench was invalid."""
+    return int(np.isnan(np.asarray(values, dtype=float)).any(axis=1).sum())
+
+
 def max_row_errors(t, error, desired, after):
     """Per row, over t >= ``after``: (max |e_i| in the row's units, or None if no sample is that late;
     that in % of the row's command, or None for a row commanded to zero). The one definition of a
-    row's error that ``row_errors`` (summary.json) and the sweep's verdict share."""
+    row's error that ``row_errors`` (summary.json) and the sweep's verdict share. Samples that read
+    NaN (the wrench invalid then) are left out."""
     window = t >= after
     figures = []
     for e, command in zip(np.abs(np.asarray(error, dtype=float)).T, row_commands(desired)):
-        worst = float(np.max(e[window])) if window.any() else None
+        values = e[window & ~np.isnan(e)]
+        worst = float(np.max(values)) if values.size else None
         figures.append((worst, None if worst is None or command == 0 else 100.0 * worst / float(command)))
     return figures
 
@@ -68,24 +83,28 @@ def row_errors(t, error, desired, names, units, since, settle_after):
     ``since``: when the law took over (contact); ``settle_after``: when the design says the
     transient is over (contact + 5 design time constants). A row commanded to zero has no % figures
     and no settling time (there is no scale in its units to settle to); its absolute errors are given.
-    Settling times are counted from ``since``.
+    Settling times are counted from ``since``. Samples that read NaN (the measured wrench invalid
+    then: no measurement) are left out of every figure.
     """
     rows = []
     commands = row_commands(desired)
     settled = max_row_errors(t, error, desired, settle_after)
-    final = max_row_errors(t, error, desired, t[-1])
-    late = t >= settle_after
+    last = last_valid(error)                   # the final figures: the last sample that is a measurement
     for i in range(error.shape[1]):
         e, command = np.abs(error[:, i]), float(commands[i])
+        valid = ~np.isnan(e)
+        late = (t >= settle_after) & valid
         worst_time = float(t[late][np.argmax(e[late])]) if late.any() else None
         if command > 0 and np.isfinite(since):
-            active = t >= since
-            settle = settling_time(t[active], e[active], 0.01 * command) - since
+            active = (t >= since) & valid
+            settle = settling_time(t[active], e[active], 0.01 * command) - since if active.any() else None
         else:
             settle = None
+        final_error = None if last is None else float(last[i])
+        final_percent = None if final_error is None or command == 0 else 100.0 * abs(final_error) / command
         rows.append({"name": names[i] if i < len(names) else f"row {i + 1}", "units": units[i],
-                     "command": command, "final_error": float(error[-1, i]),
-                     "final_error_percent": final[i][1],
+                     "command": command, "final_error": final_error,
+                     "final_error_percent": final_percent,
                      "max_error_after_5_time_constants": settled[i][0],
                      "max_error_percent_after_5_time_constants": settled[i][1],
                      "max_error_time_after_5_time_constants": worst_time,
@@ -94,9 +113,10 @@ def row_errors(t, error, desired, names, units, since, settle_after):
 
 
 def max_after(values, window):
-    """Per column, max |values| over the samples in ``window`` (a list of floats, None if it is empty)."""
+    """Per column, max |values| over the samples in ``window`` that do not read NaN (a list of floats,
+    None where there is none)."""
     values = np.abs(np.asarray(values, dtype=float))[window]
-    return [float(v) for v in values.max(axis=0)] if values.shape[0] else [None] * values.shape[1]
+    return [float(np.max(column[~np.isnan(column)])) if np.any(~np.isnan(column)) else None for column in values.T]
 
 
 def worst(rows, key):

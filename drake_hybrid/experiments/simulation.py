@@ -42,7 +42,8 @@ from drake_hybrid.analysis.linearization import controller_prediction, design_ti
 from drake_hybrid.control.fast_law import kernels_loaded
 from drake_hybrid.control.gains import ControlMode
 from drake_hybrid.core.progress import quiet
-from drake_hybrid.experiments.metrics import contact_time, impedance_check, max_after, row_errors, row_units, worst
+from drake_hybrid.experiments.metrics import (contact_time, impedance_check, invalid_samples, last_valid, max_after,
+                                           row_errors, row_units, worst)
 from drake_hybrid.scenario.builder import build_scenario
 from drake_hybrid.scenario.start import set_initial_conditions
 
@@ -202,7 +203,7 @@ def collect_log(scenario, context):
     state = _logged(scenario, context, "state")[1]
     n = state.shape[1] // 2
     log["q"], log["v"] = state[:, :n], state[:, n:]
-    for optional in ("true_wrench", "contact_phase"):        # sensor faults or conditioning; supervision
+    for optional in ("true_wrench", "contact_phase", "wrench_valid"):    # sensor faults or conditioning; supervision
         if optional in scenario.loggers:
             log[optional] = _logged(scenario, context, optional)[1]
     if getattr(scenario.source, "true_projection", None) is not None:   # the paper's pseudo-velocity: its
@@ -250,6 +251,7 @@ def summarize(scenario, log, wall_time):
     constraint_units = row_units(labels["constraint_units"], log["constraint"].shape[1]) \
         if "constraint_units" in labels else None
     torque_ratio = np.max(np.abs(log["torque"]) / effort_limits(scenario), axis=0)
+    final_force_error = last_valid(log["force_error"])         # the last sample with a valid wrench
     pairs = lambda values: [[float(np.real(v)), float(np.imag(v))] for v in values]
     summary = {
         "task": config.task,
@@ -263,7 +265,9 @@ def summarize(scenario, log, wall_time):
         "predicted_eigenvalues": pairs(predicted.designed),
         "design_time_constant": float(tau),
         "final_velocity_error": log["velocity_error"][-1].tolist(),
-        "final_force_error": log["force_error"][-1].tolist(),
+        "final_force_error": None if final_force_error is None else final_force_error.tolist(),
+        # Samples taken while the measured wrench was invalid: F, e_f and F_v read NaN there (no figure).
+        "invalid_wrench_samples": invalid_samples(log["force_error"]),
         # Headline figures: the worst row, each row in % of its own command (rows commanded to zero
         # are in velocity_rows / force_rows, in their own units); settling counted from contact.
         "contact_time": start,

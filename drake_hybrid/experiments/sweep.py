@@ -86,8 +86,8 @@ from drake_hybrid.control.gains import ControlMode
 from drake_hybrid.core.errors import GainError
 from drake_hybrid.experiments.metrics import max_row_errors, row_commands
 from drake_hybrid.experiments.simulation import RunStopped, simulate
-from drake_hybrid.experiments.sweep_spec import (StabilityCriteria, SweepSpecError, apply_parameters, parameters_digest,
-                                                 set_config_value)
+from drake_hybrid.experiments.config_paths import apply_parameters, set_config_value
+from drake_hybrid.experiments.sweep_spec import StabilityCriteria, SweepSpecError, check_axis_values, parameters_digest
 from drake_hybrid.scenario.config import dump_config, load_config
 from drake_hybrid.scenario.tasks import BUILT_IN_TASKS, TASKS, get_task, register_task
 
@@ -431,6 +431,7 @@ def sweep_points(task_name, spec):
         base = apply_parameters(task.default_config(), spec.base)
     except ValueError as error:
         raise SweepSpecError(f"base: {error}") from None
+    check_axis_values(spec, base)              # every value given, checked like a config field
     points = []
     for index, parameters in enumerate(spec.points()):
         try:

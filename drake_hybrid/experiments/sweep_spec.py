@@ -32,18 +32,17 @@ with an index (``gains.velocity[1]``).
 
 The YAML is loaded with Drake's ``yaml_load_typed`` on ``SweepSpecFile``: an
 unknown key or a wrong type is an error naming it. Every parameter names its
-kind (``{values: [...]}``, not a bare list).
+kind (``{values: [...]}``, not a bare list). The numbers of the spec itself are
+checked at load (finite, in range); its values against the task's config when the
+sweep starts (``check_axis_values``: each like the config field it sets). Paths
+into the config are ``experiments.config_paths``.
 """
 
-import copy
-import dataclasses
 import hashlib
 import itertools
 import json
 import math
-import re
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Dict, List, Optional, Union
 
 import numpy as np
@@ -51,8 +50,9 @@ import yaml
 
 from pydrake.common.yaml import yaml_dump_typed, yaml_load_typed
 
-from drake_hybrid.core.schema import check_yaml_against_schema
-from drake_hybrid.scenario.config import dump_config, load_config
+from drake_hybrid.core.schema import check_yaml_against_schema, read_yaml_file
+from drake_hybrid.experiments.config_paths import apply_parameters, config_value
+from drake_hybrid.scenario.builder import prepare_config
 
 GRID_KINDS = ("values", "linspace", "logspace")
 RANDOM_KINDS = ("uniform", "loguniform", "normal", "choice")
@@ -144,13 +144,13 @@ class SweepSpec:
 class AxisSpec:
     """One parameter: exactly one kind, with its list of arguments (see the module docstring)."""
 
-    values: List[Union[float, str]] = field(default_factory=list)     # grid: the values themselves
+    values: List[Union[float, bool, str]] = field(default_factory=list)   # grid: the values themselves
     linspace: List[float] = field(default_factory=list)               # grid: [start, stop, count]
     logspace: List[float] = field(default_factory=list)               # grid: [start, stop, count], start > 0
     uniform: List[float] = field(default_factory=list)                # random: [low, high]
     loguniform: List[float] = field(default_factory=list)             # random: [low, high], both > 0
     normal: List[float] = field(default_factory=list)                 # random: [mean, standard deviation]
-    choice: List[Union[float, str]] = field(default_factory=list)     # random: one of the values
+    choice: List[Union[float, bool, str]] = field(default_factory=list)   # random: one of the values
 
 
 @dataclass
@@ -218,6 +218,9 @@ def _axis(path, entry):
     expected = 3 if kind in ("linspace", "logspace") else 2
     if len(arguments) != expected:
         raise SweepSpecError(f"{where}.{kind}: expected {expected} numbers, got {arguments!r}")
+    for index, argument in enumerate(arguments):
+        if not math.isfinite(argument):
+            raise SweepSpecError(f"{where}.{kind}[{index}]: expected a finite number, got {argument}")
     if kind in ("linspace", "logspace") and not (float(arguments[2]).is_integer() and arguments[2] >= 1):
         raise SweepSpecError(f"{where}.{kind}: the count must be a positive integer, got {arguments[2]}")
     if kind in ("logspace", "loguniform") and not (arguments[0] > 0 and arguments[1] > 0):
@@ -251,10 +254,13 @@ def parse_spec(spec_file):
     if not spec_file.seed >= 0:
         raise SweepSpecError(f"'seed' must be a non-negative integer, got {spec_file.seed}")
     stability = spec_file.stability
+    if not math.isfinite(stability.eigenvalue_margin):
+        raise SweepSpecError(f"stability.eigenvalue_margin must be a finite number (1/s), got "
+                             f"{stability.eigenvalue_margin}")
     if not 0 < stability.steady_window <= 1:
         raise SweepSpecError(f"stability.steady_window must be in (0, 1], got {stability.steady_window}")
-    if not stability.steady_tolerance > 0:
-        raise SweepSpecError(f"stability.steady_tolerance must be positive, got {stability.steady_tolerance}")
+    if not 0 < stability.steady_tolerance < math.inf:
+        raise SweepSpecError(f"stability.steady_tolerance must be positive and finite, got {stability.steady_tolerance}")
     paths = [axis.path for axis in axes]
     for path in paths:
         for other in paths:
@@ -287,11 +293,11 @@ def load_spec(path=None, text=None):
         raise ValueError("give exactly one of path and text")
     where = "the sweep spec"
     if path is not None:
-        path = Path(path)
-        if not path.is_file():
-            raise SweepSpecError(f"sweep spec '{path}' does not exist")
-        text, where = path.read_text(), f"sweep spec '{path}'"
-    check_yaml_against_schema(text, SweepSpecFile, f"{where}: ", error=SweepSpecError)
+        text, where = read_yaml_file(path, "sweep spec", error=SweepSpecError), f"sweep spec '{path}'"
+    parsed = check_yaml_against_schema(text, SweepSpecFile, f"{where}: ", error=SweepSpecError)
+    if not isinstance(parsed, dict):
+        raise SweepSpecError(f"{where}: a sweep spec is a YAML mapping with 'parameters' (docs/stability.md), got "
+                             f"{type(parsed).__name__ if parsed is not None else 'nothing'}")
     try:
         spec_file = yaml_load_typed(schema=SweepSpecFile, data=text)
     except (AssertionError, RuntimeError, ValueError, TypeError) as error:
@@ -302,75 +308,52 @@ def load_spec(path=None, text=None):
 
 
 # ------------------------------------------------------------------------------------------------
-# Dotted paths into a ScenarioConfig
+# The values of a spec, checked like the config fields they set
 # ------------------------------------------------------------------------------------------------
 
-_SEGMENT = re.compile(r"^([A-Za-z_][A-Za-z0-9_]*)(?:\[(\d+)\])?$")
+def _field_allows(current, value):
+    """Whether ``value`` has a type the config field now holding ``current`` takes (YAML's rules: a bool
+    field takes true or false, a number field numbers, a word field words, a list field a number or a list)."""
+    if isinstance(current, bool):
+        return isinstance(value, bool)
+    if isinstance(current, (int, float)):
+        return isinstance(value, (int, float)) and not isinstance(value, bool)
+    if isinstance(current, str):
+        return isinstance(value, str)
+    if isinstance(current, list):
+        entries = value if isinstance(value, list) else [value]
+        return all(isinstance(entry, (int, float)) and not isinstance(entry, bool) for entry in entries)
+    return True
 
 
-def set_config_value(config, path, value):
-    """Set ``path`` (e.g. ``contact.pad_modulus``, ``desired_velocity.value[0]``) in ``config`` in place.
-
-    Dataclass fields must exist (ValueError naming the path and the valid
-    fields); dict fields (``task_parameters``) accept any key; a scalar for a
-    list field becomes a one-entry list."""
-    segments = path.split(".")
-    target = config
-    for depth, segment in enumerate(segments):
-        match = _SEGMENT.match(segment)
-        if not match:
-            raise ValueError(f"config path '{path}': '{segment}' is not a field name (optionally with [index])")
-        name, index = match.group(1), match.group(2)
-        last = depth == len(segments) - 1
-        if isinstance(target, dict):
-            if last and index is None:
-                target[name] = value
-                return
-            if name not in target:
-                raise ValueError(f"config path '{path}': no key '{name}' in {'.'.join(segments[:depth]) or 'config'}")
-            child = target[name]
-        elif dataclasses.is_dataclass(target) or hasattr(target, "__fields__"):
-            # a config dataclass, or a Drake config struct (MultibodyPlantConfig, SimulatorConfig)
-            names = ([f.name for f in dataclasses.fields(target)] if dataclasses.is_dataclass(target)
-                     else [f.name for f in target.__fields__])
-            if name not in names:
-                where = ".".join(segments[:depth]) or "the scenario config"
-                raise ValueError(f"config path '{path}': {where} has no field '{name}'; its fields are "
-                                 f"{', '.join(names)}")
-            child = getattr(target, name)
-            if last and index is None:
-                if isinstance(child, list) and not isinstance(value, list):
-                    value = [value]
-                setattr(target, name, value)
-                return
+def check_axis_values(spec, base):
+    """SweepSpecError naming ``parameters.PATH.KIND[i]`` for a value of an axis that its config field does
+    not take, checked like a config field: its type, then the config with that value alone set on ``base``
+    as a build checks it (``scenario.builder.prepare_config``: every field, the task's options, the gains
+    against the task's sizes). Grid values and choices are checked one by one, a distribution by its bounds
+    (uniform, loguniform) or its mean (normal)."""
+    for axis in spec.parameters:
+        if axis.kind in ("values", "choice"):
+            candidates = list(enumerate(axis.arguments))
+        elif axis.kind in ("linspace", "logspace", "uniform", "loguniform"):
+            candidates = [(0, float(axis.arguments[0])), (1, float(axis.arguments[1]))]
         else:
-            raise ValueError(f"config path '{path}': '{'.'.join(segments[:depth])}' is a value, not a section")
-        if index is not None:
-            if not isinstance(child, list):
-                raise ValueError(f"config path '{path}': '{name}' is not a list, so it takes no [index]")
-            position = int(index)
-            if position >= len(child):
-                raise ValueError(f"config path '{path}': '{name}' has {len(child)} entries, no [{position}]")
-            if last:
-                child[position] = value
-                return
-            child = child[position]
-        target = child
-    raise AssertionError("unreachable")
-
-
-def apply_parameters(config, parameters):
-    """A validated copy of ``config`` with every (path: value) of ``parameters`` set.
-
-    The copy goes through the config's YAML (``dump_config`` / ``load_config``),
-    which checks every value's type, so a point is exactly what a worker gets."""
-    point = copy.deepcopy(config)
-    for path, value in parameters.items():
-        set_config_value(point, path, value)
-    try:
-        return load_config(data=dump_config(point))
-    except Exception as error:   # Drake's typed YAML raises RuntimeError on a type mismatch
-        raise ValueError(f"parameters {parameters} do not give a valid scenario config: {error}") from None
+            candidates = [(0, float(axis.arguments[0]))]
+        try:
+            current = config_value(base, axis.path)
+        except ValueError as error:
+            raise SweepSpecError(f"parameters.{axis.path}: {error}") from None
+        for index, value in candidates:
+            where = f"parameters.{axis.path}.{axis.kind}[{index}] = {value!r}"
+            if not _field_allows(current, value):
+                kind = ("true or false" if isinstance(current, bool) else "a word" if isinstance(current, str)
+                        else "a number")
+                raise SweepSpecError(f"{where}: {axis.path} takes {kind}, like {current!r}")
+            try:
+                prepare_config(apply_parameters(base, {axis.path: value}))
+            except ValueError as error:
+                message = str(error).strip().splitlines()[0] if str(error).strip() else type(error).__name__
+                raise SweepSpecError(f"{where}: {message}") from None
 
 
 def parameters_digest(points):

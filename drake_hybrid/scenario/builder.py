@@ -33,6 +33,7 @@ from drake_hybrid.control.controller import HybridController
 from drake_hybrid.control.gains import ControlMode, gain_matrix
 from drake_hybrid.control.phases import ContactPhase
 from drake_hybrid.control.supervision import ContactSupervisor
+from drake_hybrid.core.arguments import instance
 from drake_hybrid.core.errors import ConfigError
 from drake_hybrid.core.kinematics import EndEffectorKinematics
 from drake_hybrid.scenario.config import ScenarioConfig, WristSensorConfig
@@ -111,6 +112,8 @@ def prepare_config(config):
     """(task, mode, constraint space, config) with every field validated once (``config.validate``,
     the task's typed options) and the desired force padded with zeros on the kinematic rows (given
     for the force-controlled rows only): what every diagram built from a config starts from."""
+    instance(config, "config", "build_scenario", ScenarioConfig,
+             what="a ScenarioConfig (e.g. get_task('window-washing').default_config())")
     task = get_task(config.task)
     mode = ControlMode.parse(config.mode)
     config.validate()
@@ -118,6 +121,12 @@ def prepare_config(config):
     constraint_space = task.constraint_space(config)
     config = dataclasses.replace(config, desired_force=pad_kinematic_rows(
         config.desired_force, constraint_space.force_size, constraint_space.constraint.kinematic_rows))
+    config.desired_force.validate(constraint_space.force_size, "desired_force")   # (a task may fill desired_velocity)
+    if config.supervised:          # a guarded approach to a surface, which only pushes: over the whole course
+        config.desired_force.check_keeps_sign("desired_force")
+    if config.controller == "li-sastry":     # the gains against the task's sizes and the control rate
+        config.gains.matrices(constraint_space.velocity_size, constraint_space.force_size, mode,
+                              config.control_period if config.control_period > 0 else None)
     return task, mode, constraint_space, config
 
 

@@ -22,7 +22,6 @@ import copyreg
 import dataclasses
 import math
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Dict, List, Union
 
 
@@ -35,7 +34,7 @@ from drake_hybrid.control.gains import ControlMode, HybridGains
 from drake_hybrid.control.safety import SafetyConfig
 from drake_hybrid.control.supervision import SupervisionConfig
 from drake_hybrid.core.errors import ConfigError, check_fields, check_finite
-from drake_hybrid.core.schema import check_yaml_against_schema
+from drake_hybrid.core.schema import check_yaml_against_schema, read_yaml_file
 from drake_hybrid.systems.faults import SensorFaultConfig
 from drake_hybrid.systems.sources import Profile
 
@@ -338,6 +337,10 @@ class ScenarioConfig:
         if not self.start.in_contact and not self.supervision.approach_speed > 0:
             raise ConfigError("supervision.approach_speed must be > 0 with start.in_contact: false (the tool "
                               "would never reach the surface)")
+        if not self.start.in_contact and self.start.gap >= self.supervision.max_travel:
+            raise ConfigError(f"start.gap ({self.start.gap:g} m) must be shorter than supervision.max_travel "
+                              f"({self.supervision.max_travel:g}, units of C): the guarded move stops (HOLD) after "
+                              "max_travel, before it reaches the surface; raise max_travel or start closer")
         self.mechanism.validate()
         self.baseline.validate()
         if self.controller not in CONTROLLERS:
@@ -369,11 +372,14 @@ def load_config(path=None, data=None, defaults=None):
     """A ScenarioConfig from a YAML file or string, on top of ``defaults``; ConfigError (one line)
     for an unknown key, a wrong type, a repeated key or an unknown sensor tag."""
     where = f"{path}: " if path else ""
-    if path is not None and not Path(path).is_file():
-        raise ConfigError(f"config file '{path}' does not exist")
-    check_yaml_against_schema(Path(path).read_text() if path is not None else data, ScenarioConfig, where)
+    if path is not None:
+        data = read_yaml_file(path, "config file")
+    parsed = check_yaml_against_schema(data, ScenarioConfig, where)
+    if not isinstance(parsed, dict):
+        raise ConfigError(f"{where}a config is a YAML mapping of fields (e.g. 'duration: 2.0'), got "
+                          f"{type(parsed).__name__ if parsed is not None else 'nothing'}")
     try:
-        return yaml_load_typed(schema=ScenarioConfig, filename=path, data=data,
+        return yaml_load_typed(schema=ScenarioConfig, data=data,
                                defaults=defaults if defaults is not None else ScenarioConfig())
     except (AssertionError, RuntimeError, ValueError, TypeError) as error:
         raise ConfigError(f"{where}{str(error).splitlines()[0]}") from None

@@ -34,14 +34,15 @@ from xml.etree import ElementTree
 
 import numpy as np
 
-from pydrake.geometry import (AddRigidHydroelasticProperties, Capsule, Cylinder, Ellipsoid, ProximityProperties,
+from pydrake.geometry import (AddRigidHydroelasticProperties, Capsule, Cylinder, Ellipsoid, ProximityProperties, Shape,
                              Sphere)
 from pydrake.math import RigidTransform, RollPitchYaw
 from pydrake.multibody.parsing import Parser
 from pydrake.multibody.plant import CoulombFriction
 
 from drake_hybrid.control.gains import HybridGains
-from drake_hybrid.core.errors import OffConstraintError
+from drake_hybrid.core.arguments import describe, function, instance, positive, text, vector
+from drake_hybrid.core.errors import ArgumentError, OffConstraintError
 from drake_hybrid.core.kinematics import inverse_kinematics
 from drake_hybrid.scenario.config import ScenarioConfig, StartConfig
 from drake_hybrid.scenario.parsing import ConfigureParser
@@ -115,6 +116,7 @@ def attach_pad_tool(plant, arm, flange_frame, X_flange_tool=None):
     Returns the RobotModel that ``CustomTask``'s ``add_robot`` returns, with ``only_pad_contact``:
     the arm's own collision shapes touch neither each other nor the workpiece (watch the
     animation for clearance), so only the pad makes contact."""
+    instance(X_flange_tool, "X_flange_tool", "attach_pad_tool", RigidTransform, allow_none=True)
     parser = ConfigureParser(Parser(plant))
     frame = get_frame(plant, flange_frame, arm, "flange_frame") if isinstance(flange_frame, str) else flange_frame
     tool, weld, pad = add_pad_tool(plant, parser, frame, X_flange_tool if X_flange_tool is not None
@@ -148,6 +150,11 @@ def add_rigid_workpiece(plant, shape, X_WG, name="workpiece", resolution_hint=No
     hydroelastic collision geometry (mesh resolution ``resolution_hint``, m; default
     ``default_resolution``: tied to the curvature) and a visual one. Returns the collision
     geometry ids. Contact friction is set from the scenario config."""
+    owner = "add_rigid_workpiece"
+    instance(shape, "shape", owner, Shape, what="a pydrake.geometry Shape (Box, Sphere, Cylinder, Ellipsoid, ...)")
+    instance(X_WG, "X_WG", owner, RigidTransform)
+    resolution_hint = positive(resolution_hint, "resolution_hint", owner, unit="m", allow_none=True)
+    color = vector(color, "color", owner, 4)
     world = plant.world_body()
     properties = ProximityProperties()
     AddRigidHydroelasticProperties(default_resolution(shape) if resolution_hint is None else resolution_hint,
@@ -181,14 +188,25 @@ class CustomTask(Task):
 
     def __init__(self, name, add_robot, add_workpiece, constraint_space, start_pose, joint_guess,
                  labels=None, camera=None, description="a user-defined task"):
-        self.name = name
-        self.camera = camera
-        self.description = description
-        self._add_robot = add_robot
-        self._add_workpiece = add_workpiece
+        owner = "CustomTask"
+        self.name = text(name, "name", owner)
+        if not name.strip():
+            raise ArgumentError(f"{owner}: name must be a non-empty string (the task's name in configs), got ''")
+        self._add_robot = function(add_robot, "add_robot", owner, "add_robot(plant) -> RobotModel")
+        self._add_workpiece = function(add_workpiece, "add_workpiece", owner,
+                                       "add_workpiece(plant) -> list of collision geometry ids")
+        if not all(hasattr(constraint_space, attribute) for attribute in ("chart", "constraint", "force_size",
+                                                                         "velocity_size")):
+            raise ArgumentError(f"{owner}: constraint_space must be a ConstraintSpace (chart, constraint C, velocity "
+                                f"projection E_p), got {describe(constraint_space)}")
         self.space = constraint_space
-        self.start_pose = start_pose
-        self.joint_guess = np.asarray(joint_guess, dtype=float)
+        self.start_pose = instance(start_pose, "start_pose", owner, RigidTransform,
+                                   what="a RigidTransform (the end-effector frame's pose at the start)")
+        self.joint_guess = vector(joint_guess, "joint_guess", owner, unit="rad, m: one per arm joint")
+        self.camera = camera
+        self.description = text(description, "description", owner)
+        if labels is not None and not isinstance(labels, dict):
+            raise ArgumentError(f"{owner}: labels must be a dict of plot labels or None, got {describe(labels)}")
         k, m = constraint_space.velocity_size, constraint_space.force_size
         self._labels = labels or {"velocity": [f"r-dot_p[{i}]" for i in range(k)], "velocity_units": "SI",
                                   "force": [f"F[{i}]" for i in range(m)], "force_units": "SI"}

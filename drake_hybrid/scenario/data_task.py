@@ -68,7 +68,7 @@ from drake_hybrid.core.constraints import Constraint
 from drake_hybrid.core.errors import ConfigError, UnknownFrameError
 from drake_hybrid.core.expressions import check_parameter_names, expression_row_to_sympy, expression_to_sympy
 from drake_hybrid.core.projections import ConstraintSpace, GivenVelocityProjection, KernelVelocityProjection
-from drake_hybrid.core.schema import check_yaml_against_schema
+from drake_hybrid.core.schema import check_depth, check_yaml_against_schema, read_yaml_file
 from drake_hybrid.scenario.config import ScenarioConfig
 from drake_hybrid.scenario.custom import CustomTask, add_rigid_workpiece, attach_pad_tool
 from drake_hybrid.scenario.hooks import make_hooks
@@ -213,11 +213,10 @@ def read_task_file(path, text=None):
     named in errors)."""
     path = Path(path)
     if text is None:
-        if not path.is_file():
-            raise ConfigError(f"task file '{path}' does not exist")
-        text = path.read_text()
+        text = read_yaml_file(path, "task file", max_size=MAX_FILE_SIZE)
     if len(text) > MAX_FILE_SIZE:
         raise ConfigError(f"{path}: the task file is larger than {MAX_FILE_SIZE // 1000} kB")
+    check_depth(text, f"{path}: ")
     try:
         text = evaluate_pose_expressions(text, f"{path}: ")
         check_yaml_against_schema(text, TaskFile, f"{path}: ")
@@ -574,7 +573,7 @@ def load_task_file(path, register=True, text=None):
     """(DataTask, ScenarioConfig) of the task file ``path``; the task is registered by its name
     (``register_task``: known to ``simulate``, ``linearize_continuous``, the CLI) unless ``register``
     is False. ConfigError naming the file and the field for anything the file gets wrong."""
-    text = Path(path).read_text() if text is None and Path(path).is_file() else text
+    text = read_yaml_file(path, "task file", max_size=MAX_FILE_SIZE) if text is None else text
     spec = read_task_file(path, text)
     where = f"{path}: "
     if not spec.name:

@@ -55,6 +55,7 @@ from pydrake.multibody.tree import JacobianWrtVariable
 from pydrake.solvers import Solve
 from pydrake.systems.framework import DiagramBuilder
 
+from drake_hybrid.core.arguments import number, vector
 from drake_hybrid.core.errors import ConfigError, UnreachablePoseError
 from drake_hybrid.scenario.custom import attach_pad_tool
 from drake_hybrid.scenario.plant import get_frame
@@ -562,7 +563,10 @@ class LoadedArm:
         low = np.where(np.isfinite(lower), lower, -np.pi) + limit_margin
         high = np.where(np.isfinite(upper), upper, np.pi) - limit_margin
         generator = np.random.default_rng(rng)
-        starts = ([np.clip(np.asarray(near, dtype=float), low, high)] if near is not None else []) + [(low + high) / 2]
+        if near is not None:
+            near = vector(near, "near", "LoadedArm.find_joint_guess", len(low), unit="rad, m: one per arm joint")
+        seeds = number(seeds, "seeds", "LoadedArm.find_joint_guess", low=1, integer=True)
+        starts = ([np.clip(near, low, high)] if near is not None else []) + [(low + high) / 2]
         starts += [generator.uniform(low, high) for _ in range(max(seeds - len(starts), 0))]
         frame = plant.GetFrameByName(self.robot.end_effector_frame)
         best, solutions = None, 0

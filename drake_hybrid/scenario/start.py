@@ -140,6 +140,7 @@ def pressing_positions(scenario, positions_at_depth, max_depth=0.01):
     s is found by root finding so that F . F_d / |F_d| = |F_d|.
     """
     config, task = scenario.config, scenario.task
+    config.desired_force.check_keeps_sign("desired_force")      # pushing at t = 0 (below), and on every row after
     desired = np.asarray(config.desired_force.evaluate(0.0)[0], dtype=float)
     magnitude = float(np.linalg.norm(desired))
     if magnitude == 0:

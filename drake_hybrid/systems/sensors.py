@@ -42,6 +42,7 @@ from pydrake.systems.scalar_conversion import TemplateSystem
 
 from drake_hybrid.control.phases import ContactPhase
 from drake_hybrid.control.sampling import SAMPLE_LEAD
+from drake_hybrid.core.arguments import boolean, nonnegative, number, positive, vector
 from drake_hybrid.core.errors import DimensionError
 from drake_hybrid.core.kinematics import resolve_frame
 from drake_hybrid.core.linalg import all_finite, value
@@ -67,10 +68,7 @@ def reaction_force_slot(plant, joint):
 
 
 def _point(point, owner):
-    point = np.asarray(point, dtype=float)
-    if point.shape != (3,):
-        raise DimensionError(f"{owner}: end_effector_point must be a 3-vector, got shape {point.shape}")
-    return point
+    return vector(point, "end_effector_point", owner, 3, unit="m", error=DimensionError)
 
 
 def _shift(F_coefficients, p_from_to_W):
@@ -360,6 +358,9 @@ def WristForceTorqueSensor_(T):
 WristForceTorqueSensor = WristForceTorqueSensor_[None]
 
 
+MAX_FILTER_SIZE = 10_000      # entries a LowPassFilter filters (a wrench has 6)
+
+
 def low_pass_coefficient(bandwidth_hz, period):
     """alpha = 1 - exp(-2 pi f_c h): the exact discretization of y-dot = 2 pi f_c (u - y) for a held
     input (1 when bandwidth_hz is 0: no filtering)."""
@@ -402,13 +403,10 @@ def LowPassFilter_(T):
 
         def _construct(self, size, bandwidth_hz, period=None, converter=None):
             LeafSystem_[T].__init__(self, converter)
-            if not bandwidth_hz > 0:
-                raise ValueError(f"LowPassFilter: bandwidth_hz must be positive, got {bandwidth_hz}")
-            if int(size) != size or size < 1:
-                raise ValueError(f"LowPassFilter: size must be a positive integer, got {size}")
-            if period is not None and not period > 0:
-                raise ValueError(f"LowPassFilter: period must be positive or None, got {period}")
-            self._size, self.bandwidth_hz, self.period = size, float(bandwidth_hz), period
+            size = number(size, "size", "LowPassFilter", low=1, high=MAX_FILTER_SIZE, integer=True)
+            bandwidth_hz = positive(bandwidth_hz, "bandwidth_hz", "LowPassFilter", unit="Hz")
+            period = positive(period, "period", "LowPassFilter", unit="s", allow_none=True)
+            self._size, self.bandwidth_hz, self.period = size, bandwidth_hz, period
             self._rate = 2 * math.pi * self.bandwidth_hz
             self.DeclareVectorInputPort("u", size)
             if period is None:
@@ -494,14 +492,11 @@ def WrenchConditioner_(T):
         def _construct(self, period, bandwidth_hz=0.0, max_hold_time=0.01, use_sequence=False, tare=False,
                        converter=None):
             LeafSystem_[T].__init__(self, converter)
-            if not (period is not None and float(period) > 0):
-                raise ValueError(f"WrenchConditioner: period must be positive, got {period}")
-            if not float(bandwidth_hz) >= 0:
-                raise ValueError(f"WrenchConditioner: bandwidth_hz must be >= 0, got {bandwidth_hz}")
-            if not float(max_hold_time) >= 0:
-                raise ValueError(f"WrenchConditioner: max_hold_time must be >= 0, got {max_hold_time}")
-            self.period, self.bandwidth_hz, self.max_hold_time = float(period), float(bandwidth_hz), float(max_hold_time)
-            self.use_sequence, self.tare = bool(use_sequence), bool(tare)
+            owner = "WrenchConditioner"
+            self.period = positive(period, "period", owner, unit="s")
+            self.bandwidth_hz = nonnegative(bandwidth_hz, "bandwidth_hz", owner, unit="Hz")
+            self.max_hold_time = nonnegative(max_hold_time, "max_hold_time", owner, unit="s")
+            self.use_sequence, self.tare = boolean(use_sequence, "use_sequence", owner), boolean(tare, "tare", owner)
             self._alpha = low_pass_coefficient(self.bandwidth_hz, self.period)
             self._max_age = int(math.floor(self.max_hold_time / self.period + 1e-9))
             self._raw_port = self.DeclareVectorInputPort("raw_wrench", 6)

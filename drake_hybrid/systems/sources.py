@@ -27,7 +27,8 @@ from pydrake.autodiffutils import AutoDiffXd
 from pydrake.systems.framework import LeafSystem_
 from pydrake.systems.scalar_conversion import TemplateSystem
 
-from drake_hybrid.core.errors import ConfigError, DimensionError
+from drake_hybrid.core.arguments import MAX_TASK_SIZE, describe, instance, nonnegative, number, positive, vector
+from drake_hybrid.core.errors import ConfigError, DimensionError, ForceSignError
 from drake_hybrid.core.kinematics import declare_cached_value, declare_task_input
 from drake_hybrid.core.linalg import value
 from drake_hybrid.core.projections import pseudo_desired_velocity
@@ -58,18 +59,55 @@ class Profile:
     def check_kind(self, what):
         """ConfigError naming ``what``.kind if it is not one of KINDS (the sizes are checked by ``validate``)."""
         if self.kind not in self.KINDS:
-            raise ConfigError(f"{what}.kind must be one of {', '.join(self.KINDS)}, got '{self.kind}'")
+            raise ConfigError(f"{what}.kind must be one of {', '.join(self.KINDS)}, got {describe(self.kind)}")
 
     def validate(self, size, what):
+        """Raise a typed error naming ``what``.field for a field that does not make a profile of ``size``
+        entries: the kind, entries that are not finite numbers, the sizes, a duration <= 0."""
         self.check_kind(what)
-        if len(self.value) != size:
-            raise DimensionError(f"{what}: value must have {size} entries, got {len(self.value)}")
-        if self.kind == "smooth_step" and len(self.final_value) != size:
-            raise DimensionError(f"{what}: final_value must have {size} entries, got {len(self.final_value)}")
-        if self.kind == "smooth_step" and not self.duration > 0:
-            raise ValueError(f"{what}: duration must be positive, got {self.duration}")
-        if self.kind == "sine" and len(self.amplitude) != size:
-            raise DimensionError(f"{what}: amplitude must have {size} entries, got {len(self.amplitude)}")
+        owner = "Profile"
+        entries = {"value": self.value}
+        if self.kind == "smooth_step":
+            entries["final_value"] = self.final_value
+        if self.kind == "sine":
+            entries["amplitude"] = self.amplitude
+        for name, given in entries.items():
+            array = vector(given, f"{what}.{name}", owner, error=ConfigError)
+            if array.size != size:
+                raise DimensionError(f"{what}: {name} must have {size} entries, got {array.size}")
+        number(self.start_time, f"{what}.start_time", owner, unit="s", error=ConfigError)
+        if self.kind == "smooth_step":
+            positive(self.duration, f"{what}.duration", owner, unit="s", error=ConfigError)
+        if self.kind == "sine":
+            nonnegative(self.frequency, f"{what}.frequency", owner, unit="Hz", error=ConfigError)
+
+    def bounds(self):
+        """(lowest, highest) value of each row over the profile's whole course, t >= 0."""
+        base = np.asarray(self.value, dtype=float)
+        if self.kind == "smooth_step":                  # the quintic blend is monotone from value to final_value
+            final = np.asarray(self.final_value, dtype=float)
+            return np.minimum(base, final), np.maximum(base, final)
+        if self.kind == "sine" and self.frequency > 0:  # every phase comes round
+            swing = np.abs(np.asarray(self.amplitude, dtype=float))
+            return base - swing, base + swing
+        return base, base
+
+    def check_keeps_sign(self, what):
+        """ForceSignError naming ``what`` if a row of this (desired force) profile takes both signs over
+        its course: a contact only pushes, so a row of F_d that presses at one time would pull at
+        another (F_d is the force ON the robot in E_f's coordinates). Zero (letting go) is allowed."""
+        lowest, highest = self.bounds()
+        for row, (low, high) in enumerate(zip(lowest, highest)):
+            if low < 0 < high:
+                if self.kind == "smooth_step":
+                    course = (f"a smooth_step from {self.value[row]:g} to {self.final_value[row]:g} over "
+                              f"t = {self.start_time:g}..{self.start_time + self.duration:g} s")
+                else:
+                    course = f"a sine of {self.value[row]:g} +- {abs(self.amplitude[row]):g}"
+                raise ForceSignError(
+                    f"{what}: row {row} changes sign over its course ({course}: from {low:g} to {high:g}); a contact "
+                    "only pushes, so F_d (the force ON the robot in E_f's coordinates) must keep one sign on every row "
+                    "(it may reach 0)")
 
     def evaluate(self, t):
         """(value, time derivative) at time t (floats)."""
@@ -86,6 +124,17 @@ class Profile:
         amplitude = np.asarray(self.amplitude, dtype=float)
         phase = omega * (t - self.start_time)
         return base + amplitude * math.sin(phase), amplitude * omega * math.cos(phase)
+
+
+def _checked_profiles(owner, velocity_profile, force_profile, velocity_size, force_size):
+    """The sizes (k, m) as integers, both profiles checked (Profile, validated for their sizes)."""
+    velocity_size = number(velocity_size, "velocity_size", owner, low=0, high=MAX_TASK_SIZE, integer=True)
+    force_size = number(force_size, "force_size", owner, low=1, high=MAX_TASK_SIZE, integer=True)
+    for name, profile, size in (("velocity_profile", velocity_profile, velocity_size),
+                                ("force_profile", force_profile, force_size)):
+        instance(profile, name, owner, Profile, what="a Profile (e.g. Profile(kind='constant', value=[...]))")
+        profile.validate(size, name)
+    return velocity_size, force_size
 
 
 @TemplateSystem.define("ProfileSource_", T_list=[float, AutoDiffXd])
@@ -107,8 +156,8 @@ def ProfileSource_(T):
 
         def _construct(self, velocity_profile, force_profile, velocity_size, force_size, converter=None):
             LeafSystem_[T].__init__(self, converter)
-            velocity_profile.validate(velocity_size, "velocity profile")
-            force_profile.validate(force_size, "force profile")
+            velocity_size, force_size = _checked_profiles("ProfileSource", velocity_profile, force_profile,
+                                                          velocity_size, force_size)
             self.velocity_profile, self.force_profile = velocity_profile, force_profile
             self._sizes = (velocity_size, force_size)
             self.DeclareVectorOutputPort("desired_velocity", velocity_size, self._calc_velocity,
@@ -177,8 +226,8 @@ def PseudoVelocitySource_(T):
             k = paper_projection.size
             if true_projection.size != k:
                 raise DimensionError(f"paper E_p has {k} rows but E_t has {true_projection.size}")
-            velocity_profile.validate(k, "velocity profile")
-            force_profile.validate(force_size, "force profile")
+            _, force_size = _checked_profiles("PseudoVelocitySource", velocity_profile, force_profile, k, force_size)
+            end_effector_point = vector(end_effector_point, "end_effector_point", "PseudoVelocitySource", 3, unit="m")
             self._arguments = (plant, end_effector_frame, end_effector_point, paper_projection, true_projection,
                                velocity_profile, force_profile, force_size)
             self.paper_projection, self.true_projection = paper_projection, true_projection
@@ -256,7 +305,8 @@ def DesiredFieldSource_(T):
             LeafSystem_[T].__init__(self, converter)
             chart = constraint_space.chart
             self._float_plant = plant
-            self._end_effector_point = np.asarray(end_effector_point, dtype=float)
+            self._end_effector_point = vector(end_effector_point, "end_effector_point", "DesiredFieldSource", 3,
+                                              unit="m")
             self.constraint_space = constraint_space
             self.velocity_field, self.force_field = velocity_field, force_field
             d, m, k = chart.velocity_size, constraint_space.force_size, constraint_space.velocity_size
