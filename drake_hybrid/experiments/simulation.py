@@ -43,7 +43,9 @@ from drake_hybrid.control.fast_law import kernels_loaded
 from drake_hybrid.control.gains import ControlMode
 from drake_hybrid.core.progress import quiet
 from drake_hybrid.experiments.metrics import contact_time, impedance_check, max_after, row_errors, row_units, worst
+from drake_hybrid.experiments.path_report import lift_off_time, path_report
 from drake_hybrid.scenario.builder import build_scenario
+from drake_hybrid.scenario.path_job import PATH_LOGS
 from drake_hybrid.scenario.start import set_initial_conditions
 
 
@@ -202,7 +204,8 @@ def collect_log(scenario, context):
     state = _logged(scenario, context, "state")[1]
     n = state.shape[1] // 2
     log["q"], log["v"] = state[:, :n], state[:, n:]
-    for optional in ("true_wrench", "contact_phase"):        # sensor faults or conditioning; supervision
+    for optional in ("true_wrench", "contact_phase", "lifting", *PATH_LOGS):  # faults, conditioning; supervision;
+        # a job's path (scenario.path_job)
         if optional in scenario.loggers:
             log[optional] = _logged(scenario, context, optional)[1]
     if getattr(scenario.source, "true_projection", None) is not None:   # the paper's pseudo-velocity: its
@@ -235,14 +238,18 @@ def summarize(scenario, log, wall_time):
     labels = scenario.task.labels(scenario.config)
     start = contact_time(log)
     settle_after = start + 5 * tau
+    # A job's lift-off (scenario.path_job) leaves the surface on purpose: the rows' figures end there.
+    lift = lift_off_time(log)
+    job = slice(None, None if lift is None else int(np.searchsorted(t, lift)))
     # With the paper's pseudo-velocity rows the error is the true rows' (collect_log): as those, against their command.
-    velocity_rows = row_errors(t, log["velocity_error"], log.get("true_desired_velocity", log["desired_velocity"]),
+    velocity_rows = row_errors(t[job], log["velocity_error"][job],
+                               log.get("true_desired_velocity", log["desired_velocity"])[job],
                                labels.get("velocity_error", labels.get("velocity", [])),
                                row_units(labels.get("velocity_error_units", labels.get("velocity_units", "SI")), k),
                                start, settle_after)
-    force_rows = row_errors(t, log["force_error"], log["desired_force"], labels.get("force", []),
+    force_rows = row_errors(t[job], log["force_error"][job], log["desired_force"][job], labels.get("force", []),
                             row_units(labels.get("force_units", "SI"), m), start, settle_after)
-    measured = max_after(log["force"], t >= start)
+    measured = max_after(log["force"][job], t[job] >= start)
     for i, row in enumerate(force_rows):      # a held row (controller.kinematic_rows) has no force loop
         row.update(held=i in controller.kinematic_rows, max_measured_force_after_contact=measured[i])
         if row["held"]:                        # no command, so no error: its figures are null, not 0
@@ -299,6 +306,9 @@ def summarize(scenario, log, wall_time):
         "start_in_contact": bool(config.start.in_contact),
         "start_force_command_step": (np.asarray(gains.force_integral, dtype=float) @ np.asarray(
             config.start.force_integral, dtype=float)).tolist() if config.start.force_integral else [0.0] * m,
+        # A job's path (scenario.path_job): path and force errors per segment, time off the surface.
+        "path": path_report(log, tau, scenario.source.path.duration, scenario.source.path.length,
+                            scenario.source.force_row) if "path_progress" in log else None,
     }
     return summary
 

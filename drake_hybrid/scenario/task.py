@@ -232,6 +232,12 @@ class Task(abc.ABC):
         raise ConfigError(f"mechanism.source: task '{self.name}' has no mechanism to read from the plant; "
                           "use source 'given' with mechanism.velocity_row_inertia, or 'none'")
 
+    def workpiece_surface(self, config):
+        """(surface, pad offset): the workpiece's surface (a ``core.surfaces.Surface``) and how far the
+        controlled point is held off it along the normal (a ball pad's radius), for a job's path
+        (``config.path``, ``scenario.path_job``). Default: None (the task has no path over a surface)."""
+        return None
+
     def make_source(self, config, controller_plant, robot, constraint_space):
         """The system producing desired_velocity, desired_acceleration and desired_force.
         Default: the config's profiles."""
