@@ -68,13 +68,13 @@ def build_path(task, config):
     key = (task.name, repr(config.path), repr(sorted(config.task_parameters.items())),
            repr(sorted(config.task_options.items())))
     if key not in _PATHS:
-        _PATHS[key] = _build_path(task, config)
+        _PATHS[key] = path_on(*workpiece_surface(task, config), config.path)
     return _PATHS[key]
 
 
-def _build_path(task, config):
-    settings = config.path.validate()
-    surface, offset = workpiece_surface(task, config)
+def path_on(surface, offset, settings):
+    """The SurfacePath of the PathConfig ``settings`` on ``surface`` for a pad centre ``offset`` off it."""
+    settings.validate()
     view = view_of(settings, surface)
     limits = PathLimits(settings.speed, settings.acceleration)
     force = settings.force_argument()
@@ -108,19 +108,23 @@ def _time_at_arc(path, arc):
     return float(np.interp(arc, arcs, times))
 
 
-def heading_of(config, surface):
-    """The world direction the tool's x axis keeps: ``path.heading`` or the view's u axis."""
-    return np.asarray(config.path.heading, dtype=float) if config.path.heading else np.asarray(
-        view_of(config.path, surface).axis_u)
+def heading_of(settings, surface):
+    """The world direction the tool's x axis keeps: ``settings.heading`` (a PathConfig) or the view's u axis."""
+    return np.asarray(settings.heading, dtype=float) if settings.heading else np.asarray(
+        view_of(settings, surface).axis_u)
+
+
+def start_pose_on(surface, path, settings):
+    """(X_WP, normal): the pad centre's pose at the first point of ``path`` (its reference orientation,
+    ``settings`` a PathConfig) and the surface's outward normal there."""
+    centre, normal = path.first_point()
+    R = reference_rotation(normal, heading_of(settings, surface))
+    return RigidTransform(RotationMatrix(R), centre), np.asarray(normal, dtype=float)
 
 
 def path_start_pose(task, config):
-    """(X_WP, normal): the pad centre's pose at the path's first point (its reference orientation) and
-    the surface's outward normal there."""
-    surface, _ = workpiece_surface(task, config)
-    centre, normal = build_path(task, config).first_point()
-    R = reference_rotation(normal, heading_of(config, surface))
-    return RigidTransform(RotationMatrix(R), centre), np.asarray(normal, dtype=float)
+    """``start_pose_on`` the task's workpiece for ``config.path``."""
+    return start_pose_on(workpiece_surface(task, config)[0], build_path(task, config), config.path)
 
 
 def make_path_source(task, config, controller_plant, robot, constraint_space):
@@ -132,7 +136,7 @@ def make_path_source(task, config, controller_plant, robot, constraint_space):
     holding = config.path.holding
     period = config.control_period if config.control_period > 0 else None
     return PathSource(controller_plant, robot.end_effector_frame, robot.end_effector_point, constraint_space, path,
-                      heading=heading_of(config, surface), force_row=force_row,
+                      heading=heading_of(config.path, surface), force_row=force_row,
                       dwell=0.0 if holding else config.path.dwell,
                       wait_for_contact=config.supervised and not holding, period=period)
 

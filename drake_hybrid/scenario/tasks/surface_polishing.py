@@ -25,8 +25,6 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from pydrake.common import MemoryFile
-from pydrake.geometry import InMemoryMesh, Mesh
 from pydrake.math import RigidTransform
 from pydrake.multibody.parsing import Parser
 
@@ -37,7 +35,7 @@ from drake_hybrid.core.height_map import HeightMap, HeightMapSurface
 from drake_hybrid.core.projections import ConstraintSpace
 from drake_hybrid.core.surfaces import SphereSurface, view_projection
 from drake_hybrid.scenario.config import ScenarioConfig, StartConfig
-from drake_hybrid.scenario.custom import add_rigid_workpiece
+from drake_hybrid.scenario.workpieces import add_rigid_workpiece, mesh_shape
 from drake_hybrid.scenario.parsing import ConfigureParser, model_url
 from drake_hybrid.scenario.path_config import PathConfig, PatternConfig
 from drake_hybrid.scenario.path_job import build_path, path_start_positions
@@ -59,14 +57,6 @@ def height_map(kind):
     else:
         heights = (X ** 2 - Y ** 2) / (2 * 0.25)
     return HeightMap(x, x, heights, name=f"{kind} height map")
-
-
-def mesh_shape(surface, name):
-    """A Drake Mesh (in memory) of a HeightMapSurface's closed part (``HeightMapSurface.mesh``)."""
-    vertices, triangles = surface.mesh()
-    text = "".join(f"v {a:.9g} {b:.9g} {c:.9g}\n" for a, b, c in vertices)
-    text += "".join(f"f {i + 1} {j + 1} {k + 1}\n" for i, j, k in triangles)
-    return Mesh(InMemoryMesh(mesh_file=MemoryFile(text, ".obj", name)), 1.0)
 
 
 @dataclass
