@@ -205,7 +205,8 @@ def test_waypoints_are_projected_and_the_force_is_interpolated_along_the_arc_len
 
 @pytest.mark.parametrize("call, message", [
     (lambda: path_from_waypoints(SPHERE, [CENTER + [0, 0, 0.153], CENTER + [0.02, 0, 0.148]], PAD, LIMITS, 10.0,
-                                 1e-3), r"waypoints\[0\] .* is \+3\.00 mm off the surface of 'sphere' \(tolerance 1 mm\)"),
+                                 1e-3),
+     r"waypoints\[0\] .* is \+3\.00 mm off the surface of 'sphere' \(tolerance 1 mm\)"),
     (lambda: path_from_waypoints(SPHERE, [CENTER + [0, 0, 0.15]], PAD, LIMITS, 10.0, 1e-3), "at least two"),
     (lambda: path_from_waypoints(SPHERE, [CENTER + [0, 0, 0.15]] * 2, PAD, LIMITS, 10.0, 1e-3), "coincide"),
     (lambda: path_from_strokes(SPHERE, SPHERE.default_view(), raster([0, 0], [0.1, 0.1], 0.05), PAD,

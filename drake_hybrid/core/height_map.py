@@ -192,6 +192,15 @@ class HeightMapSurface(Surface):
     def offset_constraint(self, chart, offset, name=None):
         return HeightFieldConstraint(chart, self.offset_field(offset), name=name or self.name)
 
+    def held_normal(self, p, offset):
+        """grad (Z - H_r(X, Y)) at p's (X, Y), normalized: what the constraint's orientation rows hold a
+        against. Not constant along the normal line: 1 mm inside the offset surface (a pressed pad) it
+        turns by about 1 mm x |H_r''| (0.3 deg on the bump's flank), so a start pressed along the
+        normal must take its orientation from here, not from the surface point's normal."""
+        field = self.offset_field(offset)
+        X, Y = field.map_point(p)[:2]
+        return field.normal(X, Y)
+
     def closest_point(self, p):
         """Newton's method on |p - (X, Y, h(X, Y))|^2 in the map's frame, from p's own (X, Y)."""
         field = self.field

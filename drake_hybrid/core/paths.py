@@ -67,7 +67,8 @@ class ForceProfile:
         self.arc_lengths = np.asarray(arc_lengths, dtype=float).reshape(-1)
         self.forces = np.asarray(forces, dtype=float).reshape(-1)
         if self.forces.size == 0 or self.arc_lengths.shape != self.forces.shape:
-            raise PathError(f"{what}: give one force per arc length, got {self.forces.size} and {self.arc_lengths.size}")
+            raise PathError(f"{what}: give one force per arc length, got {self.forces.size} and "
+                            f"{self.arc_lengths.size}")
         if not np.all(np.isfinite(self.forces)) or not np.all(self.forces > 0):
             raise PathError(f"{what}: the normal force must be positive and finite (N; the pad presses), got "
                             f"{self.forces.tolist()}")

@@ -146,6 +146,12 @@ class Surface(abc.ABC):
         """The outward unit normal of the offset surface through ``p`` (the same as at its closest point)."""
         return self.closest_point(p)[1]
 
+    def held_normal(self, p, offset):
+        """The unit direction along which the orientation rows of ``offset_constraint`` hold the approach
+        vector (a = -it) at a point ``p`` near the offset surface: grad f_r(p) normalized (here the normal
+        of the offset family through p, the same along the normal line)."""
+        return self.normal(p)
+
     def offset_constraint(self, chart, offset, name=None):
         """The constraint on a point held ``offset`` along the outward normal (a ball pad's centre):
         ``surface_constraint`` of f_r, with the orientation rows (a along -grad f_r) as kinematic rows."""

@@ -44,6 +44,17 @@ def lift_off_time(log):
     return _first(np.asarray(log["lifting"])[:, 0] > 0.5, np.asarray(log["t"]))
 
 
+def before_lift_off(log):
+    """``log`` cut at the lift-off (every array's samples before it); the log itself without one."""
+    lift = lift_off_time(log)
+    if lift is None:
+        return log
+    end = int(np.searchsorted(np.asarray(log["t"]), lift))
+    samples = len(log["t"])
+    return {key: (value[:end] if hasattr(value, "__len__") and len(value) == samples else value)
+            for key, value in log.items()}
+
+
 def error_parts(log):
     """(total, along the surface, along the normal) distances of the pad centre from its reference (m)."""
     error = np.asarray(log["path_error"], dtype=float)
@@ -120,8 +131,9 @@ def path_text(report):
     def pct(value):
         return "n/a" if value is None else f"{value:.2f} %"
 
-    lines = [f"path: {report['length_m']:.3f} m in {report['segments_run']} segments, "
-             f"{'completed' if report['completed'] else 'NOT completed: reached ' + format(report['arc_length_reached_m'], '.3f') + ' m'}"
+    run = ("completed" if report["completed"] else
+           f"NOT completed: reached {report['arc_length_reached_m']:.3f} m")
+    lines = [f"path: {report['length_m']:.3f} m in {report['segments_run']} segments, {run}"
              f"; first contact at t = {report['first_contact_time']}, lift-off at t = {report['lift_off_time']}",
              f"  settled (each segment from its start + {report['settle_time_per_segment_s']:.2f} s): path error "
              f"{mm(report['max_path_error_mm'])} (along the surface {mm(report['max_path_error_along_surface_mm'])}, "

@@ -43,7 +43,7 @@ from drake_hybrid.control.fast_law import kernels_loaded
 from drake_hybrid.control.gains import ControlMode
 from drake_hybrid.core.progress import quiet
 from drake_hybrid.experiments.metrics import contact_time, impedance_check, max_after, row_errors, row_units, worst
-from drake_hybrid.experiments.path_report import lift_off_time, path_report
+from drake_hybrid.experiments.path_report import before_lift_off, path_report
 from drake_hybrid.scenario.builder import build_scenario
 from drake_hybrid.scenario.path_job import PATH_LOGS
 from drake_hybrid.scenario.start import set_initial_conditions
@@ -239,17 +239,16 @@ def summarize(scenario, log, wall_time):
     start = contact_time(log)
     settle_after = start + 5 * tau
     # A job's lift-off (scenario.path_job) leaves the surface on purpose: the rows' figures end there.
-    lift = lift_off_time(log)
-    job = slice(None, None if lift is None else int(np.searchsorted(t, lift)))
+    job = before_lift_off(log)
     # With the paper's pseudo-velocity rows the error is the true rows' (collect_log): as those, against their command.
-    velocity_rows = row_errors(t[job], log["velocity_error"][job],
-                               log.get("true_desired_velocity", log["desired_velocity"])[job],
+    velocity_rows = row_errors(job["t"], job["velocity_error"],
+                               job.get("true_desired_velocity", job["desired_velocity"]),
                                labels.get("velocity_error", labels.get("velocity", [])),
                                row_units(labels.get("velocity_error_units", labels.get("velocity_units", "SI")), k),
                                start, settle_after)
-    force_rows = row_errors(t[job], log["force_error"][job], log["desired_force"][job], labels.get("force", []),
+    force_rows = row_errors(job["t"], job["force_error"], job["desired_force"], labels.get("force", []),
                             row_units(labels.get("force_units", "SI"), m), start, settle_after)
-    measured = max_after(log["force"][job], t[job] >= start)
+    measured = max_after(job["force"], job["t"] >= start)
     for i, row in enumerate(force_rows):      # a held row (controller.kinematic_rows) has no force loop
         row.update(held=i in controller.kinematic_rows, max_measured_force_after_contact=measured[i])
         if row["held"]:                        # no command, so no error: its figures are null, not 0

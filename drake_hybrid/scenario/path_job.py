@@ -175,12 +175,17 @@ def path_start_positions(task, scenario, joint_guess):
     (``start.in_contact``) or ``start.gap`` above along the normal (IK from ``joint_guess``)."""
     config = scenario.config
     X_WP, normal = path_start_pose(task, config)
+    surface, offset = workpiece_surface(task, config)
+    heading = heading_of(config.path, surface)
     kinematics = scenario.controller.kinematics
     context = kinematics.plant.CreateDefaultContext()
     seed = [np.asarray(joint_guess, dtype=float)]
 
     def positions_at_depth(depth):
-        X_target = RigidTransform(X_WP.rotation(), X_WP.translation() - depth * normal)
+        # The orientation the constraint's held rows want there (Surface.held_normal), not the surface point's.
+        centre = X_WP.translation() - depth * normal
+        rotation = RotationMatrix(reference_rotation(surface.held_normal(centre, offset), heading))
+        X_target = RigidTransform(rotation, centre)
         seed[0] = inverse_kinematics(kinematics, context, X_target, seed[0])
         return seed[0]
 

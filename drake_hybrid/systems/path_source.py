@@ -20,7 +20,8 @@ on C = 0, the pressed pad inside it): the force loop sets it, and counted as a p
 would pull the pad along the surface by compression x tan(tilt) wherever E_p's rows are not
 tangent (0.42 mm at the sphere cap's 28 deg). Along the motion the pad stays on the surface
 (c-dot . n = 0), so d/dt e_p = e_p' to first order. With the view rows of
-``core.surfaces.view_projection`` the translational rows of e_p are u . P (c - c_d) and v . P (c - c_d). In position-force mode the
+``core.surfaces.view_projection`` the translational rows of e_p are u . P (c - c_d) and
+v . P (c - c_d). In position-force mode the
 controller takes e_p from here (its ``path_position_error`` input) instead of the integral of
 e_p', so the position error is measured against the path and cannot drift.
 
@@ -168,8 +169,8 @@ def PathSource_(T):
             self.heading = np.asarray(heading, dtype=float)
             k, m = constraint_space.velocity_size, constraint_space.force_size
             if not 0 <= int(force_row) < m or int(force_row) in constraint_space.constraint.kinematic_rows:
-                raise DimensionError(f"PathSource: force_row {force_row} must be a force-controlled row of C (0..{m - 1}"
-                                     f", not kinematic {list(constraint_space.constraint.kinematic_rows)})")
+                raise DimensionError(f"PathSource: force_row {force_row} must be a force-controlled row of C "
+                                     f"(0..{m - 1}, not kinematic {list(constraint_space.constraint.kinematic_rows)})")
             self.force_row, self.dwell = int(force_row), float(dwell)
             if not self.dwell >= 0:
                 raise ValueError(f"PathSource: dwell must be >= 0 (s), got {dwell}")
