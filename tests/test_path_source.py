@@ -72,8 +72,9 @@ def test_on_the_reference_the_command_is_the_measured_velocity_and_the_errors_va
         job["plant"].SetPositionsAndVelocities(plant_context, state)
         task = dut.kinematics.evaluate(plant_context)
         E_p = space.velocity_projection.matrix(task.configuration)
-        np.testing.assert_allclose(out["desired_velocity"], E_p @ task.velocity, atol=1e-9)    # e_p' = 0
-        np.testing.assert_allclose(out["path_position_error"], 0.0, atol=1e-9)
+        # e_p' = 0 and e_p = 0, to the spline's distance from the exact offset sphere (< 1e-6 m; times its turn).
+        np.testing.assert_allclose(out["desired_velocity"], E_p @ task.velocity, atol=1e-8)
+        np.testing.assert_allclose(out["path_position_error"], 0.0, atol=1e-7)
         np.testing.assert_allclose(out["path_error"], 0.0, atol=1e-9)
         np.testing.assert_allclose(out["desired_force"], [sample.force, 0.0, 0.0])
         assert out["path_progress"][2] == pytest.approx(t_path) and out["path_done"][0] == 0.0
@@ -95,18 +96,19 @@ def test_the_desired_acceleration_is_the_derivative_of_the_command_along_the_mot
 
 
 def test_the_position_error_is_the_displacement_along_the_surface_in_the_view_rows(job):
-    """Moved by d along the surface and by s along the normal, the view rows read the tangent part of d
-    (u . P d, v . P d) and nothing of s (the compression); the spin row reads nothing."""
+    """Moved by d along the surface and by s along the normal (a pressed pad), the view rows read the
+    tangent part of d (u . d, v . d) and nothing of s: the reference follows the pad at its depth
+    (to first order: the sphere's curvature leaves |d|^2 / rho)."""
     dut = job["dut"]
     _, sample = state_on_reference(job, 0.6)
     n = sample.normal
     tangent = np.cross(n, [0.0, 1.0, 0.0])
     tangent /= np.linalg.norm(tangent)
-    for move in (0.002 * tangent, 0.001 * n, 0.002 * tangent - 0.0008 * n):
+    for move in (0.002 * tangent, -0.001 * n, 0.002 * tangent - 0.0008 * n):
         state, _ = state_on_reference(job, 0.6, offset=move)
         error = evaluate(dut, state, 0.7)["path_position_error"]
         along = move - (move @ n) * n
-        np.testing.assert_allclose(error, [0.0, along[0], along[1]], atol=1e-9)
+        np.testing.assert_allclose(error, [0.0, along[0], along[1]], atol=(move @ move) / 0.17)
 
 
 def test_the_autodiff_source_differentiates_the_position_error_as_central_differences(job):

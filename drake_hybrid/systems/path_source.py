@@ -1,29 +1,31 @@
 """The desired motion and force of a path over the workpiece (``core.paths.SurfacePath``).
 
-``PathSource`` turns the path's reference, the pad centre c_d(t) with its velocity and
-acceleration and the surface's normal there, into the controller's commands in E_p's
-coordinates. The reference pose X_d = (c_d, R_d) has the approach vector a_d = -n (into the
-surface) and the tool's x axis along ``heading`` turned into the tangent plane; its twist
-nu_d = (c-dot_d, omega_d) and nu-dot_d follow from n, n-dot, n-ddot (``reference_frame``).
-With x, nu the measured configuration and twist (docs/theory.md §4.2)::
+``PathSource`` turns the path's reference, the pad centre c_d(t) on the offset surface C = 0 with its
+velocity and acceleration and the surface's normal n there, into the controller's commands in E_p's
+coordinates (PoseChart: x = (p, R), nu = (v, omega)).
 
-    r-dot_pd  = E_p(x) nu_d                                   the velocity rows' command
-    r-ddot_pd = E_p-dot(x, nu) nu_d + E_p(x) nu-dot_d          its derivative along the actual motion
-    e_p       = E_p(x) delta(x, x_d)                           the position error against the path
+The reference frame R_d has the approach vector a_d = -n and the tool's x axis along ``heading``
+turned into the tangent plane (``reference_frame``: omega_d, omega-dot_d from n, n-dot, n-ddot).
+The reference point follows the pad at its depth: a pressed compliant pad sits delta = -C_1 / |grad C_1|
+inside C = 0 (its compression, which the force loop sets), so the reference is
+c_r = c_d - delta n with c_r-dot = c_d-dot - delta n-dot (and c_r-ddot = c_d-ddot - delta-dot n-dot -
+delta n-ddot, delta-dot from C_1-dot = E_f,1 nu and E_f-dot,1 nu, measured: exactly the derivative). With the measured configuration x and
+twist nu (docs/theory.md §4.2)::
+
+    nu_r      = (c_r-dot, omega_d),  nu-dot_r = (c_r-ddot, omega-dot_d)
+    r-dot_pd  = E_p(x) nu_r                                   the velocity rows' command
+    r-ddot_pd = E_p-dot(x, nu) nu_r + E_p(x) nu-dot_r          its derivative along the actual motion
+    e_p       = E_p(x) (c - c_r, vee(R R_d^T - R_d R^T) / 2)  the position error against the path
     F_d       = F(s) on the force row (the normal force, N), 0 on the others
 
-delta is the configuration difference in the chart's velocity coordinates, its position part in the
-surface's tangent plane: (P (c - c_d), vee(R R_d^T - R_d R^T) / 2) on the PoseChart (first order in
-the rotation), x - x_d (angles wrapped, the position part projected likewise) on charts with L = I;
-P = I - n n^T. The part along the normal is the compliant contact's compression (the reference lies
-on C = 0, the pressed pad inside it): the force loop sets it, and counted as a position error it
-would pull the pad along the surface by compression x tan(tilt) wherever E_p's rows are not
-tangent (0.42 mm at the sphere cap's 28 deg). Along the motion the pad stays on the surface
-(c-dot . n = 0), so d/dt e_p = e_p' to first order. With the view rows of
-``core.surfaces.view_projection`` the translational rows of e_p are u . P (c - c_d) and
-v . P (c - c_d). In position-force mode the
-controller takes e_p from here (its ``path_position_error`` input) instead of the integral of
-e_p', so the position error is measured against the path and cannot drift.
+so that d/dt e_p = e_p' = E_p nu - r-dot_pd to first order. Measured from c_d instead, the compression
+would count as a position error wherever E_p's rows are not tangent (u . n delta: 0.42 mm at the sphere
+cap's 28 deg), and measured from c_d but projected onto the tangent plane its rate would differ from
+e_p' by u . delta n-dot: 1 mm/s on the bump's top (delta 1 mm, n turning at 1 rad/s), which K_p, K_v
+turn into a steady error K_v delta |n-dot| / K_p (0.15 mm). With the view rows of
+``core.surfaces.view_projection`` the translational rows of e_p are u . (c - c_r) and v . (c - c_r).
+In position-force mode the controller takes e_p from here (its ``path_position_error`` input) instead
+of the integral of e_p', so the position error is measured against the path and cannot drift.
 
 The path's clock: t_path = t - t_0. Without ``wait_for_contact`` t_0 = ``dwell``; with it (a job
 that starts off the surface) t_0 is set at the first control tick that reads CONTACT on
@@ -33,23 +35,21 @@ goes to it). ``path_done`` is 1 once the path has ended (the contact supervisor'
 input).
 """
 
-import math
-
 import numpy as np
 
 from pydrake.autodiffutils import AutoDiffXd
+from pydrake.math import sqrt
 from pydrake.systems.framework import LeafSystem_
 from pydrake.systems.scalar_conversion import TemplateSystem
 
 from drake_hybrid.control.phases import ContactPhase
 from drake_hybrid.control.sampling import SAMPLE_LEAD
-from drake_hybrid.core.charts import EulerZXZChart, PlanarChart, PoseChart
+from drake_hybrid.core.charts import PoseChart
 from drake_hybrid.core.errors import DimensionError
 from drake_hybrid.core.kinematics import declare_cached_value, declare_task_input
 from drake_hybrid.core.linalg import value
 
 NOT_STARTED = 1.0e9          # t_0 before the first contact
-TIME_STEP = 1.0e-4           # s: the central difference of nu_d on a chart whose rate map depends on x
 
 
 def _cross(a, b):
@@ -89,23 +89,6 @@ def _vee(skew):
     return np.array([skew[2, 1], skew[0, 2], skew[1, 0]])
 
 
-def configuration_difference(chart, x, x_d, normal=None):
-    """delta(x, x_d) in ``chart``'s velocity coordinates (module docstring), float or AutoDiffXd x; with
-    ``normal`` the position's part along it is left out (the in-surface displacement)."""
-    along = (lambda d: d - (d @ normal) * normal) if normal is not None else (lambda d: d)
-    if isinstance(chart, PoseChart):
-        R = np.asarray(x[3:]).reshape(3, 3)
-        R_d = np.asarray(x_d[3:], dtype=float).reshape(3, 3)
-        product = R @ R_d.T
-        return np.concatenate([along(x[:3] - x_d[:3]), 0.5 * _vee(product - product.T)])
-    delta = x - x_d
-    delta[:3] = along(delta[:3])
-    angles = {PlanarChart: (2,), EulerZXZChart: (3, 4, 5)}.get(type(chart), ())
-    for i in angles:
-        delta[i] = delta[i] - 2 * math.pi * round(float(value(delta[i])) / (2 * math.pi))
-    return delta
-
-
 @TemplateSystem.define("PathSource_", T_list=[float, AutoDiffXd])
 def PathSource_(T):
 
@@ -132,12 +115,11 @@ def PathSource_(T):
         ====================  ====  ==========================================================
         estimated_state       2n    [q; v] of the controller's plant
         contact_phase         1     phases.ContactPhase (the supervisor's), read at the ticks
-        desired_velocity      k     r-dot_pd = E_p(x) nu_d
-        desired_acceleration  k     r-ddot_pd = E_p-dot nu_d + E_p nu-dot_d
+        desired_velocity      k     r-dot_pd = E_p(x) nu_r
+        desired_acceleration  k     r-ddot_pd = E_p-dot nu_r + E_p nu-dot_r
         desired_force         m     F_d: F(s) on ``force_row``, 0 elsewhere
-        path_position_error   k     e_p = E_p(x) delta(x, x_d), delta's position in the tangent plane
-                                    (the controller's input of that name)
-        reference_position    3     c_d, the reference point (world, m)
+        path_position_error   k     e_p = E_p(x) (c - c_r, rotation error) (the controller's input)
+        reference_position    3     c_d, the reference point on C = 0 (world, m)
         reference_normal      3     the surface's outward normal there
         path_error            3     c - c_d (world, m): the pad centre from its reference point
         path_progress         3     [segment index, arc length s (m), t_path (s)]
@@ -163,8 +145,9 @@ def PathSource_(T):
             self._arguments = (plant, end_effector_frame, end_effector_point, constraint_space, path, heading,
                                force_row, dwell, wait_for_contact, period)
             chart = constraint_space.chart
-            if not isinstance(chart, (PoseChart, EulerZXZChart)):
-                raise TypeError(f"PathSource needs a 6-DOF chart (PoseChart or EulerZXZChart), got {chart.name}")
+            if not isinstance(chart, PoseChart):
+                raise TypeError(f"PathSource needs a PoseChart (a path over a surface turns the tool through any "
+                                f"direction, where Euler angles are singular), got {chart.name}")
             self.constraint_space, self.path, self.chart = constraint_space, path, chart
             self.heading = np.asarray(heading, dtype=float)
             k, m = constraint_space.velocity_size, constraint_space.force_size
@@ -230,50 +213,62 @@ def PathSource_(T):
                 discrete_state.get_mutable_vector(0).SetFromVector([float(value(context.get_time())) + self.dwell])
 
         # -- the reference -------------------------------------------------------------------------
-        def _reference_at(self, t):
-            """(sample, x_d, nu_d, nu-dot_d) of the path at t_path = ``t``."""
+        def _calc_reference(self, context):
+            """The path's reference at t_path (time only): the sample, R_d, omega_d, omega-dot_d, F_d."""
+            t = self.path_time(context)
             sample = self.path.evaluate(t)
             R_d, omega_d, omega_dot = reference_frame(sample.normal, sample.normal_rate, sample.normal_acceleration,
                                                       self.heading)
-            x_d = self.chart.configuration(R_d, sample.position)
-            nu_d = self.chart.task_velocity(x_d, np.concatenate([omega_d, sample.velocity]))
-            if isinstance(self.chart, PoseChart):           # nu is the twist: its rate is the acceleration
-                nu_dot = self.chart.task_velocity(x_d, np.concatenate([omega_dot, sample.acceleration]))
-            else:                                           # x-dependent rate map: nu_d differentiated in time
-                nu_dot = (self._reference_at(t + TIME_STEP)[2] - self._reference_at(t - TIME_STEP)[2]) / (2 * TIME_STEP)
-            return sample, x_d, nu_d, nu_dot
-
-        def _calc_reference(self, context):
-            t = self.path_time(context)
-            sample, x_d, nu_d, nu_dot = self._reference_at(t)
             force = np.zeros(self.constraint_space.force_size)
             force[self.force_row] = sample.force
-            done = 1.0 if t > self.path.duration else 0.0
-            return {"x_d": x_d, "nu_d": nu_d, "nu_dot": nu_dot, "c": sample.position, "n": sample.normal,
-                    "force": force, "done": done, "progress": np.array([sample.segment, sample.arc_length, t])}
+            return {"sample": sample, "R_d": R_d, "omega": omega_d, "omega_dot": omega_dot, "c": sample.position,
+                    "n": sample.normal, "force": force, "done": 1.0 if t > self.path.duration else 0.0,
+                    "progress": np.array([sample.segment, sample.arc_length, t])}
 
         def _calc_task(self, plant_context):
+            """The measured x, nu, c, E_p, E_p-dot and the pad's depth delta = -C_1 / |grad C_1| with its rate."""
             task = self.kinematics.evaluate(plant_context)
             x, nu = task.configuration, task.velocity
-            return (x, nu, task.position) + tuple(self.constraint_space.velocity_projection.matrix_and_rate(x, nu))
+            constraint, row = self.constraint_space.constraint, self.force_row
+            gradient = constraint.force_projection(x)[row][:3]                 # grad_p C_1
+            gradient_rate = constraint.force_projection_rate(x, nu)[row][:3]
+            length = sqrt(gradient @ gradient)
+            value, rate = constraint.value(x)[row], constraint.force_projection(x)[row] @ nu
+            depth = -value / length
+            depth_rate = -rate / length + value * (gradient @ gradient_rate) / (length * length * length)
+            E_p, E_p_dot = self.constraint_space.velocity_projection.matrix_and_rate(x, nu)
+            return x, nu, task.position, E_p, E_p_dot, depth, depth_rate
+
+        def _at_depth(self, context):
+            """(c_r, nu_r, nu-dot_r): the reference point following the pad at its depth (module docstring)."""
+            _, _, _, _, _, depth, depth_rate = self._task.Eval(context)
+            reference = self._reference.Eval(context)
+            sample = reference["sample"]
+            c_r = sample.position - depth * sample.normal
+            velocity = sample.velocity - depth * sample.normal_rate
+            acceleration = sample.acceleration - depth_rate * sample.normal_rate - depth * sample.normal_acceleration
+            return (c_r, np.concatenate([velocity, reference["omega"]]),
+                    np.concatenate([acceleration, reference["omega_dot"]]))
 
         # -- outputs ---------------------------------------------------------------------------------
         def _calc_velocity(self, context, output):
             E_p = self._task.Eval(context)[3]
-            output.SetFromVector(E_p @ self._reference.Eval(context)["nu_d"])
+            output.SetFromVector(E_p @ self._at_depth(context)[1])
 
         def _calc_acceleration(self, context, output):
-            _, _, _, E_p, E_p_dot = self._task.Eval(context)
-            reference = self._reference.Eval(context)
-            output.SetFromVector(E_p_dot @ reference["nu_d"] + E_p @ reference["nu_dot"])
+            E_p, E_p_dot = self._task.Eval(context)[3:5]
+            _, nu_r, nu_dot_r = self._at_depth(context)
+            output.SetFromVector(E_p_dot @ nu_r + E_p @ nu_dot_r)
 
         def _calc_force(self, context, output):
             output.SetFromVector(self._reference.Eval(context)["force"])
 
         def _calc_position_error(self, context, output):
-            x, _, _, E_p, _ = self._task.Eval(context)
-            reference = self._reference.Eval(context)
-            output.SetFromVector(E_p @ configuration_difference(self.chart, x, reference["x_d"], reference["n"]))
+            x, _, c, E_p = self._task.Eval(context)[:4]
+            c_r = self._at_depth(context)[0]
+            R, R_d = np.asarray(x[3:]).reshape(3, 3), self._reference.Eval(context)["R_d"]
+            product = R @ R_d.T
+            output.SetFromVector(E_p @ np.concatenate([c - c_r, 0.5 * _vee(product - product.T)]))
 
         def _calc_path_error(self, context, output):
             output.SetFromVector(self._task.Eval(context)[2] - self._reference.Eval(context)["c"])
