@@ -90,10 +90,15 @@ def test_the_summary_and_the_rows_end_at_the_lift_off(sphere_job):
 
 
 def test_the_eigenvalues_at_a_point_of_the_path_are_the_designed_ones():
-    """The continuous closed loop held at the middle of the path (path.hold_at 0.5: the pad pressing
-    at that point, the path's position error in the law): every designed eigenvalue within 5 %."""
+    """The continuous closed loop held at the middle of the 10 cm raster (path.hold_at 0.5: the pad
+    pressing at that point, 19.5 deg from the top, the path's position error in the law): every
+    designed eigenvalue within 5 %, Drake's AutoDiffXd Jacobian equal to central differences. (At
+    5.7 deg from the top, the short raster's middle, Drake's AutoDiffXd derivatives of the
+    hydroelastic contact disagree with central differences in the arm's position columns, a measured
+    fact whose cause is not established here; linearize_continuous then uses central differences and
+    the eigenvalues still match, docs/paths.md.)"""
     task = get_task("surface-polishing")
-    config = with_path(short(task.default_config()), hold_at=0.5)
+    config = with_path(task.default_config(), hold_at=0.5)
     linear = linearize_continuous(config)
     assert linear.equilibrium_residual < 1e-6
     assert linear.match.matched, linear.match

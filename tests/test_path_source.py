@@ -111,21 +111,23 @@ def test_the_position_error_is_the_displacement_along_the_surface_in_the_view_ro
         np.testing.assert_allclose(error, [0.0, along[0], along[1]], atol=(move @ move) / 0.17)
 
 
-def test_the_autodiff_source_differentiates_the_position_error_as_central_differences(job):
+@pytest.mark.parametrize("output", ["path_position_error", "desired_velocity", "desired_acceleration"])
+def test_the_autodiff_source_differentiates_its_commands_as_central_differences(job, output):
     dut = job["dut"]
     ad = dut.ToAutoDiffXd()
-    state, _ = state_on_reference(job, 0.8, offset=np.array([0.001, 0.0, 0.0]))
+    state, _ = state_on_reference(job, 0.8, offset=np.array([0.001, 0.0, -0.0005]))
+    state[len(state) // 2:] += 0.03
     context = ad.CreateDefaultContext()
     context.SetTime(0.9)
     ad.get_input_port(0).FixValue(context, InitializeAutoDiff(state))
-    gradient = ExtractGradient(ad.GetOutputPort("path_position_error").Eval(context))
+    gradient = ExtractGradient(ad.GetOutputPort(output).Eval(context))
     h = 1e-6
     for k in range(len(state)):
         step = np.zeros(len(state))
         step[k] = h
-        difference = (evaluate(dut, state + step, 0.9)["path_position_error"]
-                      - evaluate(dut, state - step, 0.9)["path_position_error"]) / (2 * h)
-        np.testing.assert_allclose(gradient[:, k], difference, atol=1e-6)
+        difference = (evaluate(dut, state + step, 0.9)[output] - evaluate(dut, state - step, 0.9)[output]) / (2 * h)
+        np.testing.assert_allclose(gradient[:, k], difference, atol=1e-6 * max(1.0, np.max(np.abs(difference))),
+                                   err_msg=f"state {k}")
 
 
 def test_the_controller_takes_its_position_error_from_the_path_input(job):

@@ -15,10 +15,12 @@ twist nu (docs/theory.md §4.2)::
     nu_r      = (c_r-dot, omega_d),  nu-dot_r = (c_r-ddot, omega-dot_d)
     r-dot_pd  = E_p(x) nu_r                                   the velocity rows' command
     r-ddot_pd = E_p-dot(x, nu) nu_r + E_p(x) nu-dot_r          its derivative along the actual motion
-    e_p       = E_p(x) (c - c_r, vee(R R_d^T - R_d R^T) / 2)  the position error against the path
+    e_p       = E_p(x) (P (c - c_r), vee(R R_d^T - R_d R^T) / 2)   the position error against the path
     F_d       = F(s) on the force row (the normal force, N), 0 on the others
 
-so that d/dt e_p = e_p' = E_p nu - r-dot_pd to first order. Measured from c_d instead, the compression
+with P = I - n n^T, so that d/dt e_p = e_p' = E_p nu - r-dot_pd to first order. (delta is the
+distance to first order: on the sphere's pad-centre surface |P| - rho = delta + delta^2 / (2 rho);
+P removes that second-order normal remainder from e_p, so a pad pressed at rest is an equilibrium.) Measured from c_d instead, the compression
 would count as a position error wherever E_p's rows are not tangent (u . n delta: 0.42 mm at the sphere
 cap's 28 deg), and measured from c_d but projected onto the tangent plane its rate would differ from
 e_p' by u . delta n-dot: 1 mm/s on the bump's top (delta 1 mm, n turning at 1 rad/s), which K_p, K_v
@@ -118,7 +120,7 @@ def PathSource_(T):
         desired_velocity      k     r-dot_pd = E_p(x) nu_r
         desired_acceleration  k     r-ddot_pd = E_p-dot nu_r + E_p nu-dot_r
         desired_force         m     F_d: F(s) on ``force_row``, 0 elsewhere
-        path_position_error   k     e_p = E_p(x) (c - c_r, rotation error) (the controller's input)
+        path_position_error   k     e_p = E_p(x) (P (c - c_r), rotation error) (the controller's input)
         reference_position    3     c_d, the reference point on C = 0 (world, m)
         reference_normal      3     the surface's outward normal there
         path_error            3     c - c_d (world, m): the pad centre from its reference point
@@ -265,10 +267,12 @@ def PathSource_(T):
 
         def _calc_position_error(self, context, output):
             x, _, c, E_p = self._task.Eval(context)[:4]
-            c_r = self._at_depth(context)[0]
-            R, R_d = np.asarray(x[3:]).reshape(3, 3), self._reference.Eval(context)["R_d"]
+            reference = self._reference.Eval(context)
+            n, displacement = reference["n"], c - self._at_depth(context)[0]
+            R, R_d = np.asarray(x[3:]).reshape(3, 3), reference["R_d"]
             product = R @ R_d.T
-            output.SetFromVector(E_p @ np.concatenate([c - c_r, 0.5 * _vee(product - product.T)]))
+            output.SetFromVector(E_p @ np.concatenate([displacement - (displacement @ n) * n,
+                                                       0.5 * _vee(product - product.T)]))
 
         def _calc_path_error(self, context, output):
             output.SetFromVector(self._task.Eval(context)[2] - self._reference.Eval(context)["c"])
