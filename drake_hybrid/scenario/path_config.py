@@ -122,14 +122,16 @@ class PathConfig:
         return float(force[0])                               # per waypoint
 
     def validate(self, prefix="path."):
-        """PathError naming the first field that is not allowed."""
-        if not self.active:
-            return self
+        """PathError naming the first field that is not allowed (every field, also of an inactive path:
+        a misspelt value is refused wherever it is)."""
         if self.waypoints and self.pattern.kind:
             raise PathError(f"{prefix}: give waypoints or a pattern, not both")
         if self.pattern.kind not in PATTERN_KINDS:
             raise PathError(f"{prefix}pattern.kind must be one of raster, spiral (or empty), got "
                             f"'{self.pattern.kind}'")
+        if self.pattern.direction not in ("u", "v"):
+            raise PathError(f"{prefix}pattern.direction must be u or v (the axis the raster's lines run along), got "
+                            f"'{self.pattern.direction}'")
         for name, unit in (("speed", "m/s"), ("acceleration", "m/s^2"), ("tolerance", "m")):
             number = float(getattr(self, name))
             if not 0 < number < math.inf:
