@@ -19,7 +19,7 @@ from drake_hybrid.control.phases import ContactPhase
 from drake_hybrid.experiments.path_report import error_parts
 from drake_hybrid.experiments.simulation import simulate
 from drake_hybrid.scenario.data_task import load_task_file
-from drake_hybrid.scenario.path_job import build_path, with_path
+from drake_hybrid.scenario.path_job import job_duration, with_path
 from drake_hybrid.scenario.tasks import get_task
 
 pytestmark = pytest.mark.slow
@@ -27,22 +27,15 @@ ROOT = Path(__file__).resolve().parent.parent
 
 
 def short(config):
-    """``config`` with a small raster (two 3 cm lines 1.5 cm apart) and the duration of its job."""
-    config = with_path(config, pattern=dataclasses.replace(config.path.pattern, size=[0.03, 0.015], spacing=0.015))
-    return config
-
-
-def job_duration(task, config):
-    approach = config.start.gap / config.supervision.approach_speed + 0.2
-    lift = config.supervision.lift_height / config.supervision.approach_speed + 0.3
-    return approach + config.path.dwell + build_path(task, config).duration + lift
+    """``config`` with a small raster (two 3 cm lines 1.5 cm apart)."""
+    return with_path(config, pattern=dataclasses.replace(config.path.pattern, size=[0.03, 0.015], spacing=0.015))
 
 
 @pytest.fixture(scope="module")
 def sphere_job():
     task = get_task("surface-polishing")
     config = short(task.default_config())
-    config.duration = round(job_duration(task, config), 1)
+    config.duration = job_duration(task, config)
     return simulate(config)
 
 
@@ -50,7 +43,7 @@ def sphere_job():
 def bump_job():
     task, config = load_task_file(ROOT / "models" / "tasks" / "raster_bump.yaml")
     config = short(config)
-    config.duration = round(job_duration(task, config), 1)
+    config.duration = job_duration(task, config)
     return simulate(config)
 
 

@@ -20,6 +20,7 @@ The pieces are public for a diagram of your own: ``build_path`` (the SurfacePath
 """
 
 import dataclasses
+import math
 
 import numpy as np
 
@@ -192,6 +193,15 @@ def path_start_positions(task, scenario, joint_guess):
     if not config.start.in_contact:
         return positions_at_depth(-config.start.gap)
     return pressing_positions(scenario, positions_at_depth)
+
+
+def job_duration(task, config):
+    """The simulated time a job needs (s, rounded up to 0.1 s): the guarded approach from ``start.gap``
+    (when the start is off the surface) and 0.2 s, the dwell, the path, the lift-off and 0.3 s."""
+    supervision = config.supervision
+    approach = config.start.gap / supervision.approach_speed + 0.2 if not config.start.in_contact else 0.0
+    lift = supervision.lift_height / supervision.approach_speed + 0.3 if lifts_off(config) else 0.0
+    return math.ceil(10 * (approach + config.path.dwell + build_path(task, config).duration + lift)) / 10
 
 
 def draw_path(meshcat, path, name="path"):

@@ -38,7 +38,7 @@ from drake_hybrid.scenario.config import ScenarioConfig, StartConfig
 from drake_hybrid.scenario.workpieces import add_rigid_workpiece, mesh_shape
 from drake_hybrid.scenario.parsing import ConfigureParser, model_url
 from drake_hybrid.scenario.path_config import PathConfig, PatternConfig
-from drake_hybrid.scenario.path_job import build_path, path_start_positions
+from drake_hybrid.scenario.path_job import job_duration, path_start_positions
 from drake_hybrid.scenario.task import Task, choice
 from drake_hybrid.scenario.tasks.robots import PAD_RADIUS, UR5E_SEED, add_ur5e_with_pad
 
@@ -88,15 +88,8 @@ class SurfacePolishing(Task):
             path=PathConfig(pattern=PatternConfig(kind="raster", center=[0.0, 0.0], size=[0.1, 0.1], spacing=0.02),
                             speed=0.05, acceleration=0.5, force=10.0, dwell=0.3))
         config.task_options["workpiece"] = options.get("workpiece", "sphere")
-        config.duration = self.job_duration(config)
+        config.duration = job_duration(self, config)
         return config
-
-    def job_duration(self, config):
-        """Approach, dwell, the path and the lift-off, with margins (s)."""
-        supervision = config.supervision
-        approach = (config.start.gap / supervision.approach_speed + 0.2) if not config.start.in_contact else 0.0
-        lift = supervision.lift_height / supervision.approach_speed + 0.3
-        return round(approach + config.path.dwell + build_path(self, config).duration + lift, 1)
 
     def labels(self, config=None):
         return {"velocity": ["spin about a", "x . c-dot", "y . c-dot"], "velocity_units": "rad/s | m/s | m/s",
