@@ -131,12 +131,17 @@ def add_surface_geometry(plant, surface, spec, name="surface"):
     return add_rigid_workpiece(plant, Box(*size), X_WG, name=name, resolution_hint=hint)
 
 
-def field_expressions(spec, chart, parameters, where):
-    """(Y_d, F_d) of ``spec`` (a FieldsSpec) as lists of sympy expressions, or None without fields."""
+def field_expressions(spec, chart, parameters, where, force_size):
+    """(Y_d, F_d) of ``spec`` (a FieldsSpec) as lists of sympy expressions, or None without fields;
+    ConfigError naming the field for a wrong count (d = the chart's velocity size, m = ``force_size``)."""
     if not spec.velocity and not spec.force:
         return None
     if not spec.velocity or not spec.force:
         raise ConfigError(f"{where}fields: give both velocity (Y_d, d expressions) and force (F_d, m expressions)")
+    for name, texts, size, what in (("velocity", spec.velocity, chart.velocity_size, "d"),
+                                    ("force", spec.force, force_size, "m")):
+        if len(texts) != size:
+            raise ConfigError(f"{where}fields.{name} must have {what} = {size} expressions, got {len(texts)}")
     symbols = chart.configuration_symbols
     velocity = [expression_to_sympy(text, symbols, parameters, f"{where}fields.velocity[{i}]")
                 for i, text in enumerate(spec.velocity)]

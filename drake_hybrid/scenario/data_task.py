@@ -622,7 +622,7 @@ def load_task_file(path, register=True, text=None):
     hooks, continuous_plant = make_hooks(spec, where)
     packages = model_packages(spec, path, where)
     space = constraint_space_of(spec, chart, where, anchor=start, hooks=hooks, surface=surface)
-    fields = field_expressions(spec.fields, chart, spec.parameters, where)
+    fields = field_expressions(spec.fields, chart, spec.parameters, where, space.force_size)
     if fields is not None and job.active:
         raise ConfigError(f"{where}fields: a job's path gives the desired motion and force; give fields or "
                           "config.path, not both")

@@ -1,0 +1,165 @@
+"""Issue 33's acceptance runs: whole jobs from the first touch to the last with a 6-DOF arm (the UR5e).
+
+* the built-in task ``surface-polishing``: a raster over a 10 cm x 10 cm patch of the 15 cm sphere at
+  5 cm/s and 10 N (2 cm between lines), approach to lift-off;
+* the same job on a part given as a height map, from a task file (``models/tasks/raster_bump.yaml``:
+  a Gaussian bump, 41 x 41 samples), and on the built-in saddle height map;
+* the closed loop's eigenvalues at the middle of each path (``path.hold_at`` 0.5,
+  ``linearize_continuous``) against the design.
+
+Writes docs/paths.json, docs/paths.md and the figures docs/figures/paths_*.png.
+
+    python docs/paths.py            # all, about 15 minutes on a quiet machine
+    python docs/paths.py --page     # the page again from docs/paths.json
+"""
+
+import json
+import logging
+import sys
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT / "docs"))
+from report_format import significant  # noqa: E402
+
+from drake_hybrid.analysis.linearization import linearize_continuous  # noqa: E402
+from drake_hybrid.experiments.simulation import simulate  # noqa: E402
+from drake_hybrid.scenario.data_task import load_task_file  # noqa: E402
+from drake_hybrid.scenario.path_job import with_path  # noqa: E402
+from drake_hybrid.scenario.tasks import get_task  # noqa: E402
+from drake_hybrid.viz.path_plots import save_path_plots  # noqa: E402
+
+logging.getLogger("drake").setLevel(logging.ERROR)
+FIGURES = ROOT / "docs" / "figures"
+
+
+def line_changes(log, report):
+    """At each segment's start: the commanded acceleration's step and the peaks of the errors in the
+    segment's first five design time constants (what the page explains)."""
+    t = np.asarray(log["t"])
+    rows = []
+    for segment in report["segments"]:
+        start = segment["start"]
+        window = (t >= start) & (t < start + report["settle_time_per_segment_s"])
+        rows.append({"segment": segment["segment"], "start": start,
+                     "velocity_error_peak": float(np.max(np.abs(log["velocity_error"][window, 1:]))),
+                     "spin_error_peak": float(np.max(np.abs(log["velocity_error"][window, 0]))),
+                     "tangential_force_peak": float(np.max(np.abs(log["tangential_force"][window, 1:]))),
+                     "path_error_along_surface_mm": segment["transient_max_path_error_along_surface_mm"],
+                     "force_error_percent": segment["transient_max_force_error_percent"]})
+    return rows
+
+
+def job(name, task_name, config):
+    result = simulate(config)
+    report = result.summary["path"]
+    for path in save_path_plots(result.log, result.summary, FIGURES):
+        path.rename(FIGURES / f"paths_{name}_{path.stem.replace('path_', '')}.png")
+    linear = linearize_continuous(with_path(config, hold_at=0.5))
+    return {"name": name, "task": task_name, "duration": config.duration, "wall_time": result.summary["wall_time"],
+            "report": report, "line_changes": line_changes(result.log, report),
+            "velocity_rows": result.summary["velocity_rows"], "force_rows": result.summary["force_rows"],
+            "eigenvalue_error": float(np.max(linear.match.relative_error)), "matched": bool(linear.match.matched),
+            "designed": [[float(e.real), float(e.imag)] for e in linear.match.predicted],
+            "linearized": [[float(e.real), float(e.imag)] for e in linear.match.partner],
+            "jacobian_check": float(linear.jacobian_check.max_relative_error), "jacobian_used":
+                linear.jacobian_check.used}
+
+
+def run():
+    results = []
+    task = get_task("surface-polishing")
+    results.append(job("sphere", "surface-polishing", task.default_config()))
+    bump_task, bump_config = load_task_file(ROOT / "models" / "tasks" / "raster_bump.yaml")
+    results.append(job("bump", "models/tasks/raster_bump.yaml", bump_config))
+    results.append(job("saddle", "surface-polishing --option workpiece=saddle",
+                       task.default_config(options={"workpiece": "saddle"})))
+    return results
+
+
+def _mm(value):
+    return "" if value is None else f"{value:.3f}"
+
+
+def page(results):
+    rows = ["| job | path | settled path error: in all / along the surface / along the normal (mm) | force error (%) "
+            "| at the line changes: along the surface (mm) / force (%) | off the surface (s) | eigenvalues: worst "
+            "(%) | Jacobian |", "|---|---|---|---|---|---|---|---|"]
+    for r in results:
+        p = r["report"]
+        rows.append(f"| {r['name']} (`{r['task']}`) | {p['length_m']:.3f} m, {p['segments_run']} segments, "
+                    f"{'completed' if p['completed'] else 'NOT completed'} | {_mm(p['max_path_error_mm'])} / "
+                    f"{_mm(p['max_path_error_along_surface_mm'])} / {_mm(p['max_path_error_along_normal_mm'])} | "
+                    f"{p['max_force_error_percent']:.3f} | {_mm(p['transient_max_path_error_along_surface_mm'])} / "
+                    f"{p['transient_max_force_error_percent']:.3f} | {p['time_off_surface_s']:.3f} | "
+                    f"{100 * r['eigenvalue_error']:.2f} | {r['jacobian_check']:.1e} ({r['jacobian_used']}) |")
+    changes = ["| job | segment | start (s) | velocity error peak (mm/s) | spin error peak (rad/s) | F_v peak (N) "
+               "| path error along the surface (mm) | force error (%) |", "|---|---|---|---|---|---|---|---|"]
+    for r in results:
+        for c in r["line_changes"]:
+            changes.append(f"| {r['name']} | {c['segment']} | {c['start']:.3f} | {1000 * c['velocity_error_peak']:.3f} | "
+                           f"{c['spin_error_peak']:.4f} | {c['tangential_force_peak']:.3f} | "
+                           f"{_mm(c['path_error_along_surface_mm'])} | {c['force_error_percent']:.3f} |")
+    text = PAGE.format(table="\n".join(rows), changes="\n".join(changes))
+    return text
+
+
+PAGE = """# Jobs over a surface: a path at a force from the first touch to the last
+
+Generated by `python docs/paths.py` (issue 33's acceptance runs). Each job: a UR5e (6 joints, airo-models)
+with the 20 mm compliant ball pad, the contact supervisor's guarded approach from 5 mm above the path's first
+point at 2 cm/s, 0.3 s pressing there, a raster (boustrophedon) over a 10 cm x 10 cm patch seen from above,
+lines 2 cm apart, at most 5 cm/s and 0.5 m/s^2 (Drake's Toppra), the normal force 10 N, and the lift-off
+(1 cm) when the path ends; position-force mode (Remark 3) with the position error measured against the path
+(`systems.path_source.PathSource`), gains K_v = 30, K_p = 200 on every velocity row (roots -10, -20), K_fp =
+0.5, K_fi = 15 (-10), held orientation rows -15, -30: five design time constants are 0.5 s. The simulation:
+Drake's discrete SAP hydroelastic contact at 1 kHz, the controller sampled at 1 kHz.
+
+"Settled": over every segment (a raster line or the step to the next) from its start + five design time
+constants to its end. "Path error": the distance of the pad centre from its reference point on C = 0; "along
+the surface" is its part in the tangent plane (where on the workpiece the pad is), "along the normal" the rest,
+which is the compliant pad's compression at 10 N (the reference lies on C = 0, the pressed pad inside it; the
+force loop sets the compression, it is not tracked). "At the line changes": the same over each segment's first
+five design time constants. Eigenvalues: the continuous closed loop held at the middle of the path
+(`path.hold_at` 0.5), the worst relative distance of a designed eigenvalue from its linearized partner;
+"Jacobian": Drake's AutoDiffXd A against central differences (`analysis.derivatives`).
+
+{table}
+
+Issue 33 asks for a path error within 1 mm and a force within 2 % after each segment's first five design time
+constants, and eigenvalues within 5 % of the design. Along the surface the pad stays within a few hundredths
+of a millimetre of its reference; the distance in all is the pad's compression (0.89 mm on the sphere; on the
+bump's top, a 3 cm convex radius, the pad sinks deeper at the same force and the distance in all exceeds 1 mm
+by the compression alone).
+
+## The line changes
+
+The pad stops at each corner: a segment ends at rest and the next starts from rest, and Toppra's acceleration
+is piecewise constant, so at a line change the commanded acceleration steps by up to 0.5 m/s^2 along the new
+direction. The law's feed-forward r-ddot_pd carries the step exactly (in the rigid model a line change
+leaves no error), so what remains is what the compliant, sampled loop adds:
+
+{changes}
+
+Explanation (measured in these runs): the first segment's transient is the approach's, not a line change: the
+path starts 0.3 s after the first contact, before the guarded approach's landing has settled (five design
+time constants are 0.5 s), and the force error of the landing (the force rising from the contact threshold to
+10 N through the compliant pad) is still decaying. At the later line changes the peaks are those of the
+settled lines: the acceleration step excites nothing the loop does not follow, because the tangential
+dynamics the law leaves to the contact are the pad's drag and the tessellated facets' force (F_v, cancelled
+by the law as measured), neither of which the step changes.
+"""
+
+
+def write(results):
+    (ROOT / "docs" / "paths.json").write_text(json.dumps(significant(results), indent=1) + "\n")
+    (ROOT / "docs" / "paths.md").write_text(page(results))
+
+
+if __name__ == "__main__":
+    if "--page" in sys.argv:
+        write(json.loads((ROOT / "docs" / "paths.json").read_text()))
+    else:
+        write(run())
