@@ -233,3 +233,35 @@ def test_a_held_path_holds_its_point():
     sample = path.evaluate(3.0)
     np.testing.assert_allclose(sample.position, [0.1, 0.2, 0.3])
     assert np.all(sample.velocity == 0) and sample.force == 7.0 and path.duration == 0
+
+
+@pytest.mark.parametrize("surface, offset_surface", [
+    (PlaneSurface([0.4, 0.0, 0.2], [0.0, 0.0, 1.0]), lambda c: c[2] - (0.2 + PAD)),
+    (SphereSurface(CENTER, 0.15), lambda c: np.linalg.norm(c - CENTER) - (0.15 + PAD)),
+    (CylinderSurface([0.45, 0.0, 0.1], [1.0, 0.0, 0.0], 0.15, length=0.3),
+     lambda c: np.linalg.norm((c - [0.45, 0.0, 0.1])[1:]) - (0.15 + PAD)),
+], ids=["plane", "sphere cap", "cylinder patch"])
+@pytest.mark.parametrize("pattern", ["raster", "spiral"])
+def test_patterns_cover_a_plane_a_sphere_cap_and_a_cylinder_patch(surface, offset_surface, pattern):
+    """Both patterns on each surface: the pad centre's reference on the offset surface throughout, the
+    pattern's lines (turns) the spacing apart in the view, the contact points on the surface."""
+    view = surface.default_view()
+    if pattern == "raster":
+        strokes = raster([0.0, 0.0], [0.04, 0.03], 0.015)
+    else:
+        strokes = spiral([0.0, 0.0], 0.02, 0.01)
+    path = path_from_strokes(surface, view, strokes, PAD, LIMITS, 10.0)
+    for t in np.linspace(0.0, path.duration, 200):
+        assert offset_surface(path.evaluate(t).position) == pytest.approx(0.0, abs=2e-6)
+    contacts = path.contact_points()
+    np.testing.assert_allclose([surface.signed_distance(q) for q in contacts], 0.0, atol=1e-10)
+    seen = view.coordinates(contacts)
+    if pattern == "raster":
+        lines = [view.coordinates(segment.contact_points) for segment in path.segments[::2]]
+        for line, offset in zip(lines, [-0.015, 0.0, 0.015]):      # each line straight in the view, 1.5 cm apart
+            np.testing.assert_allclose(line[:, 1], offset, atol=1e-12)
+            assert np.ptp(line[:, 0]) == pytest.approx(0.04)
+        assert len(lines) == 3
+    else:
+        radius = np.linalg.norm(seen, axis=1)
+        assert radius[-1] == pytest.approx(0.02, abs=1e-9) and radius[0] == pytest.approx(0.005, abs=1e-9)
