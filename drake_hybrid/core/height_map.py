@@ -223,6 +223,8 @@ class HeightMapSurface(Surface):
         x = np.linspace(hm.x[0], hm.x[-1], min(400, int(math.ceil((hm.x[-1] - hm.x[0]) / spacing)) + 1))
         y = np.linspace(hm.y[0], hm.y[-1], min(400, int(math.ceil((hm.y[-1] - hm.y[0]) / spacing)) + 1))
         heights = np.empty((len(y), len(x)))
+        on_map = np.zeros((len(y), len(x)), dtype=bool)        # the node's contact point lies on the grid
+        x0, x1, y0, y1 = field.bounds
         for j, Y in enumerate(y):
             for i, X in enumerate(x):
                 a, b, det = self._contact(X, Y, r)
@@ -233,11 +235,14 @@ class HeightMapSurface(Surface):
                 h = field.derivatives(a, b, 1)
                 normal_z = 1.0 / math.sqrt(1.0 + h[(1, 0)] ** 2 + h[(0, 1)] ** 2)
                 heights[j, i] = h[(0, 0)] + r * normal_z
-        self._check_single_contact(x, y, heights, r)
+                on_map[j, i] = x0 <= a <= x1 and y0 <= b <= y1
+        self._check_single_contact(x, y, heights, r, on_map)
         return HeightField(x, y, heights, self.X_WM, f"{self.name} offset by {r * 1000:.3g} mm")
 
-    def _check_single_contact(self, x, y, centres, r):
-        """PathError where the ball at a node's centre would reach below the part elsewhere (two contacts)."""
+    def _check_single_contact(self, x, y, centres, r, on_map):
+        """PathError where the ball at a node's centre would reach below the part elsewhere (two contacts);
+        nodes whose contact point lies off the grid (the spline extrapolated there) are not checked: the
+        pad's path keeps its contact points on the grid (``check_inside``)."""
         angles = np.linspace(0.0, 2 * math.pi, 24, endpoint=False)
         radii = np.linspace(0.1, 1.0, 8) * r
         dx = np.outer(radii, np.cos(angles)).ravel()
@@ -246,6 +251,8 @@ class HeightMapSurface(Surface):
         tolerance = 1e-6 + 1e-3 * r
         for j in range(0, len(y), 2):
             for i in range(0, len(x), 2):
+                if not on_map[j, i]:
+                    continue
                 X, Y = x[i] + dx, y[j] + dy
                 inside = (X >= x0) & (X <= x1) & (Y >= y0) & (Y <= y1)
                 ball_bottom = centres[j, i] - np.sqrt(np.maximum(r * r - dx ** 2 - dy ** 2, 0.0))

@@ -28,6 +28,7 @@ from pydrake.geometry import Rgba
 from pydrake.math import RigidTransform, RotationMatrix
 from pydrake.systems.primitives import LogVectorOutput
 
+from drake_hybrid.control.phases import ContactPhase
 from drake_hybrid.core.errors import ConfigError
 from drake_hybrid.core.kinematics import inverse_kinematics
 from drake_hybrid.core.paths import PathLimits, SurfacePath, path_from_strokes, path_from_waypoints
@@ -39,7 +40,7 @@ from drake_hybrid.systems.sources import Profile
 
 # Logged outputs of the PathSource (log key -> port) and of the supervisor.
 PATH_LOGS = {"reference_position": "reference_position", "reference_normal": "reference_normal",
-             "path_error": "path_error", "path_progress": "path_progress"}
+             "path_error": "path_error", "path_progress": "path_progress", "path_done": "path_done"}
 
 _PATHS = {}
 
@@ -193,6 +194,33 @@ def path_start_positions(task, scenario, joint_guess):
     if not config.start.in_contact:
         return positions_at_depth(-config.start.gap)
     return pressing_positions(scenario, positions_at_depth)
+
+
+def path_events(log):
+    """A job's phases for the plots and the summary (``Task.run_events``' format): the guarded approach,
+    the dwell at the first point, each line change (an instant: a segment's start) and the lift-off."""
+    if "path_progress" not in log:
+        return []
+    t = np.asarray(log["t"])
+    segment, t_path = np.asarray(log["path_progress"])[:, 0], np.asarray(log["path_progress"])[:, 2]
+    events = []
+    started = np.nonzero(t_path >= 0)[0]
+    if "contact_phase" in log:
+        contact = np.nonzero(np.asarray(log["contact_phase"])[:, 0] == float(ContactPhase.CONTACT))[0]
+        if contact.size and contact[0] > 0:
+            events.append({"start": float(t[0]), "end": float(t[contact[0]]), "label": "guarded approach"})
+        if contact.size and started.size and started[0] > contact[0]:
+            events.append({"start": float(t[contact[0]]), "end": float(t[started[0]]),
+                           "label": "pressing at the path's first point (dwell)"})
+    done = np.asarray(log["path_done"])[:, 0] > 0.5 if "path_done" in log else np.zeros(len(t), dtype=bool)
+    for index in np.nonzero(np.diff(segment) > 0)[0]:
+        if segment[index] >= 0 and not done[index + 1]:                       # not the path's start or end
+            events.append({"start": float(t[index + 1]), "end": None, "label": "a line change (segment start)"})
+    if "lifting" in log:
+        lifting = np.nonzero(np.asarray(log["lifting"])[:, 0] > 0.5)[0]
+        if lifting.size:
+            events.append({"start": float(t[lifting[0]]), "end": float(t[-1]), "label": "lift-off"})
+    return events
 
 
 def job_duration(task, config):
