@@ -105,15 +105,20 @@ def _mm(value):
 def page(everything):
     results, halved = everything["jobs"], everything["step_halved"]
     rows = ["| job | path | settled path error: in all / along the surface / along the normal (mm) | force error (%) "
-            "| at the line changes: along the surface (mm) / force (%) | off the surface (s) | eigenvalues: worst "
-            "(%) | Jacobian |", "|---|---|---|---|---|---|---|---|"]
+            "| at the line changes: along the surface (mm) / force (%) | after the approach (segment 0) | off the "
+            "surface (s) | eigenvalues: worst (%) | Jacobian |", "|---|---|---|---|---|---|---|---|---|"]
     for r in results:
         p = r["report"]
+        later = r["line_changes"][1:]
+        first = r["line_changes"][0]
         rows.append(f"| {r['name']} (`{r['task']}`) | {p['length_m']:.3f} m, {p['segments_run']} segments, "
                     f"{'completed' if p['completed'] else 'NOT completed'} | {_mm(p['max_path_error_mm'])} / "
                     f"{_mm(p['max_path_error_along_surface_mm'])} / {_mm(p['max_path_error_along_normal_mm'])} | "
-                    f"{p['max_force_error_percent']:.3f} | {_mm(p['transient_max_path_error_along_surface_mm'])} / "
-                    f"{p['transient_max_force_error_percent']:.3f} | {p['time_off_surface_s']:.3f} | "
+                    f"{p['max_force_error_percent']:.3f} | "
+                    f"{_mm(max(c['path_error_along_surface_mm'] for c in later))} / "
+                    f"{max(c['force_error_percent'] for c in later):.3f} | "
+                    f"{_mm(first['path_error_along_surface_mm'])} mm / {first['force_error_percent']:.3f} % | "
+                    f"{p['time_off_surface_s']:.3f} | "
                     f"{100 * r['eigenvalue_error']:.2f} | {r['jacobian_check']:.1e} ({r['jacobian_used']}) |")
     changes = ["| job | segment | start (s) | velocity error peak (mm/s) | spin error peak (rad/s) | F_v peak (N) "
                "| path error along the surface (mm) | force error (%) |", "|---|---|---|---|---|---|---|---|"]
@@ -153,7 +158,9 @@ Issue 33 asks for a path error within 1 mm and a force within 2 % after each seg
 constants, and eigenvalues within 5 % of the design. Along the surface the pad stays within a few hundredths
 of a millimetre of its reference; the distance in all is the pad's compression (0.89 mm on the sphere; on the
 bump's top, a 3 cm convex radius, the pad sinks deeper at the same force and the distance in all exceeds 1 mm
-by the compression alone).
+by the compression alone, 1.05 mm: not a tracking error, but over the issue's 1 mm if the compression is
+counted). The line changes' transients are a few hundredths of a millimetre (below); the approach's, in the
+first segment, a few tenths.
 
 ## The line changes
 
@@ -171,7 +178,9 @@ at 0.5 m/s^2) builds that lead, the position loop (roots -10, -20) removes it wi
 constants, and each deceleration to rest builds the opposite lag: the peaks at the line changes, and the
 largest errors inside the settled windows, which end with their segment's deceleration. The law itself
 follows the step of the commanded acceleration (its feed-forward carries it), and the contact adds nothing
-visible there (the measured tangential force F_v stays below a milli-newton). Halving the step halves the
+visible there: the measured tangential force F_v (about 1 mN on the sphere and the saddle, up to 40 mN on the
+bump's tessellated mesh) is cancelled by the law as measured, and the peaks are the same on all three
+workpieces and at every line change. Halving the step halves the
 transient (a short raster of two 4 cm lines 2 cm apart, the plant and the controller at the same period):
 
 | period | peak along the surface at the line changes (um) | h v / 2 (um) |
