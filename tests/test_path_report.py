@@ -43,7 +43,8 @@ def test_the_report_splits_the_error_and_finds_the_windows():
     assert report["max_path_error_along_normal_mm"] == pytest.approx(0.9)
     # Settled from each segment's start + 0.1 s: the first segment's 1 mm transient (to 0.6 s) is not in it.
     assert report["max_path_error_along_surface_mm"] == pytest.approx(0.2)
-    assert report["transient_max_path_error_along_surface_mm"] == pytest.approx(1.2)
+    assert report["first_segment_max_path_error_along_surface_mm"] == pytest.approx(1.2)
+    assert report["line_change_max_path_error_along_surface_mm"] == pytest.approx(0.1)
     assert report["max_path_error_mm"] == pytest.approx(np.hypot(0.2, 0.9))
     assert report["max_force_error_percent"] == pytest.approx(1.0)
     assert [s["max_path_error_along_surface_mm"] for s in report["segments"]] == pytest.approx([0.2, 0.1])

@@ -11,7 +11,8 @@ From the log of a path job (``scenario.path_job``: ``path_error`` = c - c_d, ``r
 * the force error along the path, |F - F_d| in N and in % of F_d, on the force-controlled row;
 * both per segment (a stroke from rest to rest: a raster line, the step to the next one), over its
   *settled* part (from the segment's start + five design time constants to its end) and over its
-  first five time constants (the transient at the line change);
+  first five time constants (the transient at the line change; in the first segment, the approach's
+  landing, still settling when the path starts after its dwell);
 * the time off the surface: how long the supervisor was out of CONTACT between the first contact and
   the lift-off, and how often contact was lost;
 * the job's timeline: first contact, the path's start and end, the lift-off, and how much of the
@@ -35,6 +36,11 @@ def _first(mask, t):
 def _max_or_none(values):
     values = np.asarray(values, dtype=float)
     return float(np.max(values)) if values.size else None
+
+
+def _largest(segments, key):
+    """The largest ``key`` over ``segments`` that have it (None if none has)."""
+    return _max_or_none([s[key] for s in segments if s[key] is not None])
 
 
 def lift_off_time(log):
@@ -115,9 +121,14 @@ def path_report(log, design_time_constant, path_duration, path_length, force_row
         "max_path_error_along_normal_mm": _max_or_none(normal[settled_all]),
         "max_force_error_N": _max_or_none(force_error[settled_all]),
         "max_force_error_percent": _max_or_none(percent[settled_all]),
-        # Over the segments' first 5 design time constants (the line changes):
-        "transient_max_path_error_along_surface_mm": _max_or_none(tangential[on_path & ~settled_all]),
-        "transient_max_force_error_percent": _max_or_none(percent[on_path & ~settled_all]),
+        # Over the first 5 design time constants of the segments after the first (the line changes), and of
+        # the first (the approach's landing is still settling there):
+        "line_change_max_path_error_along_surface_mm": _largest(segments[1:],
+                                                                "transient_max_path_error_along_surface_mm"),
+        "line_change_max_force_error_percent": _largest(segments[1:], "transient_max_force_error_percent"),
+        "first_segment_max_path_error_along_surface_mm": _largest(segments[:1],
+                                                                  "transient_max_path_error_along_surface_mm"),
+        "first_segment_max_force_error_percent": _largest(segments[:1], "transient_max_force_error_percent"),
         "time_off_surface_s": float(np.sum(dt[off])), "contact_losses": losses,
         "segments": segments,
     }
@@ -139,9 +150,11 @@ def path_text(report):
              f"{mm(report['max_path_error_mm'])} (along the surface {mm(report['max_path_error_along_surface_mm'])}, "
              f"along the normal {mm(report['max_path_error_along_normal_mm'])}: the pad's compression), normal force "
              f"error {pct(report['max_force_error_percent'])}",
-             f"  at the line changes (each segment's first {report['settle_time_per_segment_s']:.2f} s): path error "
-             f"along the surface {mm(report['transient_max_path_error_along_surface_mm'])}, force error "
-             f"{pct(report['transient_max_force_error_percent'])}",
+             f"  at the line changes (each later segment's first {report['settle_time_per_segment_s']:.2f} s): path "
+             f"error along the surface {mm(report['line_change_max_path_error_along_surface_mm'])}, force error "
+             f"{pct(report['line_change_max_force_error_percent'])}; after the approach (the first segment's): "
+             f"{mm(report['first_segment_max_path_error_along_surface_mm'])}, "
+             f"{pct(report['first_segment_max_force_error_percent'])}",
              f"  off the surface between the first contact and the lift-off: {report['time_off_surface_s']:.3f} s "
              f"({report['contact_losses']} contact losses)"]
     return lines

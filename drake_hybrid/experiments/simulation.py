@@ -289,9 +289,9 @@ def summarize(scenario, log, wall_time):
         if controller.mode is ControlMode.IMPEDANCE_FORCE and controller.velocity_row_inertia is None else None,
         "max_constraint_residual": float(np.max(np.abs(log["constraint"]))),
         # From contact on: before it, C is the start's gap, not a residual.
-        "max_constraint_residual_after_contact":
-            float(np.max(np.abs(log["constraint"][t >= start]))) if np.any(t >= start) else None,
-        "max_constraint_residual_rows_after_contact": max_after(log["constraint"], t >= start),
+        "max_constraint_residual_after_contact":      # (to a job's lift-off)
+            float(np.max(np.abs(job["constraint"][job["t"] >= start]))) if np.any(job["t"] >= start) else None,
+        "max_constraint_residual_rows_after_contact": max_after(job["constraint"], job["t"] >= start),
         "constraint_units": constraint_units,      # per row of C (None where the task names none)
         "held": [row["name"] for row in force_rows if row["held"]],    # no force commanded: see force_rows
         "max_torque_to_effort_limit": torque_ratio.tolist(),
