@@ -7,13 +7,14 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-import sympy
 
 from drake_hybrid.core.errors import ConfigError, PathError
 from drake_hybrid.core.height_field import HeightFieldConstraint
 from drake_hybrid.scenario.builder import build_scenario
 from drake_hybrid.scenario.data_task import load_task_file
 from drake_hybrid.scenario.parsing import models_directory
+from drake_hybrid.scenario.path_job import build_path
+from drake_hybrid.scenario.tasks import get_task
 from drake_hybrid.systems.path_source import PathSource
 from drake_hybrid.systems.sources import DesiredFieldSource
 
@@ -119,3 +120,17 @@ def test_a_path_needs_a_surface_and_not_fields(tmp_path):
     job = "  path: {pattern: {kind: raster}}\n"
     with pytest.raises(ConfigError, match=r"config\.path: a path needs workpiece\.surface"):
         load_task_file(write(tmp_path, window_with("", job)))
+
+
+def test_the_sphere_job_file_is_the_built_in_job():
+    """models/tasks/raster_sphere.yaml and the surface-polishing task: the same path, start and commands."""
+    task, config = load_task_file(TASKS / "raster_sphere.yaml")
+    built_in = get_task("surface-polishing")
+    reference = built_in.default_config()
+    ours, theirs = build_path(task, config), build_path(built_in, reference)
+    assert ours.length == pytest.approx(theirs.length, rel=1e-12) and ours.duration == pytest.approx(theirs.duration)
+    np.testing.assert_allclose(ours.centres(), theirs.centres(), atol=1e-12)
+    assert config.path == reference.path and config.gains == reference.gains and config.mode == reference.mode
+    x = np.asarray(config.start.configuration)
+    np.testing.assert_allclose(task.constraint_space(config).constraint.value(x),
+                               built_in.constraint_space(reference).constraint.value(x), atol=1e-12)
