@@ -34,6 +34,7 @@ from drake_hybrid.control.gains import ControlMode
 from drake_hybrid.core.errors import ConfigError
 from drake_hybrid.core.progress import Stages
 from drake_hybrid.experiments.metrics import display_unit
+from drake_hybrid.experiments.path_report import path_text
 from drake_hybrid.experiments.simulation import RunStopped, simulate
 from drake_hybrid.experiments.sweep import read_results, run_sweep
 from drake_hybrid.experiments.sweep_spec import SweepSpecError, load_spec
@@ -274,6 +275,8 @@ def command_simulate(args):
     if s.get("impedance"):
         print(f"  {_impedance_text(s['impedance'])}")
     print(f"  {_residual_text(s)}")
+    for line in path_text(s["path"]) if s.get("path") else ():
+        print(f"  {line}")
     for n, note in enumerate(s.get("notes", []), start=1):
         print(f"  note {n}: {note}")
     print(f"  wrote {', '.join(str(f) for f in files)}")

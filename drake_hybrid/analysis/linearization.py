@@ -268,8 +268,9 @@ def _task_shifts(task_name, scenario, root_context, predicted, measured, toleran
 def at_rest_config(config):
     """A copy of ``config`` at rest, its sampling kept: zero desired velocity, constant F_d(0), zero
     start integrals, starting in contact, no contact supervisor, sensor faults or wrench conditioner
-    (sampled systems outside the law, with their own timing); the model error is kept. Its start is
-    an equilibrium of the closed loop."""
+    (sampled systems outside the law, with their own timing); the model error is kept; a job's path
+    held at a point (``path.hold_at``, its first point unless set). Its start is an equilibrium of
+    the closed loop."""
 
 
     c = copy.deepcopy(config)
@@ -282,6 +283,8 @@ def at_rest_config(config):
     c.supervision.enabled = False
     c.sensor_faults = SensorFaultConfig()
     c.sensor.condition = False
+    if c.path.active and c.path.hold_at < 0:     # a job's path: held at its first point (path.hold_at)
+        c.path.hold_at = 0.0
     return c
 
 

@@ -72,6 +72,7 @@ def HybridController_(T):
             - desired_force
             - contact_phase (only with guarded_move)
             - approach_reference (only with guarded_move)
+            - path_position_error (only with path_position_error)
             output_ports:
             - actuation
             - velocity_error
@@ -94,6 +95,8 @@ def HybridController_(T):
         desired_force         m     F_d, in the coordinates of the constraint's E_f
         contact_phase         1     phases.ContactPhase (only with ``guarded_move``)
         approach_reference    m     C_r, the guarded move's reference (only with ``guarded_move``)
+        path_position_error   k     e_p measured against a path (only with ``path_position_error``;
+                                    e.g. ``systems.path_source.PathSource``)
         actuation             n_u   joint torques mapped to the actuators
         velocity_error        k     e_p' = E_p r-dot - r-dot_pd
         force_error           m     e_f = F - F_d
@@ -103,7 +106,8 @@ def HybridController_(T):
         tangential_force      k     F_v
         wrench_valid          1     1 if the measured wrench was finite, 0 if not (then force,
                                     force_error and tangential_force read NaN)
-        position_error        k     e_p = integral of e_p' (zero in velocity-force mode)
+        position_error        k     e_p = integral of e_p' (zero in velocity-force mode); with
+                                    ``path_position_error``, that input (position and impedance modes)
         ====================  ====  ===================================================
 
         Law (docs/theory.md §4; F is the force on the robot, docs/theory.md §0)::
@@ -239,6 +243,10 @@ def HybridController_(T):
             wrench_lag: T (s), how late the measured wrench arrives (the wrench path's low-pass,
                 ``systems.sensors.low_pass_lag``): the law splits it at the configuration T earlier,
                 to first order (``law.measured_forces``). Default 0.
+            path_position_error: declare the ``path_position_error`` input: in position-force and
+                impedance-force mode the law's e_p is that input (a position error measured against a
+                path, which does not drift as an integral does) instead of the integral of e_p' (still
+                integrated in the state, unused). Default False.
             fast_law: for T = float, evaluate the law through its compiled
                 float path (``fast_law``; the same law, equal to 1e-12) when
                 numba is available; False = the generic ``law.evaluate_law``.
@@ -248,7 +256,7 @@ def HybridController_(T):
                        mode=ControlMode.VELOCITY_FORCE, control_period=None, sample_lead=True, safety=None,
                        guarded_move=None, sampled_diagnostics=False, velocity_row_inertia=None,
                        plant_time_step=0.0, compensate_tangential_force=True, wrench_lag=0.0, fast_law=True,
-                       converter=None):
+                       path_position_error=False, converter=None):
             # Every argument as given, for scalar conversion (_construct_copy): one added later cannot
             # be forgotten there.
             arguments = locals()
@@ -339,6 +347,8 @@ def HybridController_(T):
             if guarded_move is not None:
                 self._phase_port = self.DeclareVectorInputPort("contact_phase", 1)
                 self._reference_port = self.DeclareVectorInputPort("approach_reference", m)
+            self._path_error_port = (self.DeclareVectorInputPort("path_position_error", k) if path_position_error
+                                     else None)
 
             integrated = m + (k if self.mode.integrates_position else 0)
             self._integrated_size = integrated
@@ -369,7 +379,8 @@ def HybridController_(T):
                 self.DeclareVectorOutputPort("diagnostics", start, self._calc_sampled_diagnostics,
                                              prerequisites_of_calc={self.xd_ticket()})
             self.DeclareVectorOutputPort("position_error", k, self._calc_position_error,
-                                         prerequisites_of_calc={state_ticket})
+                                         prerequisites_of_calc={state_ticket} if self._path_error_port is None else
+                                         {self._path_error_port.ticket()})
             # Before the first step: the law's preconditions at the start (check_start).
             self.DeclareInitializationPublishEvent(self._check_start_event)
             # The float fast path (control/fast_law.py): the same law compiled; None = the generic law.
@@ -418,6 +429,9 @@ def HybridController_(T):
         def _check_start_event(self, context):
             self.check_start(context)
             return EventStatus.Succeeded()
+        def get_path_position_error_input_port(self):
+            """The ``path_position_error`` input (only with ``path_position_error``; else None)."""
+            return self._path_error_port
 
         def diagnostics(self, context):
             """What the protections did in the evaluation at ``context``: a dict with the contact
@@ -466,7 +480,7 @@ def HybridController_(T):
             desired_velocity = self._velocity_port.Eval(context)
             desired_acceleration = self._acceleration_port.Eval(context)
             desired_force = self._force_port.Eval(context)
-            integrals = self._integrals(context)
+            integrals = self._law_integrals(context)
             wrench = self._wrench_port.Eval(context)
             phase = self._contact_phase(context)
             # C_r, read off the surface only (in CONTACT the law does not use it).
@@ -503,10 +517,17 @@ def HybridController_(T):
             if self.sampled_diagnostics:
                 discrete_state.get_mutable_vector(1).SetFromVector(reported_diagnostics_vector(solution))
 
+        def _law_integrals(self, context):
+            """[xi; e_p] as the law reads them: e_p from ``path_position_error`` when declared."""
+            integrals = self._integrals(context)
+            if self._path_error_port is not None and self.mode.integrates_position:
+                integrals = np.concatenate([integrals[:self.force_size], self._path_error_port.Eval(context)])
+            return integrals
+
         def _calc_position_error(self, context, output):
             m, k = self.force_size, self.velocity_size
             if self.mode.integrates_position:
-                output.SetFromVector(self._integrals(context)[m:m + k])
+                output.SetFromVector(self._law_integrals(context)[m:m + k])
             else:
                 output.SetFromVector(np.zeros(k))
 

@@ -39,6 +39,14 @@ A lost contact is re-acquired by the same guarded move: the arm moves along n_C 
 approach speed s until the force exceeds the contact threshold. The impact at re-contact is
 that of a pad arriving at speed s (the peak force grows with s and the pad's stiffness; the
 reliability figures in docs/reliability.md measure it).
+
+Lift-off (a job's end; ``ContactSupervisor(..., lift_off=True)``): when the ``lift_off`` input
+becomes 1 (e.g. ``systems.path_source.PathSource``'s ``path_done``), the supervisor leaves the
+surface: phase HOLD (the controller's guarded move, no force command), C_entry = C_r = C there, and
+C_r moving away from the surface at s (-n_C) until it is ``lift_height`` out, then standing; no
+transition back to CONTACT however the pad touches on the way. The ``lifting`` output is 1 from then
+on (the log's and plots' LIFT-OFF phase). The guarded move follows C_r with the lag 2 s / K_a of a
+ramp (it has no speed feed-forward in HOLD).
 """
 
 from dataclasses import dataclass
@@ -71,6 +79,7 @@ class SupervisionConfig:
     loss_threshold: p below which (for ``loss_dwell`` seconds) contact is declared lost.
     max_travel: how far (units of C) the guarded move may go without finding the surface.
     tare_time: s; > 0 starts in TARE (needs ``sensor.condition``) when the start is in free space.
+    lift_height: how far (units of C) a lift-off takes the pad from the surface (a job's end).
     """
 
     enabled: bool = False
@@ -81,10 +90,11 @@ class SupervisionConfig:
     loss_dwell: float = 0.01
     max_travel: float = 0.05
     tare_time: float = 0.0
+    lift_height: float = 0.01
 
     def validate(self):
         """ValueError naming the first bad field."""
-        check_fields(self, "supervision.", positive=("approach_gain", "loss_dwell", "max_travel"),
+        check_fields(self, "supervision.", positive=("approach_gain", "loss_dwell", "max_travel", "lift_height"),
                      nonnegative=("approach_speed", "tare_time"))
         if not 0 < float(self.loss_threshold) < float(self.contact_threshold) <= 1:
             raise ConfigError("supervision thresholds must satisfy 0 < loss_threshold < contact_threshold <= 1 "
@@ -107,22 +117,26 @@ def ContactSupervisor_(T):
             - desired_force
             - constraint_value
             - measured_wrench
+            - lift_off (only with lift_off)
             output_ports:
             - contact_phase
             - contact_count
             - approach_reference
+            - lifting
 
         ==================  ====  ==============================================================
         force               m     F (the controller's ``force`` output)
         desired_force       m     F_d
         constraint_value    m     C(r) (the controller's ``constraint_value`` output)
         measured_wrench     6     the wrench the controller reads (NaN entries: no decision)
+        lift_off            1     >= 0.5: leave the surface (only with ``lift_off``)
         contact_phase       1     phases.ContactPhase (state)
         contact_count       1     how many times CONTACT was entered (state)
         approach_reference  m     C_r, the guarded move's reference (state)
+        lifting             1     1 once a lift-off has begun (state)
         ==================  ====  ==============================================================
 
-        Discrete state [phase, timer, contact count, C_entry (m), C_r (m)], updated every ``period`` at
+        Discrete state [phase, timer, contact count, C_entry (m), C_r (m), lifting], updated every ``period`` at
         the controller's tick (k h - SAMPLE_LEAD h), from the controller's outputs at that tick:
         a transition takes effect at the next tick (one period of latency).
 
@@ -135,10 +149,11 @@ def ContactSupervisor_(T):
             kinematic_rows: rows of C held kinematically (excluded from p and n_C).
             period: the control period h (s).
             initial_phase: the phase at t = 0 (a ContactPhase).
+            lift_off: declare the ``lift_off`` input (a job's end: leave the surface, module docstring).
         """
 
         def _construct(self, config, force_size, kinematic_rows, period, initial_phase=ContactPhase.CONTACT,
-                       converter=None):
+                       lift_off=False, converter=None):
             LeafSystem_[T].__init__(self, converter)
             owner = "ContactSupervisor"
             instance(config, "config", owner, SupervisionConfig).validate()
@@ -160,7 +175,9 @@ def ContactSupervisor_(T):
             self._desired_force_port = self.DeclareVectorInputPort("desired_force", m)
             self._constraint_port = self.DeclareVectorInputPort("constraint_value", m)
             self._wrench_port = self.DeclareVectorInputPort("measured_wrench", 6)
-            initial = np.zeros(3 + 2 * m)
+            self.lift_off = bool(lift_off)
+            self._lift_port = self.DeclareVectorInputPort("lift_off", 1) if self.lift_off else None
+            initial = np.zeros(3 + 2 * m + 1)
             initial[0] = float(self.initial_phase)
             self._state_index = self.DeclareDiscreteState(initial)
             self.DeclarePeriodicDiscreteUpdateEvent(self.period, self.period * (1.0 - SAMPLE_LEAD), self._update)
@@ -168,10 +185,11 @@ def ContactSupervisor_(T):
             self.DeclareVectorOutputPort("contact_count", 1, self._calc_count, prerequisites_of_calc={self.xd_ticket()})
             self.DeclareVectorOutputPort("approach_reference", m, self._calc_reference,
                                          prerequisites_of_calc={self.xd_ticket()})
+            self.DeclareVectorOutputPort("lifting", 1, self._calc_lifting, prerequisites_of_calc={self.xd_ticket()})
 
         def _construct_copy(self, other, converter=None):
             Impl._construct(self, other.config, other.force_size, other.kinematic_rows, other.period,
-                            other.initial_phase, converter=converter)
+                            other.initial_phase, other.lift_off, converter=converter)
 
         def get_contact_phase_output_port(self):
             return self.GetOutputPort("contact_phase")
@@ -186,7 +204,7 @@ def ContactSupervisor_(T):
                 raise ValueError(f"ContactSupervisor: constraint_value must have {self.force_size} entries, got "
                                  f"{constraint_value.shape}")
             context.SetDiscreteState(0, np.concatenate([[float(ContactPhase(phase)), 0.0, 0.0], constraint_value,
-                                                        constraint_value]))
+                                                        constraint_value, [0.0]]))
 
         def _calc_phase(self, context, output):
             output.SetFromVector(context.get_discrete_state(0).CopyToVector()[:1])
@@ -195,21 +213,35 @@ def ContactSupervisor_(T):
             output.SetFromVector(context.get_discrete_state(0).CopyToVector()[2:3])
 
         def _calc_reference(self, context, output):
-            output.SetFromVector(context.get_discrete_state(0).CopyToVector()[3 + self.force_size:])
+            m = self.force_size
+            output.SetFromVector(context.get_discrete_state(0).CopyToVector()[3 + m:3 + 2 * m])
 
-        def next_state(self, state, force, desired_force, constraint_value, wrench_valid):
-            """The transition of the module docstring (floats): the state after one period."""
+        def _calc_lifting(self, context, output):
+            output.SetFromVector(context.get_discrete_state(0).CopyToVector()[3 + 2 * self.force_size:])
+
+        def next_state(self, state, force, desired_force, constraint_value, wrench_valid, lift=False):
+            """The transition of the module docstring (floats): the state after one period (``lift``: the
+            lift_off input is set; a state without the lifting entry is returned without it)."""
             config, h, m = self.config, self.period, self.force_size
             phase, timer, count = ContactPhase(int(state[0])), float(state[1]), float(state[2])
-            entry, reference = np.array(state[3:3 + m], dtype=float), np.array(state[3 + m:], dtype=float)
+            entry, reference = np.array(state[3:3 + m], dtype=float), np.array(state[3 + m:3 + 2 * m], dtype=float)
+            tail = [float(state[3 + 2 * m])] if len(state) > 3 + 2 * m else []     # [lifting]
             commanded = desired_force * self._force_controlled
             magnitude = float(np.linalg.norm(commanded))
             if magnitude == 0:                      # no pressing direction: nothing to supervise
-                return np.concatenate([[float(phase), timer, count], entry, reference])
+                return np.concatenate([[float(phase), timer, count], entry, reference, tail])
             pressing = float(force @ commanded) / magnitude if wrench_valid else None     # p
             direction = -commanded / magnitude                                             # n_C
             touching = pressing is not None and pressing >= config.contact_threshold * magnitude
-            if phase is ContactPhase.TARE:
+            if tail and (lift or tail[0] > 0.5):
+                # Lift-off: HOLD, C_r away from the surface at s from C there, up to lift_height out.
+                if tail[0] < 0.5:
+                    phase, timer, entry, tail = ContactPhase.HOLD, 0.0, constraint_value.copy(), [1.0]
+                    reference = entry.copy()
+                else:
+                    away = min(-direction @ (reference - entry) + h * config.approach_speed, config.lift_height)
+                    reference = entry - away * direction
+            elif phase is ContactPhase.TARE:
                 timer += h
                 if timer >= config.tare_time - 0.5 * h:
                     phase, timer, entry = ContactPhase.APPROACH, 0.0, constraint_value.copy()
@@ -234,14 +266,15 @@ def ContactSupervisor_(T):
                         reference = entry.copy()
                 else:
                     timer = 0.0
-            return np.concatenate([[float(phase), timer, count], entry, reference])
+            return np.concatenate([[float(phase), timer, count], entry, reference, tail])
 
         def _update(self, context, discrete_state):
             state = value(context.get_discrete_state(0).CopyToVector())
             force = value(self._force_port.Eval(context))
             wrench_valid = all_finite(self._wrench_port.Eval(context)) and all_finite(force)
+            lift = self._lift_port is not None and float(value(self._lift_port.Eval(context))[0]) >= 0.5
             new_state = self.next_state(state, force, value(self._desired_force_port.Eval(context)),
-                                        value(self._constraint_port.Eval(context)), wrench_valid)
+                                        value(self._constraint_port.Eval(context)), wrench_valid, lift)
             discrete_state.get_mutable_vector(0).SetFromVector(new_state)
 
     return Impl

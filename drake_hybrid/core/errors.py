@@ -124,3 +124,10 @@ def check_finite(owner, prefix="", allow_infinite=()):
 
     walk(owner, "")
     return owner
+
+
+class PathError(DrakeHybridError):
+    """A path or a coverage pattern that the controller cannot follow: a waypoint off the workpiece's
+    surface by more than the tolerance, a limit that is not positive, a pattern outside the region
+    where the surface is defined, a height map with missing or too few samples. The message names
+    the field (or the waypoint) and what is allowed."""

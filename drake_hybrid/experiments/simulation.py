@@ -44,7 +44,9 @@ from drake_hybrid.control.gains import ControlMode
 from drake_hybrid.core.progress import quiet
 from drake_hybrid.experiments.metrics import (contact_time, impedance_check, invalid_samples, last_valid, max_after,
                                            row_errors, row_units, worst)
+from drake_hybrid.experiments.path_report import before_lift_off, path_report
 from drake_hybrid.scenario.builder import build_scenario
+from drake_hybrid.scenario.path_job import PATH_LOGS
 from drake_hybrid.scenario.start import set_initial_conditions
 
 
@@ -203,7 +205,8 @@ def collect_log(scenario, context):
     state = _logged(scenario, context, "state")[1]
     n = state.shape[1] // 2
     log["q"], log["v"] = state[:, :n], state[:, n:]
-    for optional in ("true_wrench", "contact_phase", "wrench_valid"):    # sensor faults or conditioning; supervision
+    for optional in ("true_wrench", "contact_phase", "wrench_valid", "lifting", *PATH_LOGS):  # faults, conditioning; supervision;
+        # a job's path (scenario.path_job)
         if optional in scenario.loggers:
             log[optional] = _logged(scenario, context, optional)[1]
     if getattr(scenario.source, "true_projection", None) is not None:   # the paper's pseudo-velocity: its
@@ -230,20 +233,22 @@ def summarize(scenario, log, wall_time):
     k, m = controller.velocity_size, controller.force_size
     predicted = controller_prediction(controller)
     tau = design_time_constant(gains, controller.mode, controller.kinematic_rows)
-    t = log["t"]
     speed_scale = float(np.max(np.linalg.norm(log["desired_velocity"], axis=1)))
     force_scale = float(np.max(np.linalg.norm(log["desired_force"], axis=1)))
     labels = scenario.task.labels(scenario.config)
     start = contact_time(log)
     settle_after = start + 5 * tau
+    # A job's lift-off (scenario.path_job) leaves the surface on purpose: the rows' figures end there.
+    job = before_lift_off(log)
     # With the paper's pseudo-velocity rows the error is the true rows' (collect_log): as those, against their command.
-    velocity_rows = row_errors(t, log["velocity_error"], log.get("true_desired_velocity", log["desired_velocity"]),
+    velocity_rows = row_errors(job["t"], job["velocity_error"],
+                               job.get("true_desired_velocity", job["desired_velocity"]),
                                labels.get("velocity_error", labels.get("velocity", [])),
                                row_units(labels.get("velocity_error_units", labels.get("velocity_units", "SI")), k),
                                start, settle_after)
-    force_rows = row_errors(t, log["force_error"], log["desired_force"], labels.get("force", []),
+    force_rows = row_errors(job["t"], job["force_error"], job["desired_force"], labels.get("force", []),
                             row_units(labels.get("force_units", "SI"), m), start, settle_after)
-    measured = max_after(log["force"], t >= start)
+    measured = max_after(job["force"], job["t"] >= start)
     for i, row in enumerate(force_rows):      # a held row (controller.kinematic_rows) has no force loop
         row.update(held=i in controller.kinematic_rows, max_measured_force_after_contact=measured[i])
         if row["held"]:                        # no command, so no error: its figures are null, not 0
@@ -287,9 +292,9 @@ def summarize(scenario, log, wall_time):
         if controller.mode is ControlMode.IMPEDANCE_FORCE and controller.velocity_row_inertia is None else None,
         "max_constraint_residual": float(np.max(np.abs(log["constraint"]))),
         # From contact on: before it, C is the start's gap, not a residual.
-        "max_constraint_residual_after_contact":
-            float(np.max(np.abs(log["constraint"][t >= start]))) if np.any(t >= start) else None,
-        "max_constraint_residual_rows_after_contact": max_after(log["constraint"], t >= start),
+        "max_constraint_residual_after_contact":      # (to a job's lift-off)
+            float(np.max(np.abs(job["constraint"][job["t"] >= start]))) if np.any(job["t"] >= start) else None,
+        "max_constraint_residual_rows_after_contact": max_after(job["constraint"], job["t"] >= start),
         "constraint_units": constraint_units,      # per row of C (None where the task names none)
         "held": [row["name"] for row in force_rows if row["held"]],    # no force commanded: see force_rows
         "max_torque_to_effort_limit": torque_ratio.tolist(),
@@ -303,6 +308,9 @@ def summarize(scenario, log, wall_time):
         "start_in_contact": bool(config.start.in_contact),
         "start_force_command_step": (np.asarray(gains.force_integral, dtype=float) @ np.asarray(
             config.start.force_integral, dtype=float)).tolist() if config.start.force_integral else [0.0] * m,
+        # A job's path (scenario.path_job): path and force errors per segment, time off the surface.
+        "path": path_report(log, tau, scenario.source.path.duration, scenario.source.path.length,
+                            scenario.source.force_row) if "path_progress" in log else None,
     }
     return summary
 

@@ -30,6 +30,9 @@ failure, the error text of every stage that failed (never dropped):
 * ``peak_force``, ``peak_force_row``: the measured force's peak |F_i| over the run
   in its row's units, for the row whose peak is largest relative to its command
   (one unit where commanded to zero), and that row's name and units.
+* ``path_*``: a job's figures (``experiments.path_report``): the settled path error in all and along
+  the surface (mm), the normal force error (%), the time off the surface (s) and the fraction of the
+  path run; a job's steady window ends at its lift-off.
 * ``stable_continuous``: every eigenvalue of the continuous closed loop,
   except the k = d - m marginal ones the law leaves (unregulated positions,
   ``analysis.predicted_eigenvalues``), has Re(s) < ``eigenvalue_margin``. The
@@ -85,6 +88,7 @@ from drake_hybrid.analysis.linearization import (STEP_CHECK_RATE, linearize_cont
 from drake_hybrid.control.gains import ControlMode
 from drake_hybrid.core.errors import GainError
 from drake_hybrid.experiments.metrics import max_row_errors, row_commands
+from drake_hybrid.experiments.path_report import before_lift_off
 from drake_hybrid.experiments.simulation import RunStopped, simulate
 from drake_hybrid.experiments.config_paths import apply_parameters, set_config_value
 from drake_hybrid.experiments.sweep_spec import StabilityCriteria, SweepSpecError, check_axis_values, parameters_digest
@@ -100,6 +104,10 @@ METRIC_COLUMNS = [
     "final_velocity_error", "final_force_error",
     "peak_force", "max_constraint_residual",
     "simulation_wall_time", "linearization_wall_time", "wall_time", "cpu_time",
+    # A job's path (experiments.path_report; empty for other runs): settled path error in all and along
+    # the surface (mm), normal force error (%), time off the surface (s), the fraction of the path run.
+    "path_error_mm", "path_error_along_surface_mm", "path_force_error_percent", "path_time_off_surface",
+    "path_fraction_run",
 ]
 TEXT_COLUMNS = ["steady_velocity_row", "steady_force_row", "peak_force_row", "discrete_step_check", "worker", "error"]
 RESULT_COLUMNS = VERDICT_COLUMNS + METRIC_COLUMNS + TEXT_COLUMNS
@@ -170,8 +178,9 @@ def peak_row_force(log, summary):
 
 
 def simulation_metrics(result, criteria):
-    """The simulation's columns from a SimulationResult (see the module docstring)."""
-    log, summary = result.log, result.summary
+    """The simulation's columns from a SimulationResult (see the module docstring). A job's run ends, for
+    the steady window, at its lift-off (leaving the surface is not an error)."""
+    log, summary = before_lift_off(result.log), result.summary
     t = log["t"]
     finite = all(np.all(np.isfinite(np.asarray(v, dtype=float))) for v in log.values())
     after = t[-1] - criteria.steady_window * (t[-1] - t[0])
@@ -194,7 +203,19 @@ def simulation_metrics(result, criteria):
         "peak_force_row": peak_force_row,
         "max_constraint_residual": summary["max_constraint_residual"],
         "simulation_wall_time": summary["wall_time"],
+        **path_columns(summary.get("path")),
     }
+
+
+def path_columns(report):
+    """The path columns of a job's ``summary["path"]`` (none for another run)."""
+    if not report:
+        return {}
+    return {"path_error_mm": report["max_path_error_mm"],
+            "path_error_along_surface_mm": report["max_path_error_along_surface_mm"],
+            "path_force_error_percent": report["max_force_error_percent"],
+            "path_time_off_surface": report["time_off_surface_s"],
+            "path_fraction_run": report["arc_length_reached_m"] / report["length_m"] if report["length_m"] else None}
 
 
 def _stage_error(stage, error):

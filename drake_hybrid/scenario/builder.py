@@ -37,6 +37,8 @@ from drake_hybrid.core.arguments import instance
 from drake_hybrid.core.errors import ConfigError
 from drake_hybrid.core.kinematics import EndEffectorKinematics
 from drake_hybrid.scenario.config import ScenarioConfig, WristSensorConfig
+from drake_hybrid.scenario.path_job import (add_path_loggers, connect_path, draw_path, lifts_off, make_path_source,
+                                             with_path_commands)
 from drake_hybrid.scenario.plant import RobotModel, build_controller_plant, build_plant
 from drake_hybrid.scenario.start import check_start_sizes
 from drake_hybrid.scenario.task import pad_kinematic_rows
@@ -105,7 +107,8 @@ def make_controller(config, task, plant, controller_plant, robot, constraint_spa
         velocity_row_inertia=velocity_row_inertia(config, task, plant, constraint_space),
         compensate_tangential_force=config.compensate_tangential_force,
         wrench_lag=low_pass_lag(config.sensor.bandwidth_hz, control_period),
-        plant_time_step=plant.time_step() if plant_time_step is None else plant_time_step)
+        plant_time_step=plant.time_step() if plant_time_step is None else plant_time_step,
+        path_position_error=config.path.active)
 
 
 def prepare_config(config):
@@ -121,6 +124,8 @@ def prepare_config(config):
     constraint_space = task.constraint_space(config)
     config = dataclasses.replace(config, desired_force=pad_kinematic_rows(
         config.desired_force, constraint_space.force_size, constraint_space.constraint.kinematic_rows))
+    if config.path.active:
+        config = with_path_commands(config, constraint_space)
     config.desired_force.validate(constraint_space.force_size, "desired_force")   # (a task may fill desired_velocity)
     if config.supervised:          # a guarded approach to a surface, which only pushes: over the whole course
         config.desired_force.check_keeps_sign("desired_force")
@@ -210,7 +215,11 @@ def build_scenario(config, meshcat=None, with_loggers=True, sampled_plant_output
     builder.Connect(plant.get_state_output_port(robot.arm), controller.get_estimated_state_input_port())
     builder.Connect(controller.GetOutputPort("actuation"), plant.get_actuation_input_port(robot.arm))
 
-    source = builder.AddNamedSystem("desired", task.make_source(config, controller_plant, robot, constraint_space))
+    if config.path.active:                          # a job's path (scenario.path_job)
+        source = make_path_source(task, config, controller_plant, robot, constraint_space)
+    else:
+        source = task.make_source(config, controller_plant, robot, constraint_space)
+    source = builder.AddNamedSystem("desired", source)
     if source.num_input_ports():
         builder.Connect(plant.get_state_output_port(robot.arm), source.get_input_port(0))
     for name in ("desired_velocity", "desired_acceleration", "desired_force"):
@@ -222,7 +231,7 @@ def build_scenario(config, meshcat=None, with_loggers=True, sampled_plant_output
             initial_phase = ContactPhase.TARE if tare else ContactPhase.APPROACH
         supervisor = builder.AddNamedSystem("contact_supervisor", ContactSupervisor(
             config.supervision, constraint_space.force_size, controller.kinematic_rows, control_period,
-            initial_phase))
+            initial_phase, lift_off=lifts_off(config)))
         for name in ("force", "constraint_value"):
             builder.Connect(controller.GetOutputPort(name), supervisor.GetInputPort(name))
         builder.Connect(source.GetOutputPort("desired_force"), supervisor.GetInputPort("desired_force"))
@@ -231,6 +240,8 @@ def build_scenario(config, meshcat=None, with_loggers=True, sampled_plant_output
         builder.Connect(supervisor.GetOutputPort("approach_reference"), controller.get_approach_reference_input_port())
         if tare:
             builder.Connect(supervisor.GetOutputPort("contact_phase"), conditioner.GetInputPort("contact_phase"))
+    if config.path.active:
+        connect_path(builder, source, controller, supervisor)
 
     loggers = {}
     if with_loggers:
@@ -253,8 +264,12 @@ def build_scenario(config, meshcat=None, with_loggers=True, sampled_plant_output
             loggers["true_wrench"] = LogVectorOutput(true_wrench, builder, period)
         if supervisor is not None:
             loggers["contact_phase"] = LogVectorOutput(supervisor.GetOutputPort("contact_phase"), builder, period)
+        if config.path.active:
+            add_path_loggers(builder, source, supervisor, loggers, period)
     if meshcat is not None:
         MeshcatVisualizer.AddToBuilder(builder, scene_graph, meshcat)
+        if config.path.active:
+            draw_path(meshcat, source.path)
     diagram = builder.Build()
     diagram.set_name(f"hybrid_{task.name}")
     kinematics = EndEffectorKinematics(plant, robot.end_effector_frame, robot.end_effector_point,

@@ -35,6 +35,7 @@ from drake_hybrid.control.safety import SafetyConfig
 from drake_hybrid.control.supervision import SupervisionConfig
 from drake_hybrid.core.errors import ConfigError, check_fields, check_finite
 from drake_hybrid.core.schema import check_yaml_against_schema, read_yaml_file
+from drake_hybrid.scenario.path_config import PathConfig
 from drake_hybrid.systems.faults import SensorFaultConfig
 from drake_hybrid.systems.sources import Profile
 
@@ -278,6 +279,9 @@ class ScenarioConfig:
     baseline: BaselineGains = field(default_factory=BaselineGains)
     mechanism: MechanismConfig = field(default_factory=MechanismConfig)
     compensate_tangential_force: bool = True     # cancel the measured F_v in velocity/position-force mode
+    # A job's path over the workpiece (scenario.path_config; inactive by default): the desired motion
+    # and force then come from the path (scenario.path_job), not from desired_velocity / desired_force.
+    path: PathConfig = field(default_factory=PathConfig)
 
     def replace(self, **changes):
         """A copy with some top-level fields changed."""
@@ -343,6 +347,9 @@ class ScenarioConfig:
                               "max_travel, before it reaches the surface; raise max_travel or start closer")
         self.mechanism.validate()
         self.baseline.validate()
+        self.path.validate()
+        if self.path.active and self.controller != "li-sastry":
+            raise ConfigError(f"path: controller '{self.controller}' is a baseline; a path job needs the li-sastry law")
         if self.controller not in CONTROLLERS:
             raise ConfigError(f"controller must be one of {', '.join(CONTROLLERS)}, got '{self.controller}'")
         if self.controller != "li-sastry" and (self.mechanism.source != "none" or self.supervised):

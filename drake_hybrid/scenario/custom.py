@@ -34,14 +34,11 @@ from xml.etree import ElementTree
 
 import numpy as np
 
-from pydrake.geometry import (AddRigidHydroelasticProperties, Capsule, Cylinder, Ellipsoid, ProximityProperties, Shape,
-                             Sphere)
 from pydrake.math import RigidTransform, RollPitchYaw
 from pydrake.multibody.parsing import Parser
-from pydrake.multibody.plant import CoulombFriction
 
 from drake_hybrid.control.gains import HybridGains
-from drake_hybrid.core.arguments import describe, function, instance, positive, text, vector
+from drake_hybrid.core.arguments import describe, function, instance, text, vector
 from drake_hybrid.core.errors import ArgumentError, OffConstraintError
 from drake_hybrid.core.kinematics import inverse_kinematics
 from drake_hybrid.scenario.config import ScenarioConfig, StartConfig
@@ -50,6 +47,7 @@ from drake_hybrid.scenario.plant import RobotModel, get_frame
 from drake_hybrid.scenario.start import pressing_positions
 from drake_hybrid.scenario.task import Task
 from drake_hybrid.scenario.tasks.robots import add_pad_tool
+from drake_hybrid.scenario.workpieces import add_rigid_workpiece, default_resolution  # noqa: F401 (public here too)
 from drake_hybrid.systems.sources import Profile
 
 # ------------------------------------------------------------------------------------------------
@@ -124,45 +122,6 @@ def attach_pad_tool(plant, arm, flange_frame, X_flange_tool=None):
     return RobotModel(arm=arm, model_instances=[arm, tool], end_effector_frame="pad_center",
                       end_effector_point=np.zeros(3), tool_weld=weld, pad_geometries=pad,
                       only_pad_contact=True)
-
-
-MAX_RESOLUTION = 0.005            # m, the coarsest workpiece mesh
-FACETS_PER_RADIUS = 20            # a curved shape's mesh: radius / 20 (2.5 mm at R = 5 cm)
-
-
-def default_resolution(shape):
-    """The workpiece mesh's resolution hint (m): MAX_RESOLUTION, finer on a curved shape of small
-    radius (its smallest, for an ellipsoid). A facet's normal is off the surface's by up to half a
-    facet angle, resolution / (2 R), and the pad reads that as a tangential force that comes and
-    goes as it slides: at 5 mm on R = 5 cm the impedance-force velocity error stayed at 3.4 %,
-    at 2.5 mm 0.6 % (docs/drake_notes.md)."""
-    radii = {Sphere: lambda s: [s.radius()], Cylinder: lambda s: [s.radius()], Capsule: lambda s: [s.radius()],
-             Ellipsoid: lambda s: [s.a(), s.b(), s.c()]}
-    for kind, radius in radii.items():
-        if isinstance(shape, kind):
-            return min(MAX_RESOLUTION, min(radius(shape)) / FACETS_PER_RADIUS)
-    return MAX_RESOLUTION
-
-
-def add_rigid_workpiece(plant, shape, X_WG, name="workpiece", resolution_hint=None,
-                        color=(0.55, 0.6, 0.7, 1.0)):
-    """Register ``shape`` (a pydrake.geometry Shape) on the world body at X_WG as a rigid
-    hydroelastic collision geometry (mesh resolution ``resolution_hint``, m; default
-    ``default_resolution``: tied to the curvature) and a visual one. Returns the collision
-    geometry ids. Contact friction is set from the scenario config."""
-    owner = "add_rigid_workpiece"
-    instance(shape, "shape", owner, Shape, what="a pydrake.geometry Shape (Box, Sphere, Cylinder, Ellipsoid, ...)")
-    instance(X_WG, "X_WG", owner, RigidTransform)
-    resolution_hint = positive(resolution_hint, "resolution_hint", owner, unit="m", allow_none=True)
-    color = vector(color, "color", owner, 4)
-    world = plant.world_body()
-    properties = ProximityProperties()
-    AddRigidHydroelasticProperties(default_resolution(shape) if resolution_hint is None else resolution_hint,
-                                   properties)
-    properties.AddProperty("material", "coulomb_friction", CoulombFriction(0.0, 0.0))
-    geometry = plant.RegisterCollisionGeometry(world, X_WG, shape, name, properties)
-    plant.RegisterVisualGeometry(world, X_WG, shape, f"{name}_visual", np.asarray(color, dtype=float))
-    return [geometry]
 
 
 # ------------------------------------------------------------------------------------------------

@@ -70,11 +70,16 @@ from drake_hybrid.core.expressions import check_parameter_names, expression_row_
 from drake_hybrid.core.projections import ConstraintSpace, GivenVelocityProjection, KernelVelocityProjection
 from drake_hybrid.core.schema import check_depth, check_yaml_against_schema, read_yaml_file
 from drake_hybrid.scenario.config import ScenarioConfig
+from drake_hybrid.core.surfaces import view_projection
 from drake_hybrid.scenario.custom import CustomTask, add_rigid_workpiece, attach_pad_tool
+from drake_hybrid.scenario.data_surface import (FieldsSpec, SurfaceSpec, add_surface_geometry, field_expressions,
+                                                field_source, surface_of)
 from drake_hybrid.scenario.hooks import make_hooks
 from drake_hybrid.scenario.parsing import ConfigureParser, installed_model_packages, models_directory
+from drake_hybrid.scenario.path_job import path_on, path_start_positions, start_pose_on, view_of
 from drake_hybrid.scenario.robots import TOOL_AXES, load_arm
 from drake_hybrid.scenario.tasks import register_task
+from drake_hybrid.systems.sources import Profile
 
 MAX_FILE_SIZE = 1_000_000      # characters of a task file
 CHARTS = ("planar", "planar_point", "euler_zxz", "pose")
@@ -134,6 +139,7 @@ class WorkpieceSpec:
 
     directives: List[ModelDirective] = field(default_factory=list)   # Drake model directives (e.g. add_weld)
     shapes: List[ShapeSpec] = field(default_factory=list)            # rigid hydroelastic shapes on the world
+    surface: SurfaceSpec = field(default_factory=SurfaceSpec)  # the surface a path lies on (scenario/data_surface.py)
 
 
 @dataclass
@@ -200,6 +206,7 @@ class TaskFile:
     velocity_projection: VelocityProjectionSpec = field(default_factory=VelocityProjectionSpec)
     start: StartSpec = field(default_factory=StartSpec)
     labels: LabelsSpec = field(default_factory=LabelsSpec)
+    fields: FieldsSpec = field(default_factory=FieldsSpec)   # Y_d(r), F_d(r) as expressions (scenario/data_surface.py)
     config: ScenarioConfig = field(default_factory=ScenarioConfig)   # the run (task is set to name)
 
 
@@ -349,11 +356,12 @@ class DataTask(CustomTask):
     and ``path``. Its start is in the chart's coordinates of the controlled point (``config.start.configuration``
     with the chart's number of coordinates; six numbers [x, y, z, roll, pitch, yaw] of E otherwise)."""
 
-    def __init__(self, spec, path, text, hooks=None, continuous_plant=True, **pieces):
+    def __init__(self, spec, path, text, hooks=None, continuous_plant=True, surface=None, fields=None, **pieces):
         super().__init__(**pieces)
         self.spec, self.path, self.text = spec, Path(path), text
         self.hooks = dict(hooks or {})            # {Task method: the hook's implementation} (scenario/hooks.py)
         self.continuous_plant = continuous_plant
+        self.surface, self.fields = surface, fields   # (Surface, offset) or None; (Y_d, F_d) or None
         self._config = None
 
     def _hook(self, method):
@@ -371,11 +379,18 @@ class DataTask(CustomTask):
     def add_workpiece(self, plant, config):
         return list(self._add_workpiece(plant, config))     # the file's workpiece, then a hook's
 
+    def workpiece_surface(self, config):
+        return self.surface
+
     def make_source(self, config, controller_plant, robot, constraint_space):
+        if self.fields is not None:                # the paper's fields Y_d(r), F_d(r) (scenario/data_surface.py)
+            return field_source(self.fields, controller_plant, robot, constraint_space, f"{self.path}: ")
         hook = self._hook("make_source") or super().make_source
         return hook(config, controller_plant, robot, constraint_space)
 
     def start_positions(self, scenario):
+        if scenario.config.path.active and self._hook("start_positions") is None:   # a job: the path's first point
+            return path_start_positions(self, scenario, self.joint_guess)
         return (self._hook("start_positions") or super().start_positions)(scenario)
 
     def set_environment_state(self, scenario, plant_context):
@@ -464,11 +479,12 @@ def _instance_names(plant):
     return [plant.GetModelInstanceName(ModelInstanceIndex(i)) for i in range(plant.num_model_instances())]
 
 
-def _workpiece_adder(spec, path, where, hooks, packages):
+def _workpiece_adder(spec, path, where, hooks, packages, surface=None):
     workpiece = spec.workpiece
     add_by_hook = hooks.get("add_workpiece")
-    if not workpiece.directives and not workpiece.shapes and add_by_hook is None:
-        raise ConfigError(f"{where}workpiece: give directives or shapes")
+    with_surface = surface is not None and workpiece.surface.geometry
+    if not workpiece.directives and not workpiece.shapes and add_by_hook is None and not with_surface:
+        raise ConfigError(f"{where}workpiece: give directives, shapes or a surface")
     add_models = (_directives_adder(workpiece.directives, f"{where}workpiece", path, packages)
                   if workpiece.directives else None)
     for index, shape in enumerate(workpiece.shapes):
@@ -493,21 +509,29 @@ def _workpiece_adder(spec, path, where, hooks, packages):
             geometries += add_rigid_workpiece(plant, kind(*shape.size), shape.X_WG.GetDeterministicValue(),
                                               name=f"{shape.name}_{index}",
                                               resolution_hint=shape.resolution_hint or None)
+        if with_surface:
+            geometries += add_surface_geometry(plant, surface[0], workpiece.surface, name="surface")
         if add_by_hook is not None:
             geometries += list(add_by_hook(plant, config))
         return geometries
     return add_workpiece
 
 
-def constraint_space_of(spec, chart, where, anchor, hooks=None):
-    """The ConstraintSpace of the file: C from ``constraint.rows`` (or a hook's ``constraint``), E_p
-    from ``velocity_projection`` (the kernel of E_f at ``anchor`` when no rows are given)."""
+def constraint_space_of(spec, chart, where, anchor, hooks=None, surface=None):
+    """The ConstraintSpace of the file: C from ``constraint.rows`` (or a hook's ``constraint``, or the
+    ``workpiece.surface`` offset by the pad's radius), E_p from ``velocity_projection`` (the view's rows
+    with a surface, else the kernel of E_f at ``anchor``, when no rows are given)."""
     symbols, parameters = chart.configuration_symbols, spec.parameters
     if hooks and "constraint" in hooks:
         if spec.constraint.rows or spec.constraint.kinematic_rows or spec.constraint.branch:
             raise ConfigError(f"{where}constraint: a hook gives the constraint; give no rows, kinematic_rows or "
                               "branch")
         constraint = hooks["constraint"](chart)
+    elif surface is not None and not spec.constraint.rows:
+        try:
+            constraint = surface[0].offset_constraint(chart, surface[1])
+        except TypeError as error:
+            raise ConfigError(f"{where}workpiece.surface: {error} (chart.kind: pose)") from None
     else:
         constraint = _constraint_of_rows(spec, chart, where)
     d = chart.velocity_size
@@ -517,12 +541,14 @@ def constraint_space_of(spec, chart, where, anchor, hooks=None):
             matrix = [expression_row_to_sympy(text, d, symbols, parameters, f"{where}velocity_projection.rows[{i}]")
                       for i, text in enumerate(given)]
             projection = GivenVelocityProjection(chart, matrix, name="E_p")
+        elif surface is not None:
+            projection = view_projection(chart, view_of(spec.config.path, surface[0]))
         else:
             projection = KernelVelocityProjection(constraint, anchor)
         return ConstraintSpace(constraint, projection)
     except ConfigError:
         raise
-    except ValueError as error:
+    except (ValueError, TypeError) as error:
         raise ConfigError(f"{where}velocity_projection: {error}") from None
 
 
@@ -581,10 +607,24 @@ def load_task_file(path, register=True, text=None):
     check_parameter_names(spec.parameters, (), f"{where}parameters")
     chart = make_chart(spec.chart, where)
     check_parameter_names(spec.parameters, chart.configuration_symbols, f"{where}parameters")
-    start = start_configuration_of(spec, chart, where)
+    surface = surface_of(spec.workpiece.surface, path, where)
+    job = spec.config.path
+    if job.active:
+        job.validate(f"{where}config.path.")
+        if surface is None:
+            raise ConfigError(f"{where}config.path: a path needs workpiece.surface (the surface it lies on)")
+    if job.active and not (spec.start.configuration or spec.start.pose):
+        # A job starts at its path's first point (scenario.path_job).
+        start = chart.configuration_of_pose(start_pose_on(surface[0], path_on(*surface, job), job)[0])
+    else:
+        start = start_configuration_of(spec, chart, where)
     hooks, continuous_plant = make_hooks(spec, where)
     packages = model_packages(spec, path, where)
-    space = constraint_space_of(spec, chart, where, anchor=start, hooks=hooks)
+    space = constraint_space_of(spec, chart, where, anchor=start, hooks=hooks, surface=surface)
+    fields = field_expressions(spec.fields, chart, spec.parameters, where, space.force_size)
+    if fields is not None and job.active:
+        raise ConfigError(f"{where}fields: a job's path gives the desired motion and force; give fields or "
+                          "config.path, not both")
     if len(spec.start.joint_guess) == 0:
         raise ConfigError(f"{where}start.joint_guess: give the arm's joint positions inverse kinematics starts from")
     labels = dataclasses.asdict(spec.labels)
@@ -595,11 +635,16 @@ def load_task_file(path, register=True, text=None):
         del labels["constraint_units"]         # the summary then says "in the units of C's rows"
     task = DataTask(spec, path, text, hooks=hooks, continuous_plant=continuous_plant, name=spec.name,
                     add_robot=_robot_adder(spec, path, where, hooks, packages),
-                    add_workpiece=_workpiece_adder(spec, path, where, hooks, packages), constraint_space=space,
-                    start_pose=chart.pose(start), joint_guess=spec.start.joint_guess, labels=labels,
-                    description=spec.description)
+                    add_workpiece=_workpiece_adder(spec, path, where, hooks, packages, surface),
+                    constraint_space=space, start_pose=chart.pose(start), joint_guess=spec.start.joint_guess,
+                    labels=labels, description=spec.description, surface=surface, fields=fields)
     config = dataclasses.replace(spec.config, task=spec.name)
     config.start = dataclasses.replace(config.start, configuration=[float(v) for v in start])
+    if fields is not None:
+        # The fields' commands at the start (what the start presses with, scenario.start): F_d(r_0) and Y_d(r_0).
+        values = {symbol: value for symbol, value in zip(chart.configuration_symbols, start)}
+        config.desired_force = Profile(kind="constant", value=[float(f.evalf(subs=values)) for f in fields[1]])
+        config.desired_velocity = Profile(kind="constant", value=[0.0] * space.velocity_size)
     config.validate()
     task._config = config
     if register:

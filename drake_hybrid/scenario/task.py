@@ -28,6 +28,7 @@ import numpy as np
 
 from drake_hybrid.core.errors import ConfigError
 from drake_hybrid.scenario.config import ScenarioConfig
+from drake_hybrid.scenario.path_job import path_events
 from drake_hybrid.systems.sources import Profile, ProfileSource
 
 
@@ -197,8 +198,9 @@ class Task(abc.ABC):
         (e.g. the pad on a rough patch): a list of ``{"start": t0, "end": t1 or None, "label": ...}``
         (s; ``end`` None: an instant; ``"explains_errors": False`` for a phase the plots mark but that
         causes no row's error, e.g. a change of basis of held rows). Default: where a switching
-        constraint changes piece (``piece_switches``), none for a constraint of one piece."""
-        return piece_switches(scenario, log)
+        constraint changes piece (``piece_switches``), none for a constraint of one piece; and a job's
+        phases (``path_job.path_events``: approach, dwell, line changes, lift-off)."""
+        return piece_switches(scenario, log) + path_events(log)
 
     def labels(self, config=None):
         """Plot labels of the velocity- and force-controlled coordinates (``config``: the run's, for a
@@ -231,6 +233,12 @@ class Task(abc.ABC):
         simulation ``plant`` (``mechanism.source: plant``). Default: the task has no mechanism."""
         raise ConfigError(f"mechanism.source: task '{self.name}' has no mechanism to read from the plant; "
                           "use source 'given' with mechanism.velocity_row_inertia, or 'none'")
+
+    def workpiece_surface(self, config):
+        """(surface, pad offset): the workpiece's surface (a ``core.surfaces.Surface``) and how far the
+        controlled point is held off it along the normal (a ball pad's radius), for a job's path
+        (``config.path``, ``scenario.path_job``). Default: None (the task has no path over a surface)."""
+        return None
 
     def make_source(self, config, controller_plant, robot, constraint_space):
         """The system producing desired_velocity, desired_acceleration and desired_force.

@@ -9,9 +9,11 @@ velocity projection, its default ScenarioConfig and its start configuration.
 from drake_hybrid.scenario.tasks.crank_turning import CrankTurning
 from drake_hybrid.scenario.tasks.grinding import Grinding
 from drake_hybrid.scenario.tasks.sphere_polishing import SpherePolishing
+from drake_hybrid.scenario.tasks.surface_polishing import SurfacePolishing
 from drake_hybrid.scenario.tasks.window_washing import WindowWashing
 
-TASKS = {task.name: task for task in (WindowWashing(), CrankTurning(), SpherePolishing(), Grinding())}
+TASKS = {task.name: task for task in (WindowWashing(), CrankTurning(), SpherePolishing(), Grinding(),
+                                      SurfacePolishing())}
 
 
 BUILT_IN_TASKS = frozenset(TASKS)

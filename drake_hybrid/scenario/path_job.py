@@ -1,0 +1,258 @@
+"""A job from the first touch to the last: a path over the workpiece in a scenario.
+
+With ``config.path`` active (``scenario.path_config``) and a task that names its workpiece's
+surface (``Task.workpiece_surface(config) -> (surface, pad offset)``), the builder
+(``scenario.builder.build_scenario``) makes the closed loop of a job::
+
+    PathSource ─desired_velocity, desired_acceleration, desired_force─► HybridController
+    PathSource ─path_position_error──────────────────────────────────► HybridController (e_p against the path)
+    ContactSupervisor ─contact_phase─► PathSource     (the path's clock starts at the first contact)
+    PathSource ─path_done─► ContactSupervisor (lift_off: leave the surface at the end)
+
+and logs the path's reference, error and progress and the supervisor's lift-off. A job starts
+off the surface (``start.in_contact: false``): the guarded approach goes to the path's first
+point, the pad presses there for ``path.dwell`` s, follows the path, and lifts off
+``supervision.lift_height`` at its end. A start in contact (``start.in_contact: true``) presses at
+the first point at t = 0 and starts the path after the dwell.
+
+The pieces are public for a diagram of your own: ``build_path`` (the SurfacePath of a config),
+``make_path_source``, ``connect_path``, ``path_start_pose``, ``draw_path`` (Meshcat).
+"""
+
+import dataclasses
+import math
+
+import numpy as np
+
+from pydrake.geometry import Rgba
+from pydrake.math import RigidTransform, RotationMatrix
+from pydrake.systems.primitives import LogVectorOutput
+
+from drake_hybrid.control.phases import ContactPhase
+from drake_hybrid.core.errors import ConfigError
+from drake_hybrid.core.kinematics import inverse_kinematics
+from drake_hybrid.core.paths import PathLimits, SurfacePath, path_from_strokes, path_from_waypoints
+from drake_hybrid.core.patterns import raster, spiral
+from drake_hybrid.core.surfaces import ViewPlane
+from drake_hybrid.scenario.start import pressing_positions
+from drake_hybrid.systems.path_source import PathSource, reference_rotation
+from drake_hybrid.systems.sources import Profile
+
+# Logged outputs of the PathSource (log key -> port) and of the supervisor.
+PATH_LOGS = {"reference_position": "reference_position", "reference_normal": "reference_normal",
+             "path_error": "path_error", "path_progress": "path_progress", "path_done": "path_done"}
+
+_PATHS = {}
+
+
+def workpiece_surface(task, config):
+    """(surface, pad offset) of the task's workpiece; ConfigError if the task names none."""
+    surface = task.workpiece_surface(config)
+    if surface is None:
+        raise ConfigError(f"path: task '{task.name}' does not name its workpiece's surface (Task.workpiece_surface), "
+                          "so a path cannot be laid on it")
+    return surface
+
+
+def view_of(path_config, surface):
+    """The pattern's ViewPlane: ``path.view`` or the surface's default."""
+    view = path_config.view
+    if not (view.origin or view.axis_u or view.axis_v):
+        return surface.default_view()
+    default = surface.default_view()
+    return ViewPlane.make(view.origin or default.origin, view.axis_u or default.axis_u, view.axis_v or default.axis_v,
+                          what="path.view")
+
+
+def build_path(task, config):
+    """The SurfacePath of ``config.path`` on the task's workpiece (cached per task and config); held at
+    one point when ``path.hold_at`` >= 0. PathError (one line) for a path the job cannot follow."""
+    key = (task.name, repr(config.path), repr(sorted(config.task_parameters.items())),
+           repr(sorted(config.task_options.items())))
+    if key not in _PATHS:
+        _PATHS[key] = path_on(*workpiece_surface(task, config), config.path)
+    return _PATHS[key]
+
+
+def path_on(surface, offset, settings):
+    """The SurfacePath of the PathConfig ``settings`` on ``surface`` for a pad centre ``offset`` off it."""
+    settings.validate()
+    view = view_of(settings, surface)
+    limits = PathLimits(settings.speed, settings.acceleration)
+    force = settings.force_argument()
+    if settings.waypoints:
+        points = [w.point for w in settings.waypoints]
+        path = path_from_waypoints(surface, points, offset, limits, force, settings.tolerance,
+                                   settings.interpolation, view, what="path")
+    else:
+        pattern = settings.pattern
+        if pattern.kind == "raster":
+            strokes = raster(pattern.center, pattern.size, pattern.spacing, pattern.direction, what="path.pattern")
+        else:
+            strokes = spiral(pattern.center, pattern.radius, pattern.spacing, what="path.pattern")
+        check_inside = getattr(surface, "check_inside", None)
+        if check_inside is not None:                     # a height map: the pad must stay on the map
+            corners = np.vstack([stroke[[0, -1]] for stroke in strokes])
+            map_points = [surface.field.map_point(view.point(u, v))[:2] for u, v in corners]
+            check_inside(map_points, offset, "the pattern's corner")
+        path = path_from_strokes(surface, view, strokes, offset, limits, force, what="path")
+    if settings.holding:
+        arc = settings.hold_at * path.length
+        sample = path.evaluate(_time_at_arc(path, arc))
+        path = SurfacePath.hold(sample.position, sample.normal, path.force(arc))
+    return path
+
+
+def _time_at_arc(path, arc):
+    """The path time at which the reference reaches arc length ``arc``."""
+    times = np.linspace(0.0, path.duration, 2001)
+    arcs = [path.evaluate(t).arc_length for t in times]
+    return float(np.interp(arc, arcs, times))
+
+
+def heading_of(settings, surface):
+    """The world direction the tool's x axis keeps: ``settings.heading`` (a PathConfig) or the view's u axis."""
+    return np.asarray(settings.heading, dtype=float) if settings.heading else np.asarray(
+        view_of(settings, surface).axis_u)
+
+
+def start_pose_on(surface, path, settings):
+    """(X_WP, normal): the pad centre's pose at the first point of ``path`` (its reference orientation,
+    ``settings`` a PathConfig) and the surface's outward normal there."""
+    centre, normal = path.first_point()
+    R = reference_rotation(normal, heading_of(settings, surface))
+    return RigidTransform(RotationMatrix(R), centre), np.asarray(normal, dtype=float)
+
+
+def path_start_pose(task, config):
+    """``start_pose_on`` the task's workpiece for ``config.path``."""
+    return start_pose_on(workpiece_surface(task, config)[0], build_path(task, config), config.path)
+
+
+def make_path_source(task, config, controller_plant, robot, constraint_space):
+    """The PathSource of ``config.path`` (it waits for the first contact when the start is off the surface)."""
+    surface, _ = workpiece_surface(task, config)
+    path = build_path(task, config)
+    kinematic = constraint_space.constraint.kinematic_rows
+    force_row = next(i for i in range(constraint_space.force_size) if i not in kinematic)
+    holding = config.path.holding
+    period = config.control_period if config.control_period > 0 else None
+    return PathSource(controller_plant, robot.end_effector_frame, robot.end_effector_point, constraint_space, path,
+                      heading=heading_of(config.path, surface), force_row=force_row,
+                      dwell=0.0 if holding else config.path.dwell,
+                      wait_for_contact=config.supervised and not holding, period=period)
+
+
+def lifts_off(config):
+    """True if the job's supervisor gets the lift-off input (a run path with ``lift_off``)."""
+    return config.path.active and config.path.lift_off and not config.path.holding and config.supervised
+
+
+def connect_path(builder, source, controller, supervisor=None):
+    """Wire a PathSource beyond its desired_* outputs: its position error into the controller (when it
+    has the input), the supervisor's phase into it (when it waits for contact), its path_done into
+    the supervisor's lift_off (when it has that input)."""
+    port = getattr(controller, "get_path_position_error_input_port", lambda: None)()
+    if port is not None:
+        builder.Connect(source.GetOutputPort("path_position_error"), port)
+    if source.get_contact_phase_input_port() is not None:
+        if supervisor is None:
+            raise ConfigError("path: the PathSource waits for contact but there is no contact supervisor")
+        builder.Connect(supervisor.GetOutputPort("contact_phase"), source.get_contact_phase_input_port())
+    if supervisor is not None and supervisor.lift_off:
+        builder.Connect(source.GetOutputPort("path_done"), supervisor.GetInputPort("lift_off"))
+
+
+def add_path_loggers(builder, source, supervisor, loggers, period):
+    """Loggers of the path's reference, error and progress (and of the supervisor's lift-off)."""
+    for key, port in PATH_LOGS.items():
+        loggers[key] = LogVectorOutput(source.GetOutputPort(port), builder, period)
+    if supervisor is not None:
+        loggers["lifting"] = LogVectorOutput(supervisor.GetOutputPort("lifting"), builder, period)
+
+
+def path_start_positions(task, scenario, joint_guess):
+    """The arm's start for a path job: the pad centre at the path's first point in its reference
+    orientation (frame E turned as the reference, its point P there), pressing with F_d(0)
+    (``start.in_contact``) or ``start.gap`` above along the normal (IK from ``joint_guess``)."""
+    config = scenario.config
+    X_WP, normal = path_start_pose(task, config)
+    surface, offset = workpiece_surface(task, config)
+    heading = heading_of(config.path, surface)
+    kinematics = scenario.controller.kinematics
+    context = kinematics.plant.CreateDefaultContext()
+    seed = [np.asarray(joint_guess, dtype=float)]
+
+    def positions_at_depth(depth):
+        # The orientation the constraint's held rows want there (Surface.held_normal), not the surface point's.
+        centre = X_WP.translation() - depth * normal
+        rotation = RotationMatrix(reference_rotation(surface.held_normal(centre, offset), heading))
+        X_target = RigidTransform(rotation, centre)
+        seed[0] = inverse_kinematics(kinematics, context, X_target, seed[0])
+        return seed[0]
+
+    if not config.start.in_contact:
+        return positions_at_depth(-config.start.gap)
+    return pressing_positions(scenario, positions_at_depth)
+
+
+def path_events(log):
+    """A job's phases for the plots and the summary (``Task.run_events``' format): the guarded approach,
+    the dwell at the first point, each line change (an instant: a segment's start) and the lift-off."""
+    if "path_progress" not in log:
+        return []
+    t = np.asarray(log["t"])
+    segment, t_path = np.asarray(log["path_progress"])[:, 0], np.asarray(log["path_progress"])[:, 2]
+    events = []
+    started = np.nonzero(t_path >= 0)[0]
+    if "contact_phase" in log:
+        contact = np.nonzero(np.asarray(log["contact_phase"])[:, 0] == float(ContactPhase.CONTACT))[0]
+        if contact.size and contact[0] > 0:
+            events.append({"start": float(t[0]), "end": float(t[contact[0]]), "label": "guarded approach"})
+        if contact.size and started.size and started[0] > contact[0]:
+            events.append({"start": float(t[contact[0]]), "end": float(t[started[0]]),
+                           "label": "pressing at the path's first point (dwell)"})
+    done = np.asarray(log["path_done"])[:, 0] > 0.5 if "path_done" in log else np.zeros(len(t), dtype=bool)
+    for index in np.nonzero(np.diff(segment) > 0)[0]:
+        if segment[index] >= 0 and not done[index + 1]:                       # not the path's start or end
+            events.append({"start": float(t[index + 1]), "end": None, "label": "a line change (segment start)"})
+    if "lifting" in log:
+        lifting = np.nonzero(np.asarray(log["lifting"])[:, 0] > 0.5)[0]
+        if lifting.size:
+            events.append({"start": float(t[lifting[0]]), "end": float(t[-1]), "label": "lift-off"})
+    return events
+
+
+def job_duration(task, config):
+    """The simulated time a job needs (s, rounded up to 0.1 s): the guarded approach from ``start.gap``
+    (when the start is off the surface) and 0.2 s, the dwell, the path, the lift-off and 0.3 s."""
+    supervision = config.supervision
+    approach = config.start.gap / supervision.approach_speed + 0.2 if not config.start.in_contact else 0.0
+    lift = supervision.lift_height / supervision.approach_speed + 0.3 if lifts_off(config) else 0.0
+    return math.ceil(10 * (approach + config.path.dwell + build_path(task, config).duration + lift)) / 10
+
+
+def draw_path(meshcat, path, name="path"):
+    """Draw ``path`` in ``meshcat`` (the animation): the pad centre's reference as a line, and the
+    points on the workpiece it passes over (the contact points), under ``/name``."""
+    centres, contacts = path.centres(), path.contact_points()
+    meshcat.SetLine(f"{name}/pad_centre", centres.T, 2.0, Rgba(0.1, 0.6, 0.2, 1.0))
+    meshcat.SetLine(f"{name}/on_the_workpiece", contacts.T, 2.0, Rgba(0.9, 0.4, 0.1, 1.0))
+
+
+def with_path_commands(config, constraint_space):
+    """``config`` with desired_velocity zero and desired_force F(0) on the force row, constant: what the
+    start (pressing with F_d(0)), the static torque and the summaries read; the run's commands come
+    from the path."""
+    kinematic = constraint_space.constraint.kinematic_rows
+    force_row = next(i for i in range(constraint_space.force_size) if i not in kinematic)
+    force = [0.0] * constraint_space.force_size
+    force[force_row] = config.path.initial_force()
+    return dataclasses.replace(config, desired_velocity=Profile(kind="constant",
+                                                                value=[0.0] * constraint_space.velocity_size),
+                               desired_force=Profile(kind="constant", value=force))
+
+
+def with_path(config, **changes):
+    """A copy of ``config`` with ``config.path`` fields changed (e.g. ``hold_at=0.5``)."""
+    return dataclasses.replace(config, path=dataclasses.replace(config.path, **changes))
