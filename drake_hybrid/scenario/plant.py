@@ -16,7 +16,6 @@ from pydrake.multibody.plant import AddMultibodyPlant, CoulombFriction, Multibod
 from pydrake.multibody.tree import SpatialInertia
 
 from drake_hybrid.core.errors import ConfigError, UnknownFrameError
-from drake_hybrid.scenario.config import ContactSensorConfig
 
 
 @dataclass
@@ -69,16 +68,14 @@ def build_plant(task, config, builder, time_step=None, sampled_outputs=None):
     """Add the task's plant (robot, tool, workpiece, contact properties) to ``builder``.
 
     ``sampled_outputs``: a discrete plant's contact results and reaction forces sampled at its last
-    step (Drake's ``use_sampled_output_ports``) or those of the step being taken. Default: not
-    sampled when the contact sensor reads them under a sampled controller (``config.control_period``
-    > 0: no algebraic loop, the controller's actuation comes from its state), so that the measured
-    wrench is the one the plant applies: sampled contact results are computed at the state before
-    the last step while the body poses are current, and shifting the contact force from its
-    centroid to the end effector across that gap adds a false moment |f| |v| h
-    (docs/drake_notes.md). Otherwise sampled (Drake's default): a wrist sensor's reaction force acts
-    at a frame of the tool, with no such shift, and a continuous controller would close a loop."""
+    step (Drake's ``use_sampled_output_ports``, the default) or those of the step about to be taken.
+    Sampled, the sensors read the contact solve the plant's step made (one solve per step; the
+    contact sensor shifts it to the end effector as it was at that solve, ``ContactWrenchSensor``);
+    unsampled, a controller that reads them at another instant than the plant steps costs a second
+    contact solve per step (docs/drake_notes.md). ``analysis.linearize_discrete`` asks for unsampled
+    ports (abstract state does not linearize)."""
     if sampled_outputs is None:
-        sampled_outputs = not (config.control_period > 0 and isinstance(config.sensor, ContactSensorConfig))
+        sampled_outputs = True
     time_step = config.plant.time_step if time_step is None else time_step
     plant_config = copy.copy(config.plant)
     plant_config.time_step = time_step

@@ -102,6 +102,19 @@ def ContactWrenchSensor_(T):
         non-robot body, the spatial force on the robot body, shifted from the
         contact point (centroid) to P, in world.
 
+        On a discrete plant with sampled output ports (Drake's default,
+        ``plant.has_sampled_output_ports()``) the contact results are those of
+        the plant's last step, solved at the configuration q_k before it, while
+        ``body_poses`` is the current q_{k+1}. The sensor then keeps p_WP(q_k)
+        in its state (an unrestricted update at the plant's steps, which reads
+        the same q_k as the plant's step) and shifts the step's forces to that
+        point: the reading is the wrench the step applied, about P where P was,
+        one step old, with no false moment |f| |v| h from a lever arm taken
+        across the step (docs/drake_notes.md). With unsampled ports the results
+        are those of the step about to be taken (a second contact solve per step
+        when the controller reads them at another instant than the plant steps)
+        and the current pose is used.
+
         Args:
             plant: the simulation plant (float, finalized, with a SceneGraph).
             robot_bodies: the bodies that count as "the robot" (e.g. all bodies
@@ -130,18 +143,40 @@ def ContactWrenchSensor_(T):
             self._results_port = self.DeclareAbstractInputPort("contact_results",
                                                                AbstractValue.Make(ContactResults_[T]()))
             self._poses_port = self.DeclareAbstractInputPort("body_poses", Value[List[RigidTransform_[T]]]([]))
-            # A function of the inputs only (not of time): a logger at the next instant reuses the value.
+            prerequisites = {self.all_input_ports_ticket()}
+            # Sampled contact results: P where the step that computed them found it (class docstring).
+            self.samples_point = plant.time_step() > 0 and plant.has_sampled_output_ports()
+            if self.samples_point:
+                # NaN until the first step: the results then come from the start (scenario.start), P is current.
+                self._point_state = self.DeclareDiscreteState(np.full(3, np.nan))
+                self.DeclarePeriodicUnrestrictedUpdateEvent(plant.time_step(), 0.0, self._sample_point)
+                prerequisites.add(self.xd_ticket())
+            # A function of the inputs (and the sampled P), not of time: a logger at the next instant reuses it.
             self.DeclareVectorOutputPort("wrench", 6, self._calc_wrench_float if T == float else self._calc_wrench,
-                                         prerequisites_of_calc={self.all_input_ports_ticket()})
+                                         prerequisites_of_calc=prerequisites)
 
         def _construct_copy(self, other, converter=None):
             Impl._construct(self, other._plant, other._robot_bodies, other._frame, other._end_effector_point,
                             converter=converter)
 
+        def _current_point(self, context):
+            return _point_in_world(self._poses_port.Eval(context), self._body_index, self._point_in_body)
+
+        def _sample_point(self, context, state):
+            """At the plant's step: P at the configuration the step solves the contact at."""
+            state.get_mutable_discrete_state(self._point_state).SetFromVector(self._current_point(context))
+
+        def _contact_point(self, context):
+            """p_WP the contact results are shifted to: sampled with them, else current."""
+            if self.samples_point:
+                sampled = context.get_discrete_state(self._point_state).value()
+                if all_finite(sampled):
+                    return sampled
+            return self._current_point(context)
+
         def _calc_wrench(self, context, output):
             results = self.get_input_port(0).Eval(context)
-            body_poses = self.get_input_port(1).Eval(context)
-            p_WP = _point_in_world(body_poses, self._body_index, self._point_in_body)
+            p_WP = self._contact_point(context)
             total = np.zeros(6, dtype=p_WP.dtype)
             for i in range(results.num_hydroelastic_contacts()):
                 info = results.hydroelastic_contact_info(i)
@@ -201,7 +236,10 @@ def ContactWrenchSensor_(T):
                 n1 += c2 * b0 - c0 * b2
                 n2 += c0 * b1 - c1 * b0
                 f0, f1, f2 = f0 + b0, f1 + b1, f2 + b2
-            p0, p1, p2 = self._poses_port.Eval(context)[self._body_slot].multiply(self._point_in_body).tolist()
+            if self.samples_point:
+                p0, p1, p2 = self._contact_point(context).tolist()
+            else:
+                p0, p1, p2 = self._poses_port.Eval(context)[self._body_slot].multiply(self._point_in_body).tolist()
             output.SetFromVector([n0 - (p1 * f2 - p2 * f1), n1 - (p2 * f0 - p0 * f2), n2 - (p0 * f1 - p1 * f0),
                                   f0, f1, f2])
 
