@@ -36,6 +36,7 @@ Size: two LeafSystems with the ports, state and caches of HybridController (shar
 ``_declare_common`` and ``_BaselineMixin``), each a docstring and a short law.
 """
 
+import sys
 from dataclasses import dataclass, field
 from typing import List
 
@@ -237,7 +238,7 @@ class _BaselineMixin(LawSystemParts):
         return plant_context, kin, values, xi, e_p, desired_velocity, desired_force, solution
 
 
-@TemplateSystem.define("JointServoHybridController_", T_list=[float, AutoDiffXd])
+@TemplateSystem.define("JointServoHybridController_", T_list=[float, AutoDiffXd], scope=sys.modules[__name__])
 def JointServoHybridController_(T):
 
     class Impl(_BaselineMixin, LeafSystem_[T]):
@@ -319,7 +320,7 @@ def JointServoHybridController_(T):
 JointServoHybridController = JointServoHybridController_[None]
 
 
-@TemplateSystem.define("AxisPDOpenLoopForceController_", T_list=[float, AutoDiffXd])
+@TemplateSystem.define("AxisPDOpenLoopForceController_", T_list=[float, AutoDiffXd], scope=sys.modules[__name__])
 def AxisPDOpenLoopForceController_(T):
 
     class Impl(_BaselineMixin, LeafSystem_[T]):

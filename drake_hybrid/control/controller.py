@@ -20,6 +20,8 @@ entries, state and events.
 Size: over half of the module is the system's docstring (ports, closed loop, protections, arguments).
 """
 
+import sys
+
 import numpy as np
 
 from pydrake.autodiffutils import AutoDiffXd
@@ -53,7 +55,7 @@ class LawCache:
         self.plant_context, self.forces, self.solution = plant_context, forces, None
 
 
-@TemplateSystem.define("HybridController_", T_list=[float, AutoDiffXd])
+@TemplateSystem.define("HybridController_", T_list=[float, AutoDiffXd], scope=sys.modules[__name__])
 def HybridController_(T):
 
     class Impl(LawSystemParts, LeafSystem_[T]):

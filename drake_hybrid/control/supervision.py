@@ -41,6 +41,7 @@ that of a pad arriving at speed s (the peak force grows with s and the pad's sti
 reliability figures in docs/reliability.md measure it).
 """
 
+import sys
 from dataclasses import dataclass
 
 import numpy as np
@@ -92,7 +93,7 @@ class SupervisionConfig:
         return self
 
 
-@TemplateSystem.define("ContactSupervisor_", T_list=[float, AutoDiffXd])
+@TemplateSystem.define("ContactSupervisor_", T_list=[float, AutoDiffXd], scope=sys.modules[__name__])
 def ContactSupervisor_(T):
 
     class Impl(LeafSystem_[T]):

@@ -74,10 +74,8 @@ import traceback
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
-import dask
 import numpy as np
 import yaml
-from distributed import Client, LocalCluster, as_completed
 from tqdm import tqdm
 
 from drake_hybrid.analysis.linearization import (STEP_CHECK_RATE, linearize_continuous, linearize_sampled_loop,
@@ -403,6 +401,8 @@ def _process_alive(pid):
 
 def _check_scheduler(address, timeout=10.0):
     """SweepSpecError (one line) if no Dask scheduler answers at ``address`` within ``timeout`` s."""
+    from distributed import Client     # Dask only where a sweep runs on it (tests/test_architecture.py)
+
     try:
         client = Client(address, timeout=timeout)
     except (OSError, TimeoutError) as error:
@@ -480,7 +480,8 @@ def _start_client(scheduler, workers, worker_memory=WORKER_MEMORY):
     cluster's nannies therefore restart a worker whose memory passes 95 % of
     ``worker_memory`` (no spilling, no pausing: a paused worker would never
     shrink); the point it was running is run again elsewhere."""
-
+    import dask
+    from distributed import Client, LocalCluster
 
     if scheduler:
         return Client(scheduler), None, scheduler
@@ -554,6 +555,8 @@ def _run_locked(task_name, spec, out, base, points, scheduler, workers, resume, 
             for index, parameters, config_yaml in pending:
                 record(index, parameters, evaluate_point(config_yaml, **options))
         elif pending:
+            from distributed import as_completed
+
             client, cluster, where = _start_client(scheduler, workers, worker_memory)
             try:
                 futures = {client.submit(evaluate_point, config_yaml, pure=False, **options): (index, parameters)
@@ -605,8 +608,6 @@ def constraint_sizes(config):
 def theory_on_plane(base_config, x_path, y_path, x_values, y_values, fixed=None):
     """``rigid_contact_theory_stable`` over the (x, y) plane (other fields from ``fixed`` and the base):
     an array (len(y_values) x len(x_values)) of 1.0 (stable), 0.0 (unstable) and nan (not admissible)."""
-
-
     sizes = constraint_sizes(base_config)
     verdict = np.full((len(y_values), len(x_values)), np.nan)
     for i, y in enumerate(y_values):

@@ -42,7 +42,7 @@ from drake_hybrid.scenario.task import pad_kinematic_rows
 from drake_hybrid.scenario.tasks import get_task
 from drake_hybrid.systems.faults import JointFriction, SensorFaultInjector
 from drake_hybrid.systems.sensors import (ContactWrenchSensor, LowPassFilter, WrenchConditioner, WristForceTorqueSensor,
-                                          low_pass_lag)
+                                          low_pass_lag, sampled_reading_age)
 
 
 @dataclass
@@ -89,8 +89,9 @@ def make_controller(config, task, plant, controller_plant, robot, constraint_spa
                     sample_lead, supervised, with_loggers, plant_time_step=None):
     """The law of ``config.controller``: Li & Sastry's HybridController or a baseline (control.baselines).
     ``plant_time_step``: the step of the plant the law drives, for its joint damping (``control.damping``;
-    default ``plant.time_step()``; 0 for a real arm). The law splits the wrench where it was measured,
-    the low-pass of ``config.sensor`` (``add_wrench_path``) late (``systems.sensors.low_pass_lag``)."""
+    default ``plant.time_step()``; 0 for a real arm). The law splits the wrench where it was measured:
+    the low-pass of ``config.sensor`` (``add_wrench_path``) late (``systems.sensors.low_pass_lag``), a
+    sampled plant's reading one step old (``systems.sensors.sampled_reading_age``)."""
     if config.controller != "li-sastry":
         return make_baseline(config.controller, controller_plant, robot.end_effector_frame, robot.end_effector_point,
                              constraint_space, gains=config.gains, baseline=config.baseline,
@@ -103,7 +104,7 @@ def make_controller(config, task, plant, controller_plant, robot, constraint_spa
         sampled_diagnostics=with_loggers and control_period is not None,
         velocity_row_inertia=velocity_row_inertia(config, task, plant, constraint_space),
         compensate_tangential_force=config.compensate_tangential_force,
-        wrench_lag=low_pass_lag(config.sensor.bandwidth_hz, control_period),
+        wrench_lag=low_pass_lag(config.sensor.bandwidth_hz, control_period) + sampled_reading_age(plant),
         plant_time_step=plant.time_step() if plant_time_step is None else plant_time_step)
 
 

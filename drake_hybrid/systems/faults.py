@@ -16,6 +16,7 @@ compute on values (an injected fault has no derivative); ``JointFriction`` diffe
 """
 
 import math
+import sys
 from dataclasses import dataclass, field
 from typing import List
 
@@ -76,7 +77,7 @@ class SensorFaultConfig:
         return self
 
 
-@TemplateSystem.define("SensorFaultInjector_", T_list=[float, AutoDiffXd])
+@TemplateSystem.define("SensorFaultInjector_", T_list=[float, AutoDiffXd], scope=sys.modules[__name__])
 def SensorFaultInjector_(T):
 
     class Impl(LeafSystem_[T]):
@@ -185,7 +186,7 @@ def SensorFaultInjector_(T):
 SensorFaultInjector = SensorFaultInjector_[None]
 
 
-@TemplateSystem.define("JointFriction_", T_list=[float, AutoDiffXd])
+@TemplateSystem.define("JointFriction_", T_list=[float, AutoDiffXd], scope=sys.modules[__name__])
 def JointFriction_(T):
 
     class Impl(LeafSystem_[T]):

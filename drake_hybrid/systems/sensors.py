@@ -28,6 +28,7 @@ and the sampling; each is a TemplateSystem of about 100 lines.
 """
 
 import math
+import sys
 
 import numpy as np
 
@@ -45,6 +46,14 @@ from drake_hybrid.control.sampling import SAMPLE_LEAD
 from drake_hybrid.core.errors import DimensionError
 from drake_hybrid.core.kinematics import resolve_frame
 from drake_hybrid.core.linalg import all_finite, value
+
+
+def sampled_reading_age(plant):
+    """How old a reading of ``plant``'s contact results or reaction forces is when a sensor uses it: one
+    step h on a discrete plant with sampled output ports (the last step's solve, made at the
+    configuration q_k before it, while the arm is at q_k+1 now), 0 otherwise. The law splits the
+    wrench where it was exerted (``HybridController``'s ``wrench_lag``)."""
+    return plant.time_step() if plant.time_step() > 0 and plant.has_sampled_output_ports() else 0.0
 
 
 def _robot_geometry_ids(plant, robot_bodies):
@@ -83,7 +92,7 @@ def _shift(F_coefficients, p_from_to_W):
                      f[0], f[1], f[2]])
 
 
-@TemplateSystem.define("ContactWrenchSensor_", T_list=[float, AutoDiffXd])
+@TemplateSystem.define("ContactWrenchSensor_", T_list=[float, AutoDiffXd], scope=sys.modules[__name__])
 def ContactWrenchSensor_(T):
 
     class Impl(LeafSystem_[T]):
@@ -249,7 +258,7 @@ def ContactWrenchSensor_(T):
 ContactWrenchSensor = ContactWrenchSensor_[None]
 
 
-@TemplateSystem.define("WristForceTorqueSensor_", T_list=[float, AutoDiffXd])
+@TemplateSystem.define("WristForceTorqueSensor_", T_list=[float, AutoDiffXd], scope=sys.modules[__name__])
 def WristForceTorqueSensor_(T):
 
     class Impl(LeafSystem_[T]):
@@ -418,7 +427,7 @@ def low_pass_lag(bandwidth_hz, period):
     return period * (1.0 - alpha) / alpha
 
 
-@TemplateSystem.define("LowPassFilter_", T_list=[float, AutoDiffXd])
+@TemplateSystem.define("LowPassFilter_", T_list=[float, AutoDiffXd], scope=sys.modules[__name__])
 def LowPassFilter_(T):
 
     class Impl(LeafSystem_[T]):
@@ -485,7 +494,7 @@ LowPassFilter = LowPassFilter_[None]
 
 
 
-@TemplateSystem.define("WrenchConditioner_", T_list=[float, AutoDiffXd])
+@TemplateSystem.define("WrenchConditioner_", T_list=[float, AutoDiffXd], scope=sys.modules[__name__])
 def WrenchConditioner_(T):
 
     class Impl(LeafSystem_[T]):

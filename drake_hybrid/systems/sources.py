@@ -18,6 +18,7 @@
 """
 
 import math
+import sys
 from dataclasses import dataclass, field
 from typing import List
 
@@ -88,7 +89,7 @@ class Profile:
         return base + amplitude * math.sin(phase), amplitude * omega * math.cos(phase)
 
 
-@TemplateSystem.define("ProfileSource_", T_list=[float, AutoDiffXd])
+@TemplateSystem.define("ProfileSource_", T_list=[float, AutoDiffXd], scope=sys.modules[__name__])
 def ProfileSource_(T):
 
     class Impl(LeafSystem_[T]):
@@ -139,7 +140,7 @@ def ProfileSource_(T):
 ProfileSource = ProfileSource_[None]
 
 
-@TemplateSystem.define("PseudoVelocitySource_", T_list=[float, AutoDiffXd])
+@TemplateSystem.define("PseudoVelocitySource_", T_list=[float, AutoDiffXd], scope=sys.modules[__name__])
 def PseudoVelocitySource_(T):
 
     class Impl(LeafSystem_[T]):
@@ -224,7 +225,7 @@ def PseudoVelocitySource_(T):
 PseudoVelocitySource = PseudoVelocitySource_[None]
 
 
-@TemplateSystem.define("DesiredFieldSource_", T_list=[float, AutoDiffXd])
+@TemplateSystem.define("DesiredFieldSource_", T_list=[float, AutoDiffXd], scope=sys.modules[__name__])
 def DesiredFieldSource_(T):
 
     class Impl(LeafSystem_[T]):

@@ -21,7 +21,6 @@ breakaway, the phases the plots mark), which read the task's own geometry and lo
 """
 
 import math
-from dataclasses import dataclass, fields
 
 import numpy as np
 
@@ -31,9 +30,10 @@ from pydrake.multibody.plant import CoulombFriction
 
 from drake_hybrid.control.gains import ControlMode, HybridGains
 from drake_hybrid.core.errors import ConfigError
-from drake_hybrid.scenario.task import Task, choice
-from drake_hybrid.scenario.tasks.sphere_polishing import SpherePolishing, SpherePolishingOptions
-from drake_hybrid.scenario.tasks.window_washing import WindowWashing, WindowWashingOptions
+from drake_hybrid.scenario.task import Task
+from drake_hybrid.scenario.task_options import SPHERE_ONLY, GrindingOptions, built_in_option_help
+from drake_hybrid.scenario.tasks.sphere_polishing import SpherePolishing
+from drake_hybrid.scenario.tasks.window_washing import WindowWashing
 
 PANE_SIZE = (3.0, 0.5, 0.02)       # models/window.sdf
 PANE_CENTER_X = 1.0
@@ -232,17 +232,6 @@ def rough_patch_notes(scenario, log, design_time_constant, rough_start, rough_en
     return notes + [f"the run ends in steady sliding, {after:.2f} s after the pad left the {where}"]
 
 
-@dataclass
-class GrindingOptions(WindowWashingOptions, SpherePolishingOptions):
-    workpiece: str = choice("window", ("window", "sphere"))
-    rough_friction: float = 0.9           # mu of the pad on the rough patch (window)
-    rough_start: float = 1.05             # m, the patch along x
-    rough_end: float = 1.15
-
-
-SPHERE_ONLY = tuple(f.name for f in fields(SpherePolishingOptions))   # the sphere's path: no meaning on the window
-
-
 class Grinding(Task):
     Options = GrindingOptions
     name = "grinding"
@@ -266,8 +255,7 @@ class Grinding(Task):
         return options
 
     def option_help(self):
-        return [line + (" (workpiece=sphere only)" if line.split("=", 1)[0] in SPHERE_ONLY else "")
-                for line in super().option_help()]
+        return built_in_option_help(self.name)
 
     def _base(self, config):
         return self._window if self.options(config).workpiece == "window" else self._sphere

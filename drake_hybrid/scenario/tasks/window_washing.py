@@ -27,7 +27,6 @@ constraint keeps the nominal height.
 """
 
 import math
-from dataclasses import dataclass
 
 import numpy as np
 
@@ -47,6 +46,7 @@ from drake_hybrid.scenario.parsing import ConfigureParser, model_url
 from drake_hybrid.scenario.plant import RobotModel
 from drake_hybrid.scenario.start import pressing_positions
 from drake_hybrid.scenario.task import Task
+from drake_hybrid.scenario.task_options import WindowWashingOptions
 from drake_hybrid.scenario.tasks.robots import PAD_CENTER_IN_TOOL, PAD_RADIUS, add_pad_tool
 from drake_hybrid.systems.sources import Profile
 
@@ -54,15 +54,6 @@ ARMS = {3: ("planar_3r.sdf", (1.0, 0.8, 0.3)), 4: ("planar_4r.sdf", (0.8, 0.7, 0
 # PD gains of the moving pane's actuator (N/m, N s/m): with the pane's 1 kg, a 1 kHz natural frequency
 # well damped, so the pane follows its lift profile to micrometres under a 10 N push.
 LIFT_GAINS = (4.0e7, 1.2e4)
-
-
-@dataclass
-class WindowWashingOptions:
-    window_height: float = 1.0          # m, the pane's lower face (the paper's y = 1)
-    joints: int = 3                     # 3: the paper's square arm; 4: a redundant arm
-    window_lift: float = 0.0            # m the pane moves up (0: welded pane)
-    window_lift_time: float = 0.5       # s, when the lift starts
-    window_lift_duration: float = 0.01  # s, over how long
 
 
 class WindowWashing(Task):
