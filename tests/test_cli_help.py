@@ -259,16 +259,14 @@ def test_first_line_of_a_command_comes_before_pydrake_is_imported():
 
 
 def test_the_first_compile_time_is_the_readmes_measured_figure_everywhere():
-    """The README's 30-65 s for numba's first compile (measured on 2 cores) is what the stage line and
+    """The README's 30-65 s for numba's first compile (measured on 2 cores) is what a run's note and
     fast_law's docstring say too."""
-    import inspect
-
     from drake_hybrid.control import fast_law
     from drake_hybrid.experiments import simulation
 
     figure = re.search(r"compiles the\s+control law with numba \((\d+-\d+) s on 2 cores", README.read_text()).group(1)
-    assert f"compiles them ({figure} s on 2 shared cores" in " ".join(fast_law.kernels_loaded.__doc__.split())
-    assert f"numba compiles it once, {figure} s)" in inspect.getsource(simulation.simulate)
+    assert f"compiling them ({figure} s on 2 shared cores" in " ".join(fast_law.kernels_loaded.__doc__.split())
+    assert f"(once, {figure} s on 2 cores)" in simulation.COMPILING_NOTE
 
 
 def test_html_writes_one_animation_and_no_meshcat_info_line(tmp_path, capsys, caplog):

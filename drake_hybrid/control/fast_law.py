@@ -43,16 +43,13 @@ from drake_hybrid.core.constraints import SelectingConstraint
 from drake_hybrid.core.projections import GivenVelocityProjection, KernelVelocityProjection
 from drake_hybrid.core.symbolic import straight_line_program, time_derivative
 
+from drake_hybrid.control import fast_compile
 from drake_hybrid.control import fast_kernels as kernels
+from drake_hybrid.control.fast_compile import cache_folder
 from drake_hybrid.control.fast_kernels import DONE, NEEDS_BASE_TORQUE, NEEDS_INVERSE_DYNAMICS
 
 _WARNED = []
 _FUNCTIONS = "sin, cos, tan, asin, acos, atan, atan2, sqrt, exp, log, sinh, cosh, tanh, pi, e as E"
-
-
-def cache_folder():
-    """Where the generated constraint modules (and numba's cache of them) live."""
-    return Path(os.environ.get("DRAKE_HYBRID_CACHE", Path.home() / ".cache" / "drake_hybrid")) / "fast_law"
 
 
 def _kernels_version():
@@ -232,7 +229,8 @@ def _warn_once(message):
 def kernels_loaded():
     """True once the law's compiled kernels are in this process (compiled, or loaded from numba's
     disk cache); before that, the first tick loads them (about 0.4 s) or, on a first run with an
-    empty cache, compiles them (30-65 s on 2 shared cores, as the README says)."""
+    empty cache, starts numba compiling them in the background (30-65 s on 2 shared cores, as the
+    README says; control/fast_compile.py) and runs the generic law."""
     return bool(getattr(kernels.law_from_terms, "signatures", True))
 
 
@@ -242,6 +240,8 @@ class FastLaw:
     ``compile_seconds``: the first tick's compile (or cache load) time, None before it.
     ``fallbacks``: evaluations handed to the generic law (errors, non-finite results).
     ``disabled``: the first tick could not compile (warned once); the generic law runs.
+    ``compiling``: the compiled law was not on disk at the first tick: a background job compiles it
+    (``fast_compile``, process id ``compile_job``) and this controller runs the generic law throughout.
     """
 
     def __init__(self, module, reals, ints, controller):
@@ -270,6 +270,8 @@ class FastLaw:
         self.compile_seconds = None
         self.fallbacks = 0
         self.disabled = False
+        self.compiling, self.compile_job = False, None
+        self._module_path = getattr(module, "__file__", None)
 
     @classmethod
     def build(cls, controller, law, space):
@@ -303,15 +305,23 @@ class FastLaw:
         phase = int(phase)
         reals, ints, terms = self.reals, self.ints, self._terms
         if self.compile_seconds is None:
-            # The first call compiles (or loads from the cache); a constraint numba cannot compile
-            # leaves this controller on the generic law, with a one-line warning.
-            if self.disabled:
+            # The first call compiles (or loads from the cache), or leaves the compile to a background job
+            # and this controller on the generic law (control/fast_compile.py); a constraint numba cannot
+            # compile leaves it on the generic law too, with a one-line warning.
+            if self.disabled or self.compiling:
                 return None
             start = time.perf_counter()
             try:
+                calls = self._calls(plant, plant_context, forces, X, J_g, A_bias, v, desired_velocity,
+                                    desired_acceleration, desired_force, wrench, integrals, phase, approach_reference,
+                                    M, base)
+                if not fast_compile.compiled(calls) and fast_compile.policy() == "background":
+                    self._compile_in_background(calls)
+                    return None
                 self._terms_into(terms, X, J_g, A_bias, v, reals, ints)
                 self._law(terms, v, desired_velocity, desired_acceleration, desired_force, wrench, integrals, phase,
                           approach_reference, M, base, reals, ints)
+                fast_compile.record(calls)
             except Exception as error:
                 self.disabled = True
                 message = " ".join(str(error).split())[:200]
@@ -334,6 +344,29 @@ class FastLaw:
             self.fallbacks += 1
             return None
         return CompiledSolution(out, phase, self._slices, self._scalars)
+
+    def _calls(self, plant, plant_context, forces, X, J_g, A_bias, v, desired_velocity, desired_acceleration,
+               desired_force, wrench, integrals, phase, approach_reference, M, base):
+        """[(compiled function, the numba types of this tick's call)] of the three compiled calls."""
+        terms, reals, ints = self._terms, self.reals, self.ints
+        law = (terms, v, desired_velocity, desired_acceleration, desired_force, wrench, integrals, phase,
+               approach_reference, M, base, reals, ints)
+        out = np.zeros(self._joint_acceleration_slice.stop + self.ints[kernels.I_N])     # as law_kernel's
+        torque = plant.CalcInverseDynamics(plant_context, self._zero_acceleration, forces)  # as Drake returns it
+        return [(self._terms_into, fast_compile.signature_of((terms, X, J_g, A_bias, v, reals, ints))),
+                (self._law, fast_compile.signature_of(law)),
+                (self._finish, fast_compile.signature_of((out, torque, base, reals, ints)))]
+
+    def _compile_in_background(self, calls):
+        """This controller keeps the generic law; numba compiles ``calls`` in a background job (one per
+        machine at a time) for the controllers built after it, unless an earlier job failed."""
+        self.compiling = True
+        error = fast_compile.failure()
+        if error is not None:
+            _warn_once(f"drake_hybrid: numba could not compile the fast law ({error}); the controllers run the "
+                       f"generic law (delete {fast_compile.cache_folder() / 'failed'} to try again)")
+            return
+        self.compile_job = fast_compile.start_job(calls, self._module_path)
 
 
 def _field(index):

@@ -39,12 +39,16 @@ from pydrake.systems.analysis import ApplySimulatorConfig, Simulator
 from pydrake.systems.framework import EventStatus
 
 from drake_hybrid.analysis.linearization import controller_prediction, design_time_constant, predicted_errors
-from drake_hybrid.control.fast_law import kernels_loaded
 from drake_hybrid.control.gains import ControlMode
 from drake_hybrid.core.progress import quiet
 from drake_hybrid.experiments.metrics import contact_time, impedance_check, max_after, row_errors, row_units, worst
 from drake_hybrid.scenario.builder import build_scenario
 from drake_hybrid.scenario.start import set_initial_conditions
+
+# The run's note when its controller ran the generic law while numba compiled the fast one (control/fast_compile.py).
+COMPILING_NOTE = ("this run used the generic law (the compiled one gives the same to 1e-12): the compiled law was not on "
+                  "this machine yet, and numba compiles it in the background for the next runs (once, 30-65 s on 2 "
+                  "cores)")
 
 
 @dataclass
@@ -139,10 +143,7 @@ def simulate(config, progress=False, meshcat=None, record_html=False, setup=None
                                          simulator.get_monitor()))
     if meshcat is not None and record_html:
         meshcat.StartRecording(set_visualizations_while_recording=False)
-    initializing = f"{config.task}: initializing the simulator"
-    if getattr(scenario.controller, "fast_law", None) is not None and not kernels_loaded():
-        initializing += " (and the compiled law: on the first run ever, numba compiles it once, 30-65 s)"
-    with stages(initializing):
+    with stages(f"{config.task}: initializing the simulator"):
         simulator.Initialize()
     start = time.perf_counter()
     duration = float(config.duration)
@@ -182,6 +183,8 @@ def simulate(config, progress=False, meshcat=None, record_html=False, setup=None
             summary[key] = None
         for row in summary.get("force_rows") or []:
             row.update({key: None for key in row if key not in ("name", "units", "command", "held")})
+    if getattr(getattr(scenario.controller, "fast_law", None), "compiling", False):
+        summary.setdefault("notes", []).append(COMPILING_NOTE)
     result = SimulationResult(config=config, log=log, summary=summary, scenario=scenario, html=html,
                               simulator=simulator, context=context)
     if stop:
