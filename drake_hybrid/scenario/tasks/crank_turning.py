@@ -42,7 +42,7 @@ from drake_hybrid.core.errors import ConfigError
 from drake_hybrid.core.kinematics import EndEffectorKinematics, inverse_kinematics
 from drake_hybrid.core.projections import ConstraintSpace, crank_paper_projection, crank_true_velocity_projection
 from drake_hybrid.scenario.config import ScenarioConfig, StartConfig, WristSensorConfig
-from drake_hybrid.scenario.parsing import ConfigureParser, model_url
+from drake_hybrid.scenario.parsing import ConfigureParser, add_model
 from drake_hybrid.scenario.task import EigenvalueShift, Task
 from drake_hybrid.scenario.task_options import CRANK_START_ANGLE, CrankTurningOptions
 from drake_hybrid.scenario.tasks.robots import PAD_CENTER_IN_TOOL, add_ur5e_with_pad
@@ -153,7 +153,7 @@ class CrankTurning(Task):
                              "handle by a SAP weld constraint, which continuous plants do not support")
         parser = Parser(plant)
         ConfigureParser(parser)
-        crank = parser.AddModelsFromUrl(model_url("crank.sdf"))[0]
+        crank = add_model(parser, "crank.sdf")[0]
         plant.WeldFrames(plant.world_frame(), plant.GetFrameByName("post", crank),
                          RigidTransform([self.center[0], self.center[1], self.height]))
         return self.weld_pad_to_handle(plant)

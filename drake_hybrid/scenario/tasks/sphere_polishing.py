@@ -44,7 +44,7 @@ from drake_hybrid.core.constraints import sphere_constraint
 from drake_hybrid.core.kinematics import EndEffectorKinematics, inverse_kinematics
 from drake_hybrid.core.projections import ConstraintSpace, sphere_paper_projection, sphere_true_velocity_projection
 from drake_hybrid.scenario.config import ScenarioConfig, StartConfig
-from drake_hybrid.scenario.parsing import ConfigureParser, model_url
+from drake_hybrid.scenario.parsing import ConfigureParser, add_model
 from drake_hybrid.scenario.start import pressing_positions
 from drake_hybrid.scenario.task import Task
 from drake_hybrid.scenario.task_options import SpherePolishingOptions
@@ -124,7 +124,7 @@ class SpherePolishing(Task):
     def add_workpiece(self, plant, config):
         parser = Parser(plant)
         ConfigureParser(parser)
-        sphere = parser.AddModelsFromUrl(model_url("sphere_workpiece.sdf"))[0]
+        sphere = add_model(parser, "sphere_workpiece.sdf")[0]
         plant.WeldFrames(plant.world_frame(), plant.GetFrameByName("sphere", sphere), RigidTransform(SPHERE_CENTER))
         return list(plant.GetCollisionGeometriesForBody(plant.GetBodyByName("sphere", sphere)))
 

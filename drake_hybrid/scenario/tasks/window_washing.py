@@ -42,7 +42,7 @@ from drake_hybrid.core.constraints import window_constraint
 from drake_hybrid.core.errors import ConfigError
 from drake_hybrid.core.projections import ConstraintSpace, GivenVelocityProjection
 from drake_hybrid.scenario.config import ScenarioConfig, StartConfig
-from drake_hybrid.scenario.parsing import ConfigureParser, model_url
+from drake_hybrid.scenario.parsing import ConfigureParser, add_model
 from drake_hybrid.scenario.plant import RobotModel
 from drake_hybrid.scenario.start import pressing_positions
 from drake_hybrid.scenario.task import Task
@@ -96,7 +96,7 @@ class WindowWashing(Task):
         joints, (file_name, lengths) = self._arm(config)
         parser = Parser(plant)
         ConfigureParser(parser)
-        arm = parser.AddModelsFromUrl(model_url(file_name))[0]
+        arm = add_model(parser, file_name)[0]
         plant.WeldFrames(plant.world_frame(), plant.GetFrameByName("base", arm))
         # Tool +z along the last link's +x, pad centre exactly at the tip.
         X_last_flange = RigidTransform(RotationMatrix.MakeYRotation(math.pi / 2),
@@ -108,7 +108,7 @@ class WindowWashing(Task):
     def add_workpiece(self, plant, config):
         parser = Parser(plant)
         ConfigureParser(parser)
-        window = parser.AddModelsFromUrl(model_url("window.sdf"))[0]
+        window = add_model(parser, "window.sdf")[0]
         height = self._height(config)
         X_W_mount = RigidTransform([1.0, 0, height])
         pane_frame = plant.GetFrameByName("pane", window)
