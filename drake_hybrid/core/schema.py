@@ -16,8 +16,9 @@ import yaml
 from drake_hybrid.core.errors import ConfigError
 
 
-class _UniqueKeyLoader(yaml.SafeLoader):
-    """A YAML loader that refuses a key given twice in one mapping (and accepts any !Tag)."""
+class _UniqueKeyLoader(getattr(yaml, "CSafeLoader", yaml.SafeLoader)):
+    """A YAML loader that refuses a key given twice in one mapping (and accepts any !Tag). It parses
+    with libyaml when PyYAML has it (a sweep point's config: 0.3 s in pure Python, a few ms)."""
 
     def construct_mapping(self, node, deep=False):
         seen = set()

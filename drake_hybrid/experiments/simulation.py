@@ -139,8 +139,10 @@ def simulate(config, progress=False, meshcat=None, record_html=False, setup=None
     if setup is not None:
         setup(scenario, simulator, context)
     stop = {}
-    simulator.set_monitor(chain_monitors(sensor_fault_monitor(scenario, float(config.sensor.fault_time), stop),
-                                         simulator.get_monitor()))
+    if scenario.fault_injector is not None or scenario.conditioner is not None:
+        # Only these make the wrench non-finite (a dropout, a hold run out): the check costs a Python call a step.
+        simulator.set_monitor(chain_monitors(sensor_fault_monitor(scenario, float(config.sensor.fault_time), stop),
+                                             simulator.get_monitor()))
     if meshcat is not None and record_html:
         meshcat.StartRecording(set_visualizations_while_recording=False)
     with stages(f"{config.task}: initializing the simulator"):

@@ -82,6 +82,7 @@ from drake_hybrid.analysis.linearization import (STEP_CHECK_RATE, linearize_cont
                                                  predicted_eigenvalues)
 from drake_hybrid.control.gains import ControlMode
 from drake_hybrid.core.errors import GainError
+from drake_hybrid.core.progress import quiet
 from drake_hybrid.experiments.metrics import max_row_errors, row_commands
 from drake_hybrid.experiments.simulation import RunStopped, simulate
 from drake_hybrid.experiments.sweep_spec import (StabilityCriteria, SweepSpecError, apply_parameters, parameters_digest,
@@ -202,7 +203,7 @@ def _stage_error(stage, error):
     return f"{stage}: {text}"
 
 
-def evaluate_point(config_yaml, criteria=None, continuous=True, discrete=True, task=None):
+def evaluate_point(config_yaml, criteria=None, continuous=True, discrete=True, task=None, stages=None):
     """Evaluate one sweep point from its config YAML; returns the result columns as a dict.
 
     ``task``: a task object that is not built in (a ``CustomTask``), registered in this process
@@ -211,8 +212,12 @@ def evaluate_point(config_yaml, criteria=None, continuous=True, discrete=True, t
 
     Each stage (simulation, continuous and discrete linearization) runs on its
     own: a failing stage leaves its columns empty and adds its error text to
-    ``error``; the others still run."""
+    ``error``; the others still run. ``stages`` (``core.progress.Stages``, default silent) times
+    them: the config, the simulation's own stages (building, the start, initializing, with the
+    simulated run as "simulation"), each linearization (benchmarks/sweep_throughput.py reads
+    ``stages.times``)."""
     criteria = StabilityCriteria(**(criteria or {}))
+    stages = stages or quiet()
     start, cpu_start = time.perf_counter(), time.process_time()
     row = {column: None for column in RESULT_COLUMNS}
     row["worker"] = f"{socket.gethostname()}:{os.getpid()}"
@@ -220,12 +225,15 @@ def evaluate_point(config_yaml, criteria=None, continuous=True, discrete=True, t
     if task is not None and TASKS.get(task.name) is not task:
         register_task(task)
     try:
-        config = load_config(data=config_yaml)
+        with stages("config"):
+            config = load_config(data=config_yaml)
     except Exception as error:
         row.update(error=_stage_error("config", error), wall_time=time.perf_counter() - start)
         return row
     try:
-        row.update(simulation_metrics(simulate(config), criteria))
+        with stages("simulation"):
+            result = simulate(config, stages=stages)
+        row.update(simulation_metrics(result, criteria))
     except RunStopped as stopped:            # a fault or an error mid-run: never a stable point
         row["stable_simulation"] = False
         errors.append(f"simulation: {stopped}")
@@ -234,14 +242,16 @@ def evaluate_point(config_yaml, criteria=None, continuous=True, discrete=True, t
     linearization_start = time.perf_counter()
     if continuous:
         try:
-            linear = linearize_continuous(config)
+            with stages("continuous linearization"):
+                linear = linearize_continuous(config)
             row["worst_continuous_real"], row["marginal_continuous_real"] = _worst_real(linear.match)
             row["stable_continuous"] = row["worst_continuous_real"] < criteria.eigenvalue_margin
         except Exception as error:
             errors.append(_stage_error("continuous linearization", error))
     if discrete and config.control_period > 0:
         try:
-            linear = linearize_sampled_loop(config)
+            with stages("discrete linearization"):
+                linear = linearize_sampled_loop(config)
             row["worst_discrete_real"], row["marginal_discrete_real"] = _worst_real(linear.match)
             row["spectral_radius"] = float(np.max(np.abs(linear.multipliers)))
             row["discrete_equilibrium_residual"] = linear.equilibrium_residual

@@ -175,6 +175,14 @@ def ContactWrenchSensor_(T):
             """At the plant's step: P at the configuration the step solves the contact at."""
             state.get_mutable_discrete_state(self._point_state).SetFromVector(self._current_point(context))
 
+        def set_sampled_point(self, context):
+            """Take P's position for the contact results the plant holds now (``scenario.start`` after it
+            primed the plant at the start, before the first step; until then, or if this is never called,
+            the sensor shifts to the current P)."""
+            if self.samples_point:
+                context.get_mutable_discrete_state(self._point_state).SetFromVector(
+                    value(self._current_point(context)))
+
         def _contact_point(self, context):
             """p_WP the contact results are shifted to: sampled with them, else current."""
             if self.samples_point:
