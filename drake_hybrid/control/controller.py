@@ -358,10 +358,8 @@ def HybridController_(T):
                 self._diagnostic_slices[name] = slice(start, start + size)
                 start += size
             if self.sampled_diagnostics:
-                # Discrete state group 1: the diagnostics of the last tick.
-                self.DeclareDiscreteState(start)
-                self.DeclareVectorOutputPort("diagnostics", start, self._calc_sampled_diagnostics,
-                                             prerequisites_of_calc={self.xd_ticket()})
+                # Discrete state group 1: the diagnostics of the last tick (output by Drake: no Python call).
+                self.DeclareStateOutputPort("diagnostics", self.DeclareDiscreteState(start))
             self.DeclareVectorOutputPort("position_error", k, self._calc_position_error,
                                          prerequisites_of_calc={state_ticket})
             # The float fast path (control/fast_law.py): the same law compiled; None = the generic law.
@@ -472,9 +470,6 @@ def HybridController_(T):
 
         def _calc_held_actuation(self, context, output):
             output.SetFromVector(context.get_discrete_state(0).CopyToVector()[self._integrated_size:])
-
-        def _calc_sampled_diagnostics(self, context, output):
-            output.SetFromVector(context.get_discrete_state(1).CopyToVector())
 
         def _store_diagnostics(self, solution, discrete_state):
             if self.sampled_diagnostics:

@@ -8,8 +8,10 @@ then runs the rest of the law. Two compiled calls per tick, not one, so that a n
 compiles only its own module (about 1.5 s) and never the law again (about 40 s, once per machine).
 The generated source is written once to a cache folder (``DRAKE_HYBRID_CACHE``, default
 ``~/.cache/drake_hybrid``), keyed by its hash and the kernels' source, so numba's ``cache=True``
-keeps the machine code between runs. Nothing compiles at import; the first tick compiles (or
-loads from the cache) and records the time in ``FastLaw.compile_seconds``.
+keeps the machine code between runs. Nothing compiles at import; the first tick loads the compiled
+law from the cache (recording the time in ``FastLaw.compile_seconds``) or, when it is not there yet,
+hands the compile to a background job and keeps this controller on the generic law
+(``control.fast_compile``; ``DRAKE_HYBRID_COMPILE=foreground`` compiles at the first tick instead).
 
 Per tick (``evaluate``): the Drake calls the law needs (pose, J_g, J_g-dot v, v, and M or h + g
 where the law needs them), the two compiled calls, and for n = d one inverse dynamics call and a
@@ -21,6 +23,9 @@ paths give every output port to 1e-12.
 AutoDiffXd controllers keep the generic path. Without numba (not installed, or it fails to import)
 ``build`` warns once and returns None; so does a constraint the compiler does not handle (e.g. a
 ``SelectingConstraint`` without a symbolic ``selector``): the generic path then runs.
+
+Size: the code generation, the constants' packing and the first tick's compile-or-wait belong with
+the fast path they serve (the numerics are in fast_kernels, the background compile in fast_compile).
 """
 
 import hashlib

@@ -43,6 +43,8 @@ def check_yaml_against_schema(text, schema, where="", error=ConfigError):
     except ConfigError as problem:
         raise error(f"{where}{problem}") from None
     except yaml.YAMLError as problem:
+        if "maximum nesting depth" in str(problem):     # libyaml's limit (PyYAML's own parser recurses instead)
+            raise error(f"{where}the YAML nests too deeply") from None
         raise error(f"{where}not valid YAML: {str(problem).splitlines()[0]}") from None
     mismatch = type_mismatch(parsed, schema)
     if mismatch:

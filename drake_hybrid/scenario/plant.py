@@ -55,10 +55,13 @@ def _set_contact_properties(plant, scene_graph, geometry_ids, config, pad):
             properties.UpdateProperty("material", "hunt_crossley_dissipation", float(config.pad_dissipation))
             if config.relaxation_time >= 0:
                 properties.UpdateProperty("material", "relaxation_time", float(config.relaxation_time))
-        elif config.workpiece_relaxation_time >= 0:
-            # SAP's pair relaxation time is the sum of the two geometries' (Drake's default 0.1 s each):
-            # docs/drake_notes.md, "SAP's normal damping drags a pad over a curved workpiece".
-            properties.UpdateProperty("material", "relaxation_time", float(config.workpiece_relaxation_time))
+        else:
+            if config.workpiece_relaxation_time >= 0:
+                # SAP's pair relaxation time is the sum of the two geometries' (Drake's default 0.1 s each):
+                # docs/drake_notes.md, "SAP's normal damping drags a pad over a curved workpiece".
+                properties.UpdateProperty("material", "relaxation_time", float(config.workpiece_relaxation_time))
+            if config.workpiece_resolution > 0 and properties.HasProperty("hydroelastic", "resolution_hint"):
+                properties.UpdateProperty("hydroelastic", "resolution_hint", float(config.workpiece_resolution))
         properties.UpdateProperty("material", "coulomb_friction",
                                   CoulombFriction(float(config.friction), float(config.friction)))
         scene_graph.AssignRole(plant.get_source_id(), geometry_id, properties, RoleAssign.kReplace)
