@@ -151,7 +151,8 @@ def markdown(results):
              "(`contact.pad_resolution`, `contact.workpiece_resolution`) and the plant's time step (the "
              "controller stays at 1 kHz). Accuracy: the worst velocity and force row errors after five design "
              "time constants (% of the command), the largest distance of the run's measured velocity and force "
-             "from the first row's (the finest meshes) after contact (% of the command), the designed eigenvalues' worst "
+             "from the first row's (the finest meshes) after contact (% of the command), the designed "
+             "eigenvalues' worst "
              "deviation (the continuous closed loop; the crank's sampled map). Cost: the plant alone's "
              "real-time factor replaying the run's torques, the closed loop's, and the seconds to build the "
              "diagram (the meshes are made then). Real-time factors depend on the machine's load: compare "
@@ -184,11 +185,16 @@ def main():
     args.json.write_text(json.dumps(results, indent=1, default=float) + "\n")
     print(f"wrote {args.json}")
     if args.doc:
-        text = "\n".join(markdown(results)) + "\n"
-        if args.doc.exists() and "## Choice" in args.doc.read_text():
-            text += "\n## Choice" + args.doc.read_text().split("## Choice", 1)[1]      # the hand-written part
-        args.doc.write_text(text)
+        write_doc(results, args.doc)
         print(f"wrote {args.doc}")
+
+
+def write_doc(results, path=DOC):
+    """The table into ``path``, keeping its hand-written "## Choice" section."""
+    text = "\n".join(markdown(results)) + "\n"
+    if path.exists() and "## Choice" in path.read_text():
+        text += "\n## Choice" + path.read_text().split("## Choice", 1)[1]
+    path.write_text(text)
 
 
 if __name__ == "__main__":
