@@ -267,13 +267,10 @@ def markdown(results):
               "system's calculation timed by a wrapper, exclusive of the calls nested in it. Law: the controller's "
               "cache calculation (state, force elements, the compiled law and its Drake calls); law isolated: the "
               "same calculation at the same state timed alone in a loop, so the difference is what the contact "
-              "solver's eviction of the CPU caches costs it. Contact results: the plant's contact results read by "
-              "the sensor (for the crank's wrist sensor its reaction forces, whose ports stay sampled: no solve), "
-              "twice per step: at k h - delta by the controller's tick (a SAP solve at the held torque) "
-              "and at k h by the wrench logger (the step's own solve, which the step then reuses, warm-started from the "
-              "tick's); with unsampled output ports the tick's read is a second SAP solve per step that the plant "
-              "alone does not make (docs/drake_notes.md). Rest: the plant's step beyond that, the simulator, the "
-              "loggers.", "",
+              "solver's eviction of the CPU caches costs it. Contact results: the plant's sampled contact results "
+              "(the crank's wrist sensor: its reaction forces) read by the sensor once a step, a read of the step's "
+              "own solve (docs/drake_notes.md, \"Sampled plant output ports\"). Rest: the plant's step with its one "
+              "contact solve, the simulator, the loggers.", "",
               "## Accuracy and linearization, per task and mode", "",
               "| task | mode | final velocity error % | final force error % | max after 5 tau (v / F) % | "
               "max / final abs C | eigenvalue deviation % | matched | Linearize s | whole linearization s |",
