@@ -30,6 +30,7 @@ import time
 from pathlib import Path
 
 from drake_hybrid.control import fast_kernels
+from drake_hybrid.core.locks import process_alive
 
 POLICIES = ("background", "foreground")
 _POLICY = [os.environ.get("DRAKE_HYBRID_COMPILE", "background")]
@@ -98,23 +99,13 @@ def signature_of(arguments):
     return tuple(numba.typeof(argument) for argument in arguments)
 
 
-def _process_alive(pid):
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    except PermissionError:
-        return True
-    return True
-
-
 def job_running():
     """The process id of the running compile job, or None."""
     try:
         pid = int((cache_folder() / "compiling.lock").read_text().split()[0])
     except (OSError, ValueError, IndexError):
         return None
-    return pid if _process_alive(pid) else None
+    return pid if process_alive(pid) else None
 
 
 def start_job(calls, module_path=None):
@@ -147,7 +138,9 @@ def start_job(calls, module_path=None):
     return process.pid
 
 
-def _import_file(path):
+def import_file(path):
+    """The module of the Python file at ``path`` (a generated constraint module), imported once per process
+    under its file's name."""
     name = Path(path).stem
     if name in sys.modules:
         return sys.modules[name]
@@ -164,7 +157,7 @@ def run_job(request_path):
     folder = cache_folder()
     try:
         request = pickle.loads(Path(request_path).read_bytes())
-        generated = _import_file(request["module_path"]) if request["module_path"] else None
+        generated = import_file(request["module_path"]) if request["module_path"] else None
         calls = []
         for module_name, name, signature in request["calls"]:
             owner = fast_kernels if module_name == fast_kernels.__name__ else generated

@@ -29,7 +29,6 @@ the fast path they serve (the numerics are in fast_kernels, the background compi
 """
 
 import hashlib
-import importlib.util
 import os
 import sys
 import time
@@ -156,11 +155,7 @@ def load_generated(source):
         temporary = folder / f".{name}.{os.getpid()}.tmp"
         temporary.write_text(source)
         os.replace(temporary, path)                 # atomic: parallel workers may write the same file
-    spec = importlib.util.spec_from_file_location(name, path)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    sys.modules[name] = module
-    return module
+    return fast_compile.import_file(path)
 
 
 # ------------------------------------------------------------------------------------------------

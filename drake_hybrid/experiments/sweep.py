@@ -82,6 +82,7 @@ from drake_hybrid.analysis.linearization import (STEP_CHECK_RATE, linearize_cont
                                                  predicted_eigenvalues)
 from drake_hybrid.control.gains import ControlMode
 from drake_hybrid.core.errors import GainError
+from drake_hybrid.core.locks import process_alive
 from drake_hybrid.core.progress import quiet
 from drake_hybrid.experiments.metrics import max_row_errors, row_commands
 from drake_hybrid.experiments.simulation import RunStopped, simulate
@@ -378,7 +379,7 @@ class SweepLock:
                 descriptor = os.open(self.path, os.O_CREAT | os.O_EXCL | os.O_WRONLY)
             except FileExistsError:
                 holder = self._holder()
-                if holder is not None and _process_alive(holder):
+                if holder is not None and process_alive(holder):
                     raise SweepSpecError(f"{self.path.parent} is being written by another sweep (process {holder}); "
                                          "wait for it or use another output directory") from None
                 self.path.unlink(missing_ok=True)    # the holder died: take the lock over
@@ -397,16 +398,6 @@ class SweepLock:
             return int(self.path.read_text().strip())
         except (OSError, ValueError):
             return None
-
-
-def _process_alive(pid):
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    except PermissionError:
-        return True
-    return True
 
 
 def _check_scheduler(address, timeout=10.0):
