@@ -75,6 +75,14 @@ def reaction_force_slot(plant, joint):
     return [int(index) for index in plant.GetJointIndices()].index(int(joint.index()))
 
 
+def _point_in_world_floats(X_WB, point_in_body):
+    """p_WP = X_WB p_BP for T = float, as a list of three floats: RigidTransform.multiply's numpy
+    wrapper costs three times this arithmetic on a 3-vector (the sensors run it every step)."""
+    (r00, r01, r02, t0), (r10, r11, r12, t1), (r20, r21, r22, t2) = X_WB.GetAsMatrix34().tolist()
+    a, b, c = point_in_body
+    return [t0 + r00 * a + r01 * b + r02 * c, t1 + r10 * a + r11 * b + r12 * c, t2 + r20 * a + r21 * b + r22 * c]
+
+
 def _point(point, owner):
     point = np.asarray(point, dtype=float)
     if point.shape != (3,):
@@ -148,6 +156,7 @@ def ContactWrenchSensor_(T):
             self._body_index = frame.body().index()
             self._body_slot = int(self._body_index)
             self._point_in_body = frame.GetFixedPoseInBodyFrame().multiply(self._end_effector_point)
+            self._point_in_body_list = self._point_in_body.tolist()
             self._robot_geometry_values = {geometry.get_value() for geometry in self._robot_geometries}
             self._results_port = self.DeclareAbstractInputPort("contact_results",
                                                                AbstractValue.Make(ContactResults_[T]()))
@@ -169,6 +178,8 @@ def ContactWrenchSensor_(T):
                             converter=converter)
 
         def _current_point(self, context):
+            if T == float:
+                return _point_in_world_floats(self._poses_port.Eval(context)[self._body_slot], self._point_in_body_list)
             return _point_in_world(self._poses_port.Eval(context), self._body_index, self._point_in_body)
 
         def _sample_point(self, context, state):
@@ -189,7 +200,7 @@ def ContactWrenchSensor_(T):
                 sampled = context.get_discrete_state(self._point_state).value()
                 if all_finite(sampled):
                     return sampled
-            return self._current_point(context)
+            return np.asarray(self._current_point(context))
 
         def _calc_wrench(self, context, output):
             results = self.get_input_port(0).Eval(context)
@@ -253,10 +264,11 @@ def ContactWrenchSensor_(T):
                 n1 += c2 * b0 - c0 * b2
                 n2 += c0 * b1 - c1 * b0
                 f0, f1, f2 = f0 + b0, f1 + b1, f2 + b2
+            p0 = math.nan
             if self.samples_point:
-                p0, p1, p2 = self._contact_point(context).tolist()
-            else:
-                p0, p1, p2 = self._poses_port.Eval(context)[self._body_slot].multiply(self._point_in_body).tolist()
+                p0, p1, p2 = context.get_discrete_state(self._point_state).value().tolist()
+            if p0 != p0:                        # no sampled point (not sampling, or before the first step)
+                p0, p1, p2 = self._current_point(context)
             output.SetFromVector([n0 - (p1 * f2 - p2 * f1), n1 - (p2 * f0 - p0 * f2), n2 - (p0 * f1 - p1 * f0),
                                   f0, f1, f2])
 
@@ -335,6 +347,7 @@ def WristForceTorqueSensor_(T):
             self._body_index = frame.body().index()
             self._point_in_body = frame.GetFixedPoseInBodyFrame().multiply(self._end_effector_point)
             self._body_slot, self._tool_slot = int(self._body_index), int(self._tool_index)
+            self._point_in_body_list = self._point_in_body.tolist()
             self._reactions_port = self.DeclareAbstractInputPort("reaction_forces", Value[List[SpatialForce_[T]]]([]))
             self._poses_port = self.DeclareAbstractInputPort("body_poses", Value[List[RigidTransform_[T]]]([]))
             # Issue 18: the tool's inertial wrench, from its model (off: the paper's static compensation).
@@ -400,7 +413,7 @@ def WristForceTorqueSensor_(T):
             (n0, f0), (n1, f1), (n2, f2) = (R_WJc @ coefficients.reshape(2, 3).T).tolist()
             t0, t1, t2 = X_W_tool.translation().tolist()
             j0, j1, j2 = (R_W_tool @ self._p_tool_Jc_and_com).tolist()    # columns p_tool_Jc, p_tool_com
-            p0, p1, p2 = body_poses[self._body_slot].multiply(self._point_in_body).tolist()
+            p0, p1, p2 = _point_in_world_floats(body_poses[self._body_slot], self._point_in_body_list)
             a0, a1, a2 = t0 + j0[0] - p0, t1 + j1[0] - p1, t2 + j2[0] - p2    # p_WJc - p_WP
             c0, c1, c2 = t0 + j0[1] - p0, t1 + j1[1] - p1, t2 + j2[1] - p2    # p_Wcom - p_WP
             w0, w1, w2 = self._weight

@@ -112,12 +112,16 @@ def ProfileSource_(T):
             force_profile.validate(force_size, "force profile")
             self.velocity_profile, self.force_profile = velocity_profile, force_profile
             self._sizes = (velocity_size, force_size)
+            # A constant profile's outputs depend on nothing: Drake computes them once per context (no
+            # Python call at every tick and every logged sample); the others depend on time.
+            velocity, force = ({self.nothing_ticket() if profile.kind == "constant" else self.time_ticket()}
+                               for profile in (velocity_profile, force_profile))
             self.DeclareVectorOutputPort("desired_velocity", velocity_size, self._calc_velocity,
-                                         prerequisites_of_calc={self.time_ticket()})
+                                         prerequisites_of_calc=velocity)
             self.DeclareVectorOutputPort("desired_acceleration", velocity_size, self._calc_acceleration,
-                                         prerequisites_of_calc={self.time_ticket()})
+                                         prerequisites_of_calc=velocity)
             self.DeclareVectorOutputPort("desired_force", force_size, self._calc_force,
-                                         prerequisites_of_calc={self.time_ticket()})
+                                         prerequisites_of_calc=force)
 
         def _construct_copy(self, other, converter=None):
             Impl._construct(self, other.velocity_profile, other.force_profile, *other._sizes, converter=converter)
