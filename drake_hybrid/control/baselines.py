@@ -54,6 +54,7 @@ from drake_hybrid.control.sampling import SAMPLE_LEAD
 from drake_hybrid.core.errors import ConfigError, DimensionError, check_fields
 from drake_hybrid.core.kinematics import declare_task_input, resolve_frame
 from drake_hybrid.core.linalg import all_finite, solve, value
+from drake_hybrid.core.templates import default_instantiation
 
 MAPPINGS = ("inverse", "pseudoinverse")
 
@@ -317,7 +318,7 @@ def JointServoHybridController_(T):
     return Impl
 
 
-JointServoHybridController = JointServoHybridController_[None]
+JointServoHybridController = default_instantiation(JointServoHybridController_)
 
 
 @TemplateSystem.define("AxisPDOpenLoopForceController_", T_list=[float, AutoDiffXd], scope=sys.modules[__name__])
@@ -386,7 +387,7 @@ def AxisPDOpenLoopForceController_(T):
     return Impl
 
 
-AxisPDOpenLoopForceController = AxisPDOpenLoopForceController_[None]
+AxisPDOpenLoopForceController = default_instantiation(AxisPDOpenLoopForceController_)
 
 
 def make_baseline(name, plant, end_effector_frame, end_effector_point, constraint_space, gains=None, baseline=None,

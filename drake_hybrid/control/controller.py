@@ -41,6 +41,7 @@ from drake_hybrid.control.sampling import SAMPLE_LEAD
 from drake_hybrid.core.errors import DimensionError
 from drake_hybrid.core.kinematics import declare_task_input, resolve_frame, set_plant_state
 from drake_hybrid.core.linalg import all_finite, value
+from drake_hybrid.core.templates import default_instantiation
 
 
 class LawCache:
@@ -504,4 +505,4 @@ def HybridController_(T):
     return Impl
 
 
-HybridController = HybridController_[None]
+HybridController = default_instantiation(HybridController_)

@@ -54,6 +54,7 @@ from drake_hybrid.control.phases import ContactPhase
 from drake_hybrid.control.sampling import SAMPLE_LEAD
 from drake_hybrid.core.errors import ConfigError, check_fields
 from drake_hybrid.core.linalg import all_finite, value
+from drake_hybrid.core.templates import default_instantiation
 
 
 @dataclass
@@ -244,4 +245,4 @@ def ContactSupervisor_(T):
     return Impl
 
 
-ContactSupervisor = ContactSupervisor_[None]
+ContactSupervisor = default_instantiation(ContactSupervisor_)

@@ -46,6 +46,7 @@ from drake_hybrid.control.sampling import SAMPLE_LEAD
 from drake_hybrid.core.errors import DimensionError
 from drake_hybrid.core.kinematics import resolve_frame
 from drake_hybrid.core.linalg import all_finite, value
+from drake_hybrid.core.templates import default_instantiation
 
 
 def sampled_reading_age(plant):
@@ -275,7 +276,7 @@ def ContactWrenchSensor_(T):
     return Impl
 
 
-ContactWrenchSensor = ContactWrenchSensor_[None]
+ContactWrenchSensor = default_instantiation(ContactWrenchSensor_)
 
 
 @TemplateSystem.define("WristForceTorqueSensor_", T_list=[float, AutoDiffXd], scope=sys.modules[__name__])
@@ -425,7 +426,7 @@ def WristForceTorqueSensor_(T):
     return Impl
 
 
-WristForceTorqueSensor = WristForceTorqueSensor_[None]
+WristForceTorqueSensor = default_instantiation(WristForceTorqueSensor_)
 
 
 def low_pass_coefficient(bandwidth_hz, period):
@@ -511,7 +512,7 @@ def LowPassFilter_(T):
     return Impl
 
 
-LowPassFilter = LowPassFilter_[None]
+LowPassFilter = default_instantiation(LowPassFilter_)
 
 
 
@@ -620,4 +621,4 @@ def WrenchConditioner_(T):
     return Impl
 
 
-WrenchConditioner = WrenchConditioner_[None]
+WrenchConditioner = default_instantiation(WrenchConditioner_)

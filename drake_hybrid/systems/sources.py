@@ -33,6 +33,7 @@ from drake_hybrid.core.kinematics import declare_cached_value, declare_task_inpu
 from drake_hybrid.core.linalg import value
 from drake_hybrid.core.projections import pseudo_desired_velocity
 from drake_hybrid.core.symbolic import CompiledFunction, to_sympy_matrix
+from drake_hybrid.core.templates import default_instantiation
 
 
 @dataclass
@@ -141,7 +142,7 @@ def ProfileSource_(T):
     return Impl
 
 
-ProfileSource = ProfileSource_[None]
+ProfileSource = default_instantiation(ProfileSource_)
 
 
 @TemplateSystem.define("PseudoVelocitySource_", T_list=[float, AutoDiffXd], scope=sys.modules[__name__])
@@ -226,7 +227,7 @@ def PseudoVelocitySource_(T):
     return Impl
 
 
-PseudoVelocitySource = PseudoVelocitySource_[None]
+PseudoVelocitySource = default_instantiation(PseudoVelocitySource_)
 
 
 @TemplateSystem.define("DesiredFieldSource_", T_list=[float, AutoDiffXd], scope=sys.modules[__name__])
@@ -311,4 +312,4 @@ def DesiredFieldSource_(T):
     return Impl
 
 
-DesiredFieldSource = DesiredFieldSource_[None]
+DesiredFieldSource = default_instantiation(DesiredFieldSource_)
