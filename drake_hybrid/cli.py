@@ -16,6 +16,8 @@ help the README's synopsis mirrors (tests/test_cli_help.py).
 """
 
 import argparse
+import contextlib
+import gc
 import json
 import math
 import os
@@ -40,11 +42,17 @@ class UsageError(ValueError):
     """Bad command-line input (printed as one line, exit code 2)."""
 
 
+@contextlib.contextmanager
 def _loading(args, what):
     """The command's first stage line while it loads ``what`` (its modules): from the entry point
-    (``main``'s ``loading_line``), not with --quiet."""
+    (``main``'s ``loading_line``), not with --quiet. Then the objects the imports made (modules,
+    functions, Drake's bindings, sympy's and numba's tables: most of the process's) are moved out of
+    the cyclic garbage collector's sight (``gc.freeze``): they live as long as the process, and each
+    full collection, the last one at exit included, would scan them all again (1-2 s of a run)."""
     enabled = getattr(args, "loading_line", False) and not getattr(args, "quiet", False)
-    return Stages(enabled=enabled)(f"drake-hybrid {args.command}: loading {what}")
+    with Stages(enabled=enabled)(f"drake-hybrid {args.command}: loading {what}"):
+        yield
+    gc.freeze()
 
 
 def _options(args):
