@@ -153,7 +153,9 @@ def import_file(path):
 
 def run_job(request_path):
     """The job: compile every call of the request (numba saves each to its cache), record them, release
-    the lock. A failure is written to ``failed`` (and the job's log)."""
+    the lock. A failure is written to ``failed`` (and the job's log). It yields the CPU to the run
+    that started it (a lower priority, ``os.nice``): that run uses the generic law meanwhile."""
+    os.nice(10)
     folder = cache_folder()
     try:
         request = pickle.loads(Path(request_path).read_bytes())
