@@ -331,6 +331,12 @@ def markdown(results):
     return "\n".join(lines)
 
 
+def _save(part, name):
+    """A part's figures also in results/NAME (what its own script writes when run alone)."""
+    (HERE / "results").mkdir(exist_ok=True)
+    (HERE / "results" / name).write_text(json.dumps(part, indent=1, default=float) + "\n")
+
+
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--quick", action="store_true", help="fewer samples and repeats (about a minute)")
@@ -385,12 +391,14 @@ def main(argv=None):
     if "first_run" not in args.skip:
         print("first run")
         results["first_run"] = first_run.measure()
+        _save(results["first_run"], "first_run.json")
     if "sweep" not in args.skip:
         print("sweep throughput")
         results["sweep"] = sweep_throughput.measure(0.5, HERE / "results")
     if "resolution" not in args.skip:
         print("contact meshes and plant step")
         results["resolution"] = contact_resolution.measure(args.tasks, quick=args.quick)
+        _save(results["resolution"], "contact_resolution.json")
         contact_resolution.write_doc(results["resolution"])
     results["load_average_at_end"] = os.getloadavg()
     results["targets"] = targets(results)
