@@ -262,7 +262,8 @@ def markdown(results):
                      f"{t['plant_rtf_static_torque']:.3g} | {t['plant_rtf_zero_torque']:.3g} | "
                      f"{_fmt(t['replay_drift'])} |")
     lines += ["", "RTF = simulated / wall seconds of `AdvanceTo` (by CPU time: simulated / this process's CPU seconds, "
-              "which the other jobs of a shared machine distort far less). Closed loop: `drake_hybrid.experiments.simulation.simulate` "
+              "which the other jobs of a shared machine distort far less). Closed loop: "
+              "`drake_hybrid.experiments.simulation.simulate` "
               "(plant, sampled controller, wrench sensor, source, loggers). Plant alone: the same plant and contact "
               "replaying the closed loop's logged torques (same motion, same contact; see closed_loop.py). "
               "Medians of the repeats.", "",

@@ -46,9 +46,9 @@ from drake_hybrid.scenario.builder import build_scenario
 from drake_hybrid.scenario.start import set_initial_conditions
 
 # The run's note when its controller ran the generic law while numba compiled the fast one (control/fast_compile.py).
-COMPILING_NOTE = ("this run used the generic law (the compiled one gives the same to 1e-12): the compiled law was not on "
-                  "this machine yet, and numba compiles it in the background for the next runs (once, 30-65 s on 2 "
-                  "cores)")
+COMPILING_NOTE = ("this run used the generic law (the compiled one gives the same to 1e-12): the compiled law was "
+                  "not on this machine yet, and numba compiles it in the background for the next runs (once, "
+                  "30-65 s on 2 cores)")
 
 
 @dataclass
