@@ -34,6 +34,8 @@ import tempfile
 import time
 from pathlib import Path
 
+import cloudpickle
+
 from drake_hybrid.core.progress import Stages
 from drake_hybrid.experiments.sweep import evaluate_point, read_results, run_sweep, sweep_points
 from drake_hybrid.experiments.sweep_spec import load_spec
@@ -46,6 +48,8 @@ parameters:
   gains.force_proportional: {{values: [0.25, 0.5, 0.75]}}
   control_period: {{values: [0.001, 0.004]}}
 """
+# The workers do not have this folder on their path: its functions (warm_up) travel by value.
+cloudpickle.register_pickle_by_value(sys.modules[__name__])
 STAGES = {"config": "config", "build": "building the diagram", "start": "solving the start",
           "initialize": "initializing the simulator", "simulation": "simulation",
           "continuous linearization": "continuous linearization", "discrete linearization": "discrete linearization"}
