@@ -80,6 +80,7 @@ from tqdm import tqdm
 
 from drake_hybrid.analysis.linearization import (STEP_CHECK_RATE, linearize_continuous, linearize_sampled_loop,
                                                  predicted_eigenvalues)
+from drake_hybrid.control import fast_compile
 from drake_hybrid.control.gains import ControlMode
 from drake_hybrid.core.errors import GainError
 from drake_hybrid.core.locks import process_alive
@@ -216,9 +217,16 @@ def evaluate_point(config_yaml, criteria=None, continuous=True, discrete=True, t
     ``error``; the others still run. ``stages`` (``core.progress.Stages``, default silent) times
     them: the config, the simulation's own stages (building, the start, initializing, with the
     simulated run as "simulation"), each linearization (benchmarks/sweep_throughput.py reads
-    ``stages.times``)."""
+    ``stages.times``).
+
+    Every point runs the compiled law (``fast_compile.foreground``: compiled at a worker's first point
+    where its machine has none yet), so that no figure depends on when a background compile finished."""
+    with fast_compile.foreground():
+        return _evaluate_point(config_yaml, criteria, continuous, discrete, task, stages or quiet())
+
+
+def _evaluate_point(config_yaml, criteria, continuous, discrete, task, stages):
     criteria = StabilityCriteria(**(criteria or {}))
-    stages = stages or quiet()
     start, cpu_start = time.perf_counter(), time.process_time()
     row = {column: None for column in RESULT_COLUMNS}
     row["worker"] = f"{socket.gethostname()}:{os.getpid()}"

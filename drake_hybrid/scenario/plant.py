@@ -71,14 +71,15 @@ def build_plant(task, config, builder, time_step=None, sampled_outputs=None):
     """Add the task's plant (robot, tool, workpiece, contact properties) to ``builder``.
 
     ``sampled_outputs``: a discrete plant's contact results and reaction forces sampled at its last
-    step (Drake's ``use_sampled_output_ports``, the default) or those of the step about to be taken.
-    Sampled, the sensors read the contact solve the plant's step made (one solve per step; the
-    contact sensor shifts it to the end effector as it was at that solve, ``ContactWrenchSensor``);
-    unsampled, a controller that reads them at another instant than the plant steps costs a second
-    contact solve per step (docs/drake_notes.md). ``analysis.linearize_discrete`` asks for unsampled
-    ports (abstract state does not linearize)."""
+    step or those of the step about to be taken; default ``config.plant.use_sampled_output_ports``
+    (Drake's default: sampled). Sampled, the sensors read the contact solve the plant's step made
+    (one solve per step; the contact sensor shifts it to the end effector as it was at that solve,
+    ``ContactWrenchSensor``, and the law splits it one step old); unsampled, the reading is the
+    current step's, and a controller that reads it at another instant than the plant steps costs a
+    second contact solve per step (docs/drake_notes.md; the grinding task pays it).
+    ``analysis.linearize_discrete`` asks for unsampled ports (abstract state does not linearize)."""
     if sampled_outputs is None:
-        sampled_outputs = True
+        sampled_outputs = config.plant.use_sampled_output_ports
     time_step = config.plant.time_step if time_step is None else time_step
     plant_config = copy.copy(config.plant)
     plant_config.time_step = time_step
