@@ -59,13 +59,14 @@ from drake_hybrid.scenario.tasks import TASKS, get_task
 MODES = [mode.value for mode in ControlMode]
 
 
-def plant_alone_rtf(config, torque="static", log=None):
+def plant_alone_rtf(config, torque="static", log=None, clock=time.perf_counter):
     """Real-time factor of the task's plant alone from the task's start.
 
     torque: "replay" (the torques of ``log``, a closed-loop run's log, through a
     zero-order hold), "static" (gravity + the desired push at the start, held)
-    or "zero". Returns (rtf, hydroelastic contacts at the end, max |q - q_log|
-    at the end for "replay" else None)."""
+    or "zero". ``clock``: wall time (default) or ``time.process_time`` (this process's CPU
+    time, what a loaded shared machine distorts least). Returns (rtf, hydroelastic contacts at
+    the end, max |q - q_log| at the end for "replay" else None)."""
     task = get_task(config.task)
     scenario = build_scenario(config, with_loggers=False)
     q0 = task.start_positions(scenario)
@@ -84,14 +85,28 @@ def plant_alone_rtf(config, torque="static", log=None):
         held = static_torque(scenario, q0) if torque == "static" else np.zeros(len(q0))
         plant.get_actuation_input_port(robot.arm).FixValue(plant_context, held)
     simulator.Initialize()
-    start = time.perf_counter()
+    start = clock()
     simulator.AdvanceTo(float(config.duration))
-    wall = time.perf_counter() - start
+    wall = clock() - start
     contacts = plant.get_contact_results_output_port().Eval(plant_context).num_hydroelastic_contacts()
     drift = None
     if torque == "replay":
         drift = float(np.max(np.abs(plant.GetPositions(plant_context, robot.arm) - log["q"][-1])))
     return float(config.duration) / wall, int(contacts), drift
+
+
+def closed_loop_cpu_rtf(config):
+    """The closed loop's real-time factor by this process's CPU time (``simulate``'s diagram, loggers
+    included, timed over ``AdvanceTo`` after ``Initialize``): on a shared machine the wall clock
+    counts the other jobs' time too, the CPU time mostly not."""
+    scenario = build_scenario(config)
+    simulator = Simulator(scenario.diagram)
+    context = simulator.get_mutable_context()
+    set_initial_conditions(scenario, context)
+    simulator.Initialize()
+    start = time.process_time()
+    simulator.AdvanceTo(float(config.duration))
+    return float(config.duration) / (time.process_time() - start)
 
 
 def _accuracy(summary, final_constraint):
@@ -182,16 +197,21 @@ def measure_task(name, repeats=3, modes=MODES, tick_samples=2000, log=print):
     if default_log is None:
         default_log = simulate(default).log
     drift = contacts_end = None
+    closed_cpu, replay_cpu = [], []
     for _ in range(repeats):
         rtf, contacts_end, drift = plant_alone_rtf(default, "replay", default_log)
         replay.append(rtf)
         if len(closed) < repeats:
             closed.append(simulate(default).summary["real_time_factor"])
+        replay_cpu.append(plant_alone_rtf(default, "replay", default_log, clock=time.process_time)[0])
+        closed_cpu.append(closed_loop_cpu_rtf(default))
     static.append(plant_alone_rtf(default, "static")[0])
     zero.append(plant_alone_rtf(default, "zero")[0])
     result["rtf"] = statistics.median(closed)
     result["plant_rtf"] = statistics.median(replay)
     result["rtf_ratio"] = result["rtf"] / result["plant_rtf"]
+    result["cpu_rtf"], result["plant_cpu_rtf"] = statistics.median(closed_cpu), statistics.median(replay_cpu)
+    result["cpu_rtf_ratio"] = result["cpu_rtf"] / result["plant_cpu_rtf"]
     result["plant_rtf_static_torque"] = statistics.median(static)
     result["plant_rtf_zero_torque"] = statistics.median(zero)
     result["rtf_samples"] = closed

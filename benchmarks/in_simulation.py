@@ -10,7 +10,7 @@ calculations timed by wrappers installed on their classes before the diagram is 
 * ``update``: the rest of the controller's periodic discrete update (integrals, held torque,
   diagnostics), exclusive of the law;
 * ``sensor``: the wrench sensor's calculation, exclusive of ``contact results`` (the plant's
-  contact results it reads: with unsampled output ports a contact solve, see below);
+  contact results it reads, see below);
 * ``source``: the desired-motion source's outputs;
 * ``rest``: the step's wall time minus all of these (the plant's own discrete step with its SAP
   solve, the simulator, the loggers).
@@ -20,13 +20,11 @@ parts add up to the step. Timing costs about 0.3 us per wrapped call, charged to
 ``law_us`` (median per evaluation) against the isolated tick's ``_calc_solution`` on the same
 controller at the same state shows how much a simulation step's cold caches cost the law.
 
-The sampled controller reads the wrench at k h - delta, before its new torque; a discrete plant
-with unsampled output ports (``build_plant`` gives them to the contact sensor; a wrist sensor keeps
-the sampled ones, so the crank's reads cost no solve) answers with a contact solve at the old torque, and the step at k h
-solves again with the new one: two SAP solves per step where the sampled ports need one
-(counted with gdb in docs/drake_notes.md). Both are in ``contact results``: the tick's read, and
-the wrench logger's read at k h, which is the step's own solve (the step reuses it; warm-started
-from the tick's solution at the same state, it is the cheaper of the two).
+The plant's contact results are sampled (Drake's default output ports): each step's own solve,
+read once a step by the sensor (at k h by the wrench logger, after the step; the controller's tick
+at (k+1) h - delta reuses that value), so ``contact results`` is a read of stored results, not a
+solve; the plant's one SAP solve a step is in ``rest`` (docs/drake_notes.md, "Sampled plant output
+ports").
 """
 
 import time
@@ -165,7 +163,7 @@ def measure_task(name, duration=None, warmup=0.05):
 def table(results):
     """Markdown lines of ``{task: measure_task(...)}``."""
     lines = ["| task | step us | law us per evaluation (median / p99) | law isolated us | law per step us (share) | "
-             "contact results (the read's solve) us | sensor us | source us | update us | rest us (plant step, "
+             "contact results us | sensor us | source us | update us | rest us (plant step, "
              "simulator, loggers) |",
              "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
     for name, r in results.items():

@@ -20,8 +20,8 @@ same figures for Python systems that do only what a force controller cannot avoi
    (replayed from its log, so the plant does the same work along the same motion; ``drift`` checks
    it), output by a state output port (no Python callback). Its real-time factor against the plant
    alone replaying the same torques through a C++ ``TrajectorySource`` (``closed_loop.plant_alone_rtf``),
-   with the plant's output ports unsampled (what the library uses with a contact sensor under a
-   sampled controller, docs/drake_notes.md: a second contact solve per step) and sampled.
+   with the plant's output ports unsampled (a second contact solve per step, docs/drake_notes.md)
+   and sampled (what the library uses: one solve per step).
 
 Results: printed, and written to ``results/python_floor.json``; PROFILE.md section 0d discusses them.
 """

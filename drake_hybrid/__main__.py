@@ -1,36 +1,27 @@
-"""The ``drake-hybrid`` command (also ``python -m drake_hybrid``): its first line, then the command line.
+"""The ``drake-hybrid`` command (also ``python -m drake_hybrid``).
 
-Importing ``drake_hybrid.cli`` loads Drake, numba, matplotlib and Dask, a few seconds. This entry
-point prints a stage line with that time first, on standard error (``drake-hybrid simulate: loading
-Drake, numba, matplotlib and Dask ... 3.1 s``; nothing with ``--quiet`` or ``--help``, or for an
-unknown command, which the parser then names), and hands over to ``drake_hybrid.cli.main``. It
-imports only the standard library, ``core.progress`` and ``commands`` (the package's names load on
-first use: ``drake_hybrid/__init__.py``); tests/test_cli_help.py checks that pydrake is imported after
-the line. ``drake-hybrid --help`` (``-h``) is answered from ``drake_hybrid.commands`` alone, in a
-fraction of a second; a command's help (``drake-hybrid simulate --help``) lists the tasks' options,
-which needs the tasks, so it loads the rest.
+``drake-hybrid --help`` (``-h``) is answered from ``drake_hybrid.commands`` alone, with the standard
+library only. Everything else goes to ``drake_hybrid.cli.main``, which is light to import too (the
+standard library, numpy and the tasks' options): a command's --help prints at once, and a command
+prints its first stage line ("drake-hybrid simulate: loading Drake, numba and matplotlib ... 2.1 s",
+on standard error; nothing with --quiet) before it loads what it uses. tests/test_cli_help.py checks
+that neither imports pydrake, numba, matplotlib or Dask.
 """
 
 import importlib
 import sys
 
 from drake_hybrid.commands import COMMAND_HELP, top_level_help
-from drake_hybrid.core.progress import Stages
 
 COMMANDS = tuple(COMMAND_HELP)     # drake_hybrid.cli.make_parser's (tested)
-SILENT = {"-h", "--help", "--quiet"}
 
 
 def main(argv=None):
     argv = sys.argv[1:] if argv is None else list(argv)
-    command = argv[0] if argv else None
-    if command in ("-h", "--help"):               # the top-level help: text only, nothing to load
+    if argv[:1] in (["-h"], ["--help"]):          # the top-level help: text only, nothing to load
         sys.stdout.write(top_level_help())
         return 0
-    stages = Stages(enabled=command in COMMANDS and not SILENT & set(argv))
-    with stages(f"drake-hybrid {command}: loading Drake, numba, matplotlib and Dask"):
-        cli = importlib.import_module("drake_hybrid.cli")
-    return cli.main(argv)
+    return importlib.import_module("drake_hybrid.cli").main(argv, loading_line=True)
 
 
 if __name__ == "__main__":

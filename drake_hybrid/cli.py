@@ -4,11 +4,20 @@
 of the source and is not printed (tests/test_cli_help.py checks both, and the help against the README's
 synopsis).
 
+Each command loads what it uses when it runs, under its first stage line ("drake-hybrid simulate:
+loading Drake, numba and matplotlib ... 2.1 s", ``_loading``): Dask for sweep only, the LCM hardware
+stack for hardware only, Meshcat's recorder only with --html. This module itself imports the standard
+library, numpy and the light ``commands``, ``control.gains`` and ``scenario.task_options`` (the tasks'
+options for a command's --help), so that every --help is answered in a fraction of a second; it is the
+one module whose functions import the package's modules (tests/test_architecture.py).
+
 Size: one command per function (simulate, analyze, sweep, tasks, hardware) and the parser whose
 help the README's synopsis mirrors (tests/test_cli_help.py).
 """
 
 import argparse
+import contextlib
+import gc
 import json
 import math
 import os
@@ -19,42 +28,32 @@ import time
 import warnings
 from pathlib import Path
 
-import matplotlib.pyplot as plt
 import numpy as np
 
-from pydrake.lcm import DrakeLcm
-
-from drake_hybrid.analysis.derivatives import DerivativeMismatchWarning
-from drake_hybrid.analysis.linearization import (linearize_continuous, linearize_discrete, nyquist_split,
-                                                 predicted_match, shift_indices)
 # DESCRIPTION (the top-level help) and each command's line live in the light drake_hybrid.commands,
 # which the entry point answers --help from; cli.DESCRIPTION stays the name tests and readers use.
 from drake_hybrid.commands import COMMAND_HELP, DESCRIPTION, top_level_parser  # noqa: F401
 from drake_hybrid.control.gains import ControlMode
 from drake_hybrid.core.errors import ConfigError
 from drake_hybrid.core.progress import Stages
-from drake_hybrid.experiments.metrics import display_unit
-from drake_hybrid.experiments.path_report import path_text
-from drake_hybrid.experiments.simulation import RunStopped, simulate
-from drake_hybrid.experiments.sweep import read_results, run_sweep
-from drake_hybrid.experiments.sweep_spec import SweepSpecError, load_spec
-from drake_hybrid.hardware.controller_side import build_controller_station
-from drake_hybrid.hardware.loop import compare_with_direct
-from drake_hybrid.hardware.messages import HardwareConfig
-from drake_hybrid.hardware.panda import panda_config, panda_drum_task, panda_table_task
-from drake_hybrid.hardware.realtime import replay_timing, run_controller
-from drake_hybrid.scenario.config import load_config
-from drake_hybrid.scenario.data_task import is_task_file, load_task_file, read_task_file
-from drake_hybrid.scenario.hooks import ENTRY_POINT_GROUP, get_hook, hook_names
-from drake_hybrid.scenario.parsing import models_directory
-from drake_hybrid.scenario.tasks import TASKS, get_task
-from drake_hybrid.viz.animation import quiet_meshcat, set_task_camera
-from drake_hybrid.viz.outputs import write_run
-from drake_hybrid.viz.plotting import eigenvalue_figure, save_sweep_plots
+from drake_hybrid.scenario.task_options import BUILT_IN_OPTIONS, built_in_option_help, is_task_file
 
 
 class UsageError(ValueError):
     """Bad command-line input (printed as one line, exit code 2)."""
+
+
+@contextlib.contextmanager
+def _loading(args, what):
+    """The command's first stage line while it loads ``what`` (its modules): from the entry point
+    (``main``'s ``loading_line``), not with --quiet. Then the objects the imports made (modules,
+    functions, Drake's bindings, sympy's and numba's tables: most of the process's) are moved out of
+    the cyclic garbage collector's sight (``gc.freeze``): they live as long as the process, and each
+    full collection, the last one at exit included, would scan them all again (1-2 s of a run)."""
+    enabled = getattr(args, "loading_line", False) and not getattr(args, "quiet", False)
+    with Stages(enabled=enabled)(f"drake-hybrid {args.command}: loading {what}"):
+        yield
+    gc.freeze()
 
 
 def _options(args):
@@ -116,13 +115,17 @@ def _existing_ancestor(path):
 
 def _task_argument(value):
     """The TASK argument: a task's name, or a task file (FILE.yaml, scenario/data_task.py)."""
-    if is_task_file(value) or value in TASKS:
+    if is_task_file(value) or value in BUILT_IN_OPTIONS:
         return value
-    raise argparse.ArgumentTypeError(f"invalid choice: '{value}' (choose from {', '.join(sorted(TASKS))}, "
+    raise argparse.ArgumentTypeError(f"invalid choice: '{value}' (choose from {', '.join(sorted(BUILT_IN_OPTIONS))}, "
                                      "or give a task file FILE.yaml)")
 
 
 def _config(args):
+    from drake_hybrid.scenario.config import load_config
+    from drake_hybrid.scenario.data_task import load_task_file
+    from drake_hybrid.scenario.tasks import get_task
+
     _check_output_paths(args)
     options = _options(args)
     if is_task_file(args.task):
@@ -226,6 +229,8 @@ def _impedance_text(check):
 
 def _residual_text(summary):
     """max |C(r)| after contact in C's units: one figure if every row has the same unit, else one per row."""
+    from drake_hybrid.experiments.metrics import display_unit
+
     residual = summary["max_constraint_residual_after_contact"]
     if residual is None:
         return "no contact made"
@@ -239,10 +244,17 @@ def _residual_text(summary):
 
 
 def command_simulate(args):
+    with _loading(args, "Drake, numba and matplotlib"):
+        from drake_hybrid.experiments.path_report import path_text
+        from drake_hybrid.experiments.simulation import RunStopped, simulate
+        from drake_hybrid.scenario.tasks import get_task
+        from drake_hybrid.viz.outputs import write_run
     config = _config(args)
     out = Path(args.out) if args.out else Path("runs") / config.task
     meshcat = None
     if args.html:
+        from drake_hybrid.viz.animation import quiet_meshcat, set_task_camera
+
         meshcat = quiet_meshcat()
         set_task_camera(meshcat, get_task(config.task))
     stages = Stages(enabled=not args.quiet)
@@ -295,6 +307,11 @@ def _sampled_loop_text(config, period):
 def command_analyze(args):
     if not 0 < args.tolerance <= 1:
         raise UsageError(f"--tolerance must be a relative tolerance in (0, 1] (0.05: within 5 %), got {args.tolerance}")
+    with _loading(args, "Drake"):
+        from drake_hybrid.analysis.derivatives import DerivativeMismatchWarning
+        from drake_hybrid.analysis.linearization import (linearize_continuous, linearize_discrete, nyquist_split,
+                                                         predicted_match, shift_indices)
+        from drake_hybrid.scenario.tasks import get_task
     config = _config(args)
     task = get_task(config.task)
     stages = Stages(enabled=not args.quiet)
@@ -377,6 +394,10 @@ def command_analyze(args):
     if step_check is not None:
         print(f"  {step_check.summary()}")
     if args.plot:
+        import matplotlib.pyplot as plt
+
+        from drake_hybrid.viz.plotting import eigenvalue_figure
+
         figure = eigenvalue_figure(match, title=f"{config.task}, {controller_mode.value}", period=period,
                                    shifts=result.shifts)
         figure.savefig(args.plot, dpi=110)
@@ -415,6 +436,10 @@ def _where(workers):
 
 
 def command_sweep(args):
+    with _loading(args, "Drake, numba and Dask"):
+        from drake_hybrid.experiments.sweep import read_results, run_sweep
+        from drake_hybrid.experiments.sweep_spec import SweepSpecError, load_spec
+        from drake_hybrid.scenario.data_task import load_task_file
     _check_output_paths(args)
     if args.workers < 0:
         raise UsageError(f"--workers must be 0 (serial, in this process) or a number of local Dask worker "
@@ -443,12 +468,19 @@ def command_sweep(args):
     print(f"{task_name}: {done}; {len(rows)} in the table, {stable} stable, {run.failures} with errors")
     print(f"  wrote {run.results_path}")
     if args.plot:
+        from drake_hybrid.viz.plotting import save_sweep_plots
+
         for path in save_sweep_plots(rows, spec, out):
             print(f"  wrote {path}")
     return 0
 
 
 def command_tasks(args):
+    with _loading(args, "Drake"):
+        from drake_hybrid.scenario.data_task import read_task_file
+        from drake_hybrid.scenario.hooks import ENTRY_POINT_GROUP, get_hook, hook_names
+        from drake_hybrid.scenario.parsing import models_directory
+        from drake_hybrid.scenario.tasks import TASKS
     print("tasks (drake-hybrid simulate|analyze NAME):")
     for name, task in TASKS.items():
         print(f"  {name:24s} {task.description}")
@@ -467,16 +499,16 @@ def command_tasks(args):
 
 
 def _task_options_epilog():
-    """The valid --option keys of every task (from its typed Options)."""
+    """The valid --option keys of every built-in task (from its typed Options, ``scenario.task_options``)."""
     lines = ["task options (--option KEY=VALUE, repeatable):"]
-    for name, task in TASKS.items():
-        entries = task.option_help()
+    for name in BUILT_IN_OPTIONS:
+        entries = built_in_option_help(name)
         lines.append(f"  {name}:" + (" none" if not entries else ""))
         lines += [f"    {entry}" for entry in entries]
     return "\n".join(lines)
 
 
-HARDWARE_TASKS = {"panda-drum": panda_drum_task, "panda-table": panda_table_task}
+HARDWARE_TASKS = {"panda-drum": "panda_drum_task", "panda-table": "panda_table_task"}   # hardware.panda's
 HARDWARE_DEFAULTS = {"hil": (2.0, 0.05), "timing": (10.0, 0.02), "run": (10.0, 0.02)}   # --duration s, --speed m/s
 
 
@@ -527,6 +559,14 @@ def command_hardware(args):
     """hil: lock-step loop vs the directly wired one; timing: a real-time run on memq:// (replayed
     robot); run: the controller side against a real driver at --lcm-url. Prints a summary; a
     watchdog stop is a fault (exit 1); --json FILE writes the figures."""
+    with _loading(args, "Drake and numba"):
+        from pydrake.lcm import DrakeLcm
+
+        from drake_hybrid.hardware import panda
+        from drake_hybrid.hardware.controller_side import build_controller_station
+        from drake_hybrid.hardware.loop import compare_with_direct
+        from drake_hybrid.hardware.messages import HardwareConfig
+        from drake_hybrid.hardware.realtime import replay_timing, run_controller
     wait = getattr(args, "wait", None)
     if args.duration is not None and not (math.isfinite(args.duration) and args.duration > 0):
         raise UsageError(f"--duration must be a positive number of seconds (> 0), got {args.duration}")
@@ -536,10 +576,11 @@ def command_hardware(args):
         raise UsageError(f"--speed must be a finite number (m/s), got {args.speed}")
     _check_output_paths(args)
     start = time.perf_counter()
-    task = HARDWARE_TASKS[args.task]()
+    task = getattr(panda, HARDWARE_TASKS[args.task])()
     duration, speed = HARDWARE_DEFAULTS[args.mode]
-    config = panda_config(task, duration=args.duration or duration, wrist_sensor=args.wrench_source == "force_torque",
-                          speed=speed if args.speed is None else args.speed)
+    config = panda.panda_config(task, duration=args.duration or duration,
+                                wrist_sensor=args.wrench_source == "force_torque",
+                                speed=speed if args.speed is None else args.speed)
     hardware = HardwareConfig(wrench_source=args.wrench_source).validate()
     if args.mode == "hil":
         figures = compare_with_direct(config, hardware)[0]
@@ -582,7 +623,8 @@ def make_parser():
                         help="show the full Python traceback of an error (also DRAKE_HYBRID_TRACEBACK=1)")
     modes = [m.value for m in ControlMode]
     epilog = _task_options_epilog()
-    task_help = ", ".join(sorted(TASKS)) + ", or a task file FILE.yaml (a whole task in one file: models/tasks/)"
+    task_help = (", ".join(sorted(BUILT_IN_OPTIONS))
+                 + ", or a task file FILE.yaml (a whole task in one file: models/tasks/)")
     simulate = sub.add_parser("simulate", parents=[common],
                               help=COMMAND_HELP["simulate"],
                               description="Simulate a task; writes log.npz, summary.json, config.yaml and the "
@@ -688,8 +730,11 @@ def make_parser():
     return parser
 
 
-def main(argv=None):
+def main(argv=None, loading_line=False):
+    """Run the command of ``argv``; ``loading_line``: print its first stage line while it loads what it
+    uses (the ``drake-hybrid`` entry point does; a script or a test calling ``main`` gets its output only)."""
     args = make_parser().parse_args(argv)
+    args.loading_line = loading_line
     if args.traceback or os.environ.get("DRAKE_HYBRID_TRACEBACK", "") not in ("", "0"):
         return args.func(args)
     try:

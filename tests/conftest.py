@@ -3,6 +3,10 @@
 import os
 
 os.environ.setdefault("MPLBACKEND", "Agg")
+# Every controller of the suite (and of the processes it starts) runs the compiled law from its first tick,
+# compiled there where the machine has none yet: results must not depend on when a background compile
+# finished. The background path has its own tests (tests/test_fast_law.py).
+os.environ.setdefault("DRAKE_HYBRID_COMPILE", "foreground")
 
 import numpy as np
 import pytest

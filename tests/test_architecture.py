@@ -5,14 +5,22 @@ import ast
 import re
 import shutil
 import subprocess
+import sys
 from pathlib import Path
 
 import pytest
 
 ROOT = Path(__file__).resolve().parent.parent
 PACKAGE = ROOT / "drake_hybrid"
-# Imports allowed inside functions: optional dependencies only (not installed by a plain install).
+# Imports allowed inside functions: optional dependencies (not installed by a plain install) ...
 OPTIONAL = {"playwright", "numba"}   # numba: the fast law falls back to the generic one without it
+# ... heavy modules that only some commands use, imported where they are first needed so that the others
+# do not load them (issue 31: a first run in seconds): Dask for sweeps, scipy.signal for the impedance's
+# driven response (about a second each) ...
+LOADED_WHERE_USED = {"dask", "distributed", "scipy.signal"}
+# ... and the command line, whose commands each import the package's modules they use when they run
+# (drake_hybrid/cli.py's docstring), so that every --help answers at once.
+IMPORTS_PER_COMMAND = {"cli.py"}
 MAX_LINES = 400
 THEORY = ROOT / "docs" / "theory.md"
 # Files that may cite the theory: source, docs, notebooks, configuration.
@@ -37,17 +45,42 @@ def test_the_layers_contract_holds():
     assert result.returncode == 0, result.stdout[-3000:]
 
 
+def _loaded_where_used(name):
+    return name.split(".")[0] in OPTIONAL or any(name == heavy or name.startswith(heavy + ".")
+                                                 for heavy in LOADED_WHERE_USED)
+
+
 @pytest.mark.parametrize("path", modules(), ids=lambda p: str(p.relative_to(PACKAGE)))
 def test_no_imports_inside_functions_except_optional_dependencies(path):
+    """Imports at the top of the module, except optional dependencies, the few heavy modules only some
+    commands use (``LOADED_WHERE_USED``) and the command line's per-command imports."""
+    if str(path.relative_to(PACKAGE)) in IMPORTS_PER_COMMAND:
+        return
     tree = ast.parse(path.read_text())
     top_level = set(map(id, tree.body))
     hidden = []
     for node in ast.walk(tree):
         if isinstance(node, (ast.Import, ast.ImportFrom)) and id(node) not in top_level:
             names = [node.module] if isinstance(node, ast.ImportFrom) else [a.name for a in node.names]
-            if not all(name.split(".")[0] in OPTIONAL for name in names):
+            if not all(_loaded_where_used(name) for name in names):
                 hidden.append(f"line {node.lineno}: {names}")
     assert not hidden, hidden
+
+
+def test_heavy_modules_load_only_where_used():
+    """The heavy modules of ``LOADED_WHERE_USED`` are imported at no module's top (else the rule above
+    would buy nothing), and the command line's module imports none of the package's heavy layers at its
+    top: importing drake_hybrid.cli loads neither Drake, numba, matplotlib nor Dask."""
+    for path in modules():
+        for node in ast.parse(path.read_text()).body:
+            if isinstance(node, (ast.Import, ast.ImportFrom)):
+                names = [node.module] if isinstance(node, ast.ImportFrom) else [a.name for a in node.names]
+                loaded = [name for name in names if name.split(".")[0] not in OPTIONAL and _loaded_where_used(name)]
+                assert not loaded, f"{path.relative_to(PACKAGE)} imports {loaded} at its top"
+    code = ("import sys, drake_hybrid.cli; print(sorted(m for m in ('pydrake', 'numba', 'matplotlib', 'dask', "
+            "'distributed', 'scipy.signal', 'sympy') if m in sys.modules))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    assert out.strip() == "[]"
 
 
 @pytest.mark.parametrize("path", modules(), ids=lambda p: str(p.relative_to(PACKAGE)))

@@ -14,7 +14,7 @@ from drake_hybrid.cli import main, make_parser
 from drake_hybrid.core.errors import ConfigError
 from drake_hybrid.core.progress import Stages
 from drake_hybrid.experiments.sweep import SweepRun
-from drake_hybrid.scenario.tasks import TASKS, get_task
+from drake_hybrid.scenario.tasks import BUILT_IN_TASKS, TASKS, get_task
 from drake_hybrid.scenario.tasks.grinding import SPHERE_ONLY
 
 README = Path(__file__).resolve().parent.parent / "README.md"
@@ -101,9 +101,13 @@ def test_every_hardware_option_says_what_goes_there(mode):
 
 @pytest.mark.parametrize("command", ["simulate", "analyze"])
 def test_option_help_lists_every_tasks_keys(capsys, command):
+    """Every built-in task's options (the command line's process knows no other task), from the light
+    scenario.task_options: each task's own option_help, exactly."""
     text = _help(capsys, [command, "--help"])
-    for name, task in TASKS.items():
+    for name in BUILT_IN_TASKS:
+        task = TASKS[name]
         assert f"{name}:" in text
+        assert "\n".join(f"    {entry}" for entry in task.option_help()) in text, name
         for entry in task.option_help():
             assert entry.split("=")[0] in text, (name, entry)
     assert "`" not in text
@@ -161,9 +165,9 @@ def test_a_resumed_sweep_with_nothing_left_says_so(tmp_path, monkeypatch, capsys
     """Not "evaluated in 0.0 s on nothing to run"."""
     done = SweepRun(out_dir=tmp_path, results_path=tmp_path / "results.csv", points=12, evaluated=0, failures=0,
                     wall_time=0.0, workers="serial")
-    monkeypatch.setattr(cli, "load_spec", lambda path: object())
-    monkeypatch.setattr(cli, "run_sweep", lambda *args, **kwargs: done)
-    monkeypatch.setattr(cli, "read_results", lambda path: [{"stable": True}] * 12)
+    monkeypatch.setattr("drake_hybrid.experiments.sweep_spec.load_spec", lambda path: object())
+    monkeypatch.setattr("drake_hybrid.experiments.sweep.run_sweep", lambda *args, **kwargs: done)
+    monkeypatch.setattr("drake_hybrid.experiments.sweep.read_results", lambda path: [{"stable": True}] * 12)
     assert main(["sweep", "window-washing", "--grid", "spec.yaml", "--resume", "--out", str(tmp_path)]) == 0
     out = capsys.readouterr().out
     assert "nothing to run: all 12 points already in the table" in out and "0.0 s" not in out
@@ -171,14 +175,14 @@ def test_a_resumed_sweep_with_nothing_left_says_so(tmp_path, monkeypatch, capsys
 
 def test_a_sweep_says_where_it_ran_in_the_command_lines_terms(tmp_path, monkeypatch, capsys):
     """Not "(local:2)": the flag that chose it, and what it is."""
-    monkeypatch.setattr(cli, "load_spec", lambda path: object())
-    monkeypatch.setattr(cli, "read_results", lambda path: [{"stable": True}] * 4)
+    monkeypatch.setattr("drake_hybrid.experiments.sweep_spec.load_spec", lambda path: object())
+    monkeypatch.setattr("drake_hybrid.experiments.sweep.read_results", lambda path: [{"stable": True}] * 4)
     for workers, where in (("local:2", "on 2 local Dask worker processes (--workers)"),
                            ("serial", "serially in this process (--workers 0)"),
                            ("tcp://127.0.0.1:8786", "on the Dask scheduler at tcp://127.0.0.1:8786 (--scheduler)")):
         run = SweepRun(out_dir=tmp_path, results_path=tmp_path / "results.csv", points=4, evaluated=4, failures=0,
                        wall_time=2.0, workers=workers)
-        monkeypatch.setattr(cli, "run_sweep", lambda *args, run=run, **kwargs: run)
+        monkeypatch.setattr("drake_hybrid.experiments.sweep.run_sweep", lambda *args, run=run, **kwargs: run)
         assert main(["sweep", "window-washing", "--grid", "spec.yaml", "--out", str(tmp_path)]) == 0
         assert f"4 of 4 points evaluated in 2.0 s {where};" in capsys.readouterr().out
     assert main(["sweep", "window-washing", "--grid", "spec.yaml", "--workers", "-1"]) == 2
@@ -203,54 +207,71 @@ def test_the_papers_sphere_rows_without_euler_angles_are_refused_when_the_option
         task.options(config)
 
 
-def test_the_entry_point_imports_without_drake_numba_or_matplotlib():
-    """drake-hybrid's entry point (drake_hybrid.__main__) loads none of the heavy modules before its first line."""
-    code = ("import sys, drake_hybrid.__main__; heavy = [m for m in ('pydrake', 'numba', 'matplotlib', 'dask') "
-            "if m in sys.modules]; print(heavy)")
+def test_the_entry_point_and_the_command_line_import_without_drake_numba_matplotlib_or_dask():
+    """drake-hybrid's entry point (drake_hybrid.__main__) and the command line's module load none of the heavy
+    modules: each command loads what it uses when it runs, so every --help answers at once."""
+    code = ("import sys, drake_hybrid.__main__, drake_hybrid.cli; heavy = [m for m in ('pydrake', 'numba', "
+            "'matplotlib', 'dask', 'sympy') if m in sys.modules]; print(heavy)")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
     assert out.strip() == "[]"
+
+
+@pytest.mark.parametrize("argv", [["simulate", "--help"], ["analyze", "--help"], ["sweep", "--help"],
+                                  ["hardware", "hil", "--help"], ["tasks", "--help"]])
+def test_a_commands_help_loads_nothing_heavy(argv):
+    code = ("import sys, drake_hybrid.__main__ as entry\ntry:\n    entry.main(sys.argv[1:])\nexcept SystemExit:\n"
+            "    pass\nprint([m for m in ('pydrake', 'numba', 'matplotlib', 'dask', 'sympy') if m in sys.modules])")
+    out = subprocess.run([sys.executable, "-c", code, *argv], capture_output=True, text=True, check=True).stdout
+    assert "usage: drake-hybrid" in out and out.strip().endswith("[]")
 
 
 def test_the_entry_points_commands_are_the_parsers():
     assert set(entry.COMMANDS) == set(_subparsers(make_parser()))
 
 
-def test_the_loading_line_respects_quiet_and_help(capsys, monkeypatch):
-    monkeypatch.setattr(cli, "main", lambda argv: 0)          # only the entry point's own line
-    assert entry.main(["simulate", "window-washing"]) == 0
-    assert re.fullmatch(r"drake-hybrid simulate: loading Drake, numba, matplotlib and Dask \.\.\. \d+\.\d s\n",
-                        capsys.readouterr().err)
-    for argv in (["simulate", "window-washing", "--quiet"], ["analyze", "--help"], ["--help"], ["no-such-command"], []):
-        assert entry.main(argv) == 0
-        assert capsys.readouterr().err == "", argv
+def test_the_loading_line_names_what_the_command_loads_and_respects_quiet(capsys):
+    """Each command's first stage line says what it loads (Dask only for sweep); --quiet silences it;
+    a refused argument or a --help prints none (nothing is loaded)."""
+    assert entry.main(["tasks"]) == 0
+    assert re.fullmatch(r"drake-hybrid tasks: loading Drake \.\.\. \d+\.\d s\n", capsys.readouterr().err)
+    assert entry.main(["simulate", "window-washing", "--option", "nope=1"]) == 2   # loads, then refuses the option
+    assert re.match(r"drake-hybrid simulate: loading Drake, numba and matplotlib \.\.\. \d+\.\d s\n",
+                    capsys.readouterr().err)
+    for argv in (["simulate", "window-washing", "--option", "nope=1", "--quiet"],     # quiet
+                 ["simulate", "window-washing", "--option", "nope=1"]):              # main itself: no line
+        assert (entry.main if "--quiet" in argv else main)(argv) == 2
+        assert "loading" not in capsys.readouterr().err, argv
+    for argv in (["simulate", "no-such-task"], ["analyze", "--help"]):
+        with pytest.raises(SystemExit):
+            entry.main(argv)
+        assert "loading" not in capsys.readouterr().err, argv
 
 
 @pytest.mark.slow
-def test_first_line_of_simulate_comes_before_pydrake_is_imported():
+def test_first_line_of_a_command_comes_before_pydrake_is_imported():
     """-X importtime logs every import on stderr as it happens: the stage line must precede pydrake's."""
-    result = subprocess.run([sys.executable, "-X", "importtime", "-m", "drake_hybrid", "simulate", "no-such-task"],
+    result = subprocess.run([sys.executable, "-X", "importtime", "-m", "drake_hybrid", "tasks"],
                             capture_output=True, text=True)
-    assert result.returncode == 2                      # the parser refuses the task after the imports
+    assert result.returncode == 0, result.stderr[-2000:]
     err = result.stderr
-    loading = err.find("drake-hybrid simulate: loading Drake")
+    loading = err.find("drake-hybrid tasks: loading Drake")
     pydrake = re.search(r"\|\s+pydrake$", err, flags=re.MULTILINE)
     assert pydrake is not None and 0 <= loading < pydrake.start(), err[:2000]
-    quiet = subprocess.run([sys.executable, "-m", "drake_hybrid", "simulate", "no-such-task", "--quiet"],
-                           capture_output=True, text=True)
-    assert quiet.returncode == 2 and "loading" not in quiet.stderr
+    refused = subprocess.run([sys.executable, "-m", "drake_hybrid", "simulate", "no-such-task"],
+                             capture_output=True, text=True)
+    assert refused.returncode == 2 and "loading" not in refused.stderr and "invalid choice" in refused.stderr
 
 
 def test_the_first_compile_time_is_the_readmes_measured_figure_everywhere():
-    """The README's 30-65 s for numba's first compile (measured on 2 cores) is what the stage line and
+    """The README's 30-65 s for numba's first compile (measured on 2 cores) is what a run's note and
     fast_law's docstring say too."""
-    import inspect
-
     from drake_hybrid.control import fast_law
     from drake_hybrid.experiments import simulation
 
     figure = re.search(r"compiles the\s+control law with numba \((\d+-\d+) s on 2 cores", README.read_text()).group(1)
-    assert f"compiles them ({figure} s on 2 shared cores" in " ".join(fast_law.kernels_loaded.__doc__.split())
-    assert f"numba compiles it once, {figure} s)" in inspect.getsource(simulation.simulate)
+    assert f"compiling them in the background ({figure} s on 2 shared cores" in " ".join(
+        fast_law.kernels_loaded.__doc__.split())
+    assert f"(once, {figure} s on 2 cores)" in simulation.COMPILING_NOTE
 
 
 def test_html_writes_one_animation_and_no_meshcat_info_line(tmp_path, capsys, caplog):

@@ -11,7 +11,7 @@ import pytest
 
 from pydrake.multibody.plant import MultibodyPlant
 
-from drake_hybrid.control import fast_kernels, fast_law
+from drake_hybrid.control import fast_compile, fast_kernels, fast_law
 from drake_hybrid.control.controller import HybridController
 from drake_hybrid.control.damping import joint_damping
 from drake_hybrid.control.gains import ControlMode
@@ -20,6 +20,15 @@ from drake_hybrid.scenario.builder import build_scenario
 from drake_hybrid.scenario.tasks import BUILT_IN_TASKS, TASKS
 
 pytestmark = pytest.mark.skipif(fast_kernels.NUMBA_ERROR is not None, reason="numba not available")
+
+
+@pytest.fixture(autouse=True)
+def compiled_at_the_first_tick():
+    """These tests hold the compiled law against the generic one: each controller compiles (or loads)
+    it at its first tick, instead of running the generic law while a background job compiles it."""
+    previous = fast_compile.set_policy("foreground")
+    yield
+    fast_compile.set_policy(previous)
 
 PORTS = ("actuation", "velocity_error", "force_error", "constraint_value", "projected_velocity", "force",
          "tangential_force")
@@ -89,6 +98,8 @@ def _compare(fast, generic, inputs, integrals, what):
             diagnostics = system.diagnostics(context)
         results.append((ports, diagnostics))
     (fast_ports, fast_diagnostics), (generic_ports, generic_diagnostics) = results
+    law = fast.fast_law
+    assert law.disabled or law.compile_seconds is not None, f"{what}: the compiled law did not run"
     for name, expected in generic_ports.items():
         scale = max(1.0, float(np.max(np.abs(expected), initial=0.0)))
         np.testing.assert_allclose(fast_ports[name], expected, rtol=TOLERANCE, atol=TOLERANCE * scale,
@@ -253,3 +264,77 @@ def test_both_paths_agree_with_an_impedance_mass(task, rng):
         integrals = rng.normal(scale=0.05, size=fast.integral_state_slices()[1].stop)
         _compare(fast, generic, inputs, integrals, f"{name} impedance mass state {i}")
     assert fast.fast_law.fallbacks == 0
+
+
+def _first_tick(controller, start):
+    context = controller.CreateDefaultContext()
+    n = start[0].num_velocities()
+    controller.get_estimated_state_input_port().FixValue(context, np.concatenate([start[5], np.zeros(n)]))
+    for port, size in (("measured_wrench", 6), ("desired_velocity", controller.velocity_size),
+                       ("desired_acceleration", controller.velocity_size), ("desired_force", controller.force_size)):
+        controller.GetInputPort(port).FixValue(context, np.zeros(size))
+    return controller.GetOutputPort("actuation").Eval(context).copy()
+
+
+def test_a_law_not_compiled_yet_runs_generic_while_a_background_job_compiles_it(monkeypatch, tmp_path):
+    """Background policy (the default): a controller whose compiled law is not on disk hands its first
+    tick's signatures to one compile job and runs the generic law for its whole life (its actuation is
+    the generic controller's exactly); once the job has recorded them, a new controller runs compiled."""
+    monkeypatch.setenv("DRAKE_HYBRID_CACHE", str(tmp_path))
+    fast_compile.set_policy("background")
+    jobs = []
+    monkeypatch.setattr(fast_compile, "start_job", lambda calls, module_path=None: jobs.append(calls) or 12345)
+    start = _task_start("window-washing")
+    fast, generic = _pair(start, "velocity-force")
+    np.testing.assert_array_equal(_first_tick(fast, start), _first_tick(generic, start))
+    assert fast.fast_law.compiling and fast.fast_law.compile_job == 12345 and fast.fast_law.compile_seconds is None
+    (calls,) = jobs
+    assert [function.py_func.__name__ for function, _ in calls] == ["terms_into", "law_from_terms",
+                                                                    "finish_inverse_dynamics"]
+    assert not fast_compile.compiled(calls)
+    fast_compile.record(calls)                       # what the job does once numba has cached them
+    later, _ = _pair(start, "velocity-force")
+    _first_tick(later, start)
+    assert not later.fast_law.compiling and later.fast_law.compile_seconds is not None and len(jobs) == 1
+
+
+def test_a_failed_compile_job_is_reported_once_and_leaves_the_generic_law(monkeypatch, tmp_path):
+    monkeypatch.setenv("DRAKE_HYBRID_CACHE", str(tmp_path))
+    monkeypatch.setattr(fast_law, "_WARNED", [])
+    fast_compile.set_policy("background")
+    (tmp_path / "fast_law").mkdir()
+    (tmp_path / "fast_law" / "failed").write_text("TypingError: no implementation\n")
+    monkeypatch.setattr(fast_compile, "start_job", lambda *a, **k: pytest.fail("started a job after a failure"))
+    start = _task_start("window-washing")
+    fast, generic = _pair(start, "velocity-force")
+    with pytest.warns(UserWarning, match="numba could not compile the fast law .TypingError"):
+        np.testing.assert_array_equal(_first_tick(fast, start), _first_tick(generic, start))
+    assert fast.fast_law.compiling
+
+
+def test_the_compile_job_compiles_in_its_own_process_records_and_releases_its_lock(tmp_path):
+    """The job itself (python -m drake_hybrid.control.fast_compile), on a small kernel and empty caches:
+    it compiles the signature it is given in another process, records it, and removes its lock."""
+    import os
+    import subprocess
+    import sys
+    import time
+
+    environment = dict(os.environ, DRAKE_HYBRID_CACHE=str(tmp_path), NUMBA_CACHE_DIR=str(tmp_path / "numba"))
+    code = ("import sys, time, numpy as np\n"
+            "from drake_hybrid.control import fast_compile, fast_kernels\n"
+            "calls = [(fast_kernels.all_finite, fast_compile.signature_of((np.zeros(3),)))]\n"
+            "assert not fast_compile.compiled(calls)\n"
+            "pid = fast_compile.start_job(calls)\n"
+            "assert fast_compile.start_job(calls) == pid        # one job at a time\n"
+            "deadline = time.monotonic() + 120\n"
+            "while fast_compile.job_running() is not None and time.monotonic() < deadline:\n"
+            "    time.sleep(0.2)\n"
+            "print(fast_compile.compiled(calls), fast_compile.failure())\n")
+    out = subprocess.run([sys.executable, "-c", code], env=environment, capture_output=True, text=True, timeout=180)
+    assert out.returncode == 0, out.stderr[-2000:]
+    assert out.stdout.split() == ["True", "None"]
+    folder = tmp_path / "fast_law"
+    assert not (folder / "compiling.lock").exists() and not list(folder.glob("request-*"))
+    assert "compiled drake_hybrid.control.fast_kernels.all_finite" in (folder / "compile.log").read_text()
+    assert list((tmp_path / "numba").rglob("*.nbi"))                 # numba's own cache, written by the job

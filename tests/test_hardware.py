@@ -25,7 +25,6 @@ from drake import lcmt_panda_command
 
 from pydrake.lcm import DrakeLcm
 
-from drake_hybrid import cli
 from drake_hybrid.cli import main
 from drake_hybrid.control.gains import HybridGains
 from drake_hybrid.core.errors import ConfigError
@@ -286,7 +285,8 @@ def test_wall_clock_stamps_for_a_real_driver(drum):
 def test_command_line_hardware(capsys, monkeypatch):
     assert main(["hardware", "run", "--duration", "0.02", "--wait", "0.05", "--lcm-url", "memq://cli_no_driver"]) == 1
     assert "nothing was commanded" in capsys.readouterr().err
-    monkeypatch.setattr(cli, "replay_timing", lambda *args, **kwargs: pytest.fail("ran with a refused --lcm-url"))
+    monkeypatch.setattr("drake_hybrid.hardware.realtime.replay_timing",
+                        lambda *args, **kwargs: pytest.fail("ran with a refused --lcm-url"))
     assert main(["hardware", "timing", "--lcm-url", "tcpq://127.0.0.1:7700"]) == 2      # no network URL in tests
     assert "memq://" in capsys.readouterr().err
     for argv, flag, allowed in [(["hil", "--duration", "nan"], "--duration", "> 0"),
@@ -317,7 +317,7 @@ def _timing_summary(stop=None):
 
 
 def test_hardware_prints_a_summary_and_json_only_with_json(tmp_path, capsys, monkeypatch):
-    monkeypatch.setattr(cli, "replay_timing",
+    monkeypatch.setattr("drake_hybrid.hardware.realtime.replay_timing",
                         lambda *args, **kwargs: (SimpleNamespace(summary=_timing_summary()), None))
     assert main(["hardware", "timing", "--duration", "0.01"]) == 0
     out = capsys.readouterr().out
@@ -335,7 +335,7 @@ def test_hardware_prints_a_summary_and_json_only_with_json(tmp_path, capsys, mon
 
 def test_a_watchdog_stop_is_reported_as_a_fault_with_exit_1(tmp_path, capsys, monkeypatch):
     reason = "stop at t = 0.0040 s: robot status stale (newest valid one 10.0 ms old); sending zero task torque"
-    monkeypatch.setattr(cli, "replay_timing",
+    monkeypatch.setattr("drake_hybrid.hardware.realtime.replay_timing",
                         lambda *args, **kwargs: (SimpleNamespace(summary=_timing_summary(stop=reason)), None))
     path = tmp_path / "timing.json"
     assert main(["hardware", "timing", "--duration", "0.01", "--json", str(path)]) == 1

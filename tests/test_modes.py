@@ -172,13 +172,13 @@ def test_the_sphere_pole_paths_drift_is_the_held_rows_contact_torque_which_the_l
     assert mode.predicted == pytest.approx(0.533, abs=0.01)
     assert mode.explained(0.05)
     assert "held row(s) 2, 3" in mode.likely_cause and "contact torque" in mode.likely_cause
-    monkeypatch.setattr(cli, "linearize_continuous", lambda *args, **kwargs: paper)
+    monkeypatch.setattr("drake_hybrid.analysis.linearization.linearize_continuous", lambda *args, **kwargs: paper)
     assert cli.main(["analyze", "sphere-polishing", "--option", "path=pole", "--quiet"]) == 0
     printed = capsys.readouterr().out
     assert "1 unstable mode(s), each within 5 % of its predicted value (below)" in printed
     assert "matched as predicted" in printed and "predicts 0.533 1/s" in printed
     assert cli.main(["analyze", "sphere-polishing", "--option", "path=pole", "--quiet", "--strict"]) == 1
-    monkeypatch.setattr(cli, "linearize_continuous", lambda *args, **kwargs: cancelled)
+    monkeypatch.setattr("drake_hybrid.analysis.linearization.linearize_continuous", lambda *args, **kwargs: cancelled)
     capsys.readouterr()
     assert cli.main(["analyze", "sphere-polishing", "--option", "path=pole", "--quiet", "--strict"]) == 0
     assert "no other mode unstable: matched" in capsys.readouterr().out

@@ -172,3 +172,50 @@ def test_float_sensors_equal_their_generic_calculation(task_name, contact_model)
     assert np.linalg.norm(generic.value()[3:]) > 1.0                      # in contact
     np.testing.assert_allclose(fast.value(), generic.value(), rtol=1e-12, atol=1e-12 * np.abs(generic.value()).max())
     np.testing.assert_array_equal(sensor.get_output_port(0).Eval(context), fast.value())
+
+
+@pytest.mark.parametrize("contact_model", ["hydroelastic_with_fallback", "point"])
+def test_contact_sensor_reads_the_steps_own_solve_about_p_where_it_was(contact_model):
+    """On a discrete plant with sampled output ports (one contact solve per step) the sensor shifts the
+    step's contact forces to P at the configuration q_k the step solved them at (its sampled point): the
+    wrench it reports, mapped by J(q_k)^T, is the plant's own generalized contact force of that step to
+    rounding. Shifted to the current P instead (the pose after the step), the lever arm is off by the
+    step's motion v h, a false moment of about |f| |v| h (docs/drake_notes.md), far above rounding."""
+    from pydrake.multibody.tree import JacobianWrtVariable
+    from pydrake.systems.analysis import Simulator
+
+    config = get_task("window-washing").default_config()
+    config.plant.contact_model = contact_model
+    scenario = build_scenario(config, with_loggers=False)
+    plant, sensor, arm = scenario.plant, scenario.sensor, scenario.robot.arm
+    assert plant.has_sampled_output_ports() and sensor.samples_point
+    simulator = Simulator(scenario.diagram)
+    context = simulator.get_mutable_context()
+    set_initial_conditions(scenario, context)
+    plant_context, sensor_context = plant.GetMyContextFromRoot(context), sensor.GetMyContextFromRoot(context)
+    frame = sensor._frame
+    solve_context = plant.CreateDefaultContext()
+    h = plant.time_step()
+    sampled_errors, current_errors, torques = [], [], []
+    for k in range(1, 120):
+        q_before_step = plant.GetPositions(plant_context)
+        simulator.AdvanceTo((k + 0.5) * h)
+        if k < 100:                                                       # sliding from rest first
+            continue
+        plant.SetPositions(solve_context, q_before_step)
+        J = plant.CalcJacobianSpatialVelocity(solve_context, JacobianWrtVariable.kV, frame,
+                                              scenario.robot.end_effector_point, plant.world_frame(),
+                                              plant.world_frame())
+        tau_contact = plant.get_generalized_contact_forces_output_port(arm).Eval(plant_context)
+        wrench = sensor.get_output_port(0).Eval(sensor_context)
+        p_now = sensor._current_point(sensor_context)
+        # The same forces shifted to the current P: n_now = n_sampled - (p_now - p_sampled) x f.
+        p_sampled = sensor_context.get_discrete_state(0).value()
+        at_current = np.concatenate([wrench[:3] - np.cross(p_now - p_sampled, wrench[3:]), wrench[3:]])
+        sampled_errors.append(np.abs(J.T @ wrench - tau_contact).max())
+        current_errors.append(np.abs(J.T @ at_current - tau_contact).max())
+        torques.append(np.abs(tau_contact).max())
+    speed = np.linalg.norm(scenario.kinematics.evaluate(plant_context).velocity[:2])
+    assert speed > 0.02                                                   # sliding
+    assert max(sampled_errors) < 1e-12 * max(torques)
+    assert min(current_errors) > 0.1 * 10.0 * speed * h                   # |f| |v| h, f = 10 N

@@ -212,12 +212,15 @@ def test_small_sweep_on_a_local_dask_cluster_matches_serial(serial_sweep, tmp_pa
 @pytest.mark.slow                # the serial sweep fixture (15 s): not in the fast loop
 def test_sweep_verdicts_agree_with_the_physics(serial_sweep):
     """K_fp = 2 on a stiff pad: the sampled force loop diverges (multiplier outside the unit circle,
-    the simulation's force error does not settle); K_fp = 0.5 is stable at both rates."""
+    the simulation's force error does not settle); K_fp = 0.5 is stable at both rates. The map is the
+    simulated loop's, whose wrench is the plant's last step's (sampled ports): its largest multiplier
+    measured 1.33 at 1 ms and 1.73 at 4 ms (1.60 and 1.77 with the current step's wrench, unsampled
+    ports; docs/drake_notes.md)."""
     _, rows = serial_sweep
     by_key = {(r["contact.pad_modulus"], r["gains.force_proportional"], r["control_period"]): r for r in rows}
     for period in (0.001, 0.004):
         stiff_high_gain = by_key[(1e9, 2.0, period)]
-        assert stiff_high_gain["stable_discrete"] is False and stiff_high_gain["spectral_radius"] > 1.5
+        assert stiff_high_gain["stable_discrete"] is False and stiff_high_gain["spectral_radius"] > 1.25
         assert stiff_high_gain["stable_simulation"] is False and stiff_high_gain["steady_force_error"] > 5.0
         nominal = by_key[(5e6, 0.5, period)]
         assert nominal["stable_discrete"] is True and nominal["spectral_radius"] < 1.01

@@ -48,7 +48,6 @@ from dataclasses import dataclass
 
 import numpy as np
 from scipy.optimize import linear_sum_assignment
-from scipy.signal import lsim
 
 from drake_hybrid.scenario.task import EigenvalueShift
 
@@ -227,6 +226,8 @@ def impedance_response(velocity_gain, position_gain, t, tangential_force, positi
     logged F_v (``tangential_force``, samples at ``t``, linear between them) from e_p(0), e_p'(0): the
     velocity errors a run realizing the impedance has (module docstring; ``inverse_mass`` M_d^-1,
     None: the paper's unit mass)."""
+    from scipy.signal import lsim      # about a second to load: only where used (tests/test_architecture.py)
+
     k = velocity_gain.shape[0]
     A = impedance_matrix(velocity_gain, position_gain)
     B = np.vstack([np.zeros((k, k)), np.eye(k) if inverse_mass is None else inverse_mass])

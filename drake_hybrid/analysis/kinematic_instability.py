@@ -42,7 +42,7 @@ from drake_hybrid.core.charts import PlanarPointChart
 from drake_hybrid.core.constraints import Constraint
 from drake_hybrid.core.kinematics import EndEffectorKinematics
 from drake_hybrid.core.projections import ConstraintSpace, GivenVelocityProjection
-from drake_hybrid.scenario.parsing import ConfigureParser, model_url
+from drake_hybrid.scenario.parsing import ConfigureParser, add_model
 
 HINTED_CONFIGURATION = np.radians([-160.0, 30.0])   # rad: the hint, where Raibert-Craig is unstable
 JOINT_GAINS = (5.0, 1.0)                            # K_q (1/s): unequal joint gains
@@ -70,7 +70,7 @@ def two_link_plant(builder=None):
     plant, _ = AddMultibodyPlantSceneGraph(builder, time_step=0.0)
     parser = Parser(plant)
     ConfigureParser(parser)
-    arm = parser.AddModelsFromUrl(model_url("planar_2r.sdf"))[0]
+    arm = add_model(parser, "planar_2r.sdf")[0]
     plant.WeldFrames(plant.world_frame(), plant.GetFrameByName("base", arm), RigidTransform())
     plant.Finalize()
     return plant, builder

@@ -36,6 +36,7 @@ Size: two LeafSystems with the ports, state and caches of HybridController (shar
 ``_declare_common`` and ``_BaselineMixin``), each a docstring and a short law.
 """
 
+import sys
 from dataclasses import dataclass, field
 from typing import List
 
@@ -53,6 +54,7 @@ from drake_hybrid.control.sampling import SAMPLE_LEAD
 from drake_hybrid.core.errors import ConfigError, DimensionError, check_fields
 from drake_hybrid.core.kinematics import declare_task_input, resolve_frame
 from drake_hybrid.core.linalg import all_finite, solve, value
+from drake_hybrid.core.templates import default_instantiation
 
 MAPPINGS = ("inverse", "pseudoinverse")
 
@@ -230,7 +232,7 @@ class _BaselineMixin(LawSystemParts):
         return plant_context, kin, values, xi, e_p, desired_velocity, desired_force, solution
 
 
-@TemplateSystem.define("JointServoHybridController_", T_list=[float, AutoDiffXd])
+@TemplateSystem.define("JointServoHybridController_", T_list=[float, AutoDiffXd], scope=sys.modules[__name__])
 def JointServoHybridController_(T):
 
     class Impl(_BaselineMixin, LeafSystem_[T]):
@@ -310,10 +312,10 @@ def JointServoHybridController_(T):
     return Impl
 
 
-JointServoHybridController = JointServoHybridController_[None]
+JointServoHybridController = default_instantiation(JointServoHybridController_)
 
 
-@TemplateSystem.define("AxisPDOpenLoopForceController_", T_list=[float, AutoDiffXd])
+@TemplateSystem.define("AxisPDOpenLoopForceController_", T_list=[float, AutoDiffXd], scope=sys.modules[__name__])
 def AxisPDOpenLoopForceController_(T):
 
     class Impl(_BaselineMixin, LeafSystem_[T]):
@@ -380,7 +382,7 @@ def AxisPDOpenLoopForceController_(T):
     return Impl
 
 
-AxisPDOpenLoopForceController = AxisPDOpenLoopForceController_[None]
+AxisPDOpenLoopForceController = default_instantiation(AxisPDOpenLoopForceController_)
 
 
 def make_baseline(name, plant, end_effector_frame, end_effector_point, constraint_space, gains=None, baseline=None,

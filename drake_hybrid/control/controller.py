@@ -20,6 +20,8 @@ entries, state and events.
 Size: over half of the module is the system's docstring (ports, closed loop, protections, arguments).
 """
 
+import sys
+
 import numpy as np
 
 from pydrake.autodiffutils import AutoDiffXd
@@ -41,6 +43,7 @@ from drake_hybrid.core.errors import ArgumentError, DimensionError
 from drake_hybrid.core.preconditions import check_generic_rank, check_pushing_force
 from drake_hybrid.core.kinematics import declare_task_input, resolve_frame, set_plant_state
 from drake_hybrid.core.linalg import all_finite, value
+from drake_hybrid.core.templates import default_instantiation
 
 
 class LawCache:
@@ -55,7 +58,7 @@ class LawCache:
         self.plant_context, self.forces, self.solution = plant_context, forces, None
 
 
-@TemplateSystem.define("HybridController_", T_list=[float, AutoDiffXd])
+@TemplateSystem.define("HybridController_", T_list=[float, AutoDiffXd], scope=sys.modules[__name__])
 def HybridController_(T):
 
     class Impl(LawSystemParts, LeafSystem_[T]):
@@ -374,10 +377,8 @@ def HybridController_(T):
                                              prerequisites_of_calc={self.xd_ticket()})
             start = declare_diagnostic_outputs(self, k, m, self._solution, solution_ticket)
             if self.sampled_diagnostics:
-                # Discrete state group 1: the diagnostics of the last tick.
-                self.DeclareDiscreteState(start)
-                self.DeclareVectorOutputPort("diagnostics", start, self._calc_sampled_diagnostics,
-                                             prerequisites_of_calc={self.xd_ticket()})
+                # Discrete state group 1: the diagnostics of the last tick (output by Drake: no Python call).
+                self.DeclareStateOutputPort("diagnostics", self.DeclareDiscreteState(start))
             self.DeclareVectorOutputPort("position_error", k, self._calc_position_error,
                                          prerequisites_of_calc={state_ticket} if self._path_error_port is None else
                                          {self._path_error_port.ticket()})
@@ -510,9 +511,6 @@ def HybridController_(T):
         def _calc_held_actuation(self, context, output):
             output.SetFromVector(context.get_discrete_state(0).CopyToVector()[self._integrated_size:])
 
-        def _calc_sampled_diagnostics(self, context, output):
-            output.SetFromVector(context.get_discrete_state(1).CopyToVector())
-
         def _store_diagnostics(self, solution, discrete_state):
             if self.sampled_diagnostics:
                 discrete_state.get_mutable_vector(1).SetFromVector(reported_diagnostics_vector(solution))
@@ -553,4 +551,4 @@ def HybridController_(T):
     return Impl
 
 
-HybridController = HybridController_[None]
+HybridController = default_instantiation(HybridController_)

@@ -8,8 +8,10 @@ then runs the rest of the law. Two compiled calls per tick, not one, so that a n
 compiles only its own module (about 1.5 s) and never the law again (about 40 s, once per machine).
 The generated source is written once to a cache folder (``DRAKE_HYBRID_CACHE``, default
 ``~/.cache/drake_hybrid``), keyed by its hash and the kernels' source, so numba's ``cache=True``
-keeps the machine code between runs. Nothing compiles at import; the first tick compiles (or
-loads from the cache) and records the time in ``FastLaw.compile_seconds``.
+keeps the machine code between runs. Nothing compiles at import; the first tick loads the compiled
+law from the cache (recording the time in ``FastLaw.compile_seconds``) or, when it is not there yet,
+hands the compile to a background job and keeps this controller on the generic law
+(``control.fast_compile``; ``DRAKE_HYBRID_COMPILE=foreground`` compiles at the first tick instead).
 
 Per tick (``evaluate``): the Drake calls the law needs (pose, J_g, J_g-dot v, v, and M or h + g
 where the law needs them), the two compiled calls, and for n = d one inverse dynamics call and a
@@ -23,8 +25,9 @@ are checked against sympy's own 30-digit evaluation of the expressions they came
 point (``verify_generated``, core/oracle.py); a disagreement raises ``CodeGenerationError`` naming the
 term.
 
-Size: code generation, its check, the constants' packing and the per-tick call of the compiled
-kernels are one idea (the float law compiled), and each needs the others' layout of the terms.
+Size: code generation, its check, the constants' packing, the first tick's compile-or-wait and the
+per-tick call of the compiled kernels are one idea (the float law compiled), and each needs the
+others' layout of the terms (the numerics are in fast_kernels, the background compile in fast_compile).
 
 AutoDiffXd controllers keep the generic path. Without numba (not installed, or it fails to import)
 ``build`` warns once and returns None; so does a constraint the compiler does not handle (e.g. a
@@ -32,7 +35,6 @@ AutoDiffXd controllers keep the generic path. Without numba (not installed, or i
 """
 
 import hashlib
-import importlib.util
 import os
 import sys
 import time
@@ -52,18 +54,15 @@ from drake_hybrid.core.projections import GivenVelocityProjection, KernelVelocit
 from drake_hybrid.core.oracle import check_against_sympy
 from drake_hybrid.core.symbolic import ELEMENTARY_FUNCTIONS, SIGN_SOURCE, straight_line_program, time_derivative
 
+from drake_hybrid.control import fast_compile
 from drake_hybrid.control import fast_kernels as kernels
+from drake_hybrid.control.fast_compile import cache_folder
 from drake_hybrid.control.fast_kernels import DONE, NEEDS_BASE_TORQUE, NEEDS_INVERSE_DYNAMICS
 
 _WARNED = []
 _FUNCTIONS = ", ".join(ELEMENTARY_FUNCTIONS) + ", pi, pow, e as E"
 # What every generated module starts with: the names straight_line_program's code calls.
 MODULE_HEADER = f"import numpy as np\nfrom math import {_FUNCTIONS}\nfrom numba import njit\n\n\n@njit(cache=True)\n{SIGN_SOURCE}\n"
-
-
-def cache_folder():
-    """Where the generated constraint modules (and numba's cache of them) live."""
-    return Path(os.environ.get("DRAKE_HYBRID_CACHE", Path.home() / ".cache" / "drake_hybrid")) / "fast_law"
 
 
 def _kernels_version():
@@ -192,11 +191,7 @@ def load_generated(source):
         temporary = folder / f".{name}.{os.getpid()}.tmp"
         temporary.write_text(source)
         os.replace(temporary, path)                 # atomic: parallel workers may write the same file
-    spec = importlib.util.spec_from_file_location(name, path)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    sys.modules[name] = module
-    return module
+    return fast_compile.import_file(path)
 
 
 # ------------------------------------------------------------------------------------------------
@@ -270,7 +265,8 @@ def _warn_once(message):
 def kernels_loaded():
     """True once the law's compiled kernels are in this process (compiled, or loaded from numba's
     disk cache); before that, the first tick loads them (about 0.4 s) or, on a first run with an
-    empty cache, compiles them (30-65 s on 2 shared cores, as the README says)."""
+    empty cache, starts numba compiling them in the background (30-65 s on 2 shared cores, as the
+    README says; control/fast_compile.py) and runs the generic law."""
     return bool(getattr(kernels.law_from_terms, "signatures", True))
 
 
@@ -280,6 +276,8 @@ class FastLaw:
     ``compile_seconds``: the first tick's compile (or cache load) time, None before it.
     ``fallbacks``: evaluations handed to the generic law (errors, non-finite results).
     ``disabled``: the first tick could not compile (warned once); the generic law runs.
+    ``compiling``: the compiled law was not on disk at the first tick: a background job compiles it
+    (``fast_compile``, process id ``compile_job``) and this controller runs the generic law throughout.
     """
 
     def __init__(self, module, reals, ints, controller, space):
@@ -309,6 +307,8 @@ class FastLaw:
         self.compile_seconds = None
         self.fallbacks = 0
         self.disabled = False
+        self.compiling, self.compile_job = False, None
+        self._module_path = getattr(module, "__file__", None)
 
     @classmethod
     def build(cls, controller, law, space):
@@ -342,15 +342,23 @@ class FastLaw:
         phase = int(phase)
         reals, ints, terms = self.reals, self.ints, self._terms
         if self.compile_seconds is None:
-            # The first call compiles (or loads from the cache); a constraint numba cannot compile
-            # leaves this controller on the generic law, with a one-line warning.
-            if self.disabled:
+            # The first call compiles (or loads from the cache), or leaves the compile to a background job
+            # and this controller on the generic law (control/fast_compile.py); a constraint numba cannot
+            # compile leaves it on the generic law too, with a one-line warning.
+            if self.disabled or self.compiling:
                 return None
             start = time.perf_counter()
             try:
+                calls = self._calls(plant, plant_context, forces, X, J_g, A_bias, v, desired_velocity,
+                                    desired_acceleration, desired_force, wrench, integrals, phase, approach_reference,
+                                    M, base)
+                if not fast_compile.compiled(calls) and fast_compile.policy() == "background":
+                    self._compile_in_background(calls)
+                    return None
                 self._terms_into(terms, X, J_g, A_bias, v, reals, ints)
                 self._law(terms, v, desired_velocity, desired_acceleration, desired_force, wrench, integrals, phase,
                           approach_reference, M, base, reals, ints)
+                fast_compile.record(calls)
             except Exception as error:
                 self.disabled = True
                 message = " ".join(str(error).split())[:200]
@@ -374,6 +382,29 @@ class FastLaw:
             self.fallbacks += 1
             return None
         return CompiledSolution(out, phase, self._slices, self._scalars)
+
+    def _calls(self, plant, plant_context, forces, X, J_g, A_bias, v, desired_velocity, desired_acceleration,
+               desired_force, wrench, integrals, phase, approach_reference, M, base):
+        """[(compiled function, the numba types of this tick's call)] of the three compiled calls."""
+        terms, reals, ints = self._terms, self.reals, self.ints
+        law = (terms, v, desired_velocity, desired_acceleration, desired_force, wrench, integrals, phase,
+               approach_reference, M, base, reals, ints)
+        out = np.zeros(self._joint_acceleration_slice.stop + self.ints[kernels.I_N])     # as law_kernel's
+        torque = plant.CalcInverseDynamics(plant_context, self._zero_acceleration, forces)  # as Drake returns it
+        return [(self._terms_into, fast_compile.signature_of((terms, X, J_g, A_bias, v, reals, ints))),
+                (self._law, fast_compile.signature_of(law)),
+                (self._finish, fast_compile.signature_of((out, torque, base, reals, ints)))]
+
+    def _compile_in_background(self, calls):
+        """This controller keeps the generic law; numba compiles ``calls`` in a background job (one per
+        machine at a time) for the controllers built after it, unless an earlier job failed."""
+        self.compiling = True
+        error = fast_compile.failure()
+        if error is not None:
+            _warn_once(f"drake_hybrid: numba could not compile the fast law ({error}); the controllers run the "
+                       f"generic law (delete {fast_compile.cache_folder() / 'failed'} to try again)")
+            return
+        self.compile_job = fast_compile.start_job(calls, self._module_path)
 
 
 def _field(index):

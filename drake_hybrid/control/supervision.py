@@ -49,6 +49,7 @@ on (the log's and plots' LIFT-OFF phase). The guarded move follows C_r with the 
 ramp (it has no speed feed-forward in HOLD).
 """
 
+import sys
 from dataclasses import dataclass
 
 import numpy as np
@@ -62,6 +63,7 @@ from drake_hybrid.control.sampling import SAMPLE_LEAD
 from drake_hybrid.core.arguments import MAX_TASK_SIZE, describe, instance, number, positive, vector
 from drake_hybrid.core.errors import ArgumentError, ConfigError, check_fields
 from drake_hybrid.core.linalg import all_finite, value
+from drake_hybrid.core.templates import default_instantiation
 
 
 @dataclass
@@ -103,7 +105,7 @@ class SupervisionConfig:
         return self
 
 
-@TemplateSystem.define("ContactSupervisor_", T_list=[float, AutoDiffXd])
+@TemplateSystem.define("ContactSupervisor_", T_list=[float, AutoDiffXd], scope=sys.modules[__name__])
 def ContactSupervisor_(T):
 
     class Impl(LeafSystem_[T]):
@@ -280,4 +282,4 @@ def ContactSupervisor_(T):
     return Impl
 
 
-ContactSupervisor = ContactSupervisor_[None]
+ContactSupervisor = default_instantiation(ContactSupervisor_)

@@ -39,7 +39,6 @@ from pydrake.systems.analysis import ApplySimulatorConfig, Simulator
 from pydrake.systems.framework import EventStatus
 
 from drake_hybrid.analysis.linearization import controller_prediction, design_time_constant, predicted_errors
-from drake_hybrid.control.fast_law import kernels_loaded
 from drake_hybrid.control.gains import ControlMode
 from drake_hybrid.core.progress import quiet
 from drake_hybrid.experiments.metrics import (contact_time, impedance_check, invalid_samples, last_valid, max_after,
@@ -48,6 +47,11 @@ from drake_hybrid.experiments.path_report import before_lift_off, path_report
 from drake_hybrid.scenario.builder import build_scenario
 from drake_hybrid.scenario.path_job import PATH_LOGS
 from drake_hybrid.scenario.start import set_initial_conditions
+
+# The run's note when its controller ran the generic law while numba compiled the fast one (control/fast_compile.py).
+COMPILING_NOTE = ("this run used the generic law (the compiled one gives the same to 1e-12): the compiled law was "
+                  "not on this machine yet, and numba compiles it in the background for the next runs (once, "
+                  "30-65 s on 2 cores)")
 
 
 @dataclass
@@ -138,14 +142,13 @@ def simulate(config, progress=False, meshcat=None, record_html=False, setup=None
     if setup is not None:
         setup(scenario, simulator, context)
     stop = {}
-    simulator.set_monitor(chain_monitors(sensor_fault_monitor(scenario, float(config.sensor.fault_time), stop),
-                                         simulator.get_monitor()))
+    if scenario.fault_injector is not None or scenario.conditioner is not None:
+        # Only these make the wrench non-finite (a dropout, a hold run out): the check costs a Python call a step.
+        simulator.set_monitor(chain_monitors(sensor_fault_monitor(scenario, float(config.sensor.fault_time), stop),
+                                             simulator.get_monitor()))
     if meshcat is not None and record_html:
         meshcat.StartRecording(set_visualizations_while_recording=False)
-    initializing = f"{config.task}: initializing the simulator"
-    if getattr(scenario.controller, "fast_law", None) is not None and not kernels_loaded():
-        initializing += " (and the compiled law: on the first run ever, numba compiles it once, 30-65 s)"
-    with stages(initializing):
+    with stages(f"{config.task}: initializing the simulator"):
         simulator.Initialize()
     start = time.perf_counter()
     duration = float(config.duration)
@@ -185,6 +188,8 @@ def simulate(config, progress=False, meshcat=None, record_html=False, setup=None
             summary[key] = None
         for row in summary.get("force_rows") or []:
             row.update({key: None for key in row if key not in ("name", "units", "command", "held")})
+    if getattr(getattr(scenario.controller, "fast_law", None), "compiling", False):
+        summary.setdefault("notes", []).append(COMPILING_NOTE)
     result = SimulationResult(config=config, log=log, summary=summary, scenario=scenario, html=html,
                               simulator=simulator, context=context)
     if stop:

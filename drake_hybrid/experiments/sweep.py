@@ -77,16 +77,17 @@ import traceback
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
-import dask
 import numpy as np
 import yaml
-from distributed import Client, LocalCluster, as_completed
 from tqdm import tqdm
 
 from drake_hybrid.analysis.linearization import (STEP_CHECK_RATE, linearize_continuous, linearize_sampled_loop,
                                                  predicted_eigenvalues)
+from drake_hybrid.control import fast_compile
 from drake_hybrid.control.gains import ControlMode
 from drake_hybrid.core.errors import GainError
+from drake_hybrid.core.locks import process_alive
+from drake_hybrid.core.progress import quiet
 from drake_hybrid.experiments.metrics import max_row_errors, row_commands
 from drake_hybrid.experiments.path_report import before_lift_off
 from drake_hybrid.experiments.simulation import RunStopped, simulate
@@ -225,7 +226,7 @@ def _stage_error(stage, error):
     return f"{stage}: {text}"
 
 
-def evaluate_point(config_yaml, criteria=None, continuous=True, discrete=True, task=None):
+def evaluate_point(config_yaml, criteria=None, continuous=True, discrete=True, task=None, stages=None):
     """Evaluate one sweep point from its config YAML; returns the result columns as a dict.
 
     ``task``: a task object that is not built in (a ``CustomTask``), registered in this process
@@ -234,7 +235,18 @@ def evaluate_point(config_yaml, criteria=None, continuous=True, discrete=True, t
 
     Each stage (simulation, continuous and discrete linearization) runs on its
     own: a failing stage leaves its columns empty and adds its error text to
-    ``error``; the others still run."""
+    ``error``; the others still run. ``stages`` (``core.progress.Stages``, default silent) times
+    them: the config, the simulation's own stages (building, the start, initializing, with the
+    simulated run as "simulation"), each linearization (benchmarks/sweep_throughput.py reads
+    ``stages.times``).
+
+    Every point runs the compiled law (``fast_compile.foreground``: compiled at a worker's first point
+    where its machine has none yet), so that no figure depends on when a background compile finished."""
+    with fast_compile.foreground():
+        return _evaluate_point(config_yaml, criteria, continuous, discrete, task, stages or quiet())
+
+
+def _evaluate_point(config_yaml, criteria, continuous, discrete, task, stages):
     criteria = StabilityCriteria(**(criteria or {}))
     start, cpu_start = time.perf_counter(), time.process_time()
     row = {column: None for column in RESULT_COLUMNS}
@@ -243,12 +255,15 @@ def evaluate_point(config_yaml, criteria=None, continuous=True, discrete=True, t
     if task is not None and TASKS.get(task.name) is not task:
         register_task(task)
     try:
-        config = load_config(data=config_yaml)
+        with stages("config"):
+            config = load_config(data=config_yaml)
     except Exception as error:
         row.update(error=_stage_error("config", error), wall_time=time.perf_counter() - start)
         return row
     try:
-        row.update(simulation_metrics(simulate(config), criteria))
+        with stages("simulation"):
+            result = simulate(config, stages=stages)
+        row.update(simulation_metrics(result, criteria))
     except RunStopped as stopped:            # a fault or an error mid-run: never a stable point
         row["stable_simulation"] = False
         errors.append(f"simulation: {stopped}")
@@ -257,14 +272,16 @@ def evaluate_point(config_yaml, criteria=None, continuous=True, discrete=True, t
     linearization_start = time.perf_counter()
     if continuous:
         try:
-            linear = linearize_continuous(config)
+            with stages("continuous linearization"):
+                linear = linearize_continuous(config)
             row["worst_continuous_real"], row["marginal_continuous_real"] = _worst_real(linear.match)
             row["stable_continuous"] = row["worst_continuous_real"] < criteria.eigenvalue_margin
         except Exception as error:
             errors.append(_stage_error("continuous linearization", error))
     if discrete and config.control_period > 0:
         try:
-            linear = linearize_sampled_loop(config)
+            with stages("discrete linearization"):
+                linear = linearize_sampled_loop(config)
             row["worst_discrete_real"], row["marginal_discrete_real"] = _worst_real(linear.match)
             row["spectral_radius"] = float(np.max(np.abs(linear.multipliers)))
             row["discrete_equilibrium_residual"] = linear.equilibrium_residual
@@ -391,7 +408,7 @@ class SweepLock:
                 descriptor = os.open(self.path, os.O_CREAT | os.O_EXCL | os.O_WRONLY)
             except FileExistsError:
                 holder = self._holder()
-                if holder is not None and _process_alive(holder):
+                if holder is not None and process_alive(holder):
                     raise SweepSpecError(f"{self.path.parent} is being written by another sweep (process {holder}); "
                                          "wait for it or use another output directory") from None
                 self.path.unlink(missing_ok=True)    # the holder died: take the lock over
@@ -412,18 +429,10 @@ class SweepLock:
             return None
 
 
-def _process_alive(pid):
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    except PermissionError:
-        return True
-    return True
-
-
 def _check_scheduler(address, timeout=10.0):
     """SweepSpecError (one line) if no Dask scheduler answers at ``address`` within ``timeout`` s."""
+    from distributed import Client     # Dask only where a sweep runs on it (tests/test_architecture.py)
+
     try:
         client = Client(address, timeout=timeout)
     except (OSError, TimeoutError) as error:
@@ -502,7 +511,8 @@ def _start_client(scheduler, workers, worker_memory=WORKER_MEMORY):
     cluster's nannies therefore restart a worker whose memory passes 95 % of
     ``worker_memory`` (no spilling, no pausing: a paused worker would never
     shrink); the point it was running is run again elsewhere."""
-
+    import dask
+    from distributed import Client, LocalCluster
 
     if scheduler:
         return Client(scheduler), None, scheduler
@@ -576,6 +586,8 @@ def _run_locked(task_name, spec, out, base, points, scheduler, workers, resume, 
             for index, parameters, config_yaml in pending:
                 record(index, parameters, evaluate_point(config_yaml, **options))
         elif pending:
+            from distributed import as_completed
+
             client, cluster, where = _start_client(scheduler, workers, worker_memory)
             try:
                 futures = {client.submit(evaluate_point, config_yaml, pure=False, **options): (index, parameters)
@@ -627,8 +639,6 @@ def constraint_sizes(config):
 def theory_on_plane(base_config, x_path, y_path, x_values, y_values, fixed=None):
     """``rigid_contact_theory_stable`` over the (x, y) plane (other fields from ``fixed`` and the base):
     an array (len(y_values) x len(x_values)) of 1.0 (stable), 0.0 (unstable) and nan (not admissible)."""
-
-
     sizes = constraint_sizes(base_config)
     verdict = np.full((len(y_values), len(x_values)), np.nan)
     for i, y in enumerate(y_values):

@@ -120,4 +120,9 @@ def panda_config(task, duration=1.0, wrist_sensor=True, speed=0.05):
         # A real F/T sensor's driver reports the tool's own inertia too: the paper's form, which does
         # not cancel F_v (scenario.config: compensate_tangential_force needs the tool's inertia removed).
         config.compensate_tangential_force = False
+    else:
+        # A driver estimates the external torque from the current state: the simulated one reads the
+        # plant's unsampled ports (the current step's contact forces), and so does the directly wired run
+        # it is compared with (scenario.plant.build_plant).
+        config.plant.use_sampled_output_ports = False
     return config

@@ -36,7 +36,7 @@ from drake_hybrid.control.supervision import ContactSupervisor
 from drake_hybrid.core.arguments import instance
 from drake_hybrid.core.errors import ConfigError
 from drake_hybrid.core.kinematics import EndEffectorKinematics
-from drake_hybrid.scenario.config import ScenarioConfig, WristSensorConfig
+from drake_hybrid.scenario.config import ContactSensorConfig, ScenarioConfig, WristSensorConfig
 from drake_hybrid.scenario.path_job import (add_path_loggers, connect_path, draw_path, lifts_off, make_path_source,
                                              with_path_commands)
 from drake_hybrid.scenario.plant import RobotModel, build_controller_plant, build_plant
@@ -45,7 +45,7 @@ from drake_hybrid.scenario.task import pad_kinematic_rows
 from drake_hybrid.scenario.tasks import get_task
 from drake_hybrid.systems.faults import JointFriction, SensorFaultInjector
 from drake_hybrid.systems.sensors import (ContactWrenchSensor, LowPassFilter, WrenchConditioner, WristForceTorqueSensor,
-                                          low_pass_lag)
+                                          low_pass_lag, sampled_reading_age)
 
 
 @dataclass
@@ -92,8 +92,13 @@ def make_controller(config, task, plant, controller_plant, robot, constraint_spa
                     sample_lead, supervised, with_loggers, plant_time_step=None):
     """The law of ``config.controller``: Li & Sastry's HybridController or a baseline (control.baselines).
     ``plant_time_step``: the step of the plant the law drives, for its joint damping (``control.damping``;
-    default ``plant.time_step()``; 0 for a real arm). The law splits the wrench where it was measured,
-    the low-pass of ``config.sensor`` (``add_wrench_path``) late (``systems.sensors.low_pass_lag``)."""
+    default ``plant.time_step()``; 0 for a real arm). The law splits the wrench where it was measured:
+    the low-pass of ``config.sensor`` (``add_wrench_path``) late (``systems.sensors.low_pass_lag``), the
+    contact sensor's reading of a sampled plant one step old (``systems.sensors.sampled_reading_age``)."""
+    # The contact sensor's sampled results are one step old, and the law splits them where they were
+    # exerted; the wrist sensor's reaction force acts at a frame of the tool (read as current, as the
+    # hardware path reads a real sensor's: the crank's figures are the same either way).
+    contact_reading_age = sampled_reading_age(plant) if isinstance(config.sensor, ContactSensorConfig) else 0.0
     if config.controller != "li-sastry":
         return make_baseline(config.controller, controller_plant, robot.end_effector_frame, robot.end_effector_point,
                              constraint_space, gains=config.gains, baseline=config.baseline,
@@ -106,7 +111,7 @@ def make_controller(config, task, plant, controller_plant, robot, constraint_spa
         sampled_diagnostics=with_loggers and control_period is not None,
         velocity_row_inertia=velocity_row_inertia(config, task, plant, constraint_space),
         compensate_tangential_force=config.compensate_tangential_force,
-        wrench_lag=low_pass_lag(config.sensor.bandwidth_hz, control_period),
+        wrench_lag=low_pass_lag(config.sensor.bandwidth_hz, control_period) + contact_reading_age,
         plant_time_step=plant.time_step() if plant_time_step is None else plant_time_step,
         path_position_error=config.path.active)
 

@@ -124,10 +124,12 @@ class ContactConfig:
     workpiece_relaxation_time: float = 0.0       # s, each workpiece geometry's, directives' too; < 0: the model's own
     friction: float = 0.0                        # Coulomb mu (static = dynamic) of pad and workpiece
     pad_resolution: float = 0.003                # m, mesh resolution hint of the pad (see docs: tessellation torque)
+    workpiece_resolution: float = 0.0            # m, the hint of each workpiece geometry that has one; 0: the model's
+    # (docs/contact_resolution.md measures both hints' accuracy against their cost)
 
     def validate(self, prefix="contact."):
         check_fields(self, prefix, positive=("pad_modulus", "pad_resolution"),
-                     nonnegative=("pad_dissipation", "friction"))
+                     nonnegative=("pad_dissipation", "friction", "workpiece_resolution"))
 
 
 @dataclass

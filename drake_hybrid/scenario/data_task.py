@@ -210,11 +210,6 @@ class TaskFile:
     config: ScenarioConfig = field(default_factory=ScenarioConfig)   # the run (task is set to name)
 
 
-def is_task_file(name):
-    """True if ``name`` (a task argument) names a task file rather than a registered task."""
-    return str(name).endswith((".yaml", ".yml"))
-
-
 def read_task_file(path, text=None):
     """The TaskFile of ``path`` (or of ``text``, read as if from ``path``; types checked, every field
     named in errors)."""

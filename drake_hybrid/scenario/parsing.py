@@ -8,13 +8,14 @@ install) it is ``<repo>/models``; a regular install ships it as
 
     parser = Parser(plant)
     ConfigureParser(parser)
-    parser.AddModelsFromUrl(model_url("planar_3r.sdf"))
+    add_model(parser, "planar_3r.sdf")         # = parser.AddModelsFromUrl(model_url("planar_3r.sdf")), faster
 
 Model packages installed with pip in the cmeel layout (``<site-packages>/cmeel.prefix/share/<name>/
 package.xml``, e.g. ``example-robot-data``) are known by name too (``installed_model_packages``), so
 a task file may write ``package://example-robot-data/robots/...``.
 """
 
+import functools
 import sys
 from pathlib import Path
 
@@ -63,3 +64,18 @@ def model_url(file_name):
         available = sorted(p.name for p in folder.iterdir() if p.suffix in (".sdf", ".urdf"))
         raise FileNotFoundError(f"no model '{file_name}' in {folder}; available: {available}")
     return f"package://drake_hybrid/{file_name}"
+
+
+@functools.lru_cache(maxsize=None)
+def _model_text(file_name):
+    return (models_directory() / file_name).read_text()
+
+
+def add_model(parser, file_name):
+    """``parser.AddModelsFromUrl(model_url(file_name))`` for a model of this package: the same models,
+    parsed from the file's text, which is read once per process. libsdformat reloads its whole
+    specification for every file it opens (about 0.1 s a model, most of a diagram's build), not for
+    a string (about 1 ms); the package's models refer to nothing by a relative path. Returns the
+    model instances."""
+    model_url(file_name)                     # FileNotFoundError naming the available models
+    return parser.AddModelsFromString(_model_text(file_name), Path(file_name).suffix.lstrip("."))

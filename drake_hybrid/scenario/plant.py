@@ -16,7 +16,6 @@ from pydrake.multibody.plant import AddMultibodyPlant, CoulombFriction, Multibod
 from pydrake.multibody.tree import SpatialInertia
 
 from drake_hybrid.core.errors import ConfigError, UnknownFrameError
-from drake_hybrid.scenario.config import ContactSensorConfig
 
 
 @dataclass
@@ -56,10 +55,13 @@ def _set_contact_properties(plant, scene_graph, geometry_ids, config, pad):
             properties.UpdateProperty("material", "hunt_crossley_dissipation", float(config.pad_dissipation))
             if config.relaxation_time >= 0:
                 properties.UpdateProperty("material", "relaxation_time", float(config.relaxation_time))
-        elif config.workpiece_relaxation_time >= 0:
-            # SAP's pair relaxation time is the sum of the two geometries' (Drake's default 0.1 s each):
-            # docs/drake_notes.md, "SAP's normal damping drags a pad over a curved workpiece".
-            properties.UpdateProperty("material", "relaxation_time", float(config.workpiece_relaxation_time))
+        else:
+            if config.workpiece_relaxation_time >= 0:
+                # SAP's pair relaxation time is the sum of the two geometries' (Drake's default 0.1 s each):
+                # docs/drake_notes.md, "SAP's normal damping drags a pad over a curved workpiece".
+                properties.UpdateProperty("material", "relaxation_time", float(config.workpiece_relaxation_time))
+            if config.workpiece_resolution > 0 and properties.HasProperty("hydroelastic", "resolution_hint"):
+                properties.UpdateProperty("hydroelastic", "resolution_hint", float(config.workpiece_resolution))
         properties.UpdateProperty("material", "coulomb_friction",
                                   CoulombFriction(float(config.friction), float(config.friction)))
         scene_graph.AssignRole(plant.get_source_id(), geometry_id, properties, RoleAssign.kReplace)
@@ -69,16 +71,15 @@ def build_plant(task, config, builder, time_step=None, sampled_outputs=None):
     """Add the task's plant (robot, tool, workpiece, contact properties) to ``builder``.
 
     ``sampled_outputs``: a discrete plant's contact results and reaction forces sampled at its last
-    step (Drake's ``use_sampled_output_ports``) or those of the step being taken. Default: not
-    sampled when the contact sensor reads them under a sampled controller (``config.control_period``
-    > 0: no algebraic loop, the controller's actuation comes from its state), so that the measured
-    wrench is the one the plant applies: sampled contact results are computed at the state before
-    the last step while the body poses are current, and shifting the contact force from its
-    centroid to the end effector across that gap adds a false moment |f| |v| h
-    (docs/drake_notes.md). Otherwise sampled (Drake's default): a wrist sensor's reaction force acts
-    at a frame of the tool, with no such shift, and a continuous controller would close a loop."""
+    step or those of the step about to be taken; default ``config.plant.use_sampled_output_ports``
+    (Drake's default: sampled). Sampled, the sensors read the contact solve the plant's step made
+    (one solve per step; the contact sensor shifts it to the end effector as it was at that solve,
+    ``ContactWrenchSensor``, and the law splits it one step old); unsampled, the reading is the
+    current step's, and a controller that reads it at another instant than the plant steps costs a
+    second contact solve per step (docs/drake_notes.md; the grinding task pays it).
+    ``analysis.linearize_discrete`` asks for unsampled ports (abstract state does not linearize)."""
     if sampled_outputs is None:
-        sampled_outputs = not (config.control_period > 0 and isinstance(config.sensor, ContactSensorConfig))
+        sampled_outputs = config.plant.use_sampled_output_ports
     time_step = config.plant.time_step if time_step is None else time_step
     plant_config = copy.copy(config.plant)
     plant_config.time_step = time_step

@@ -74,6 +74,8 @@ def set_initial_conditions(scenario, root_context):
         for _ in range(PRIMING_STEPS):
             plant.ExecuteForcedEvents(plant_context, publish=False)
         plant.SetPositionsAndVelocities(plant_context, environment)
+    if getattr(scenario.sensor, "samples_point", False):        # the contact sensor on those sampled results
+        scenario.sensor.set_sampled_point(scenario.sensor.GetMyMutableContextFromRoot(root_context))
     reading = scenario.sensor.get_output_port(0).Eval(scenario.sensor.GetMyContextFromRoot(root_context))
     if scenario.fault_injector is not None:
         injector = scenario.fault_injector

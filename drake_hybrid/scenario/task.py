@@ -29,6 +29,7 @@ import numpy as np
 from drake_hybrid.core.errors import ConfigError
 from drake_hybrid.scenario.config import ScenarioConfig
 from drake_hybrid.scenario.path_job import path_events
+from drake_hybrid.scenario.task_options import option_help
 from drake_hybrid.systems.sources import Profile, ProfileSource
 
 
@@ -40,11 +41,6 @@ class EigenvalueShift:
     designed: complex       # the eigenvalue the gains design
     predicted: complex      # where the task's physics puts it
     reason: str             # one line: what moves it, and the formula
-
-
-def choice(default, allowed):
-    """A string option whose value must be one of ``allowed``."""
-    return dataclasses.field(default=default, metadata={"allowed": tuple(allowed)})
 
 
 @dataclass
@@ -159,17 +155,9 @@ class Task(abc.ABC):
             config.task_options[name] = value
 
     def option_help(self):
-        """One line per option for help texts: ``name=VALUE`` with its type or allowed values and default."""
-        lines = []
-        for f in dataclasses.fields(self.Options):
-            allowed = f.metadata.get("allowed")
-            kind = f.type if isinstance(f.type, type) else type(f.default)
-            if allowed:
-                value = "|".join(allowed)
-            else:
-                value = {bool: "true|false", int: "INTEGER", float: "NUMBER"}.get(kind, "WORD")
-            lines.append(f"{f.name}={value} (default {f.default})")
-        return lines
+        """One line per option for help texts: ``name=VALUE`` with its type or allowed values and default
+        (``scenario.task_options.option_help``)."""
+        return option_help(self.Options)
 
     def options(self, config):
         """The task's typed options from ``config.task_parameters`` and ``config.task_options``."""

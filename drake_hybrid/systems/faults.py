@@ -16,6 +16,7 @@ compute on values (an injected fault has no derivative); ``JointFriction`` diffe
 """
 
 import math
+import sys
 from dataclasses import dataclass, field
 from typing import List
 
@@ -29,6 +30,7 @@ from pydrake.systems.scalar_conversion import TemplateSystem
 from drake_hybrid.control.sampling import SAMPLE_LEAD
 from drake_hybrid.core.errors import ConfigError, DimensionError, check_fields
 from drake_hybrid.core.linalg import all_finite, value
+from drake_hybrid.core.templates import default_instantiation
 
 DROPOUT_KINDS = ("nan", "stale")
 _BLOCK = 4096          # samples of noise drawn at once (per seed and block index)
@@ -76,7 +78,7 @@ class SensorFaultConfig:
         return self
 
 
-@TemplateSystem.define("SensorFaultInjector_", T_list=[float, AutoDiffXd])
+@TemplateSystem.define("SensorFaultInjector_", T_list=[float, AutoDiffXd], scope=sys.modules[__name__])
 def SensorFaultInjector_(T):
 
     class Impl(LeafSystem_[T]):
@@ -182,10 +184,10 @@ def SensorFaultInjector_(T):
     return Impl
 
 
-SensorFaultInjector = SensorFaultInjector_[None]
+SensorFaultInjector = default_instantiation(SensorFaultInjector_)
 
 
-@TemplateSystem.define("JointFriction_", T_list=[float, AutoDiffXd])
+@TemplateSystem.define("JointFriction_", T_list=[float, AutoDiffXd], scope=sys.modules[__name__])
 def JointFriction_(T):
 
     class Impl(LeafSystem_[T]):
@@ -241,4 +243,4 @@ def JointFriction_(T):
     return Impl
 
 
-JointFriction = JointFriction_[None]
+JointFriction = default_instantiation(JointFriction_)

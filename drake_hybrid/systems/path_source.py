@@ -37,6 +37,8 @@ goes to it). ``path_done`` is 1 once the path has ended (the contact supervisor'
 input).
 """
 
+import sys
+
 import numpy as np
 
 from pydrake.autodiffutils import AutoDiffXd
@@ -50,6 +52,7 @@ from drake_hybrid.core.charts import PoseChart
 from drake_hybrid.core.errors import DimensionError
 from drake_hybrid.core.kinematics import declare_cached_value, declare_task_input
 from drake_hybrid.core.linalg import value
+from drake_hybrid.core.templates import default_instantiation
 
 NOT_STARTED = 1.0e9          # t_0 before the first contact
 
@@ -91,7 +94,7 @@ def _vee(skew):
     return np.array([skew[2, 1], skew[0, 2], skew[1, 0]])
 
 
-@TemplateSystem.define("PathSource_", T_list=[float, AutoDiffXd])
+@TemplateSystem.define("PathSource_", T_list=[float, AutoDiffXd], scope=sys.modules[__name__])
 def PathSource_(T):
 
     class Impl(LeafSystem_[T]):
@@ -280,4 +283,4 @@ def PathSource_(T):
     return Impl
 
 
-PathSource = PathSource_[None]
+PathSource = default_instantiation(PathSource_)

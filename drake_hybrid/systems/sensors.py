@@ -28,6 +28,7 @@ and the sampling; each is a TemplateSystem of about 100 lines.
 """
 
 import math
+import sys
 
 import numpy as np
 
@@ -46,6 +47,15 @@ from drake_hybrid.core.arguments import boolean, nonnegative, number, positive, 
 from drake_hybrid.core.errors import DimensionError
 from drake_hybrid.core.kinematics import resolve_frame
 from drake_hybrid.core.linalg import all_finite, value
+from drake_hybrid.core.templates import default_instantiation
+
+
+def sampled_reading_age(plant):
+    """How old a reading of ``plant``'s contact results or reaction forces is when a sensor uses it: one
+    step h on a discrete plant with sampled output ports (the last step's solve, made at the
+    configuration q_k before it, while the arm is at q_k+1 now), 0 otherwise. The law splits the
+    wrench where it was exerted (``HybridController``'s ``wrench_lag``)."""
+    return plant.time_step() if plant.time_step() > 0 and plant.has_sampled_output_ports() else 0.0
 
 
 def _robot_geometry_ids(plant, robot_bodies):
@@ -67,6 +77,14 @@ def reaction_force_slot(plant, joint):
     return [int(index) for index in plant.GetJointIndices()].index(int(joint.index()))
 
 
+def _point_in_world_floats(X_WB, point_in_body):
+    """p_WP = X_WB p_BP for T = float, as a list of three floats: RigidTransform.multiply's numpy
+    wrapper costs three times this arithmetic on a 3-vector (the sensors run it every step)."""
+    (r00, r01, r02, t0), (r10, r11, r12, t1), (r20, r21, r22, t2) = X_WB.GetAsMatrix34().tolist()
+    a, b, c = point_in_body
+    return [t0 + r00 * a + r01 * b + r02 * c, t1 + r10 * a + r11 * b + r12 * c, t2 + r20 * a + r21 * b + r22 * c]
+
+
 def _point(point, owner):
     return vector(point, "end_effector_point", owner, 3, unit="m", error=DimensionError)
 
@@ -81,7 +99,7 @@ def _shift(F_coefficients, p_from_to_W):
                      f[0], f[1], f[2]])
 
 
-@TemplateSystem.define("ContactWrenchSensor_", T_list=[float, AutoDiffXd])
+@TemplateSystem.define("ContactWrenchSensor_", T_list=[float, AutoDiffXd], scope=sys.modules[__name__])
 def ContactWrenchSensor_(T):
 
     class Impl(LeafSystem_[T]):
@@ -99,6 +117,19 @@ def ContactWrenchSensor_(T):
         Sums, over hydroelastic and point contacts between a robot body and a
         non-robot body, the spatial force on the robot body, shifted from the
         contact point (centroid) to P, in world.
+
+        On a discrete plant with sampled output ports (Drake's default,
+        ``plant.has_sampled_output_ports()``) the contact results are those of
+        the plant's last step, solved at the configuration q_k before it, while
+        ``body_poses`` is the current q_{k+1}. The sensor then keeps p_WP(q_k)
+        in its state (an unrestricted update at the plant's steps, which reads
+        the same q_k as the plant's step) and shifts the step's forces to that
+        point: the reading is the wrench the step applied, about P where P was,
+        one step old, with no false moment |f| |v| h from a lever arm taken
+        across the step (docs/drake_notes.md). With unsampled ports the results
+        are those of the step about to be taken (a second contact solve per step
+        when the controller reads them at another instant than the plant steps)
+        and the current pose is used.
 
         Args:
             plant: the simulation plant (float, finalized, with a SceneGraph).
@@ -124,22 +155,55 @@ def ContactWrenchSensor_(T):
             self._body_index = frame.body().index()
             self._body_slot = int(self._body_index)
             self._point_in_body = frame.GetFixedPoseInBodyFrame().multiply(self._end_effector_point)
+            self._point_in_body_list = self._point_in_body.tolist()
             self._robot_geometry_values = {geometry.get_value() for geometry in self._robot_geometries}
             self._results_port = self.DeclareAbstractInputPort("contact_results",
                                                                AbstractValue.Make(ContactResults_[T]()))
             self._poses_port = self.DeclareAbstractInputPort("body_poses", Value[List[RigidTransform_[T]]]([]))
-            # A function of the inputs only (not of time): a logger at the next instant reuses the value.
+            prerequisites = {self.all_input_ports_ticket()}
+            # Sampled contact results: P where the step that computed them found it (class docstring).
+            self.samples_point = plant.time_step() > 0 and plant.has_sampled_output_ports()
+            if self.samples_point:
+                # NaN until the first step: the results then come from the start (scenario.start), P is current.
+                self._point_state = self.DeclareDiscreteState(np.full(3, np.nan))
+                self.DeclarePeriodicUnrestrictedUpdateEvent(plant.time_step(), 0.0, self._sample_point)
+                prerequisites.add(self.xd_ticket())
+            # A function of the inputs (and the sampled P), not of time: a logger at the next instant reuses it.
             self.DeclareVectorOutputPort("wrench", 6, self._calc_wrench_float if T == float else self._calc_wrench,
-                                         prerequisites_of_calc={self.all_input_ports_ticket()})
+                                         prerequisites_of_calc=prerequisites)
 
         def _construct_copy(self, other, converter=None):
             Impl._construct(self, other._plant, other._robot_bodies, other._frame, other._end_effector_point,
                             converter=converter)
 
+        def _current_point(self, context):
+            if T == float:
+                return _point_in_world_floats(self._poses_port.Eval(context)[self._body_slot], self._point_in_body_list)
+            return _point_in_world(self._poses_port.Eval(context), self._body_index, self._point_in_body)
+
+        def _sample_point(self, context, state):
+            """At the plant's step: P at the configuration the step solves the contact at."""
+            state.get_mutable_discrete_state(self._point_state).SetFromVector(self._current_point(context))
+
+        def set_sampled_point(self, context):
+            """Take P's position for the contact results the plant holds now (``scenario.start`` after it
+            primed the plant at the start, before the first step; until then, or if this is never called,
+            the sensor shifts to the current P)."""
+            if self.samples_point:
+                context.get_mutable_discrete_state(self._point_state).SetFromVector(
+                    value(self._current_point(context)))
+
+        def _contact_point(self, context):
+            """p_WP the contact results are shifted to: sampled with them, else current."""
+            if self.samples_point:
+                sampled = context.get_discrete_state(self._point_state).value()
+                if all_finite(sampled):
+                    return sampled
+            return np.asarray(self._current_point(context))
+
         def _calc_wrench(self, context, output):
             results = self.get_input_port(0).Eval(context)
-            body_poses = self.get_input_port(1).Eval(context)
-            p_WP = _point_in_world(body_poses, self._body_index, self._point_in_body)
+            p_WP = self._contact_point(context)
             total = np.zeros(6, dtype=p_WP.dtype)
             for i in range(results.num_hydroelastic_contacts()):
                 info = results.hydroelastic_contact_info(i)
@@ -199,17 +263,21 @@ def ContactWrenchSensor_(T):
                 n1 += c2 * b0 - c0 * b2
                 n2 += c0 * b1 - c1 * b0
                 f0, f1, f2 = f0 + b0, f1 + b1, f2 + b2
-            p0, p1, p2 = self._poses_port.Eval(context)[self._body_slot].multiply(self._point_in_body).tolist()
+            p0 = math.nan
+            if self.samples_point:
+                p0, p1, p2 = context.get_discrete_state(self._point_state).value().tolist()
+            if p0 != p0:                        # no sampled point (not sampling, or before the first step)
+                p0, p1, p2 = self._current_point(context)
             output.SetFromVector([n0 - (p1 * f2 - p2 * f1), n1 - (p2 * f0 - p0 * f2), n2 - (p0 * f1 - p1 * f0),
                                   f0, f1, f2])
 
     return Impl
 
 
-ContactWrenchSensor = ContactWrenchSensor_[None]
+ContactWrenchSensor = default_instantiation(ContactWrenchSensor_)
 
 
-@TemplateSystem.define("WristForceTorqueSensor_", T_list=[float, AutoDiffXd])
+@TemplateSystem.define("WristForceTorqueSensor_", T_list=[float, AutoDiffXd], scope=sys.modules[__name__])
 def WristForceTorqueSensor_(T):
 
     class Impl(LeafSystem_[T]):
@@ -278,6 +346,7 @@ def WristForceTorqueSensor_(T):
             self._body_index = frame.body().index()
             self._point_in_body = frame.GetFixedPoseInBodyFrame().multiply(self._end_effector_point)
             self._body_slot, self._tool_slot = int(self._body_index), int(self._tool_index)
+            self._point_in_body_list = self._point_in_body.tolist()
             self._reactions_port = self.DeclareAbstractInputPort("reaction_forces", Value[List[SpatialForce_[T]]]([]))
             self._poses_port = self.DeclareAbstractInputPort("body_poses", Value[List[RigidTransform_[T]]]([]))
             # Issue 18: the tool's inertial wrench, from its model (off: the paper's static compensation).
@@ -343,7 +412,7 @@ def WristForceTorqueSensor_(T):
             (n0, f0), (n1, f1), (n2, f2) = (R_WJc @ coefficients.reshape(2, 3).T).tolist()
             t0, t1, t2 = X_W_tool.translation().tolist()
             j0, j1, j2 = (R_W_tool @ self._p_tool_Jc_and_com).tolist()    # columns p_tool_Jc, p_tool_com
-            p0, p1, p2 = body_poses[self._body_slot].multiply(self._point_in_body).tolist()
+            p0, p1, p2 = _point_in_world_floats(body_poses[self._body_slot], self._point_in_body_list)
             a0, a1, a2 = t0 + j0[0] - p0, t1 + j1[0] - p1, t2 + j2[0] - p2    # p_WJc - p_WP
             c0, c1, c2 = t0 + j0[1] - p0, t1 + j1[1] - p1, t2 + j2[1] - p2    # p_Wcom - p_WP
             w0, w1, w2 = self._weight
@@ -355,7 +424,7 @@ def WristForceTorqueSensor_(T):
     return Impl
 
 
-WristForceTorqueSensor = WristForceTorqueSensor_[None]
+WristForceTorqueSensor = default_instantiation(WristForceTorqueSensor_)
 
 
 MAX_FILTER_SIZE = 10_000      # entries a LowPassFilter filters (a wrench has 6)
@@ -381,7 +450,7 @@ def low_pass_lag(bandwidth_hz, period):
     return period * (1.0 - alpha) / alpha
 
 
-@TemplateSystem.define("LowPassFilter_", T_list=[float, AutoDiffXd])
+@TemplateSystem.define("LowPassFilter_", T_list=[float, AutoDiffXd], scope=sys.modules[__name__])
 def LowPassFilter_(T):
 
     class Impl(LeafSystem_[T]):
@@ -441,11 +510,11 @@ def LowPassFilter_(T):
     return Impl
 
 
-LowPassFilter = LowPassFilter_[None]
+LowPassFilter = default_instantiation(LowPassFilter_)
 
 
 
-@TemplateSystem.define("WrenchConditioner_", T_list=[float, AutoDiffXd])
+@TemplateSystem.define("WrenchConditioner_", T_list=[float, AutoDiffXd], scope=sys.modules[__name__])
 def WrenchConditioner_(T):
 
     class Impl(LeafSystem_[T]):
@@ -547,4 +616,4 @@ def WrenchConditioner_(T):
     return Impl
 
 
-WrenchConditioner = WrenchConditioner_[None]
+WrenchConditioner = default_instantiation(WrenchConditioner_)

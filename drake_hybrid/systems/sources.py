@@ -18,6 +18,7 @@
 """
 
 import math
+import sys
 from dataclasses import dataclass, field
 from typing import List
 
@@ -33,6 +34,7 @@ from drake_hybrid.core.kinematics import declare_cached_value, declare_task_inpu
 from drake_hybrid.core.linalg import value
 from drake_hybrid.core.projections import pseudo_desired_velocity
 from drake_hybrid.core.symbolic import CompiledFunction, to_sympy_matrix
+from drake_hybrid.core.templates import default_instantiation
 
 
 @dataclass
@@ -137,7 +139,7 @@ def _checked_profiles(owner, velocity_profile, force_profile, velocity_size, for
     return velocity_size, force_size
 
 
-@TemplateSystem.define("ProfileSource_", T_list=[float, AutoDiffXd])
+@TemplateSystem.define("ProfileSource_", T_list=[float, AutoDiffXd], scope=sys.modules[__name__])
 def ProfileSource_(T):
 
     class Impl(LeafSystem_[T]):
@@ -160,12 +162,16 @@ def ProfileSource_(T):
                                                           velocity_size, force_size)
             self.velocity_profile, self.force_profile = velocity_profile, force_profile
             self._sizes = (velocity_size, force_size)
+            # A constant profile's outputs depend on nothing: Drake computes them once per context (no
+            # Python call at every tick and every logged sample); the others depend on time.
+            velocity, force = ({self.nothing_ticket() if profile.kind == "constant" else self.time_ticket()}
+                               for profile in (velocity_profile, force_profile))
             self.DeclareVectorOutputPort("desired_velocity", velocity_size, self._calc_velocity,
-                                         prerequisites_of_calc={self.time_ticket()})
+                                         prerequisites_of_calc=velocity)
             self.DeclareVectorOutputPort("desired_acceleration", velocity_size, self._calc_acceleration,
-                                         prerequisites_of_calc={self.time_ticket()})
+                                         prerequisites_of_calc=velocity)
             self.DeclareVectorOutputPort("desired_force", force_size, self._calc_force,
-                                         prerequisites_of_calc={self.time_ticket()})
+                                         prerequisites_of_calc=force)
 
         def _construct_copy(self, other, converter=None):
             Impl._construct(self, other.velocity_profile, other.force_profile, *other._sizes, converter=converter)
@@ -185,10 +191,10 @@ def ProfileSource_(T):
     return Impl
 
 
-ProfileSource = ProfileSource_[None]
+ProfileSource = default_instantiation(ProfileSource_)
 
 
-@TemplateSystem.define("PseudoVelocitySource_", T_list=[float, AutoDiffXd])
+@TemplateSystem.define("PseudoVelocitySource_", T_list=[float, AutoDiffXd], scope=sys.modules[__name__])
 def PseudoVelocitySource_(T):
 
     class Impl(LeafSystem_[T]):
@@ -270,10 +276,10 @@ def PseudoVelocitySource_(T):
     return Impl
 
 
-PseudoVelocitySource = PseudoVelocitySource_[None]
+PseudoVelocitySource = default_instantiation(PseudoVelocitySource_)
 
 
-@TemplateSystem.define("DesiredFieldSource_", T_list=[float, AutoDiffXd])
+@TemplateSystem.define("DesiredFieldSource_", T_list=[float, AutoDiffXd], scope=sys.modules[__name__])
 def DesiredFieldSource_(T):
 
     class Impl(LeafSystem_[T]):
@@ -356,4 +362,4 @@ def DesiredFieldSource_(T):
     return Impl
 
 
-DesiredFieldSource = DesiredFieldSource_[None]
+DesiredFieldSource = default_instantiation(DesiredFieldSource_)

@@ -27,7 +27,6 @@ Task options: ``velocity_rows`` (``true`` | ``paper``). Task parameters:
 """
 
 import math
-from dataclasses import dataclass
 
 import numpy as np
 
@@ -43,8 +42,9 @@ from drake_hybrid.core.errors import ConfigError
 from drake_hybrid.core.kinematics import EndEffectorKinematics, inverse_kinematics
 from drake_hybrid.core.projections import ConstraintSpace, crank_paper_projection, crank_true_velocity_projection
 from drake_hybrid.scenario.config import ScenarioConfig, StartConfig, WristSensorConfig
-from drake_hybrid.scenario.parsing import ConfigureParser, model_url
-from drake_hybrid.scenario.task import EigenvalueShift, Task, choice
+from drake_hybrid.scenario.parsing import ConfigureParser, add_model
+from drake_hybrid.scenario.task import EigenvalueShift, Task
+from drake_hybrid.scenario.task_options import CRANK_START_ANGLE, CrankTurningOptions
 from drake_hybrid.scenario.tasks.robots import PAD_CENTER_IN_TOOL, add_ur5e_with_pad
 from drake_hybrid.systems.sources import Profile, PseudoVelocitySource
 
@@ -54,7 +54,7 @@ CRANK_RADIUS = 0.2                       # m, models/crank.sdf
 # with the crank straight in front of the robot, the wrist passes its q5 = 0 singularity.
 CRANK_CENTER = np.array([0.45, 0.2])
 CRANK_HEIGHT = 0.3
-START_ANGLE = 4.412                      # rad, crank angle alpha at t = 0
+START_ANGLE = CRANK_START_ANGLE          # rad, crank angle alpha at t = 0 (the option's default)
 CRANK_SEED = np.array([0.0, -1.2, 1.8, -0.6, 1.57, 0.0])   # IK seed: the wrist branch with q5 near pi/2
 
 
@@ -72,12 +72,6 @@ def true_velocities(scenario, log, center=CRANK_CENTER, radius=CRANK_RADIUS):
         task = scenario.controller.kinematics.evaluate(context)
         rates.append(true_rows.matrix(task.configuration) @ task.velocity)
     return np.array(rates)
-
-
-@dataclass
-class CrankTurningOptions:
-    start_angle: float = START_ANGLE                            # rad, crank angle alpha at t = 0
-    velocity_rows: str = choice("true", ("true", "paper"))      # E_p: true-velocity rows or (3.3-6) + pseudo-velocity
 
 
 class CrankTurning(Task):
@@ -159,7 +153,7 @@ class CrankTurning(Task):
                              "handle by a SAP weld constraint, which continuous plants do not support")
         parser = Parser(plant)
         ConfigureParser(parser)
-        crank = parser.AddModelsFromUrl(model_url("crank.sdf"))[0]
+        crank = add_model(parser, "crank.sdf")[0]
         plant.WeldFrames(plant.world_frame(), plant.GetFrameByName("post", crank),
                          RigidTransform([self.center[0], self.center[1], self.height]))
         return self.weld_pad_to_handle(plant)

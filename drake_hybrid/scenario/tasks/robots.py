@@ -13,7 +13,7 @@ import numpy as np
 from pydrake.math import RigidTransform
 from pydrake.multibody.parsing import Parser
 
-from drake_hybrid.scenario.parsing import ConfigureParser, model_url
+from drake_hybrid.scenario.parsing import ConfigureParser, add_model
 from drake_hybrid.scenario.plant import RobotModel
 
 PAD_RADIUS = 0.02            # m, the pad sphere of models/pad_tool.sdf
@@ -25,7 +25,7 @@ UR5E_SEED = np.array([0.0, -1.9, 1.9, -1.6, -1.57, 0.0])
 
 def add_pad_tool(plant, parser, wrist_frame, X_wrist_flange):
     """Parse the pad tool and weld its flange to ``wrist_frame``. Returns (instance, weld, pad geometries)."""
-    tool = parser.AddModelsFromUrl(model_url("pad_tool.sdf"))[0]
+    tool = add_model(parser, "pad_tool.sdf")[0]
     tool_frame = plant.GetFrameByName("tool", tool)
     weld = plant.WeldFrames(wrist_frame, tool_frame, X_wrist_flange)
     geometries = []

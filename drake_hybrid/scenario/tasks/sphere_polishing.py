@@ -32,7 +32,6 @@ Task parameters: ``speed`` (m/s along the path), ``normal_force`` (N),
 """
 
 import math
-from dataclasses import dataclass
 
 import numpy as np
 
@@ -42,13 +41,13 @@ from pydrake.multibody.parsing import Parser
 from drake_hybrid.control.gains import HybridGains
 from drake_hybrid.core.charts import EulerZXZChart, PoseChart
 from drake_hybrid.core.constraints import sphere_constraint
-from drake_hybrid.core.errors import ConfigError
 from drake_hybrid.core.kinematics import EndEffectorKinematics, inverse_kinematics
 from drake_hybrid.core.projections import ConstraintSpace, sphere_paper_projection, sphere_true_velocity_projection
 from drake_hybrid.scenario.config import ScenarioConfig, StartConfig
-from drake_hybrid.scenario.parsing import ConfigureParser, model_url
+from drake_hybrid.scenario.parsing import ConfigureParser, add_model
 from drake_hybrid.scenario.start import pressing_positions
-from drake_hybrid.scenario.task import Task, choice
+from drake_hybrid.scenario.task import Task
+from drake_hybrid.scenario.task_options import SpherePolishingOptions
 from drake_hybrid.scenario.tasks.robots import PAD_RADIUS, UR5E_SEED, add_ur5e_with_pad
 from drake_hybrid.systems.sources import Profile, PseudoVelocitySource
 
@@ -63,23 +62,6 @@ PATHS = {
                                                       math.cos(LATITUDE)])),
     "pole": ((0.0, 1.0, 0.0), lambda s: np.array([math.sin(-0.5 + s), 0.0, math.cos(-0.5 + s)])),
 }
-
-
-@dataclass
-class SpherePolishingOptions:
-    speed: float = 0.05                                          # m/s along the path
-    start_angle: float = 0.0                                     # the path's angle s at the start
-    chart: str = choice("pose", ("pose", "euler"))               # PoseChart or the paper's z-x-z angles
-    path: str = choice("latitude", ("latitude", "pole"))
-    velocity_rows: str = choice("true", ("true", "paper"))       # true-velocity rows or (3.3-11) + pseudo-velocity
-
-    def __post_init__(self):
-        # The paper's (3.3-11) rows are written in its z-x-z angles (core.projections.sphere_paper_projection):
-        # refused here, when the options are read, not as a TypeError once the scenario is being built.
-        if self.velocity_rows == "paper" and self.chart != "euler":
-            raise ConfigError(f"task option velocity_rows=paper (the paper's (3.3-11) rows, in z-x-z Euler angles) "
-                              f"needs chart=euler, got chart={self.chart}; with chart={self.chart} use "
-                              "velocity_rows=true")
 
 
 class SpherePolishing(Task):
@@ -142,7 +124,7 @@ class SpherePolishing(Task):
     def add_workpiece(self, plant, config):
         parser = Parser(plant)
         ConfigureParser(parser)
-        sphere = parser.AddModelsFromUrl(model_url("sphere_workpiece.sdf"))[0]
+        sphere = add_model(parser, "sphere_workpiece.sdf")[0]
         plant.WeldFrames(plant.world_frame(), plant.GetFrameByName("sphere", sphere), RigidTransform(SPHERE_CENTER))
         return list(plant.GetCollisionGeometriesForBody(plant.GetBodyByName("sphere", sphere)))
 

@@ -21,10 +21,8 @@ vector along the normal); E_p the view's rows (``core.surfaces.view_projection``
 and the pad centre's velocity along the world x and y (m/s), whose position errors are exact.
 """
 
-from dataclasses import dataclass
 
 import numpy as np
-
 from pydrake.math import RigidTransform
 from pydrake.multibody.parsing import Parser
 
@@ -35,12 +33,13 @@ from drake_hybrid.core.height_map import HeightMap, HeightMapSurface
 from drake_hybrid.core.projections import ConstraintSpace
 from drake_hybrid.core.surfaces import SphereSurface, view_projection
 from drake_hybrid.scenario.config import ScenarioConfig, StartConfig
-from drake_hybrid.scenario.workpieces import add_rigid_workpiece, mesh_shape
 from drake_hybrid.scenario.parsing import ConfigureParser, model_url
 from drake_hybrid.scenario.path_config import PathConfig, PatternConfig
 from drake_hybrid.scenario.path_job import job_duration, path_start_positions
-from drake_hybrid.scenario.task import Task, choice
+from drake_hybrid.scenario.task import Task
+from drake_hybrid.scenario.task_options import SurfacePolishingOptions
 from drake_hybrid.scenario.tasks.robots import PAD_RADIUS, UR5E_SEED, add_ur5e_with_pad
+from drake_hybrid.scenario.workpieces import add_rigid_workpiece, mesh_shape
 
 SPHERE_CENTER = np.array([0.45, 0.0, 0.10])
 SPHERE_RADIUS = 0.15                                     # m, models/sphere_workpiece.sdf
@@ -57,11 +56,6 @@ def height_map(kind):
     else:
         heights = (X ** 2 - Y ** 2) / (2 * 0.25)
     return HeightMap(x, x, heights, name=f"{kind} height map")
-
-
-@dataclass
-class SurfacePolishingOptions:
-    workpiece: str = choice("sphere", ("sphere", "bump", "saddle"))
 
 
 class SurfacePolishing(Task):

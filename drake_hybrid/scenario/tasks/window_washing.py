@@ -27,7 +27,6 @@ constraint keeps the nominal height.
 """
 
 import math
-from dataclasses import dataclass
 
 import numpy as np
 
@@ -43,10 +42,11 @@ from drake_hybrid.core.constraints import window_constraint
 from drake_hybrid.core.errors import ConfigError
 from drake_hybrid.core.projections import ConstraintSpace, GivenVelocityProjection
 from drake_hybrid.scenario.config import ScenarioConfig, StartConfig
-from drake_hybrid.scenario.parsing import ConfigureParser, model_url
+from drake_hybrid.scenario.parsing import ConfigureParser, add_model
 from drake_hybrid.scenario.plant import RobotModel
 from drake_hybrid.scenario.start import pressing_positions
 from drake_hybrid.scenario.task import Task
+from drake_hybrid.scenario.task_options import WindowWashingOptions
 from drake_hybrid.scenario.tasks.robots import PAD_CENTER_IN_TOOL, PAD_RADIUS, add_pad_tool
 from drake_hybrid.systems.sources import Profile
 
@@ -54,15 +54,6 @@ ARMS = {3: ("planar_3r.sdf", (1.0, 0.8, 0.3)), 4: ("planar_4r.sdf", (0.8, 0.7, 0
 # PD gains of the moving pane's actuator (N/m, N s/m): with the pane's 1 kg, a 1 kHz natural frequency
 # well damped, so the pane follows its lift profile to micrometres under a 10 N push.
 LIFT_GAINS = (4.0e7, 1.2e4)
-
-
-@dataclass
-class WindowWashingOptions:
-    window_height: float = 1.0          # m, the pane's lower face (the paper's y = 1)
-    joints: int = 3                     # 3: the paper's square arm; 4: a redundant arm
-    window_lift: float = 0.0            # m the pane moves up (0: welded pane)
-    window_lift_time: float = 0.5       # s, when the lift starts
-    window_lift_duration: float = 0.01  # s, over how long
 
 
 class WindowWashing(Task):
@@ -105,7 +96,7 @@ class WindowWashing(Task):
         joints, (file_name, lengths) = self._arm(config)
         parser = Parser(plant)
         ConfigureParser(parser)
-        arm = parser.AddModelsFromUrl(model_url(file_name))[0]
+        arm = add_model(parser, file_name)[0]
         plant.WeldFrames(plant.world_frame(), plant.GetFrameByName("base", arm))
         # Tool +z along the last link's +x, pad centre exactly at the tip.
         X_last_flange = RigidTransform(RotationMatrix.MakeYRotation(math.pi / 2),
@@ -117,7 +108,7 @@ class WindowWashing(Task):
     def add_workpiece(self, plant, config):
         parser = Parser(plant)
         ConfigureParser(parser)
-        window = parser.AddModelsFromUrl(model_url("window.sdf"))[0]
+        window = add_model(parser, "window.sdf")[0]
         height = self._height(config)
         X_W_mount = RigidTransform([1.0, 0, height])
         pane_frame = plant.GetFrameByName("pane", window)
