@@ -10,10 +10,13 @@ drawing, written for this project:
   carry a note in parentheses, ``contact_phase (only with guarded_move)``) becomes a table in HTML
   (the port names on either side of the system's box, the notes in small type) and a literal block
   in every other builder. A block that is not such YAML is an error naming what is wrong.
+* Private base classes (``_BaselineMixin``) are left out of a class's bases, as Drake's extension
+  leaves out pybind11's.
 * Systems made with Drake's ``TemplateSystem`` are documented under their public name: the module's
   ``HybridController = HybridController_[None]`` is a class whose ``__name__`` is the instantiation's
   (``HybridController_[float]``), which autodoc would show as an alias. The extension gives the
-  default instantiations their public names in the documentation build only, and appends to each
+  default instantiations their public names and their constructor's signature (``_construct``'s,
+  not the template's ``*args, **kwargs``) in the documentation build only, and appends to each
   one's docstring the instantiations its template offers (``HybridController_[float]``,
   ``HybridController_[AutoDiffXd]``).
 """
@@ -117,14 +120,24 @@ def name_template_systems(app, config):
     for module, name, template in template_systems(config.pydrake_system_package):
         cls = getattr(module, name)
         cls.__name__ = cls.__qualname__ = name
+        construct = inspect.signature(cls._construct)     # the constructor's real arguments
+        cls.__signature__ = construct.replace(parameters=[parameter for key, parameter in construct.parameters.items()
+                                                          if key not in ("self", "converter")])
         names = ", ".join(f"``{template._instantiation_name(param)}``" for param in template.param_list)
         cls.__doc__ = (inspect.cleandoc(cls.__doc__ or "")
                        + f"\n\n``{name}`` is ``{name}_[None]``; the template ``{name}_`` has the instantiations "
                        + f"{names} (Drake's scalar conversion: ``ToAutoDiffXd()``).\n")
 
 
+def public_bases(app, name, obj, options, bases):
+    """Show only public base classes (a private mixin such as ``_BaselineMixin`` is an implementation
+    detail with no page of its own)."""
+    bases[:] = [base for base in bases if not getattr(base, "__name__", "").startswith("_")]
+
+
 def setup(app):
     app.add_directive("pydrake_system", PydrakeSystemDirective)
+    app.connect("autodoc-process-bases", public_bases)
     app.add_config_value("pydrake_system_package", "", "env")
     app.connect("config-inited", name_template_systems)
     app.add_css_file("pydrake_system.css")
