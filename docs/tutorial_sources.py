@@ -51,6 +51,9 @@ def stage_tutorials(source, destination, executed, require_outputs=False):
         else:
             missing.append(path.name)
             notebook = _with_note(committed, NOTE_CLEAN)
+        for index, cell in enumerate(notebook["cells"]):      # nbformat 4.5 wants every cell to have an id
+            cell.setdefault("id", f"cell-{index}")
+        notebook["nbformat_minor"] = max(notebook.get("nbformat_minor", 0), 5)
         (destination / path.name).write_text(json.dumps(notebook, indent=1))
     if require_outputs and missing:
         raise RuntimeError(f"no current executed copy of {', '.join(missing)} in {executed} (run the notebook tests "

@@ -129,6 +129,15 @@ def name_template_systems(app, config):
                        + f"{names} (Drake's scalar conversion: ``ToAutoDiffXd()``).\n")
 
 
+# Drake's TemplateSystem also binds each instantiation in its module under a mangled name
+# (``HybridController_𝓣float𝓤``): the same class as the public name, not a name to document twice.
+MANGLED_INSTANTIATION = "\U0001d4e3"      # the mangling's opening character
+
+
+def skip_mangled_instantiations(app, what, name, obj, skip, options):
+    return True if MANGLED_INSTANTIATION in name else None
+
+
 def public_bases(app, name, obj, options, bases):
     """Show only public base classes (a private mixin such as ``_BaselineMixin`` is an implementation
     detail with no page of its own)."""
@@ -138,6 +147,7 @@ def public_bases(app, name, obj, options, bases):
 def setup(app):
     app.add_directive("pydrake_system", PydrakeSystemDirective)
     app.connect("autodoc-process-bases", public_bases)
+    app.connect("autodoc-skip-member", skip_mangled_instantiations)
     app.add_config_value("pydrake_system_package", "", "env")
     app.connect("config-inited", name_template_systems)
     app.add_css_file("pydrake_system.css")

@@ -3,7 +3,8 @@
 The public names (``public_names``): in every module of the package, the classes and functions it
 defines whose names do not start with ``_`` (``__all__`` where a module declares it), and its Drake
 ``TemplateSystem`` templates (documented with their default instantiation: ``HybridController_``
-with ``HybridController``). After the build has read every page, each must be a Python object of
+with ``HybridController``; the mangled names Drake binds its instantiations under are the same
+classes, not names of their own). After the build has read every page, each must be a Python object of
 the site (the autosummary pages of ``docs/reference/api.rst`` document them); a missing one is a
 warning naming it, an error under ``-W``. So a name added to the code by anyone later either appears
 in the reference or stops the documentation build. ``tests/test_docs.py`` runs ``public_names``
@@ -15,6 +16,7 @@ import inspect
 import pkgutil
 
 from pydrake.common.cpp_template import TemplateBase
+from pydrake_system import MANGLED_INSTANTIATION
 from sphinx.util import logging
 
 logger = logging.getLogger(__name__)
@@ -39,7 +41,7 @@ def public_names(package_name):
     for module in package_modules(package_name):
         declared = getattr(module, "__all__", None)
         for name, value in vars(module).items():
-            if name.startswith("_") or (declared is not None and name not in declared):
+            if name.startswith("_") or (declared is not None and name not in declared) or MANGLED_INSTANTIATION in name:
                 continue
             if isinstance(value, TemplateBase):
                 if getattr(value, "_scope", None) is module and inspect.isclass(getattr(module, name[:-1], None)):

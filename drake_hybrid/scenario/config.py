@@ -16,6 +16,9 @@ The walk from a file to a diagram::
 
 Every config dataclass validates itself with ``validate(prefix)``, raising ``ConfigError`` with
 the dotted field name; ``ScenarioConfig.validate`` calls them all.
+
+Size: one idea, the run's configuration: each section's dataclass with its fields documented (units
+included: ``schema_doc`` prints them for docs/task_files.md) and its validation.
 """
 
 import copyreg
