@@ -16,6 +16,7 @@ import json
 import re
 import subprocess
 import sys
+import textwrap
 from pathlib import Path
 
 import numpy as np
@@ -233,15 +234,28 @@ def test_the_port_diagram_parses_drakes_yaml_and_refuses_other_text():
             pydrake_system.parse_system_yaml(bad)
 
 
+def _port_blocks(text):
+    """The YAML of every ``.. pydrake_system::`` block of a source file: the lines indented below the
+    directive, up to the first line that is not."""
+    lines, blocks = text.splitlines(), []
+    for index, line in enumerate(lines):
+        if line.strip() == ".. pydrake_system::":
+            indent, body = len(line) - len(line.lstrip()), []
+            for following in lines[index + 1:]:
+                if following.strip() and len(following) - len(following.lstrip()) <= indent:
+                    break
+                body.append(following)
+            blocks.append("\n".join(body))
+    return blocks
+
+
 def test_the_package_docstrings_port_blocks_parse():
     """Every pydrake_system block in the package is Drake's YAML (a colon inside a port's note makes it
     a mapping: the block would not draw)."""
-    blocks = 0
-    for path in (ROOT / "drake_hybrid").rglob("*.py"):
-        for block in re.findall(r"\.\. pydrake_system::\n\n((?:\s{8,}.*\n)+)", path.read_text()):
-            pydrake_system.parse_system_yaml(block)
-            blocks += 1
-    assert blocks >= 15
+    blocks = [block for path in (ROOT / "drake_hybrid").rglob("*.py") for block in _port_blocks(path.read_text())]
+    assert len(blocks) >= 15
+    for block in blocks:
+        pydrake_system.parse_system_yaml(textwrap.dedent(block))
 
 
 def test_the_site_renders_current_executed_tutorials_only(tmp_path):

@@ -3,7 +3,8 @@
 The package's docstrings are written to be read in the source and in ``help()``: reST for literals,
 tables and directives, but also two plain-text habits that reST reads otherwise:
 
-* ``|x|`` for a norm or an absolute value, which reST takes for a substitution reference;
+* ``|x|`` for a norm or an absolute value, which reST takes for a substitution reference (escaped;
+  in a simple table's cells, where a backslash would shift the columns, written as U+2223);
 * fields as ``name: what it is`` with indented continuation lines (a dataclass's fields, a function's
   arguments), and indented continuations after a paragraph, which reST reads as unexpected
   indentation.
@@ -87,7 +88,9 @@ def plain_to_rst(lines):
             if out and out[-1].strip():
                 out.append("")
         if in_table:
-            out.append(line)
+            # a bar inside a cell would be a substitution; a backslash would shift the columns, so it
+            # becomes a bar of the same width that reST does not read (U+2223)
+            out.append(line if _BORDER.match(line) else line.replace("|", "\u2223"))
             if _BORDER.match(line) and (index + 1 == len(lines) or not lines[index + 1].strip()):
                 in_table = False
             previous = None
@@ -112,8 +115,11 @@ def plain_to_rst(lines):
             bullet = _BULLET.match(prev_line)
             continues_bullet = bullet and indent == len(bullet.group(0))
             new_bullet = _BULLET.match(line) and previous_bullet_indent(out) == indent
+            bullet_above = previous_bullet_indent(out)
             if indent < prev_indent and not new_bullet and index not in fields:
                 out.append("")
+            elif bullet_above is not None and not _BULLET.match(line) and indent <= bullet_above:
+                out.append("")                 # a paragraph after a list
             elif indent > prev_indent and not continues_bullet and not prev_line.rstrip().endswith("::") and (
                     prev_lines_in_paragraph > 1):
                 out.append("")
