@@ -35,16 +35,27 @@ _DRAKE_LINKS = {
 
 
 def field_comments(cls):
-    """{field name: the comment on its line in the class's source} of a dataclass."""
+    """{field name: the comment on its line in the class's source} of a dataclass, with the comment
+    lines that continue it (indented further than the field, right below it)."""
     comments = {}
     try:
         source = inspect.getsource(cls)
     except (OSError, TypeError):
         return comments
+    last, last_indent = None, 0
     for line in source.splitlines():
         match = _FIELD_LINE.match(line)
-        if match and match.group(2):
-            comments.setdefault(match.group(1), match.group(2).strip())
+        if match:
+            last, last_indent = None, len(line) - len(line.lstrip())
+            if match.group(2) and match.group(1) not in comments:
+                comments[match.group(1)] = match.group(2).strip()
+                last = match.group(1)
+            continue
+        continuation = re.match(r"^(\s+)#\s*(.*)$", line)
+        if last and continuation and len(continuation.group(1)) > last_indent:
+            comments[last] += " " + continuation.group(2).strip()
+        else:
+            last = None
     return comments
 
 
@@ -58,7 +69,7 @@ def docstring_fields(cls):
             current = match.group(1).split(", ")
             for name in current:
                 entries[name] = (match.group(2) or "").strip()
-        elif current and line.startswith(" ") and line.strip():
+        elif current and line.strip():          # the entry goes on to the end of its paragraph
             for name in current:
                 entries[name] += " " + line.strip()
         else:
