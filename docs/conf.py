@@ -44,6 +44,8 @@ extensions = [
     "reference_coverage",        # docs/_ext: a public name without a reference entry fails the build
 ]
 pydrake_system_package = reference_coverage_package = "drake_hybrid"
+reference_coverage_exclude = ("drake_hybrid.models",)   # the models' data package, not the API
+autosummary_context = {"excluded_modules": reference_coverage_exclude}   # docs/_templates/autosummary/module.rst
 
 source_suffix = {".rst": "restructuredtext", ".md": "myst-nb", ".ipynb": "myst-nb"}
 root_doc = "index"

@@ -41,6 +41,7 @@ import reference_coverage  # noqa: E402
 import tutorial_sources  # noqa: E402
 
 GENERATED = ("_build", "reference/generated", "tutorials")
+STAGED_TUTORIALS = DOCS / "tutorials"             # tutorials/*.ipynb as the site renders them
 PAGES = sorted(path for path in DOCS.rglob("*.md")
                if not any(str(path.relative_to(DOCS)).startswith(folder) for folder in GENERATED))
 CODE_BLOCK = re.compile(r"(<!-- not run: [^>]+-->\s*)?^```python\n(.*?)^```", re.S | re.M)
@@ -101,6 +102,8 @@ def test_relative_links_resolve(path):
             continue
         file, _, anchor = target.partition("#")
         resolved = (path.parent / file).resolve() if file else path
+        if STAGED_TUTORIALS in resolved.parents:       # the site stages tutorials/ there (docs/conf.py)
+            resolved = ROOT / "tutorials" / resolved.relative_to(STAGED_TUTORIALS)
         if not resolved.exists():
             broken.append(target)
         elif anchor and resolved.suffix == ".md" and anchor not in _anchors(resolved):
@@ -141,7 +144,7 @@ def test_every_public_name_has_a_reference_entry(tmp_path):
     for page in tmp_path.glob("*.rst"):
         for name in re.findall(r"^\.\. auto(?:class|function|exception):: (\S+)$", page.read_text(), re.M):
             documented.add(f"{page.stem}.{name}")
-    names = reference_coverage.public_names("drake_hybrid")
+    names = reference_coverage.public_names("drake_hybrid", exclude=("drake_hybrid.models",))
     assert len(names) > 300
     missing = sorted(name for name, entry in names.items() if entry not in documented)
     assert not missing, f"public names without a reference entry: {missing}"
