@@ -18,6 +18,14 @@ or rank singularity, non-finite actuation) falls back to ``law.evaluate_law`` fo
 which raises the same error; so there is one law, and ``tests/test_fast_law.py`` checks that both
 paths give every output port to 1e-12.
 
+The generated module is exact or it does not run: where it is first compiled (or loaded), its terms
+are checked against sympy's own 30-digit evaluation of the expressions they came from at a sample
+point (``verify_generated``, core/oracle.py); a disagreement raises ``CodeGenerationError`` naming the
+term.
+
+Size: code generation, its check, the constants' packing and the per-tick call of the compiled
+kernels are one idea (the float law compiled), and each needs the others' layout of the terms.
+
 AutoDiffXd controllers keep the generic path. Without numba (not installed, or it fails to import)
 ``build`` warns once and returns None; so does a constraint the compiler does not handle (e.g. a
 ``SelectingConstraint`` without a symbolic ``selector``): the generic path then runs.
@@ -41,13 +49,16 @@ from drake_hybrid.control.gains import ControlMode
 from drake_hybrid.core.charts import EulerZXZChart, PlanarChart, PoseChart
 from drake_hybrid.core.constraints import SelectingConstraint
 from drake_hybrid.core.projections import GivenVelocityProjection, KernelVelocityProjection
-from drake_hybrid.core.symbolic import straight_line_program, time_derivative
+from drake_hybrid.core.oracle import check_against_sympy
+from drake_hybrid.core.symbolic import ELEMENTARY_FUNCTIONS, SIGN_SOURCE, straight_line_program, time_derivative
 
 from drake_hybrid.control import fast_kernels as kernels
 from drake_hybrid.control.fast_kernels import DONE, NEEDS_BASE_TORQUE, NEEDS_INVERSE_DYNAMICS
 
 _WARNED = []
-_FUNCTIONS = "sin, cos, tan, asin, acos, atan, atan2, sqrt, exp, log, sinh, cosh, tanh, pi, e as E"
+_FUNCTIONS = ", ".join(ELEMENTARY_FUNCTIONS) + ", pi, pow, e as E"
+# What every generated module starts with: the names straight_line_program's code calls.
+MODULE_HEADER = f"import numpy as np\nfrom math import {_FUNCTIONS}\nfrom numba import njit\n\n\n@njit(cache=True)\n{SIGN_SOURCE}\n"
 
 
 def cache_folder():
@@ -101,21 +112,28 @@ def _piece_source(name, terms, chart):
     return "\n".join(lines)
 
 
-def generate_source(space):
-    """The generated module's source for ``space`` (a ConstraintSpace), or None if not supported."""
-    constraint, projection, chart = space.constraint, space.velocity_projection, space.chart
+def _compiled_pieces(space):
+    """The constraint pieces the generated module compiles for ``space`` (one, or a
+    SelectingConstraint's), or None where the generic law must run."""
+    constraint, projection = space.constraint, space.velocity_projection
     if not isinstance(projection, (KernelVelocityProjection, GivenVelocityProjection)):
         return None
     if isinstance(constraint, SelectingConstraint):
         if constraint.selector is None or not all(hasattr(p, "symbolic_terms") for p in constraint.pieces):
             return None
-        pieces = constraint.pieces
-    elif hasattr(constraint, "symbolic_terms"):
-        pieces = [constraint]
-    else:
+        return constraint.pieces
+    if hasattr(constraint, "symbolic_terms"):
+        return [constraint]
+    return None
+
+
+def generate_source(space):
+    """The generated module's source for ``space`` (a ConstraintSpace), or None if not supported."""
+    constraint, projection, chart = space.constraint, space.velocity_projection, space.chart
+    pieces = _compiled_pieces(space)
+    if pieces is None:
         return None
-    parts = [f"import numpy as np\nfrom math import {_FUNCTIONS}\nfrom numba import njit\n",
-             "from drake_hybrid.control.fast_kernels import store_terms, task_kinematics\n"]
+    parts = [MODULE_HEADER, "from drake_hybrid.control.fast_kernels import store_terms, task_kinematics\n"]
     for i, piece in enumerate(pieces):
         parts.append(_piece_source(f"_terms_{i}", _piece_terms(piece, projection, chart), chart))
     call = "    C, E_f, curvature, E_f_dot, E_p, E_p_dot_nu = _terms_{}(x, nu)"
@@ -139,6 +157,26 @@ def generate_source(space):
         ["    store_terms(terms, x, nu, J, bias, C, E_f, curvature, E_f_dot, E_p, E_p_dot_nu, ints)",
          "    return 0"]))
     return "\n\n\n".join(parts) + "\n"
+
+
+def verify_generated(module, space):
+    """Check the generated module's compiled terms of every piece (and the selector) against sympy at
+    sample points (``symbolic.check_against_sympy``); raises CodeGenerationError naming the term. Called
+    where the module is first compiled or loaded: the numba path is exact, or it does not run."""
+    pieces, chart = _compiled_pieces(space), space.chart
+    arguments = [chart.configuration_symbols, chart.velocity_symbols]
+
+    def flat(outputs):
+        return np.concatenate([np.asarray(output, dtype=float).reshape(-1) for output in outputs])
+
+    for i, piece in enumerate(pieces):
+        terms = _piece_terms(piece, space.velocity_projection, chart)
+        function = getattr(module, f"_terms_{i}")
+        check_against_sympy(f"numba terms of '{piece.name}'", [entry for matrix in terms for entry in matrix],
+                            arguments, {"numba": lambda x, nu, function=function: flat(function(x, nu))})
+    if len(pieces) > 1:
+        check_against_sympy(f"numba selector of '{space.constraint.name}'", list(space.constraint.selector),
+                            arguments, {"numba": lambda x, nu: flat(module._selector(x, nu)[:1])})
 
 
 def load_generated(source):
@@ -244,7 +282,8 @@ class FastLaw:
     ``disabled``: the first tick could not compile (warned once); the generic law runs.
     """
 
-    def __init__(self, module, reals, ints, controller):
+    def __init__(self, module, reals, ints, controller, space):
+        self._module, self._space = module, space
         self._terms_into = module.terms_into
         self._law = kernels.law_from_terms
         self._terms = np.zeros(kernels.terms_size(ints))         # scratch, used within one evaluation only
@@ -283,7 +322,7 @@ class FastLaw:
         constants = pack_constants(controller, law, space)
         if source is None or constants is None:
             return None
-        return cls(load_generated(source), constants[0], constants[1], controller)
+        return cls(load_generated(source), constants[0], constants[1], controller, space)
 
     def evaluate(self, plant_context, forces, v, integrals, desired_velocity, desired_acceleration, desired_force,
                  wrench, phase, approach_reference):
@@ -319,6 +358,7 @@ class FastLaw:
                               f"{message}); this controller runs the generic law", stacklevel=2)
                 return None
             self.compile_seconds = time.perf_counter() - start
+            verify_generated(self._module, self._space)      # CodeGenerationError: never run a wrong term
         if self._terms_into(terms, X, J_g, A_bias, v, reals, ints) != 0:
             self.fallbacks += 1                       # the chart's singularity: the generic law raises
             return None

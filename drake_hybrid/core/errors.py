@@ -34,6 +34,17 @@ class UnknownVariableError(DrakeHybridError):
     """A symbolic expression uses variables that are not the chart's coordinates."""
 
 
+class ExpressionError(DrakeHybridError):
+    """A symbolic expression cannot be compiled: a non-finite constant (nan, oo, zoo) or a function the
+    generated code does not evaluate; the message names the expression and what is allowed."""
+
+
+class CodeGenerationError(DrakeHybridError):
+    """Generated code disagrees with sympy's own evaluation of the expression it was generated from
+    (checked when it is compiled); the message names the term, the point and both values. It means a
+    defect of drake_hybrid's code generator: please report it with the expression."""
+
+
 class DimensionError(DrakeHybridError):
     """An array has the wrong shape for the object it is given to."""
 
