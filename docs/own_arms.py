@@ -1,7 +1,7 @@
 """Issue 12's acceptance matrix: three arms from the example-robot-data model package (UR10, Kinova
 Jaco 2, xArm7 with its URDF damping), three workpiece shapes (plane, 5 cm cylinder, 5 cm sphere),
 three modes with the default gains, and impedance-force again with a heavier impedance mass. Writes
-docs/own_arms.json and docs/own_arms.md (the README quotes them).
+docs/own_arms.json and docs/own_arms.md (docs/results.md quotes them).
 
     python docs/own_arms.py            # all 27 + 9 cases, about 6 minutes
     python docs/own_arms.py --page     # the page again from docs/own_arms.json

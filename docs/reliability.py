@@ -6,7 +6,7 @@
 Writes ``docs/reliability.md`` (the table, what each fault is, how each criterion was chosen,
 the details), ``docs/reliability.json`` (the figures), ``docs/figures/reliability_contact_loss.png``
 (the force through a contact loss and its re-acquisition) and replaces the table between the
-``reliability-table`` markers in ``README.md`` (the rows with a pass/fail; the reference rows are in
+``reliability-table`` markers in ``docs/results.md`` (the rows with a pass/fail; the reference rows are in
 the report). Every number in those files comes from this run, rounded to four significant figures
 (``report_format.significant``); run times and dates go to standard output only, so a rerun on an
 unchanged tree leaves those files as they were.
@@ -126,20 +126,21 @@ def plot_contact_loss(figures, path):
     plt.close(fig)
 
 
-def update_readme(table):
-    readme = ROOT / "README.md"
-    text = readme.read_text()
+def update_results_page(table):
+    """Replace the table between the markers of docs/results.md (the measured results page)."""
+    page = ROOT / "docs" / "results.md"
+    text = page.read_text()
     if START not in text or END not in text:
-        raise SystemExit(f"README.md has no {START} ... {END} markers")
+        raise SystemExit(f"docs/results.md has no {START} ... {END} markers")
     head, rest = text.split(START, 1)
     _, tail = rest.split(END, 1)
-    readme.write_text(f"{head}{START}\n{table}\n{END}{tail}")
+    page.write_text(f"{head}{START}\n{table}\n{END}{tail}")
 
 
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--quick", action="store_true", help="the test horizons and no reference runs")
-    parser.add_argument("--no-readme", action="store_true", help="do not touch README.md")
+    parser.add_argument("--no-table", action="store_true", help="do not touch docs/results.md")
     arguments = parser.parse_args(argv)
     cases = reliability.CASES + ([] if arguments.quick else reliability.SCRIPT_ONLY_CASES)
     figures, timings = [], {}
@@ -156,7 +157,7 @@ def main(argv=None):
     references = sum(figure.passed is None for figure in figures)
     passed = len(figures) - len(known) - len(new_failures) - references
     table = markdown_table(figures)
-    readme_table = markdown_table([figure for figure in figures if figure.passed is not None])
+    results_table = markdown_table([figure for figure in figures if figure.passed is not None])
     plot_contact_loss(figures, DOCS / "figures" / "reliability_contact_loss.png")
     environment = f"Python {platform.python_version()}, {platform.machine()}"
     report = [
@@ -196,8 +197,8 @@ def main(argv=None):
                           limit=f.limit, unit=f.unit, criterion=f.criterion, passed=f.passed,
                           details=serializable(f.details)) for f in figures]}),
         indent=1, default=lambda o: o.name if hasattr(o, "name") else str(o)) + "\n")
-    if not arguments.no_readme:
-        update_readme(readme_table)
+    if not arguments.no_table:
+        update_results_page(results_table)
     for name, seconds in timings.items():
         print(f"  {name}: {seconds:.1f} s")
     for figure in fixed:

@@ -155,6 +155,26 @@ def _fmt(values):
     return ", ".join(f"{v.real:.4g}{v.imag:+.4g}j" if abs(v.imag) > 1e-9 else f"{v.real:.4g}" for v in values)
 
 
+def _eigenvalues_by_row(controller, summary):
+    """" by row, velocity: 'x-dot' -10, 'theta-dot' -8; force: 'F' -10": each designed eigenvalue with its
+    row, or by loop when a gain couples the rows."""
+    from drake_hybrid.analysis.linearization import designed_eigenvalues_by_row   # (loaded with the command)
+    by_row = designed_eigenvalues_by_row(controller.validated_gains(), controller.mode, controller.kinematic_rows,
+                                         controller.num_joints - controller.task_size)
+    if by_row is None:
+        designed = np.array([complex(*e) for e in summary["predicted_eigenvalues"]])
+        return f" (by loop: a gain couples the rows): {_fmt(designed)}"
+    velocity, force, null_space = by_row
+    text = (" by row, velocity: " + ", ".join(f"'{row['name']}' {_fmt(values)}"
+                                               for row, values in zip(summary["velocity_rows"], velocity))
+            + "; force: " + ", ".join(f"'{row['name']}' {_fmt(values)}" + (" (held: -w_c, -2 w_c)" if row.get("held")
+                                                                              else "")
+                                      for row, values in zip(summary["force_rows"], force)))
+    if null_space:
+        text += f"; self-motion: {_fmt(np.array(null_space))} (-K_n per extra joint)"
+    return text
+
+
 def _event_text(time, events):
     """Where ``time`` (s) falls among the run's phases (summary["events"]): inside a span, or within 0.3 s
     after its edge or an instant; empty if nowhere near one (or only near phases that cause no error)."""
@@ -272,7 +292,7 @@ def command_simulate(args):
         return 1
     print(f"{s['task']} ({s['mode']}), {s['duration']:.2f} s simulated in {s['wall_time']:.1f} s "
           f"(real-time factor {s['real_time_factor']:.2f})")
-    print(f"  designed eigenvalues: {_fmt(np.array([complex(*e) for e in s['predicted_eigenvalues']]))}"
+    print(f"  designed eigenvalues{_eigenvalues_by_row(result.scenario.controller, s)}"
           f" (slowest time constant {s['design_time_constant']:.3f} s)")
     start = s["contact_time"]
     since = "from t = 0" if start == 0 else f"from contact at t = {start:.3f} s"

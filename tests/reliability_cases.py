@@ -5,7 +5,7 @@ simulates, and measures one figure against a pass criterion; most criteria are p
 (from the design, the rigid-contact dynamics or the fault's size), the rest are the limits
 the project set (peak impact <= 3 |F_d|). ``tests/test_reliability.py`` runs the cases with
 ``quick=True`` (short horizons); ``docs/reliability.py`` runs them all and writes
-``docs/reliability.md`` and the README's reliability table.
+``docs/reliability.md`` and the reliability table of ``docs/results.md``.
 
 A case is a function ``case(quick) -> list[Figure]``; ``CASES`` lists them in table order.
 ``BAD_CONFIGURATIONS`` lists bad inputs with the error each must raise. Reference rows (an

@@ -1,4 +1,4 @@
-"""The command line's help against the README's synopsis (what a newcomer reads first)."""
+"""The command line's help against the synopsis of docs/reference/command_line.md (what a user reads)."""
 
 import io
 import re
@@ -18,6 +18,7 @@ from drake_hybrid.scenario.tasks import BUILT_IN_TASKS, TASKS, get_task
 from drake_hybrid.scenario.tasks.grinding import SPHERE_ONLY
 
 README = Path(__file__).resolve().parent.parent / "README.md"
+COMMAND_LINE = README.parent / "docs" / "reference" / "command_line.md"
 
 
 def _subparsers(parser):
@@ -46,8 +47,9 @@ def _synopsis(text):
 
 
 def _readme_synopsis():
-    """{command: set of --options} from the README's "Command line" block."""
-    return _synopsis(README.read_text().split("## Command line", 1)[1].split("```", 2)[1])
+    """{command: set of --options} from the synopsis block of the command line's reference page
+    (docs/reference/command_line.md, where the README's "Command line" section moved)."""
+    return _synopsis(COMMAND_LINE.read_text().split("```text", 1)[1].split("```", 1)[0])
 
 
 def _options(parser):

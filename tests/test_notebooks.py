@@ -5,9 +5,12 @@ these, ``-m "not notebook"`` skips them. The kernel sees
 DRAKE_HYBRID_NOTEBOOK_TEST=1, which the notebooks' standard first cell turns
 into ``running_as_notebook = False``: shorter simulations, the same physics and
 the same checks (the notebooks assert what they show). As RussTedrake/manipulation
-does, this keeps the notebooks honest without making the suite slow.
+does, this keeps the notebooks honest without making the suite slow. Each executed notebook is saved
+in docs/_build/executed_tutorials/ (DRAKE_HYBRID_EXECUTED_TUTORIALS moves it): the documentation site
+renders those outputs without executing the tutorials a second time.
 """
 
+import os
 import re
 from pathlib import Path
 
@@ -19,6 +22,8 @@ from nbclient.exceptions import CellExecutionError
 ROOT = Path(__file__).resolve().parents[1]
 TUTORIALS = ROOT / "tutorials"
 NOTEBOOKS = sorted(TUTORIALS.glob("*.ipynb"))
+# Where the executed notebooks are saved for the documentation site (docs/tutorial_sources.py reads them).
+EXECUTED = Path(os.environ.get("DRAKE_HYBRID_EXECUTED_TUTORIALS", ROOT / "docs" / "_build" / "executed_tutorials"))
 
 STANDARD_FIRST_CELL = """\
 # Standard first cell of the drake_hybrid tutorials.
@@ -58,10 +63,11 @@ def test_notebook_is_committed_clean(path):
         assert cell.execution_count is None, f"{path.name}: code cell {index} has an execution count"
 
 
-def test_readme_links_every_tutorial():
-    readme = (ROOT / "README.md").read_text()
-    for path in NOTEBOOKS:
-        assert f"tutorials/{path.name}" in readme, f"README.md does not link tutorials/{path.name}"
+def test_readme_and_the_tutorials_page_link_every_tutorial():
+    for page in (ROOT / "README.md", ROOT / "docs" / "tutorials.md"):
+        text = page.read_text()
+        for path in NOTEBOOKS:
+            assert f"tutorials/{path.name}" in text, f"{page.relative_to(ROOT)} does not link tutorials/{path.name}"
 
 
 @pytest.mark.notebook
@@ -79,3 +85,6 @@ def test_notebook_runs(path, tmp_path, monkeypatch):
         client.execute()
     except CellExecutionError as error:
         pytest.fail(f"{path.name} failed:\n{error}", pytrace=False)
+    # The documentation renders this executed copy (docs/tutorial_sources.py) instead of running it again.
+    EXECUTED.mkdir(parents=True, exist_ok=True)
+    nbformat.write(notebook, EXECUTED / path.name)

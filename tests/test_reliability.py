@@ -2,7 +2,7 @@
 singularities and bad configuration, each with a pass criterion on a measured figure.
 
 The closed-loop cases are those of ``drake_hybrid.reliability`` (docs/reliability.py runs them with
-longer horizons and writes the README table); the unit tests below check the pieces against
+longer horizons and writes the table of docs/results.md); the unit tests below check the pieces against
 their definitions: the supervisor's transitions, the conditioner and the injector sample by
 sample, the guarded move and the saturation against the plant's dynamics, the damped inverse.
 """

@@ -282,9 +282,12 @@ def test_task_file_sweep_on_a_local_dask_cluster(built_in_sweep, tmp_path):
     _assert_same_rows(rows, built_in_sweep)
 
 
-def test_readme_shows_the_task_file_as_it_is():
-    readme = (REPOSITORY / "README.md").read_text()
-    assert WINDOW_FILE.read_text().rstrip() in readme
+def test_the_task_file_guide_shows_the_task_file_as_it_is():
+    """docs/howto/task_file.md includes the file itself (literalinclude), so it shows it as it is."""
+    guide = (REPOSITORY / "docs" / "howto" / "task_file.md").read_text()
+    assert "```{literalinclude} ../../models/tasks/window_washing.yaml" in guide
+    included = (REPOSITORY / "docs" / "howto" / "../../models/tasks/window_washing.yaml").resolve()
+    assert included.read_text() == WINDOW_FILE.read_text()      # the repository's file is the package's
 
 
 @pytest.mark.slow                # several seconds: not in the fast loop (-m 'not slow')

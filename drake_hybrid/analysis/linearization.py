@@ -36,7 +36,7 @@ from drake_hybrid.analysis.derivatives import JACOBIAN_TOLERANCE, JacobianCheck,
 from drake_hybrid.analysis.environment import impedance_environment_shifts, impedance_matrix
 from drake_hybrid.analysis.modes import diagnose_unstable_modes, explained_modes
 from drake_hybrid.control.damping import step_task_mobility
-from drake_hybrid.control.gains import ControlMode
+from drake_hybrid.control.gains import ControlMode, ValidatedGains
 from drake_hybrid.control.law import impedance_blocks
 from drake_hybrid.control.sampling import SAMPLE_LEAD
 from drake_hybrid.core.progress import quiet
@@ -100,6 +100,32 @@ def predicted_eigenvalues(gains, mode, kinematic_rows=0, redundancy=0):
     return PredictedEigenvalues(velocity=np.sort_complex(np.concatenate([velocity, null_space])),
                                 force=np.sort_complex(np.concatenate([force, held])),
                                 marginal=gains.velocity.shape[0] + len(kinematic) + redundancy)
+
+
+def designed_eigenvalues_by_row(gains, mode, kinematic_rows=(), redundancy=0):
+    """The designed eigenvalues row by row: ([velocity row i's], [force row j's], [null-space ones]), or
+    None when a gain couples rows (a full matrix: then only the loops have eigenvalues, not the rows).
+
+    With diagonal gains each row is a loop of its own: velocity row i's eigenvalue is -K_v[i, i], or the
+    two roots of s^2 + K_v[i, i] s + K_p[i, i] (position and impedance modes); force row j's is
+    -K_fi[j, j] / (1 + K_fp[j, j]), or -w_c and -2 w_c when the controller holds it (``kinematic_rows``).
+    Each is ``predicted_eigenvalues`` of that row's gains alone.
+    """
+    matrices = (gains.velocity, gains.position, gains.force_proportional, gains.force_integral, gains.impedance_mass)
+    if any(np.count_nonzero(matrix - np.diag(np.diag(matrix))) for matrix in matrices):
+        return None
+    kinematic = set(kinematic_rows if not isinstance(kinematic_rows, int) else range(kinematic_rows))
+
+    def row_gains(i, j):
+        pick = lambda matrix, index: matrix[index:index + 1, index:index + 1] if index is not None else np.eye(1)
+        return ValidatedGains(pick(gains.velocity, i), pick(gains.position, i), pick(gains.force_proportional, j),
+                              pick(gains.force_integral, j), gains.null_space_damping, gains.constraint_frequency,
+                              pick(gains.impedance_mass, i))
+
+    velocity = [predicted_eigenvalues(row_gains(i, None), mode).velocity for i in range(gains.velocity.shape[0])]
+    force = [predicted_eigenvalues(row_gains(None, j), mode, [0] if j in kinematic else []).force
+             for j in range(gains.force_integral.shape[0])]
+    return velocity, force, [complex(-gains.null_space_damping)] * redundancy
 
 
 def predicted_errors(gains, mode, times, velocity_error0, force_integral0, position_error0=None, kinematic_rows=()):

@@ -245,7 +245,7 @@ def JointServoHybridController_(T):
             - estimated_state
             - measured_wrench
             - desired_velocity
-            - desired_acceleration (unused: the servo has no acceleration feedforward)
+            - desired_acceleration (unused; the servo has no acceleration feedforward)
             - desired_force
             output_ports:
             - actuation

@@ -2,17 +2,17 @@
 
 The paper's gains (section 3):
 
-================  ==========  ======================  =================================
-name (code)       symbol      size                    role
-================  ==========  ======================  =================================
-velocity          K_v         (d-m) x (d-m)           velocity loop, eigenvalues -eig(K_v)
-position          K_p         (d-m) x (d-m)           position/impedance modes (Remark 3, 3.2-6)
-force_proportional K_fp       m x m                   force loop, (I + K_fp) xi-dot + K_fi xi = 0
-force_integral    K_fi        m x m                   force loop
-impedance_mass    M_d         (d-m) x (d-m)           impedance mode: M_d (e'' + K_v e' + K_p e) = F_v
-null_space_damping K_n        scalar (1/s)            n > d only: q-ddot_0 = -K_n q-dot
-constraint_frequency w_c      scalar (rad/s)          kinematic rows: C-ddot + 3 w_c C-dot + 2 w_c^2 C = 0
-================  ==========  ======================  =================================
+====================  ==========  ======================  =================================
+name (code)           symbol      size                    role
+====================  ==========  ======================  =================================
+velocity              K_v         (d-m) x (d-m)           velocity loop, eigenvalues -eig(K_v)
+position              K_p         (d-m) x (d-m)           position/impedance modes (Remark 3, 3.2-6)
+force_proportional    K_fp        m x m                   force loop, (I + K_fp) xi-dot + K_fi xi = 0
+force_integral        K_fi        m x m                   force loop
+impedance_mass        M_d         (d-m) x (d-m)           impedance mode: M_d (e'' + K_v e' + K_p e) = F_v
+null_space_damping    K_n         scalar (1/s)            n > d only: q-ddot_0 = -K_n q-dot
+constraint_frequency  w_c         scalar (rad/s)          kinematic rows: C-ddot + 3 w_c C-dot + 2 w_c^2 C = 0
+====================  ==========  ======================  =================================
 
 Each gain may be given as a scalar (times I), a vector (diagonal) or a matrix.
 ``HybridGains`` stores them as flat lists (YAML-friendly): one entry means a
@@ -132,10 +132,26 @@ GAIN_LISTS = ("velocity", "position", "force_proportional", "force_integral", "i
 
 @dataclass
 class HybridGains:
-    """The paper's gains (see the module docstring). Give scalars, vectors or
-    matrices; they are stored as flat lists (1, k or k*k entries). Every gain is checked here
-    (numbers, finite; the scalars' signs) and against the task's sizes, definiteness and sane
-    rates by ``matrices`` (GainError naming the gain)."""
+    """The paper's gains (see the module docstring). Give scalars, vectors or matrices; they are
+    stored as flat lists (1, k or k*k entries). Every gain is checked here (numbers, finite; the
+    scalars' signs) and against the task's sizes, definiteness and sane rates by ``matrices``
+    (GainError naming the gain).
+
+    velocity: K_v (1/s), the velocity rows' gain: in velocity-force mode each row's error decays as
+        e^(-K_v t), the designed eigenvalues -eig(K_v).
+    position: K_p (1/s^2), the position error's gain in position-force and impedance-force modes:
+        each row's roots solve s^2 + K_v s + K_p = 0 (unused in velocity-force mode).
+    force_proportional: K_fp (1, dimensionless), the force error's proportional gain.
+    force_integral: K_fi (1/s), the force error's integral gain: each force row's eigenvalue is
+        -K_fi / (1 + K_fp).
+    null_space_damping: K_n (1/s), only for a redundant arm (n joints > d chart coordinates): the law
+        adds -N^T M K_n q-dot, so the self-motion the task leaves free (J's null space) decays as
+        e^(-K_n t) instead of drifting; unused when n = d.
+    constraint_frequency: w_c (rad/s), the rows the controller holds itself (``kinematic_rows``,
+        no force commanded): C-ddot + 3 w_c C-dot + 2 w_c^2 C = 0, roots -w_c and -2 w_c.
+    impedance_mass: M_d (kg on a translational row, kg m^2 on a rotational one), the impedance's
+        mass in impedance-force mode, M_d (e'' + K_v e' + K_p e) = F_v; 1 is the paper's unit mass.
+    """
 
     velocity: List[float] = field(default_factory=lambda: [10.0])
     # K_p = 21: the position rows' roots s^2 + 10 s + 21 at -3 and -7, distinct (not the critically

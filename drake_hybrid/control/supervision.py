@@ -73,12 +73,14 @@ class SupervisionConfig:
     A scenario builds the supervisor when ``enabled`` or when the start is off the surface
     (``start.in_contact: false``).
 
+    enabled: build the supervisor (also built, whatever this says, when the start is off the surface).
     approach_speed: s, along the pressing direction, in units of C per second (m/s for the
         window and the sphere).
     approach_gain: K_a (1/s), the guarded move's bandwidth: its servo to the approach reference has a
         double pole at -K_a.
     contact_threshold: p at which contact is declared, as a fraction of |F_d|.
-    loss_threshold: p below which (for ``loss_dwell`` seconds) contact is declared lost.
+    loss_threshold: p (a fraction of |F_d|) below which (for ``loss_dwell`` seconds) contact is declared lost.
+    loss_dwell: s the force must stay below ``loss_threshold`` before contact is declared lost.
     max_travel: how far (units of C) the guarded move may go without finding the surface.
     tare_time: s; > 0 starts in TARE (needs ``sensor.condition``) when the start is in free space.
     lift_height: how far (units of C) a lift-off takes the pad from the surface (a job's end).

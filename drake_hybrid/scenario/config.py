@@ -16,6 +16,9 @@ The walk from a file to a diagram::
 
 Every config dataclass validates itself with ``validate(prefix)``, raising ``ConfigError`` with
 the dotted field name; ``ScenarioConfig.validate`` calls them all.
+
+Size: one idea, the run's configuration: each section's dataclass with its fields documented (units
+included: ``schema_doc`` prints them for docs/task_files.md) and its validation.
 """
 
 import copyreg
@@ -136,7 +139,7 @@ class ContactConfig:
 class WrenchPathConfig:
     """What every sensor's wrench passes through before the controller."""
 
-    bandwidth_hz: float = 0.0                    # first-order low-pass; 0 = none (a continuous plant needs one)
+    bandwidth_hz: float = 0.0                    # Hz, first-order low-pass; 0 = none (a continuous plant needs one)
     condition: bool = False                      # a WrenchConditioner (dropout rejection, tare, the low-pass)
     max_hold_time: float = 0.01                  # s, how long the conditioner bridges a dropout by holding
     fault_time: float = 0.05                     # s, a wrench invalid (non-finite) this long is a sensor fault:
@@ -177,8 +180,8 @@ class StartConfig:
     in_contact: bool = True                      # start pressing with the desired force; else approach (supervision)
     gap: float = 0.01                            # m from the surface along the pressing direction when not in contact
     tolerance: float = 5.0e-3                    # max |C(r)| allowed at the start (units of C's rows)
-    force_integral: List[float] = field(default_factory=list)  # xi(0); empty = zeros
-    position_error: List[float] = field(default_factory=list)  # e_p(0); empty = zeros
+    force_integral: List[float] = field(default_factory=list)  # xi(0) (N s); empty = zeros
+    position_error: List[float] = field(default_factory=list)  # e_p(0) (m, rad); empty = zeros
 
     def validate(self, prefix="start."):
         check_fields(self, prefix, positive=("tolerance", "gap"))
@@ -197,6 +200,8 @@ class MechanismConfig:
     source: "none" (the paper's form, default), "given" (``velocity_row_inertia``: 1, k or k*k
         entries like the gains) or "plant" (the task reads it from the simulation plant at the start,
         ``Task.velocity_row_inertia``; the crank does).
+    velocity_row_inertia: I_v with source "given" (kg on a translation row, kg m^2 on a rotation
+        row): 1 entry (times I), k (diagonal) or k*k (row-major).
     """
 
     source: str = "none"
@@ -224,15 +229,16 @@ class ModelErrorConfig:
     sets them in a plant context; ``set_initial_conditions`` does it for every
     run and linearization.
 
-    payload_mass_scale: the tool (the bodies of the robot's non-arm model instances): mass and
+    payload_mass_scale: factor on the tool (the bodies of the robot's non-arm model instances): mass and
         rotational inertia together.
-    link_mass_scale: the arm's links, mass and rotational inertia together (a uniformly denser
+    link_mass_scale: factor on the arm's links, mass and rotational inertia together (a uniformly denser
         link: gravity changes too).
-    link_inertia_scale: the rotational inertia about the centre of mass of every arm link only
+    link_inertia_scale: factor on the rotational inertia about the centre of mass of every arm link only
         (masses and centres of mass kept: gravity stays exact).
     joint_damping: viscous friction (N m s/rad) added to every arm joint (set when the plant is built).
     joint_friction: Coulomb friction tau_c (N m) in every arm joint (``faults.JointFriction``),
         regularized over ``friction_speed`` (rad/s).
+    friction_speed: rad/s, the joint speed over which the Coulomb friction rises to tau_c.
     """
 
     payload_mass_scale: float = 1.0
@@ -250,7 +256,27 @@ class ModelErrorConfig:
 
 @dataclass
 class ScenarioConfig:
-    """Everything that defines a run. Loads from YAML (``load_config``)."""
+    """Everything that defines a run. Loads from YAML (``load_config``).
+
+    task: a built-in task's name (``drake-hybrid tasks``) or a registered one; a task file sets its own.
+    mode: the law, velocity-force (3.1-12), position-force (Remark 3) or impedance-force (3.2-6).
+    duration: s of simulated time.
+    plant: Drake's MultibodyPlantConfig: the plant's time step (s; 0: continuous), contact model and
+        discrete contact approximation (default: 1 ms, hydroelastic, SAP).
+    simulator: Drake's SimulatorConfig (the integrator of a continuous plant).
+    log_period: s between logged samples (log.npz).
+    sensor: the wrench sensor, ``!ContactSensorConfig`` (ideal: the contact results) or
+        ``!WristSensorConfig`` (a force/torque sensor in the wrist weld), and its signal path.
+    desired_velocity: r-dot_pd(t), the velocity rows' command, in their units (labels.velocity_units:
+        m/s on a translation row, rad/s on a rotation row), one entry per row of E_p.
+    desired_force: F_d(t), the force rows' command in E_f's coordinates (N for a constraint in metres,
+        N m for one in radians; F is the force on the robot: pressing is negative along E_f's
+        outward normal), one entry per row of C.
+    task_parameters: a task's own numbers by name (see the task's ``Options``; m, rad, N as it says).
+    task_options: a task's own words by name (``--option KEY=VALUE``).
+    controller: the law closing the loop, li-sastry (HybridController) or a baseline of
+        control.baselines: raibert-craig, fisher-mujtaba, pd-open-loop-force.
+    """
 
     task: str = "window-washing"
     mode: str = "velocity-force"
@@ -258,7 +284,7 @@ class ScenarioConfig:
     max_duration: float = 3600.0                 # s of simulated time a run may ask for (raise it for longer runs)
     plant: MultibodyPlantConfig = field(default_factory=default_plant_config)
     simulator: SimulatorConfig = field(default_factory=SimulatorConfig)
-    control_period: float = 1.0e-3               # controller: 0 = continuous
+    control_period: float = 1.0e-3               # s, the controller's period; 0 = continuous
     log_period: float = 1.0e-3
     gains: HybridGains = field(default_factory=HybridGains)
     contact: ContactConfig = field(default_factory=ContactConfig)

@@ -181,7 +181,11 @@ class StartSpec:
 
 @dataclass
 class LabelsSpec:
-    """Plot and summary labels of the velocity- and force-controlled rows."""
+    """Plot and summary labels of the velocity- and force-controlled rows.
+
+    velocity_units: the velocity rows' units, one for all or one per row ("m/s | rad/s").
+    force_units: the force rows' units, one for all or one per row ("N | N m").
+    """
 
     velocity: List[str] = field(default_factory=list)       # one per E_p row (default r-dot_p[i])
     velocity_units: str = "SI"

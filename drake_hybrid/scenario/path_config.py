@@ -43,7 +43,7 @@ class PatternConfig:
     ``size`` (along u, along v) about ``center``, lines along ``direction`` ``spacing`` apart; or
     ``spiral`` out to ``radius`` with ``spacing`` between turns. Empty ``kind``: no pattern."""
 
-    kind: str = ""
+    kind: str = ""                       # raster | spiral | "" (no pattern)
     center: List[float] = field(default_factory=lambda: [0.0, 0.0])    # (u, v), m
     size: List[float] = field(default_factory=lambda: [0.1, 0.1])      # raster: (along u, along v), m
     radius: float = 0.05                                                # spiral, m
@@ -55,16 +55,16 @@ class PatternConfig:
 class ViewConfig:
     """The plane a pattern is drawn in (``core.surfaces.ViewPlane``); empty: the surface's default."""
 
-    origin: List[float] = field(default_factory=list)
-    axis_u: List[float] = field(default_factory=list)
-    axis_v: List[float] = field(default_factory=list)
+    origin: List[float] = field(default_factory=list)    # the plane's origin (world, m); empty: the default
+    axis_u: List[float] = field(default_factory=list)    # its u axis (world, unit vector: dimensionless)
+    axis_v: List[float] = field(default_factory=list)    # its v axis (world, unit vector: dimensionless)
 
 
 @dataclass
 class WaypointConfig:
     """A point on the workpiece's surface (world, m) and, optionally, the normal force there (N)."""
 
-    point: List[float] = field(default_factory=list)
+    point: List[float] = field(default_factory=list)    # on the surface (world, m)
     force: float = 0.0                       # 0: the path's force
 
 
@@ -72,27 +72,27 @@ class WaypointConfig:
 class ForcePointConfig:
     """The normal force (N) at an arc length (m) of the path; linear in between."""
 
-    arc_length: float = 0.0
-    force: float = 0.0
+    arc_length: float = 0.0              # m along the path from its start
+    force: float = 0.0                   # N, the normal force there
 
 
 @dataclass
 class PathConfig:
     """A job's path (module docstring); inactive (no waypoints, no pattern) by default."""
 
-    waypoints: List[WaypointConfig] = field(default_factory=list)
-    interpolation: str = "smooth"
+    waypoints: List[WaypointConfig] = field(default_factory=list)    # points on the surface, in order
+    interpolation: str = "smooth"            # smooth (one curve) | linear (stop at each waypoint)
     pattern: PatternConfig = field(default_factory=PatternConfig)
     view: ViewConfig = field(default_factory=ViewConfig)
-    speed: float = 0.05
-    acceleration: float = 0.5
-    force: float = 10.0
-    force_by_arc_length: List[ForcePointConfig] = field(default_factory=list)
-    tolerance: float = 0.002
-    heading: List[float] = field(default_factory=list)
-    dwell: float = 0.2
-    lift_off: bool = True
-    hold_at: float = -1.0
+    speed: float = 0.05                      # m/s, the pad centre's speed limit
+    acceleration: float = 0.5                # m/s^2, its acceleration limit (norm)
+    force: float = 10.0                      # N, the normal force (unless per waypoint or by arc length)
+    force_by_arc_length: List[ForcePointConfig] = field(default_factory=list)   # the force along the path
+    tolerance: float = 0.002                 # m, how far a waypoint may be off the surface
+    heading: List[float] = field(default_factory=list)   # the tool's x axis (world, dimensionless), in the tangent plane
+    dwell: float = 0.2                       # s pressing at the first point before moving
+    lift_off: bool = True                    # leave the surface at the end (supervision.lift_height)
+    hold_at: float = -1.0                    # >= 0: hold at this fraction of the path's length instead
 
     @property
     def active(self):

@@ -46,6 +46,7 @@ class SensorFaultConfig:
     dropout_probability: per sample, the chance that a dropout of ``dropout_samples`` begins.
     dropout_samples: length of a random dropout (samples).
     dropout_times: start times (s) of scheduled dropouts, each ``dropout_duration`` long.
+    dropout_duration: s, the length of each scheduled dropout.
     dropout_kind: "nan" (the sample is NaN) or "stale" (the last sample is repeated).
     seed: of the noise and the random dropouts.
     """

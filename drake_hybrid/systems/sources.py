@@ -46,6 +46,13 @@ class Profile:
       ``smooth_step``  from ``value`` to ``final_value`` over [start_time, start_time + duration]
                        with a quintic blend (continuous velocity and acceleration)
       ``sine``         value + amplitude sin(2 pi frequency (t - start_time))
+
+    value: the profile's value (its rows' units: m/s, rad/s, N, ...), one entry per row.
+    final_value: smooth_step: the value after the step (the rows' units).
+    amplitude: sine: the amplitude (the rows' units).
+    frequency: sine: Hz.
+    start_time: s, when the step or the sine starts.
+    duration: s, smooth_step: how long the blend takes.
     """
 
     kind: str = "constant"
