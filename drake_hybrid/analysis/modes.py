@@ -156,7 +156,7 @@ def row_force_drift(scenario, context, mode, step=DRIFT_STEP):
         stiffness[:, i] = (row_forces(scenario, context, q=q0 + dq)
                            - row_forces(scenario, context, q=q0 - dq)) / (2.0 * step)
     held = tuple(space.constraint.kinematic_rows)
-    cancels = bool(getattr(scenario.config, "compensate_tangential_force", False))
+    cancels = bool(getattr(scenario.controller, "compensate_tangential_force", False))
     gains = scenario.controller.validated_gains()
     K_p = gains.position if mode.integrates_position else None
     held_rows = [] if cancels else [k + i for i in held]          # law.held_row_compensation
@@ -248,7 +248,7 @@ def diagnose_unstable_modes(scenario, context, A, mode, designed, threshold=UNST
                 cause = (f"a contact stiffness along the velocity rows (direction {np.round(u, 2).tolist()}) beyond "
                          f"what K_p holds (about {stiffness:.3g} N/m or N m/rad); raise gains.position")
             else:
-                if getattr(scenario.config, "compensate_tangential_force", False):
+                if getattr(scenario.controller, "compensate_tangential_force", False):
                     remedy = ("the law cancels the measured F_v, so the stiffness acts through the wrench path's "
                               "lag: raise sensor.bandwidth_hz, or use position-force or impedance-force mode")
                 else:

@@ -411,6 +411,12 @@ def HybridController_(T):
             """The ``approach_reference`` input (only with ``guarded_move``; else None)."""
             return self._reference_port
 
+        @property
+        def compensate_tangential_force(self):
+            """Whether the law cancels the measured F_v (and the held rows' force) in velocity-force and
+            position-force mode (the constructor's ``compensate_tangential_force``)."""
+            return self._law.compensate_tangential_force
+
         def check_start(self, context):
             """Raise a typed error if the law cannot start at ``context`` (this controller's): E_f or E
             singular there (``ConstraintRankError``, ``ChartSingularityError``), a desired force that pulls

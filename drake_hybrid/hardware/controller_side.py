@@ -39,7 +39,8 @@ from drake_hybrid.hardware.gain_change import GainSelector, bumpless_integrals
 from drake_hybrid.hardware.messages import HardwareConfig
 from drake_hybrid.hardware.watchdog import MessageWatchdog
 from drake_hybrid.hardware.wrench import ExternalTorqueWrench, ForceTorqueConditioning
-from drake_hybrid.scenario.builder import add_wrench_path, make_controller, prepare_config
+from drake_hybrid.scenario.builder import make_controller, prepare_config
+from drake_hybrid.scenario.station import add_wrench_path
 from drake_hybrid.scenario.config import ScenarioConfig
 from drake_hybrid.scenario.plant import build_controller_plant
 

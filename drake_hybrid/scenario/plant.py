@@ -45,7 +45,10 @@ def get_frame(plant, name, model_instance, role="frame"):
                             f"its frames: {', '.join(frame_names(plant, model_instance))}")
 
 
-def _set_contact_properties(plant, scene_graph, geometry_ids, config, pad):
+def set_contact_properties(plant, scene_graph, geometry_ids, config, pad):
+    """The contact material of ``config`` (a ContactConfig) on ``geometry_ids``, before ``Finalize``: a
+    pad's (``pad``: hydroelastic modulus, mesh, Hunt-Crossley dissipation, SAP relaxation time) or a
+    workpiece's (relaxation time, mesh); friction on both."""
     inspector = scene_graph.model_inspector()
     for geometry_id in geometry_ids:
         properties = ProximityProperties(inspector.GetProximityProperties(geometry_id))
@@ -94,21 +97,42 @@ def build_plant(task, config, builder, time_step=None, sampled_outputs=None):
     workpiece_geometries = task.add_workpiece(plant, config)
     for geometry_id in robot.passive_geometries:
         scene_graph.RemoveRole(plant.get_source_id(), geometry_id, Role.kProximity)
-    _set_contact_properties(plant, scene_graph, robot.pad_geometries, config.contact, pad=True)
-    _set_contact_properties(plant, scene_graph, workpiece_geometries, config.contact, pad=False)
+    set_contact_properties(plant, scene_graph, robot.pad_geometries, config.contact, pad=True)
+    set_contact_properties(plant, scene_graph, workpiece_geometries, config.contact, pad=False)
     plant.Finalize()
     if robot.only_pad_contact:
-        # Arm models made for motion planning (spheres and cylinders around the links) overlap
-        # between non-adjacent links, and AutoDiffXd point-contact queries (Linearize) reject most
-        # shape pairs even out of contact: let only the pad touch the workpiece.
-        arm_geometries = [geometry for instance in robot.model_instances for index in plant.GetBodyIndices(instance)
-                          for geometry in plant.GetCollisionGeometriesForBody(plant.get_body(index))
-                          if geometry not in robot.pad_geometries]
-        scene_graph.collision_filter_manager().Apply(
-            CollisionFilterDeclaration()
-            .ExcludeWithin(GeometrySet(arm_geometries + list(robot.pad_geometries)))
-            .ExcludeBetween(GeometrySet(arm_geometries), GeometrySet(workpiece_geometries)))
+        only_tool_touches(plant, scene_graph, robot, workpiece_geometries)
     return plant, scene_graph, robot
+
+
+def only_tool_touches(plant, scene_graph, robot, workpiece_geometries):
+    """Collision filters after ``plant.Finalize()``: the robot (every body of ``robot.model_instances``)
+    touches the workpiece with its tool's pad (``robot.pad_geometries``) only, and its links do not
+    touch each other; ``robot.passive_geometries`` lose their proximity role. Returns the filtered
+    robot geometries.
+
+    Without it, an arm model made for motion planning (spheres and cylinders around the links) touches
+    itself between non-adjacent links, and Drake asks every robot geometry near the workpiece for a
+    hydroelastic or point contact ("Requested a contact surface between a pair of geometries without
+    hydroelastic representation"; AutoDiffXd point-contact queries, Linearize's, reject most shape
+    pairs even out of contact). The filtered links can pass through the workpiece unseen: keep them
+    clear (watch the animation)."""
+    if not plant.is_finalized():
+        raise ConfigError("only_tool_touches: call it after plant.Finalize() (collision filters need the bodies' "
+                          "geometries)")
+    inspector = scene_graph.model_inspector()
+    for geometry_id in robot.passive_geometries:
+        if inspector.GetProximityProperties(geometry_id) is not None:
+            scene_graph.RemoveRole(plant.get_source_id(), geometry_id, Role.kProximity)
+    pad, passive = list(robot.pad_geometries), set(robot.passive_geometries)
+    robot_geometries = [geometry for instance in robot.model_instances for index in plant.GetBodyIndices(instance)
+                        for geometry in plant.GetCollisionGeometriesForBody(plant.get_body(index))
+                        if geometry not in pad and geometry not in passive]
+    scene_graph.collision_filter_manager().Apply(
+        CollisionFilterDeclaration()
+        .ExcludeWithin(GeometrySet(robot_geometries + pad))
+        .ExcludeBetween(GeometrySet(robot_geometries), GeometrySet(list(workpiece_geometries))))
+    return robot_geometries
 
 
 def build_controller_plant(task, config):

@@ -11,10 +11,14 @@ static probe), ``check_start`` the typed errors for a start the law cannot use.
 import numpy as np
 from scipy.optimize import brentq
 
+from pydrake.geometry import HydroelasticContactRepresentation
+from pydrake.math import RigidTransform
 from pydrake.systems.framework import DiagramBuilder
 
-from drake_hybrid.core.errors import DimensionError, ForceSignError, OffConstraintError
-from drake_hybrid.core.kinematics import EndEffectorKinematics
+from drake_hybrid.core.arguments import instance, positive, vector
+from drake_hybrid.core.errors import ArgumentError, DimensionError, ForceSignError, OffConstraintError
+from drake_hybrid.core.kinematics import EndEffectorKinematics, inverse_kinematics
+from drake_hybrid.core.preconditions import check_pushing_force
 from drake_hybrid.scenario.plant import apply_model_error, build_plant
 from drake_hybrid.systems.sensors import ContactWrenchSensor
 
@@ -42,8 +46,8 @@ PRIMING_STEPS = 20
 def set_initial_conditions(scenario, root_context):
     """Put the robot at the task's start, pressing with the desired force if ``start.in_contact``
     (else ``start.gap`` away, for the supervisor's approach); apply the model error to the
-    simulated plant; set the controller's integrals and the filter's (or conditioner's) output
-    to the first sensor reading."""
+    simulated plant; then ``prime_start``: the controller's integrals (``start.force_integral``,
+    ``start.position_error``) and held torque, the sensors' first reading."""
     config, task, plant = scenario.config, scenario.task, scenario.plant
     plant_context = scenario.plant_context(root_context)
     apply_model_error(plant, plant_context, scenario.robot, config.model_error)
@@ -52,20 +56,42 @@ def set_initial_conditions(scenario, root_context):
     plant.SetPositions(plant_context, scenario.robot.arm, q0)
     plant.SetVelocities(plant_context, scenario.robot.arm, np.zeros(len(q0)))
     task.set_environment_state(scenario, plant_context)
-    environment = plant.GetPositionsAndVelocities(plant_context)
-    controller = scenario.controller
-    controller_context = controller.GetMyMutableContextFromRoot(root_context)
-    xi_slice, e_p_slice = controller.integral_state_slices()
+    xi_slice, e_p_slice = scenario.controller.integral_state_slices()
     integrals = np.zeros(xi_slice.stop + (e_p_slice.stop - e_p_slice.start))
     if config.start.force_integral:
         integrals[xi_slice] = config.start.force_integral
     if config.start.position_error and e_p_slice.stop > e_p_slice.start:
         integrals[e_p_slice] = config.start.position_error
+    desired = np.asarray(config.desired_force.evaluate(0.0)[0], dtype=float)
+    prime_start(scenario, root_context, holding_torque(scenario, q0, desired if config.start.in_contact else 0 * desired),
+                integrals)
+
+
+def prime_start(systems, root_context, held_torque, integrals=None):
+    """Set the states of the systems around the plant for a start at the plant's present state (set it
+    first: the arm at rest where it presses, or a gap away): the controller's integrals (``integrals``,
+    default zero: [xi; e_p]) and, for a sampled controller, its held torque ``held_torque``
+    (``holding_torque``); a discrete plant's sampled contact results and reaction forces primed with
+    the start's contact (steps taken and undone); the contact sensor's sampled point; the fault
+    injector's, the wrench filter's or the conditioner's output at the first reading; the contact
+    supervisor's entry value of C.
+
+    ``systems``: a ``scenario.station.HybridSystems`` (``add_hybrid_controller``) or a built
+    ``Scenario``; ``root_context``: the diagram's context."""
+    plant, controller = systems.plant, systems.controller
+    plant_context = plant.GetMyMutableContextFromRoot(root_context)
+    q0 = plant.GetPositions(plant_context, systems.robot.arm)
+    environment = plant.GetPositionsAndVelocities(plant_context)
+    controller_context = controller.GetMyMutableContextFromRoot(root_context)
+    xi_slice, e_p_slice = controller.integral_state_slices()
+    size = xi_slice.stop + (e_p_slice.stop - e_p_slice.start)
+    integrals = np.zeros(size) if integrals is None else np.asarray(integrals, dtype=float)
+    if integrals.shape != (size,):
+        raise DimensionError(f"prime_start: integrals must have {size} entries ([xi; e_p]), got {integrals.shape}")
     if controller.control_period is None:
         controller_context.SetContinuousState(integrals)
     else:
-        held = static_torque(scenario, q0, pressing=config.start.in_contact)
-        controller_context.SetDiscreteState(0, np.concatenate([integrals, held]))
+        controller_context.SetDiscreteState(0, np.concatenate([integrals, held_torque]))
     if plant.time_step() > 0 and plant.has_sampled_output_ports():
         # A discrete plant's contact results and reaction forces are sampled at its steps; before the
         # first step they are empty. Take steps from the initial state (with the held static torque)
@@ -74,26 +100,27 @@ def set_initial_conditions(scenario, root_context):
         for _ in range(PRIMING_STEPS):
             plant.ExecuteForcedEvents(plant_context, publish=False)
         plant.SetPositionsAndVelocities(plant_context, environment)
-    if getattr(scenario.sensor, "samples_point", False):        # the contact sensor on those sampled results
-        scenario.sensor.set_sampled_point(scenario.sensor.GetMyMutableContextFromRoot(root_context))
-    reading = scenario.sensor.get_output_port(0).Eval(scenario.sensor.GetMyContextFromRoot(root_context))
-    if scenario.fault_injector is not None:
-        injector = scenario.fault_injector
+    sensor = systems.sensor
+    if getattr(sensor, "samples_point", False):        # the contact sensor on those sampled results
+        sensor.set_sampled_point(sensor.GetMyMutableContextFromRoot(root_context))
+    reading = sensor.get_output_port(0).Eval(sensor.GetMyContextFromRoot(root_context))
+    if systems.fault_injector is not None:
+        injector = systems.fault_injector
         injector.set_initial_sample(injector.GetMyMutableContextFromRoot(root_context), reading)
         faulty = injector.GetOutputPort("faulty_wrench").Eval(injector.GetMyContextFromRoot(root_context))
         reading = faulty if np.all(np.isfinite(faulty)) else reading
-    if scenario.wrench_filter is not None:
-        filter_context = scenario.wrench_filter.GetMyMutableContextFromRoot(root_context)
-        scenario.wrench_filter.set_initial_output(filter_context, reading)
-    if scenario.conditioner is not None:
-        scenario.conditioner.set_initial_output(scenario.conditioner.GetMyMutableContextFromRoot(root_context), reading)
-    if scenario.supervisor is not None:
-        supervisor = scenario.supervisor
-        controller_plant_context = scenario.controller_plant.CreateDefaultContext()
-        scenario.controller_plant.SetPositions(controller_plant_context, q0)
+    if systems.wrench_filter is not None:
+        filter_context = systems.wrench_filter.GetMyMutableContextFromRoot(root_context)
+        systems.wrench_filter.set_initial_output(filter_context, reading)
+    if systems.conditioner is not None:
+        systems.conditioner.set_initial_output(systems.conditioner.GetMyMutableContextFromRoot(root_context), reading)
+    if systems.supervisor is not None:
+        supervisor = systems.supervisor
+        controller_plant_context = systems.controller_plant.CreateDefaultContext()
+        systems.controller_plant.SetPositions(controller_plant_context, q0)
         start = controller.kinematics.evaluate(controller_plant_context).configuration
         supervisor.set_initial_state(supervisor.GetMyMutableContextFromRoot(root_context), supervisor.initial_phase,
-                                     scenario.constraint_space.constraint.value(start))
+                                     systems.constraint_space.constraint.value(start))
 
 
 def check_start(scenario, q):
@@ -117,18 +144,23 @@ def check_start(scenario, q):
 
 
 def static_torque(scenario, q, pressing=True):
-    """tau = g(q) - J^T E_f^T F_d: the actuation that holds the robot at rest pressing with F_d
-    (``pressing=False``: g(q) only, in free space)."""
-    controller = scenario.controller
-    plant = scenario.controller_plant
+    """tau = g(q) - J^T E_f^T F_d(0): the actuation that holds the robot at rest pressing with the
+    config's F_d (``pressing=False``: g(q) only, in free space)."""
+    desired = np.asarray(scenario.config.desired_force.evaluate(0.0)[0], dtype=float)
+    return holding_torque(scenario, q, desired * (1.0 if pressing else 0.0))
+
+
+def holding_torque(systems, q, desired_force):
+    """tau = g(q) - J^T E_f^T F_d (2.3-4 at rest): the actuation that holds the robot at rest at ``q``
+    pressing with ``desired_force`` (m, in E_f's coordinates; zeros: gravity only), mapped to the
+    actuators, on the controller's own model (``systems.controller_plant``)."""
+    plant = systems.controller_plant
     context = plant.CreateDefaultContext()
     plant.SetPositions(context, q)
-    kinematics = controller.kinematics
-    task = kinematics.evaluate(context)
-    values = scenario.constraint_space.evaluate(task.configuration, task.velocity)
-    desired_force = np.asarray(scenario.config.desired_force.evaluate(0.0)[0]) * (1.0 if pressing else 0.0)
+    task = systems.controller.kinematics.evaluate(context)
+    values = systems.constraint_space.evaluate(task.configuration, task.velocity)
     gravity = -plant.CalcGravityGeneralizedForces(context)
-    torque = gravity - task.jacobian.T @ (values.force_projection.T @ desired_force)
+    torque = gravity - task.jacobian.T @ (values.force_projection.T @ np.asarray(desired_force, dtype=float))
     return np.linalg.solve(plant.MakeActuationMatrix(), torque)
 
 
@@ -170,11 +202,20 @@ def pressing_positions(scenario, positions_at_depth, max_depth=0.01):
         force = space.split_wrench(values, wrench)[1]
         return float(force @ desired) / magnitude - magnitude
 
-    # Diagnose the starts root finding cannot fix: each names what is wrong (typed), not scipy's bracket.
+    return positions_at_depth(pressing_depth(pressing_force, desired, max_depth, f"task '{task.name}'"))
+
+
+def pressing_depth(pressing_force, desired, max_depth, who):
+    """The depth s in [0, max_depth] (m) at which ``pressing_force(s)`` (F . F_d / |F_d| - |F_d|, the
+    pressing force's excess over the desired one) is zero, by Brent's method; the starts root
+    finding cannot fix are named with typed errors (``who`` begins each message): the surface's
+    geometry beyond C = 0 (OffConstraintError), a pulling F_d (ForceSignError), nothing touched
+    (OffConstraintError), too soft a contact (ValueError)."""
+    magnitude = float(np.linalg.norm(desired))
     at_surface = pressing_force(0.0) + magnitude
     if at_surface > magnitude:
         raise OffConstraintError(
-            f"task '{task.name}': at the start pose (C = 0, no penetration intended) the pad already presses with "
+            f"{who}: at the start pose (C = 0, no penetration intended) the pad already presses with "
             f"{at_surface:.3g} N > |F_d| = {magnitude:.3g} N: the workpiece's geometry reaches beyond the surface "
             "that C describes (a penetration); move the workpiece or the start so that they agree")
     deepest = pressing_force(max_depth) + magnitude
@@ -183,17 +224,130 @@ def pressing_positions(scenario, positions_at_depth, max_depth=0.01):
         against = deepest if deepest < -tiny else min(pressing_force(-max_depth) + magnitude, 0.0)
         if against < -tiny:
             raise ForceSignError(
-                f"task '{task.name}': the desired force F_d(0) = {desired.tolist()} pulls: in contact the workpiece "
+                f"{who}: the desired force F_d(0) = {np.asarray(desired).tolist()} pulls: in contact the workpiece "
                 f"pushes the pad with {against:.3g} N along F_d. F_d is the force ON the robot in E_f's coordinates "
                 "(the rows of dC/dr), and a contact only pushes: flip the sign of desired_force")
         if abs(deepest) <= tiny:
             raise OffConstraintError(
-                f"task '{task.name}': the pad touches nothing even {max_depth * 1000:.0f} mm beyond the start pose "
+                f"{who}: the pad touches nothing even {max_depth * 1000:.0f} mm beyond the start pose "
                 "along the pressing direction: the workpiece's geometry is farther than the surface C = 0 (a gap); "
                 "move the workpiece or the start so that they agree")
         raise ValueError(
-            f"task '{task.name}': even {max_depth * 1000:.0f} mm of penetration presses with only {deepest:.3g} N, "
+            f"{who}: even {max_depth * 1000:.0f} mm of penetration presses with only {deepest:.3g} N, "
             f"less than the desired {magnitude:.3g} N; raise contact.pad_modulus or lower the desired force")
-    depth = brentq(pressing_force, 0.0, max_depth, xtol=1e-10)
-    return positions_at_depth(depth)
+    return brentq(pressing_force, 0.0, max_depth, xtol=1e-10)
 
+
+
+# ------------------------------------------------------------------------------------------------
+# A contact start in your own diagram
+# ------------------------------------------------------------------------------------------------
+
+def rest_contact_wrench(plant, plant_context, robot_geometries, p_WP):
+    """The wrench on the robot at rest from its hydroelastic contacts, at the point ``p_WP`` (world),
+    as a Drake SpatialForce vector [torque; force] (N m, N): the pressure of every contact surface
+    touching ``robot_geometries`` integrated over its faces (a rest state has no dissipation and no
+    friction). A static reading of any plant, discrete or continuous, sampled output ports or not,
+    from its SceneGraph's query in ``plant_context``."""
+    query = plant.get_geometry_query_input_port().Eval(plant_context)
+    robot = set(robot_geometries)
+    wrench = np.zeros(6)
+    for surface in query.ComputeContactSurfaces(HydroelasticContactRepresentation.kTriangle):
+        if surface.id_M() in robot:
+            sign = 1.0                 # the faces' normals point out of N into M: the force on M
+        elif surface.id_N() in robot:
+            sign = -1.0
+        else:
+            continue
+        mesh, pressure = surface.tri_mesh_W(), surface.tri_e_MN()
+        for face in range(mesh.num_triangles()):
+            force = sign * pressure.Evaluate(face, CENTROID) * mesh.area(face) * mesh.face_normal(face)
+            wrench[:3] += np.cross(mesh.element_centroid(face) - p_WP, force)
+            wrench[3:] += force
+    return wrench
+
+
+CENTROID = np.full(3, 1.0 / 3.0)           # a triangle's centroid in barycentric coordinates
+
+
+def solve_contact_start(diagram, root_context, systems, start_pose, joint_guess, desired_force=None,
+                        max_depth=0.01, tolerance=1e-3):
+    """Put your diagram at a start pressing with F_d, at rest, and set every state around the plant.
+
+    ``systems`` is what ``scenario.station.add_hybrid_controller`` returned; ``start_pose`` the
+    end-effector frame E's pose (RigidTransform, world) with its point P on the surface C = 0;
+    ``joint_guess`` the arm's joint positions near it (the inverse kinematics' seed). The pad is
+    pushed into the workpiece along the direction a world force must take to give F_d
+    (``desired_force``, m entries in E_f's coordinates; default the command source's at t = 0),
+    to the depth where the contact's rest force in E_f's coordinates equals F_d (Brent's method on
+    ``rest_contact_wrench``); then ``prime_start`` with the torque that holds it there. Returns the
+    arm's joint positions.
+
+    Typed errors before the first step: a start pose off C = 0 beyond ``tolerance`` (C's units) or
+    on the wrong branch (OffConstraintError, BranchError), E singular there (ConstraintRankError,
+    ChartSingularityError), a pulling F_d (ForceSignError), a workpiece that is not where C says
+    (OffConstraintError), the inverse kinematics failing (ValueError).
+    """
+    del diagram                                       # (the systems' contexts are found from the root)
+    owner = "solve_contact_start"
+    instance(start_pose, "start_pose", owner, RigidTransform)
+    plant, robot, space = systems.plant, systems.robot, systems.constraint_space
+    controller = systems.controller
+    kinematics = controller.kinematics
+    joint_guess = vector(joint_guess, "joint_guess", owner, kinematics.plant.num_positions())
+    max_depth = positive(max_depth, "max_depth", owner, unit="m")
+    tolerance = positive(tolerance, "tolerance", owner)
+    if desired_force is None:
+        if systems.source is None:
+            raise ArgumentError(f"{owner}: desired_force is needed when the controller has no command source")
+        source_context = systems.source.GetMyContextFromRoot(root_context)
+        desired_force = systems.source.GetOutputPort("desired_force").Eval(source_context)
+    desired = vector(desired_force, "desired_force", owner, space.force_size)
+    mask = np.array([0.0 if i in space.constraint.kinematic_rows else 1.0 for i in range(space.force_size)])
+    desired = desired * mask
+    controller_context = kinematics.plant.CreateDefaultContext()
+
+    def positions_at_depth(depth, direction):
+        X_target = RigidTransform(start_pose.rotation(), start_pose.translation() + depth * direction)
+        return inverse_kinematics(kinematics, controller_context, X_target, joint_guess)
+
+    def configuration(q):
+        kinematics.plant.SetPositions(controller_context, q)
+        task = kinematics.evaluate(controller_context)
+        return task, space.evaluate(task.configuration, task.velocity)
+
+    q_surface = positions_at_depth(0.0, np.zeros(3))
+    task, values = configuration(q_surface)
+    try:
+        space.constraint.check_satisfied(task.configuration, tolerance)
+    except OffConstraintError as error:
+        raise OffConstraintError(f"{owner}: start_pose: {error}") from None
+    space.constraint.check_branch(task.configuration)
+    check_pushing_force(desired, force_controlled=mask, where=f"{owner} (desired_force)")
+    magnitude = float(np.linalg.norm(desired))
+    q0 = q_surface
+    if magnitude > 0:
+        # The world force at P that the rows read as F_d (least squares): the pad presses against it.
+        unit_forces = np.array([space.split_wrench(values, space.chart.generalized_force(
+            task.configuration, np.concatenate([np.zeros(3), axis])))[1] for axis in np.eye(3)]).T
+        force_W = np.linalg.lstsq(unit_forces, desired, rcond=None)[0]
+        direction = -force_W / np.linalg.norm(force_W)
+        plant_context = plant.GetMyMutableContextFromRoot(root_context)
+        frame = plant.GetFrameByName(robot.end_effector_frame)
+        pad = list(robot.pad_geometries)
+
+        def pressing_force(depth):
+            q = positions_at_depth(depth, direction)
+            plant.SetPositions(plant_context, robot.arm, q)
+            p_WP = frame.CalcPoseInWorld(plant_context).multiply(np.asarray(robot.end_effector_point, dtype=float))
+            task_at, values_at = configuration(q)
+            wrench = space.chart.generalized_force(task_at.configuration,
+                                                   rest_contact_wrench(plant, plant_context, pad, p_WP))
+            return float(space.split_wrench(values_at, wrench)[1] @ desired) / magnitude - magnitude
+
+        q0 = positions_at_depth(pressing_depth(pressing_force, desired, max_depth, owner), direction)
+    plant_context = plant.GetMyMutableContextFromRoot(root_context)
+    plant.SetPositions(plant_context, robot.arm, q0)
+    plant.SetVelocities(plant_context, robot.arm, np.zeros(len(q0)))
+    prime_start(systems, root_context, holding_torque(systems, q0, desired))
+    return q0

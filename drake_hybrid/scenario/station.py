@@ -1,0 +1,533 @@
+"""Building blocks for your own Drake diagram: the hybrid controller as a part of your station.
+
+Each block takes YOUR ``MultibodyPlant`` or ``DiagramBuilder`` and adds one part, returning what it
+added, as the manipulation course's station helpers (``AddIiwa``, ``AddWsg``) and Drake's
+``ApplyMultibodyPlantConfig`` do. ``scenario.builder.build_scenario`` is one composition of them
+(the package's own tasks); yours can be any other::
+
+    builder = DiagramBuilder()
+    plant, scene_graph = AddMultibodyPlant(default_plant_config(), builder)
+
+    def add_robot(plant):                       # your arm and its tool: called for both plants
+        arm = Parser(plant).AddModels(my_arm_urdf)[0]
+        plant.WeldFrames(plant.world_frame(), plant.GetFrameByName("base_link", arm))
+        return mount_tool(plant, arm, "tool0", X_flange_tool=RigidTransform([0, 0, 0.02]),
+                          gripper_joints=["finger_joint"])
+
+    robot = add_robot(plant)
+    workpiece = add_rigid_workpiece(plant, Ellipsoid(0.3, 0.2, 0.1), X_WG)
+    apply_contact_defaults(plant, scene_graph, robot, workpiece)
+    plant.Finalize()
+    only_tool_touches(plant, scene_graph, robot, workpiece)
+    hybrid = add_hybrid_controller(builder, plant, robot, space, robot_plant(add_robot), gains=gains,
+                                   control_period=1e-3, desired_velocity=Profile(value=[0.05, 0, 0, 0, 0]),
+                                   desired_force=Profile(value=[-8.0]))
+    loggers = add_loggers(builder, hybrid)
+    diagram = builder.Build()
+    context = diagram.CreateDefaultContext()
+    solve_contact_start(diagram, context, hybrid, start_pose=X_WE, joint_guess=q_guess)
+    Simulator(diagram, context).AdvanceTo(5.0)
+    log = read_log(loggers, context)
+
+and ``analysis.linearization.linearize_at_contact(diagram, context, hybrid)`` checks the closed
+loop's eigenvalues against the design on the same station built with ``time_step=0`` and no
+``control_period`` (Drake's ``Linearize`` needs a continuous loop).
+
+The blocks:
+
+``default_plant_config``     the package's MultibodyPlantConfig: 1 ms SAP steps, hydroelastic contact
+``mount_tool``               the compliant pad on a frame of any arm, at an offset; a gripper's joints
+                             welded (its geometry kept, or removed); returns a ``RobotModel``
+``add_rigid_workpiece``      a rigid hydroelastic shape at a pose, its mesh as fine as its curvature needs
+``apply_contact_defaults``   the pad's modulus, dissipation and mesh, SAP's relaxation times, friction
+``only_tool_touches``        collision filters: the robot touches the workpiece with its tool only
+``robot_plant``              the controller's own model: your robot alone, in a continuous plant
+``add_hybrid_controller``    controller, wrench sensor, wrench filter, command source (and contact
+                             supervisor) in one call, wired; returns a ``HybridSystems``
+``add_loggers``, ``read_log``  every signal of the run, keyed as in ``log.npz`` (``LOG_KEYS``)
+
+and ``scenario.start.solve_contact_start`` (pressing with F_d, in your context).
+
+Size: the blocks share one vocabulary (the RobotModel of the mounted tool, the HybridSystems of the
+controller) and each is a few lines; apart they would import each other.
+"""
+
+from dataclasses import dataclass
+from typing import Dict, Optional
+from xml.etree import ElementTree
+
+import numpy as np
+
+from pydrake.math import RigidTransform
+from pydrake.multibody.parsing import Parser
+from pydrake.multibody.plant import MultibodyPlant, MultibodyPlantConfig
+from pydrake.systems.primitives import LogVectorOutput
+
+from drake_hybrid.control.controller import HybridController
+from drake_hybrid.control.gains import ControlMode
+from drake_hybrid.control.phases import ContactPhase
+from drake_hybrid.control.supervision import ContactSupervisor
+from drake_hybrid.core.arguments import instance
+from drake_hybrid.core.errors import ArgumentError, ConfigError
+from drake_hybrid.core.kinematics import EndEffectorKinematics
+from drake_hybrid.scenario.config import ContactConfig, ContactSensorConfig, WristSensorConfig
+from drake_hybrid.scenario.parsing import ConfigureParser
+from drake_hybrid.scenario.plant import (RobotModel, get_frame, only_tool_touches,  # noqa: F401 (a block here too)
+                                         set_contact_properties)
+from drake_hybrid.scenario.tasks.robots import add_pad_tool
+from drake_hybrid.scenario.workpieces import add_rigid_workpiece, default_resolution  # noqa: F401 (blocks here too)
+from drake_hybrid.systems.faults import SensorFaultInjector
+from drake_hybrid.systems.sensors import (ContactWrenchSensor, LowPassFilter, WrenchConditioner, WristForceTorqueSensor,
+                                          low_pass_lag, sampled_reading_age)
+from drake_hybrid.systems.sources import Profile, ProfileSource
+
+CONTINUOUS_LOOP_BANDWIDTH = 200.0     # Hz: the wrench low-pass a continuous controller needs (no algebraic loop)
+
+
+def default_plant_config(time_step=1.0e-3):
+    """The package's MultibodyPlantConfig: SAP steps of ``time_step`` (0: continuous) with hydroelastic
+    contact; a Drake struct, so ``ApplyMultibodyPlantConfig`` / ``AddMultibodyPlant`` take it and your
+    own settings can replace any field."""
+    return MultibodyPlantConfig(time_step=time_step, contact_model="hydroelastic", discrete_contact_approximation="sap")
+
+
+# ------------------------------------------------------------------------------------------------
+# Your arm: the tool, a gripper, actuators
+# ------------------------------------------------------------------------------------------------
+
+def weld_joints(plant, joint_names, model_instance=None):
+    """Replace each named joint by a weld at its zero position (before ``Finalize``).
+
+    For parts the task does not move, such as gripper fingers: the hybrid law
+    needs one actuator per joint and nq == nv. Drake's ``RemoveJoint`` refuses
+    while the plant has any constraint, and pydrake does not say which joints a
+    coupler constraint (what a parser makes of a URDF ``<mimic>``) couples, so
+    **every** constraint of the plant is removed first: call this before adding
+    constraints of your own. Returns the new WeldJoints.
+    """
+    joints = []
+    for name in joint_names:
+        owner = () if model_instance is None else (model_instance,)
+        if not plant.HasJointNamed(name, *owner):
+            indices = plant.GetJointIndices(*owner) if owner else range(plant.num_joints())
+            known = sorted(plant.get_joint(index).name() for index in indices)
+            where = "the plant" if not owner else f"model '{plant.GetModelInstanceName(model_instance)}'"
+            raise ArgumentError(f"weld_joints: {where} has no joint '{name}'; its joints: {', '.join(known)}")
+        joints.append(plant.GetJointByName(name, *owner))
+    for constraint_id in plant.GetConstraintIds():
+        plant.RemoveConstraint(constraint_id)
+    welds = []
+    for joint in joints:
+        parent, child = joint.frame_on_parent(), joint.frame_on_child()
+        plant.RemoveJoint(joint)
+        welds.append(plant.WeldFrames(parent, child, RigidTransform()))
+    return welds
+
+
+def urdf_effort_limits(path):
+    """{joint name: effort limit (N m or N)} from the ``<limit effort=...>`` tags of a URDF file.
+    (Drake keeps a URDF's effort limits only on the actuators of its transmissions.)"""
+    root = ElementTree.parse(path).getroot()
+    return {joint.get("name"): float(joint.find("limit").get("effort"))
+            for joint in root.iter("joint") if joint.find("limit") is not None and joint.find("limit").get("effort")}
+
+
+def add_actuators(plant, model_instance, effort_limits=None):
+    """One actuator per single-dof joint of ``model_instance`` that has none (a URDF without
+    transmissions), with the effort limit ``effort_limits[joint name]`` (e.g. from
+    ``urdf_effort_limits``; inf where not given). Returns the actuator names."""
+    effort_limits = effort_limits or {}
+    actuated = {plant.get_joint_actuator(index).joint().index() for index in plant.GetJointActuatorIndices()}
+    names = []
+    for index in plant.GetJointIndices(model_instance):
+        joint = plant.get_joint(index)
+        if joint.num_velocities() != 1 or joint.index() in actuated:
+            continue
+        plant.AddJointActuator(f"{joint.name()}_actuator", joint, float(effort_limits.get(joint.name(), np.inf)))
+        names.append(f"{joint.name()}_actuator")
+    return names
+
+
+GRIPPER_CHOICES = ("weld", "remove")
+
+
+def mount_tool(plant, arm, flange_frame, X_flange_tool=None, gripper_joints=(), gripper="weld"):
+    """Mount the compliant ball pad (``models/pad_tool.sdf``: a 20 mm ball, its centre 0.05 m along the
+    tool's +z, the controlled point) on ``flange_frame`` of ``arm`` at ``X_flange_tool`` (default: the
+    identity), before ``Finalize``.
+
+    Args:
+        plant: your MultibodyPlant (with or without a SceneGraph: the controller's own model too).
+        arm: the ModelInstanceIndex of the arm.
+        flange_frame: a frame of ``arm`` or its name (UnknownFrameError lists the model's frames).
+        X_flange_tool: RigidTransform of the tool's mounting frame in the flange frame (an adapter's
+            length, a rotation about the flange axis).
+        gripper_joints: joints of a gripper (or anything else the task does not move) to weld at
+            their zero position: the law needs one actuator per joint it controls.
+        gripper: "weld": the gripper stays a rigid part of the wrist, drawn and colliding like the arm's
+            links (``only_tool_touches`` filters its contact with the workpiece as theirs: keep it
+            clear); "remove": also its collision geometries are dropped (``RobotModel.passive_geometries``,
+            removed by ``only_tool_touches``): a gripper your model has but your station does not.
+
+    Returns the RobotModel: the arm and tool instances, the end-effector frame ``pad_center`` and point
+    (its origin), the wrist weld (where a wrist force/torque sensor sits), the pad's geometries.
+    """
+    if gripper not in GRIPPER_CHOICES:
+        raise ConfigError(f"mount_tool: gripper must be one of {', '.join(GRIPPER_CHOICES)}, got {gripper!r}")
+    if isinstance(gripper_joints, str):
+        gripper_joints = [gripper_joints]
+    removed = []
+    if gripper_joints:
+        gripper_bodies = {plant.GetJointByName(name, arm).child_body().index()
+                          for name in gripper_joints if plant.HasJointNamed(name, arm)}
+        weld_joints(plant, list(gripper_joints), arm)
+        if gripper == "remove" and plant.geometry_source_is_registered():
+            removed = [geometry for index in gripper_bodies
+                       for geometry in plant.GetCollisionGeometriesForBody(plant.get_body(index))]
+    parser = ConfigureParser(Parser(plant))
+    frame = get_frame(plant, flange_frame, arm, "flange_frame") if isinstance(flange_frame, str) else flange_frame
+    if not hasattr(frame, "body"):
+        raise ConfigError(f"mount_tool: flange_frame must be a Frame of the arm or its name, got {flange_frame!r}")
+    tool, weld, pad = add_pad_tool(plant, parser, frame, X_flange_tool if X_flange_tool is not None
+                                   else RigidTransform())
+    return RobotModel(arm=arm, model_instances=[arm, tool], end_effector_frame="pad_center",
+                      end_effector_point=np.zeros(3), tool_weld=weld, pad_geometries=pad,
+                      passive_geometries=removed, only_pad_contact=True)
+
+
+def robot_plant(add_robot):
+    """The controller's own model of your robot: ``add_robot(plant) -> RobotModel`` called on a new
+    continuous MultibodyPlant (no SceneGraph, no workpiece), finalized. Returns the plant."""
+    plant = MultibodyPlant(0.0)
+    robot = add_robot(plant)
+    if not isinstance(robot, RobotModel):
+        raise TypeError(f"robot_plant: add_robot must return the RobotModel of mount_tool, got {type(robot).__name__}")
+    plant.Finalize()
+    return plant
+
+
+# ------------------------------------------------------------------------------------------------
+# The workpiece and the contact
+# ------------------------------------------------------------------------------------------------
+
+def _tool_geometries(robot):
+    return list(robot.pad_geometries) if isinstance(robot, RobotModel) else list(robot)
+
+
+def apply_contact_defaults(plant, scene_graph, robot, workpiece_geometries, contact=None):
+    """The package's contact material (``contact``: a ContactConfig, default its defaults) on your
+    tool (``robot``: the RobotModel of ``mount_tool``, or the pad's geometry ids) and workpiece
+    geometries: the pad's hydroelastic modulus, mesh and dissipation, SAP's relaxation times (0.03 s
+    for the pair: about critically damped), friction. Call it before ``plant.Finalize()``."""
+    contact = contact if contact is not None else ContactConfig()
+    contact.validate()
+    set_contact_properties(plant, scene_graph, _tool_geometries(robot), contact, pad=True)
+    set_contact_properties(plant, scene_graph, list(workpiece_geometries), contact, pad=False)
+
+
+# ------------------------------------------------------------------------------------------------
+# The controller and its signals
+# ------------------------------------------------------------------------------------------------
+
+@dataclass
+class HybridSystems:
+    """What ``add_hybrid_controller`` added to your builder, with what analysis needs to read it.
+
+    ``controller`` (HybridController), ``sensor`` (ContactWrenchSensor or WristForceTorqueSensor),
+    ``wrench_filter`` (LowPassFilter or None), ``conditioner`` (WrenchConditioner or None),
+    ``fault_injector`` (SensorFaultInjector or None), ``source`` (the command source or None: you wire
+    the controller's desired_* ports), ``supervisor`` (ContactSupervisor or None), ``wrench_output``
+    (the port the controller reads the wrench from), ``true_wrench`` (the sensor's own output); the
+    ``plant``, ``robot`` (RobotModel), ``controller_plant``, ``constraint_space`` and ``kinematics``
+    (EndEffectorKinematics on the simulation plant) they were built for; ``diagram``: set by the
+    functions that take the built diagram.
+    """
+
+    plant: object
+    robot: RobotModel
+    controller_plant: object
+    constraint_space: object
+    controller: object
+    sensor: object
+    kinematics: EndEffectorKinematics
+    wrench_output: object = None
+    true_wrench: object = None
+    source: Optional[object] = None
+    wrench_filter: Optional[object] = None
+    conditioner: Optional[object] = None
+    fault_injector: Optional[object] = None
+    supervisor: Optional[object] = None
+    diagram: Optional[object] = None
+
+    def plant_context(self, root_context):
+        return self.plant.GetMyMutableContextFromRoot(root_context)
+
+
+def robot_bodies(plant, robot):
+    """The bodies of every model instance of ``robot``: what a contact sensor counts as the robot."""
+    return [plant.get_body(index) for instance in robot.model_instances for index in plant.GetBodyIndices(instance)]
+
+
+def add_wrench_sensor(builder, plant, robot, sensor=None):
+    """The wrench sensor of ``sensor`` (a ContactSensorConfig, default; or a WristSensorConfig) on your
+    plant, its inputs wired: the environment's wrench on the robot at the end-effector point, in
+    world (the contact results of the robot's bodies, or the wrist weld's reaction force). Returns it."""
+    sensor = sensor if sensor is not None else ContactSensorConfig()
+    if isinstance(sensor, WristSensorConfig):
+        if robot.tool_weld is None:
+            raise ConfigError("sensor: the robot has no wrist weld (mount_tool makes one) for a WristSensorConfig; "
+                              "use ContactSensorConfig")
+        system = builder.AddNamedSystem("wrench_sensor", WristForceTorqueSensor(
+            plant, robot.tool_weld, robot.end_effector_frame, robot.end_effector_point,
+            compensate_tool_inertia=sensor.compensate_tool_inertia))
+        builder.Connect(plant.get_reaction_forces_output_port(), system.get_input_port(0))
+        if system.compensate_tool_inertia:
+            builder.Connect(plant.get_body_spatial_velocities_output_port(),
+                            system.GetInputPort("body_spatial_velocities"))
+            builder.Connect(plant.get_body_spatial_accelerations_output_port(),
+                            system.GetInputPort("body_spatial_accelerations"))
+    elif isinstance(sensor, ContactSensorConfig):
+        system = builder.AddNamedSystem("wrench_sensor", ContactWrenchSensor(
+            plant, robot_bodies(plant, robot), robot.end_effector_frame, robot.end_effector_point))
+        builder.Connect(plant.get_contact_results_output_port(), system.get_input_port(0))
+    else:
+        raise ConfigError(f"sensor must be a ContactSensorConfig or a WristSensorConfig, got {type(sensor).__name__}")
+    builder.Connect(plant.get_body_poses_output_port(), system.get_input_port(1))
+    return system
+
+
+def add_wrench_path(builder, wrench_output, sensor, period, sequence=None, tare=False):
+    """The wrench's way to the controller (``sensor``: a ContactSensorConfig or WristSensorConfig): a
+    WrenchConditioner with ``sensor.condition`` (fed the sample ``sequence`` output when given;
+    ``tare``), else a low-pass filter when ``sensor.bandwidth_hz`` > 0, else nothing. Returns (the
+    output port the controller reads, the conditioner or None, the filter or None)."""
+    conditioner = wrench_filter = None
+    if sensor.condition:
+        conditioner = builder.AddNamedSystem("wrench_conditioner", WrenchConditioner(
+            period, sensor.bandwidth_hz, sensor.max_hold_time, use_sequence=sequence is not None, tare=tare))
+        builder.Connect(wrench_output, conditioner.GetInputPort("raw_wrench"))
+        if sequence is not None:
+            builder.Connect(sequence, conditioner.GetInputPort("sequence"))
+        wrench_output = conditioner.GetOutputPort("wrench")
+    elif sensor.bandwidth_hz > 0:
+        wrench_filter = builder.AddNamedSystem("wrench_filter", LowPassFilter(6, sensor.bandwidth_hz, period))
+        builder.Connect(wrench_output, wrench_filter.get_input_port(0))
+        wrench_output = wrench_filter.get_output_port(0)
+    return wrench_output, conditioner, wrench_filter
+
+
+def wrench_lag(sensor, plant, control_period):
+    """How late the wrench reaches the law (s), which splits it where it was exerted (the controller's
+    ``wrench_lag``): the low-pass of ``sensor`` (``systems.sensors.low_pass_lag``), plus, for the
+    contact sensor on a discrete plant's sampled results, their one step of age
+    (``systems.sensors.sampled_reading_age``; the wrist sensor's reaction force is read as current,
+    as a real sensor's)."""
+    age = sampled_reading_age(plant) if isinstance(sensor, ContactSensorConfig) else 0.0
+    return low_pass_lag(sensor.bandwidth_hz, control_period) + age
+
+
+def connect_source(builder, plant, robot, source, controller):
+    """Add the command source ``source`` (a system with the output ports desired_velocity,
+    desired_acceleration and desired_force, and optionally one input: the arm's state, as
+    ``DesiredFieldSource``'s) to ``builder`` as "desired" and wire it to ``controller``. Returns it."""
+    source = builder.AddNamedSystem("desired", source)
+    if source.num_input_ports():
+        builder.Connect(plant.get_state_output_port(robot.arm), source.get_input_port(0))
+    for name in ("desired_velocity", "desired_acceleration", "desired_force"):
+        builder.Connect(source.GetOutputPort(name), controller.GetInputPort(name))
+    return source
+
+
+def add_contact_supervisor(builder, controller, wrench_output, supervision, control_period, initial_phase,
+                           source=None, conditioner=None, lift_off=False):
+    """Add a ContactSupervisor (``supervision``: a SupervisionConfig; starting in ``initial_phase``)
+    between ``controller`` (a HybridController built with ``guarded_move=supervision``) and the
+    wrench it reads (``wrench_output``), wired both ways::
+
+        controller ─force, constraint_value─► supervisor ─contact_phase, approach_reference─► controller
+        wrench_output ─► supervisor;  source ─desired_force─► supervisor;  supervisor ─contact_phase─► conditioner
+
+    (``source``: the command source; ``conditioner``: a taring WrenchConditioner; ``lift_off``: the
+    supervisor takes a ``path_done`` input and lifts off). Returns it."""
+    supervisor = builder.AddNamedSystem("contact_supervisor", ContactSupervisor(
+        supervision, controller.force_size, controller.kinematic_rows, control_period, initial_phase,
+        lift_off=lift_off))
+    for name in ("force", "constraint_value"):
+        builder.Connect(controller.GetOutputPort(name), supervisor.GetInputPort(name))
+    if source is not None:
+        builder.Connect(source.GetOutputPort("desired_force"), supervisor.GetInputPort("desired_force"))
+    builder.Connect(wrench_output, supervisor.GetInputPort("measured_wrench"))
+    builder.Connect(supervisor.GetOutputPort("contact_phase"), controller.get_contact_phase_input_port())
+    builder.Connect(supervisor.GetOutputPort("approach_reference"), controller.get_approach_reference_input_port())
+    if conditioner is not None:
+        builder.Connect(supervisor.GetOutputPort("contact_phase"), conditioner.GetInputPort("contact_phase"))
+    return supervisor
+
+
+def add_sensing(builder, plant, robot, controller, sensor, control_period, sensor_faults=None, tare=False):
+    """The wrench sensor (``add_wrench_sensor``), a SensorFaultInjector when ``sensor_faults`` is active,
+    and the wrench path (``add_wrench_path``), wired into ``controller``'s measured_wrench. Returns
+    (sensor, its own output, the output the controller reads, injector, conditioner, filter)."""
+    wrench_sensor = add_wrench_sensor(builder, plant, robot, sensor)
+    true_wrench = wrench_output = wrench_sensor.get_output_port(0)
+    injector = None
+    if sensor_faults is not None and sensor_faults.active():
+        injector = builder.AddNamedSystem("sensor_faults", SensorFaultInjector(sensor_faults, control_period))
+        builder.Connect(wrench_output, injector.GetInputPort("wrench"))
+        wrench_output = injector.GetOutputPort("faulty_wrench")
+    wrench_output, conditioner, wrench_filter = add_wrench_path(
+        builder, wrench_output, sensor, control_period,
+        sequence=injector.GetOutputPort("sequence") if injector is not None else None, tare=tare)
+    builder.Connect(wrench_output, controller.get_measured_wrench_input_port())
+    return wrench_sensor, true_wrench, wrench_output, injector, conditioner, wrench_filter
+
+
+def add_hybrid_controller(builder, plant, robot, constraint_space, controller_plant, gains=None,
+                          mode=ControlMode.VELOCITY_FORCE, control_period=None, desired_velocity=None,
+                          desired_force=None, source=None, sensor=None, supervision=None, initial_phase=None,
+                          sensor_faults=None, controller=None, **controller_options):
+    """Add the hybrid controller and what feeds it to your builder, wired to your plant.
+
+    ::
+
+        plant ─contact_results / reaction_forces, body_poses─► wrench_sensor ─► [filter or conditioner] ─┐
+        plant ─state (robot.arm)──────────────────────────────────────────────────────────────────────┼─► controller
+        source ─desired_velocity, desired_acceleration, desired_force─────────────────────────────────┘      │
+        controller ─actuation─► plant (robot.arm)  ◄───────────────────────────────────────────────────────────┘
+        [supervisor: controller ─force, constraint_value─► supervisor ─contact_phase, approach_reference─► controller]
+
+    Args:
+        builder: your DiagramBuilder; ``plant``: your finalized MultibodyPlant in it (with its SceneGraph).
+        robot: the RobotModel of ``mount_tool``.
+        constraint_space: a ConstraintSpace (chart, C, E_p).
+        controller_plant: the controller's own model of the robot (``robot_plant(add_robot)``).
+        gains, mode, control_period: of the HybridController (None: continuous, for linearization).
+        desired_velocity, desired_force: Profiles (time profiles, k and m entries; default zero) for a
+            ProfileSource; or ``source``: a system of your own with the output ports desired_velocity,
+            desired_acceleration and desired_force (wired here), or False: you wire the controller's
+            desired_* input ports yourself.
+        sensor: a ContactSensorConfig (default) or WristSensorConfig: which wrench, and its path (a
+            low-pass of ``bandwidth_hz``, a conditioner). A continuous controller needs a low-pass
+            (default then ``CONTINUOUS_LOOP_BANDWIDTH``): its actuation feeds through to the wrench.
+        supervision: a SupervisionConfig: a ContactSupervisor (guarded approach, contact loss) starting
+            in ``initial_phase`` (default CONTACT).
+        sensor_faults: a SensorFaultConfig: its injector between the sensor and the wrench path.
+        controller: a controller system of your own with the HybridController's ports (e.g. a baseline
+            of ``control.baselines``) instead of building one.
+        controller_options: further HybridController arguments (safety, velocity_row_inertia,
+            compensate_tangential_force, sample_lead, sampled_diagnostics, plant_time_step, fast_law).
+
+    Returns a HybridSystems. Every port stays reachable by name for wiring by hand.
+    """
+    owner = "add_hybrid_controller"
+    if not plant.is_finalized():
+        raise ConfigError(f"{owner}: finalize the plant first (plant.Finalize())")
+    instance(robot, "robot", owner, RobotModel, what="the RobotModel of mount_tool")
+    if sensor is None:
+        sensor = ContactSensorConfig(bandwidth_hz=CONTINUOUS_LOOP_BANDWIDTH if control_period is None else 0.0)
+    instance(sensor, "sensor", owner, (ContactSensorConfig, WristSensorConfig))
+    sensor.validate()
+    if control_period is None and not (sensor.bandwidth_hz > 0):
+        raise ConfigError("sensor.bandwidth_hz: a continuous controller (control_period None) needs a wrench "
+                          "low-pass (> 0 Hz): its actuation feeds through to the measured wrench")
+    k, m = constraint_space.velocity_size, constraint_space.force_size
+    if controller is None:
+        options = dict(sampled_diagnostics=control_period is not None, plant_time_step=plant.time_step(),
+                       wrench_lag=wrench_lag(sensor, plant, control_period))
+        options.update(controller_options)
+        controller = HybridController(controller_plant, robot.end_effector_frame, robot.end_effector_point,
+                                      constraint_space, gains=gains, mode=mode, control_period=control_period,
+                                      guarded_move=supervision, **options)
+    controller = builder.AddNamedSystem("controller", controller)
+    phase = ContactPhase.CONTACT if initial_phase is None else ContactPhase(initial_phase)
+    tare = supervision is not None and supervision.tare_time > 0 and phase == ContactPhase.TARE
+    wrench_sensor, true_wrench, wrench_output, injector, conditioner, wrench_filter = add_sensing(
+        builder, plant, robot, controller, sensor, control_period, sensor_faults, tare)
+    builder.Connect(plant.get_state_output_port(robot.arm), controller.get_estimated_state_input_port())
+    builder.Connect(controller.GetOutputPort("actuation"), plant.get_actuation_input_port(robot.arm))
+    if source is None:
+        source = ProfileSource(desired_velocity or Profile(value=[0.0] * k),
+                               desired_force or Profile(value=[0.0] * m), k, m)
+    source = connect_source(builder, plant, robot, source, controller) if source is not False else None
+    supervisor = None
+    if supervision is not None:
+        supervisor = add_contact_supervisor(builder, controller, wrench_output, supervision, control_period, phase,
+                                            source=source, conditioner=conditioner if tare else None)
+    kinematics = EndEffectorKinematics(plant, robot.end_effector_frame, robot.end_effector_point,
+                                       constraint_space.chart)
+    return HybridSystems(plant=plant, robot=robot, controller_plant=controller_plant,
+                         constraint_space=constraint_space, controller=controller, sensor=wrench_sensor,
+                         kinematics=kinematics, wrench_output=wrench_output, true_wrench=true_wrench, source=source,
+                         wrench_filter=wrench_filter, conditioner=conditioner, fault_injector=injector,
+                         supervisor=supervisor)
+
+
+# The log's keys (log.npz), each (samples x size), with "t" the sample times.
+LOG_KEYS = {
+    "t": "sample times (s)",
+    "velocity_error": "e_p' = E_p r-dot - r-dot_pd (k; each row in its own units)",
+    "force_error": "e_f = F - F_d (m; zero on kinematic rows and while the wrench is invalid)",
+    "constraint_value": "C(r) (m; in C's units: a contact's compression, a weld's offset)",
+    "projected_velocity": "r-dot_p = E_p r-dot (k)",
+    "force": "F, the force on the robot in E_f's coordinates ([F_v; F] = E^-T w) (m)",
+    "tangential_force": "F_v, the measured force along the velocity rows (k)",
+    "position_error": "e_p, the integral of e_p' (k; zero in velocity-force mode)",
+    "actuation": "the actuators' torques (n_u, N m or N, in the plant's actuator order)",
+    "desired_velocity": "r-dot_pd (k)",
+    "desired_force": "F_d (m)",
+    "state": "[q; v] of the arm (2n, in the plant's joint order for robot.arm)",
+    "wrench": "the wrench the controller reads: [torque; force] on the robot BY the environment at the "
+              "end-effector point, world frame (6; N m, N), after the filter or conditioner",
+    "true_wrench": "the sensor's own wrench, before faults, filter or conditioner (6; only when they differ)",
+    "contact_phase": "the ContactSupervisor's phase (1; control.phases.ContactPhase values; only when supervised)",
+}
+
+
+def add_loggers(builder, systems, period=None):
+    """Loggers for every signal of ``systems`` (a HybridSystems), keyed as in ``log.npz`` (``LOG_KEYS``).
+
+    ``period``: sample period (s); None logs every publish of the simulator's steps. A controller with
+    ``sampled_diagnostics`` is logged from its ``diagnostics`` port (what each tick computed, read
+    once). Returns {key: VectorLogSink or (sink, column slice)}; ``read_log`` turns it into arrays."""
+    controller = systems.controller
+    loggers = {}
+    period = 0.0 if period is None else period
+    if getattr(controller, "sampled_diagnostics", False):
+        diagnostics = LogVectorOutput(controller.GetOutputPort("diagnostics"), builder, period)
+        for name, columns in controller.diagnostic_slices().items():
+            loggers[name] = (diagnostics, columns)
+    else:
+        for name in controller.diagnostic_slices():
+            loggers[name] = LogVectorOutput(controller.GetOutputPort(name), builder, period)
+    for name in ("position_error", "actuation"):
+        loggers[name] = LogVectorOutput(controller.GetOutputPort(name), builder, period)
+    if systems.source is not None:
+        for name in ("desired_velocity", "desired_force"):
+            loggers[name] = LogVectorOutput(systems.source.GetOutputPort(name), builder, period)
+    loggers["state"] = LogVectorOutput(systems.plant.get_state_output_port(systems.robot.arm), builder, period)
+    loggers["wrench"] = LogVectorOutput(systems.wrench_output, builder, period)
+    if systems.true_wrench is not None and systems.true_wrench is not systems.wrench_output:
+        loggers["true_wrench"] = LogVectorOutput(systems.true_wrench, builder, period)
+    if systems.supervisor is not None:
+        loggers["contact_phase"] = LogVectorOutput(systems.supervisor.GetOutputPort("contact_phase"), builder, period)
+    return loggers
+
+
+def logged(loggers, root_context, name):
+    """(times, samples x size) of logger ``name`` of ``loggers`` (``add_loggers``) in ``root_context``."""
+    logger, columns = loggers[name], slice(None)
+    if isinstance(logger, tuple):
+        logger, columns = logger
+    log = logger.FindLog(root_context)
+    return log.sample_times(), log.data().T[:, columns]
+
+
+def read_log(loggers: Dict[str, object], root_context):
+    """{key: array} of every logger of ``add_loggers`` in ``root_context``, with "t" (the sample times of
+    the first): the arrays of ``log.npz`` (``LOG_KEYS``)."""
+    log = {}
+    for name in loggers:
+        times, values = logged(loggers, root_context, name)
+        log.setdefault("t", times)
+        log[name] = values
+    return log
