@@ -22,6 +22,7 @@ module (issue 13 closing note).
 """
 
 import copy
+import dataclasses
 import time
 from dataclasses import dataclass, field
 
@@ -272,12 +273,12 @@ def predicted_match(result, tolerance=0.05):
     return None
 
 
-def _task_shifts(task_name, scenario, root_context, predicted, measured, tolerance):
+def _task_shifts(task, scenario, root_context, predicted, measured, tolerance):
     """The predicted shifts and the match against the shifted design (no shifts, no match): the
-    task's own (physics the paper's model leaves out, e.g. the crank's handle inertia), or else, in
-    impedance-force mode, those of the impedance meeting its contact's stiffness and damping
-    (``analysis.environment``)."""
-    shifts = get_task(task_name).eigenvalue_shifts(scenario, root_context)
+    task's own (physics the paper's model leaves out, e.g. the crank's handle inertia; ``task`` None:
+    none), or else, in impedance-force mode, those of the impedance meeting its contact's stiffness
+    and damping (``analysis.environment``)."""
+    shifts = task.eigenvalue_shifts(scenario, root_context) if task is not None else []
     if not shifts and scenario.controller.mode is ControlMode.IMPEDANCE_FORCE:
         shifts = impedance_environment_shifts(scenario, root_context, predicted.designed, tolerance=tolerance)
     if not shifts:
@@ -366,22 +367,46 @@ def linearize_continuous(config, tolerance=0.05, bandwidth_hz=200.0, stages=None
         context = scenario.diagram.CreateDefaultContext()
     with stages(f"{c.task}: solving the start (contact equilibrium)"):
         set_initial_conditions(scenario, context)
-        derivatives = scenario.diagram.EvalTimeDerivatives(context).CopyToVector()
-    residual = float(np.max(np.abs(derivatives)))
-    if not (context.num_abstract_states() == 0 and context.has_only_continuous_state()):
-        raise ValueError("linearize_continuous needs a purely continuous closed loop")
+    return linearize_at_contact(scenario.diagram, context, scenario, tolerance=tolerance,
+                                jacobian_tolerance=jacobian_tolerance, stages=stages, task=scenario.task,
+                                what=c.task)
+
+
+def linearize_at_contact(diagram, root_context, systems, tolerance=0.05, jacobian_tolerance=JACOBIAN_TOLERANCE,
+                         stages=None, task=None, what="your diagram"):
+    """Linearize your continuous closed loop at the contact equilibrium ``root_context`` holds (e.g.
+    after ``scenario.start.solve_contact_start``), with what ``drake-hybrid analyze`` reports.
+
+    ``systems``: the ``HybridSystems`` of ``scenario.station.add_hybrid_controller`` (or a built
+    ``Scenario``). The diagram must be purely continuous (a plant with ``time_step=0``, a controller
+    without ``control_period``, a wrench low-pass). Runs Drake's ``Linearize`` (AutoDiffXd through
+    plant, contact, sensor, filter and controller), checks its A against central differences of the
+    time derivatives, every column (``analysis.derivatives``: beyond ``jacobian_tolerance``, relative
+    per column, the central-difference A is used and ``jacobian_check.used`` says so), matches eig(A)
+    against the controller's designed eigenvalues within ``tolerance`` (``controller_prediction``), in
+    impedance-force mode also against the design shifted by the contact's measured stiffness and
+    damping (``analysis.environment``; ``task``: a Task whose own shifts come first), and names every
+    mode with real part above 0.01 1/s with its likely cause (``analysis.modes``). Returns a
+    Linearization; ``equilibrium_residual`` is max |x-dot| at the start (near 0 at an equilibrium)."""
+    stages = stages or quiet()
+    derivatives = diagram.EvalTimeDerivatives(root_context).CopyToVector()
+    residual = float(np.max(np.abs(derivatives))) if derivatives.size else 0.0
+    if not (root_context.num_abstract_states() == 0 and root_context.has_only_continuous_state()):
+        raise ValueError(f"linearize_at_contact({what}): the closed loop must be purely continuous (a plant with "
+                         "time_step=0, a controller without control_period); it has discrete or abstract state")
     start = time.perf_counter()
-    with stages(f"{c.task}: linearizing ({context.num_continuous_states()} states, AutoDiffXd)"):
-        linear = Linearize(scenario.diagram, context, equilibrium_check_tolerance=np.inf)
-    with stages(f"{c.task}: checking A against central differences"):
-        A, check = checked_state_jacobian(scenario.diagram, context, linear.A(), tolerance=jacobian_tolerance,
-                                          what=f"linearize_continuous({c.task})")
+    with stages(f"{what}: linearizing ({root_context.num_continuous_states()} states, AutoDiffXd)"):
+        linear = Linearize(diagram, root_context, equilibrium_check_tolerance=np.inf)
+    with stages(f"{what}: checking A against central differences"):
+        A, check = checked_state_jacobian(diagram, root_context, linear.A(), tolerance=jacobian_tolerance,
+                                          what=f"linearize_at_contact({what})")
     wall = time.perf_counter() - start
     eigenvalues = np.linalg.eigvals(A)
-    predicted = controller_prediction(scenario.controller)
+    predicted = controller_prediction(systems.controller)
     match = match_eigenvalues(predicted.designed, eigenvalues, tolerance=tolerance, marginal=predicted.marginal)
-    shifts, shifted_match = _task_shifts(c.task, scenario, context, predicted, eigenvalues, tolerance)
-    modes = diagnose_unstable_modes(scenario, context, A, scenario.controller.mode, predicted.designed)
+    shifts, shifted_match = _task_shifts(task, systems, root_context, predicted, eigenvalues, tolerance)
+    view = systems if getattr(systems, "diagram", None) is not None else dataclasses.replace(systems, diagram=diagram)
+    modes = diagnose_unstable_modes(view, root_context, A, systems.controller.mode, predicted.designed)
     return Linearization(A=A, eigenvalues=eigenvalues, equilibrium_residual=residual, predicted=predicted,
                          match=match, wall_time=wall, shifts=shifts, shifted_match=shifted_match,
                          jacobian_check=check, unstable_modes=modes)
@@ -537,7 +562,7 @@ def linearize_discrete(config, tolerance=0.05, epsilon=1e-6, settle_time=0.0, st
     eigenvalues = np.log(multipliers[keep].astype(complex)) / h
     predicted = controller_prediction(scenario.controller)
     match = match_eigenvalues(predicted.designed, eigenvalues, tolerance=tolerance, marginal=predicted.marginal)
-    shifts, shifted_match = _task_shifts(c.task, scenario, context, predicted, eigenvalues, tolerance)
+    shifts, shifted_match = _task_shifts(get_task(c.task), scenario, context, predicted, eigenvalues, tolerance)
     return DiscreteLinearization(A=A, multipliers=multipliers, eigenvalues=eigenvalues, period=h,
                                  equilibrium_residual=residual, predicted=predicted, match=match, wall_time=wall,
                                  shifts=shifts, shifted_match=shifted_match, step_check=step_check)

@@ -30,23 +30,21 @@ The pieces:
   -sum_i F_d,i grad_p C_i (the robot pushes the workpiece with -F_d).
 """
 
-from xml.etree import ElementTree
 
 import numpy as np
 
 from pydrake.math import RigidTransform, RollPitchYaw
-from pydrake.multibody.parsing import Parser
 
 from drake_hybrid.control.gains import HybridGains
 from drake_hybrid.core.arguments import describe, function, instance, text, vector
 from drake_hybrid.core.errors import ArgumentError, OffConstraintError
 from drake_hybrid.core.kinematics import inverse_kinematics
 from drake_hybrid.scenario.config import ScenarioConfig, StartConfig
-from drake_hybrid.scenario.parsing import ConfigureParser
-from drake_hybrid.scenario.plant import RobotModel, get_frame
+from drake_hybrid.scenario.plant import RobotModel
 from drake_hybrid.scenario.start import pressing_positions
+from drake_hybrid.scenario.station import (add_actuators, mount_tool, urdf_effort_limits,  # noqa: F401 (public here too)
+                                           weld_joints)
 from drake_hybrid.scenario.task import Task
-from drake_hybrid.scenario.tasks.robots import add_pad_tool
 from drake_hybrid.scenario.workpieces import add_rigid_workpiece, default_resolution  # noqa: F401 (public here too)
 from drake_hybrid.systems.sources import Profile
 
@@ -54,74 +52,14 @@ from drake_hybrid.systems.sources import Profile
 # Robots from model packages
 # ------------------------------------------------------------------------------------------------
 
-def weld_joints(plant, joint_names, model_instance=None):
-    """Replace each named joint by a weld at its zero position (before ``Finalize``).
-
-    For parts the task does not move, such as gripper fingers: the hybrid law
-    needs one actuator per joint and nq == nv. Drake's ``RemoveJoint`` refuses
-    while the plant has any constraint, and pydrake does not say which joints a
-    coupler constraint (what a parser makes of a URDF ``<mimic>``) couples, so
-    **every** constraint of the plant is removed first: call this before adding
-    constraints of your own. Returns the new WeldJoints.
-    """
-    joints = []
-    for name in joint_names:
-        if model_instance is None:
-            if not plant.HasJointNamed(name):
-                raise ValueError(f"weld_joints: the plant has no joint '{name}'")
-            joints.append(plant.GetJointByName(name))
-        else:
-            if not plant.HasJointNamed(name, model_instance):
-                raise ValueError(f"weld_joints: model instance {model_instance} has no joint '{name}'")
-            joints.append(plant.GetJointByName(name, model_instance))
-    for constraint_id in plant.GetConstraintIds():
-        plant.RemoveConstraint(constraint_id)
-    welds = []
-    for joint in joints:
-        parent, child = joint.frame_on_parent(), joint.frame_on_child()
-        plant.RemoveJoint(joint)
-        welds.append(plant.WeldFrames(parent, child, RigidTransform()))
-    return welds
-
-
-def urdf_effort_limits(path):
-    """{joint name: effort limit (N m or N)} from the ``<limit effort=...>`` tags of a URDF file.
-    (Drake keeps a URDF's effort limits only on the actuators of its transmissions.)"""
-    root = ElementTree.parse(path).getroot()
-    return {joint.get("name"): float(joint.find("limit").get("effort"))
-            for joint in root.iter("joint") if joint.find("limit") is not None and joint.find("limit").get("effort")}
-
-
-def add_actuators(plant, model_instance, effort_limits=None):
-    """One actuator per single-dof joint of ``model_instance`` that has none (a URDF without
-    transmissions), with the effort limit ``effort_limits[joint name]`` (e.g. from
-    ``urdf_effort_limits``; inf where not given). Returns the actuator names."""
-    effort_limits = effort_limits or {}
-    actuated = {plant.get_joint_actuator(index).joint().index() for index in plant.GetJointActuatorIndices()}
-    names = []
-    for index in plant.GetJointIndices(model_instance):
-        joint = plant.get_joint(index)
-        if joint.num_velocities() != 1 or joint.index() in actuated:
-            continue
-        plant.AddJointActuator(f"{joint.name()}_actuator", joint, float(effort_limits.get(joint.name(), np.inf)))
-        names.append(f"{joint.name()}_actuator")
-    return names
-
-
 def attach_pad_tool(plant, arm, flange_frame, X_flange_tool=None):
     """Weld the compliant ball pad tool (``models/pad_tool.sdf``: 20 mm ball, its centre 0.05 m
     along the tool's +z) to ``flange_frame`` of ``arm``; the controlled point is the pad centre.
     Returns the RobotModel that ``CustomTask``'s ``add_robot`` returns, with ``only_pad_contact``:
     the arm's own collision shapes touch neither each other nor the workpiece (watch the
-    animation for clearance), so only the pad makes contact."""
-    instance(X_flange_tool, "X_flange_tool", "attach_pad_tool", RigidTransform, allow_none=True)
-    parser = ConfigureParser(Parser(plant))
-    frame = get_frame(plant, flange_frame, arm, "flange_frame") if isinstance(flange_frame, str) else flange_frame
-    tool, weld, pad = add_pad_tool(plant, parser, frame, X_flange_tool if X_flange_tool is not None
-                                   else RigidTransform())
-    return RobotModel(arm=arm, model_instances=[arm, tool], end_effector_frame="pad_center",
-                      end_effector_point=np.zeros(3), tool_weld=weld, pad_geometries=pad,
-                      only_pad_contact=True)
+    animation for clearance), so only the pad makes contact. (``scenario.station.mount_tool`` with
+    no gripper.)"""
+    return mount_tool(plant, arm, flange_frame, X_flange_tool)
 
 
 # ------------------------------------------------------------------------------------------------

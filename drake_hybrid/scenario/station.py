@@ -172,6 +172,8 @@ def mount_tool(plant, arm, flange_frame, X_flange_tool=None, gripper_joints=(), 
     Returns the RobotModel: the arm and tool instances, the end-effector frame ``pad_center`` and point
     (its origin), the wrist weld (where a wrist force/torque sensor sits), the pad's geometries.
     """
+    owner = "mount_tool"
+    instance(X_flange_tool, "X_flange_tool", owner, RigidTransform, allow_none=True)
     if gripper not in GRIPPER_CHOICES:
         raise ConfigError(f"mount_tool: gripper must be one of {', '.join(GRIPPER_CHOICES)}, got {gripper!r}")
     if isinstance(gripper_joints, str):
@@ -466,7 +468,9 @@ def add_hybrid_controller(builder, plant, robot, constraint_space, controller_pl
 LOG_KEYS = {
     "t": "sample times (s)",
     "velocity_error": "e_p' = E_p r-dot - r-dot_pd (k; each row in its own units)",
-    "force_error": "e_f = F - F_d (m; zero on kinematic rows and while the wrench is invalid)",
+    "force_error": "e_f = F - F_d (m; zero on kinematic rows, NaN while the wrench is invalid)",
+    "wrench_valid": "1 where the measured wrench was finite, 0 where not (then force, force_error and "
+                    "tangential_force read NaN) (1)",
     "constraint_value": "C(r) (m; in C's units: a contact's compression, a weld's offset)",
     "projected_velocity": "r-dot_p = E_p r-dot (k)",
     "force": "F, the force on the robot in E_f's coordinates ([F_v; F] = E^-T w) (m)",

@@ -1,0 +1,152 @@
+"""A user's own station (issue 30): an arm the package does not ship (Unitree Z1 from
+example-robot-data, its gripper removed), an ellipsoid of the user's, the constraint in sympy, the
+package's blocks (scenario.station) in the user's DiagramBuilder and plant, Drake's Simulator and the
+package's linearization. Public names only; tutorial 8 is the same station."""
+
+import importlib.metadata
+from pathlib import Path
+
+import numpy as np
+import pytest
+import sympy
+
+from pydrake.geometry import Ellipsoid
+from pydrake.math import RigidTransform, RotationMatrix
+from pydrake.multibody.parsing import Parser
+from pydrake.multibody.plant import AddMultibodyPlant
+from pydrake.systems.analysis import Simulator
+from pydrake.systems.framework import DiagramBuilder
+
+from drake_hybrid import ConstraintSpace, GivenVelocityProjection, PoseChart, surface_constraint
+from drake_hybrid.analysis.linearization import design_time_constant, linearize_at_contact
+from drake_hybrid.control.gains import ControlMode, HybridGains
+from drake_hybrid.core.errors import ArgumentError, ConfigError, ForceSignError, OffConstraintError
+from drake_hybrid.scenario.builder import build_scenario
+from drake_hybrid.scenario.robots import prepare_model
+from drake_hybrid.scenario.start import rest_contact_wrench, set_initial_conditions, solve_contact_start
+from drake_hybrid.scenario.station import (LOG_KEYS, add_hybrid_controller, add_loggers, add_rigid_workpiece,
+                                           apply_contact_defaults, default_plant_config, mount_tool,
+                                           only_tool_touches, read_log, robot_plant)
+from drake_hybrid.scenario.tasks import get_task
+from drake_hybrid.systems.sources import Profile
+
+SHARE = Path(importlib.metadata.distribution("example-robot-data").locate_file("cmeel.prefix/share/example-robot-data"))
+CENTER, AXES, PAD = np.array([0.26, 0.0, 0.253]), np.array([0.12, 0.08, 0.06]), 0.02
+A = AXES + PAD                  # the pad centre's surface: the ellipsoid grown by the pad's radius
+SPEED, FORCE = 0.03, 8.0
+GUESS = [0.0, 1.5, -1.5, 1.2, 0.0, 0.0]
+GAINS = HybridGains(velocity=[16.0], position=[48.0], force_proportional=[0.5], force_integral=[15.0])
+
+
+@pytest.fixture(scope="module")
+def z1():
+    return prepare_model(SHARE / "robots/z1_description/urdf/z1.urdf")
+
+
+def start_pose(dx=-0.03, dy=0.007):
+    """The pad centre on the grown ellipsoid at (dx, dy) from its top, the tool tilted 21 degrees."""
+    return RigidTransform(RotationMatrix.MakeYRotation(np.pi - 0.37),
+                          CENTER + [dx, dy, A[2] * np.sqrt(1 - (dx / A[0])**2 - (dy / A[1])**2)])
+
+
+def build(z1, time_step, control_period, speed=SPEED, force=FORCE, finalize=True):
+    def add_robot(plant):
+        arm = Parser(plant).AddModels(z1.model)[0]
+        return mount_tool(plant, arm, "link06", RigidTransform(RotationMatrix.MakeYRotation(np.pi / 2), [0.02, 0, 0]),
+                          gripper_joints=["jointGripper"], gripper="remove")
+
+    chart = PoseChart()
+    surface = surface_constraint(chart, lambda p: A[2] * (sympy.sqrt(sum(((p[i] - CENTER[i]) / A[i])**2
+                                                                          for i in range(3))) - 1),
+                                 name="ellipsoid", normal_rows=False)
+    space = ConstraintSpace(surface, GivenVelocityProjection(chart, np.delete(np.eye(6), 2, axis=0)))
+    builder = DiagramBuilder()
+    plant, scene_graph = AddMultibodyPlant(default_plant_config(time_step), builder)
+    robot = add_robot(plant)
+    workpiece = add_rigid_workpiece(plant, Ellipsoid(*AXES), RigidTransform(CENTER))
+    apply_contact_defaults(plant, scene_graph, robot, workpiece)
+    if not finalize:
+        return builder, plant, robot, space, add_robot
+    plant.Finalize()
+    only_tool_touches(plant, scene_graph, robot, workpiece)
+    hybrid = add_hybrid_controller(builder, plant, robot, space, robot_plant(add_robot), gains=GAINS,
+                                   mode=ControlMode.POSITION_FORCE, control_period=control_period,
+                                   desired_velocity=Profile(value=[speed, 0, 0, 0, 0]),
+                                   desired_force=Profile(value=[force]))
+    loggers = add_loggers(builder, hybrid)
+    return builder.Build(), hybrid, loggers
+
+
+@pytest.mark.slow
+def test_own_station_tracks_and_linearizes_as_designed(z1):
+    """Every row within 2 % of its command scale after 5 design time constants (the rows commanded zero
+    against the speed), eigenvalues within 5 % of the design, AutoDiffXd's A within 1e-3 of central
+    differences."""
+    diagram, hybrid, loggers = build(z1, 1e-3, 1e-3)
+    context = diagram.CreateDefaultContext()
+    solve_contact_start(diagram, context, hybrid, start_pose(), GUESS)
+    Simulator(diagram, context).AdvanceTo(2.0)
+    log = read_log(loggers, context)
+    assert set(log) <= set(LOG_KEYS)
+    controller = hybrid.controller
+    tau = design_time_constant(controller.validated_gains(), controller.mode, controller.kinematic_rows)
+    settled = log["t"] >= 5 * tau
+    velocity = 100 * np.abs(log["velocity_error"][settled]).max(axis=0) / SPEED
+    force = 100 * np.abs(log["force_error"][settled]).max(axis=0) / FORCE
+    assert np.all(velocity < 2.0) and np.all(force < 2.0), (velocity, force)
+
+    diagram, hybrid, _ = build(z1, 0.0, None, speed=0.0)
+    context = diagram.CreateDefaultContext()
+    solve_contact_start(diagram, context, hybrid, start_pose(), GUESS)
+    linearization = linearize_at_contact(diagram, context, hybrid)
+    assert linearization.equilibrium_residual < 1e-6
+    assert linearization.match.matched and max(linearization.match.relative_error) < 0.05
+    assert linearization.jacobian_check.max_relative_error < 1e-3 and linearization.jacobian_check.used == "autodiff"
+    assert not linearization.unstable_modes
+
+
+def test_a_pulling_force_is_refused_before_the_first_step(z1):
+    diagram, hybrid, _ = build(z1, 1e-3, 1e-3, force=-FORCE)
+    with pytest.raises(ForceSignError, match="pulls"):
+        solve_contact_start(diagram, diagram.CreateDefaultContext(), hybrid, start_pose(), GUESS)
+
+
+def test_a_start_off_the_surface_is_refused(z1):
+    diagram, hybrid, _ = build(z1, 1e-3, 1e-3)
+    off = RigidTransform(start_pose().rotation(), start_pose().translation() + [0, 0, 0.01])
+    with pytest.raises(OffConstraintError, match="solve_contact_start: start_pose"):
+        solve_contact_start(diagram, diagram.CreateDefaultContext(), hybrid, off, GUESS)
+
+
+def test_blocks_name_what_is_wrong(z1):
+    builder, plant, robot, space, add_robot = build(z1, 1e-3, 1e-3, finalize=False)
+    with pytest.raises(ConfigError, match="finalize the plant first"):
+        add_hybrid_controller(builder, plant, robot, space, robot_plant(add_robot), control_period=1e-3)
+    plant.Finalize()
+    with pytest.raises(ArgumentError, match="sensor"):
+        add_hybrid_controller(builder, plant, robot, space, robot_plant(add_robot), control_period=1e-3,
+                              sensor="contact")
+    with pytest.raises(ConfigError, match="gripper must be one of weld, remove"):
+        mount_tool(plant, robot.arm, "link06", gripper="keep")
+
+
+def test_linearize_at_contact_needs_a_continuous_loop(z1):
+    diagram, hybrid, _ = build(z1, 1e-3, 1e-3, speed=0.0)
+    context = diagram.CreateDefaultContext()
+    with pytest.raises(ValueError, match="purely continuous"):
+        linearize_at_contact(diagram, context, hybrid)
+
+
+@pytest.mark.parametrize("task", ["window-washing", "sphere-polishing"])
+def test_rest_contact_wrench_is_the_sensors_reading_at_a_start(task):
+    """The start's static contact from SceneGraph's surfaces equals the package's contact sensor's
+    reading of the primed plant (the same wrench, two ways)."""
+    scenario = build_scenario(get_task(task).default_config(duration=0.1), with_loggers=False)
+    context = scenario.diagram.CreateDefaultContext()
+    set_initial_conditions(scenario, context)
+    plant_context = scenario.plant.GetMyContextFromRoot(context)
+    X_WE = scenario.plant.GetFrameByName(scenario.robot.end_effector_frame).CalcPoseInWorld(plant_context)
+    wrench = rest_contact_wrench(scenario.plant, plant_context, scenario.robot.pad_geometries,
+                                 X_WE.multiply(np.asarray(scenario.robot.end_effector_point, dtype=float)))
+    reading = scenario.sensor.get_output_port(0).Eval(scenario.sensor.GetMyContextFromRoot(context))
+    assert np.allclose(wrench, reading, rtol=0, atol=1e-3 * np.linalg.norm(reading))
