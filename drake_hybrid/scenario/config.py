@@ -270,8 +270,8 @@ class ScenarioConfig:
     desired_velocity: r-dot_pd(t), the velocity rows' command, in their units (labels.velocity_units:
         m/s on a translation row, rad/s on a rotation row), one entry per row of E_p.
     desired_force: F_d(t), the force rows' command in E_f's coordinates (N for a constraint in metres,
-        N m for one in radians; F is the force on the robot: pressing is negative along E_f's
-        outward normal), one entry per row of C.
+        N m for one in radians; F is the force on the robot along the rows of dC/dr: pressing is
+        positive where C grows out of the workpiece, negative where it grows into it), one entry per row of C.
     task_parameters: a task's own numbers by name (see the task's ``Options``; m, rad, N as it says).
     task_options: a task's own words by name (``--option KEY=VALUE``).
     controller: the law closing the loop, li-sastry (HybridController) or a baseline of

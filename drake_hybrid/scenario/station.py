@@ -21,7 +21,7 @@ added, as the manipulation course's station helpers (``AddIiwa``, ``AddWsg``) an
     only_tool_touches(plant, scene_graph, robot, workpiece)
     hybrid = add_hybrid_controller(builder, plant, robot, space, robot_plant(add_robot), gains=gains,
                                    control_period=1e-3, desired_velocity=Profile(value=[0.05, 0, 0, 0, 0]),
-                                   desired_force=Profile(value=[-8.0]))
+                                   desired_force=Profile(value=[8.0]))   # pressing: on the robot along +grad C
     loggers = add_loggers(builder, hybrid)
     diagram = builder.Build()
     context = diagram.CreateDefaultContext()
@@ -44,7 +44,7 @@ The blocks:
 ``robot_plant``              the controller's own model: your robot alone, in a continuous plant
 ``add_hybrid_controller``    controller, wrench sensor, wrench filter, command source (and contact
                              supervisor) in one call, wired; returns a ``HybridSystems``
-``add_loggers``, ``read_log``  every signal of the run, keyed as in ``log.npz`` (``LOG_KEYS``)
+``add_loggers``, ``read_log``  every signal of the run, keyed by ``LOG_KEYS`` (the ports' names)
 
 and ``scenario.start.solve_contact_start`` (pressing with F_d, in your context).
 
@@ -464,7 +464,7 @@ def add_hybrid_controller(builder, plant, robot, constraint_space, controller_pl
                          supervisor=supervisor)
 
 
-# The log's keys (log.npz), each (samples x size), with "t" the sample times.
+# The log's keys (read_log; log.npz names a few otherwise), each (samples x size), with "t" the sample times.
 LOG_KEYS = {
     "t": "sample times (s)",
     "velocity_error": "e_p' = E_p r-dot - r-dot_pd (k; each row in its own units)",
@@ -488,7 +488,7 @@ LOG_KEYS = {
 
 
 def add_loggers(builder, systems, period=None):
-    """Loggers for every signal of ``systems`` (a HybridSystems), keyed as in ``log.npz`` (``LOG_KEYS``).
+    """Loggers for every signal of ``systems`` (a HybridSystems), keyed by ``LOG_KEYS``.
 
     ``period``: sample period (s); None logs every publish of the simulator's steps. A controller with
     ``sampled_diagnostics`` is logged from its ``diagnostics`` port (what each tick computed, read
@@ -528,7 +528,7 @@ def logged(loggers, root_context, name):
 
 def read_log(loggers: Dict[str, object], root_context):
     """{key: array} of every logger of ``add_loggers`` in ``root_context``, with "t" (the sample times of
-    the first): the arrays of ``log.npz`` (``LOG_KEYS``)."""
+    the first), keyed by ``LOG_KEYS`` (log.npz calls a few otherwise: velocity, constraint, torque, q and v)."""
     log = {}
     for name in loggers:
         times, values = logged(loggers, root_context, name)
