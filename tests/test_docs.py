@@ -28,6 +28,7 @@ from drake_hybrid.control.gains import HybridGains
 from drake_hybrid.experiments.simulation import simulate
 from drake_hybrid.scenario.data_task import TaskFile
 from drake_hybrid.scenario.schema_doc import schema_rows
+from drake_hybrid.scenario.station import LOG_KEYS
 from drake_hybrid.scenario.tasks import get_task
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -173,6 +174,13 @@ def test_the_outputs_page_documents_every_key_a_run_writes():
     for rows in (result.summary["velocity_rows"], result.summary["force_rows"]):
         keys |= set(rows[0])
     assert keys - documented == set()
+
+
+def test_the_own_diagram_page_documents_every_log_key():
+    """docs/howto/own_diagram.md's table of the log: every key of scenario.station.LOG_KEYS."""
+    page = (DOCS / "howto" / "own_diagram.md").read_text()
+    documented = set(re.findall(r"`([a-z_]+)`", page.split("## The log", 1)[1].split("\n## ", 1)[0]))
+    assert set(LOG_KEYS) - documented == set()
 
 
 # ------------------------------------------------------------------------------------------------
