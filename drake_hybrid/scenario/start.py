@@ -11,12 +11,14 @@ static probe), ``check_start`` the typed errors for a start the law cannot use.
 import numpy as np
 from scipy.optimize import brentq
 
-from pydrake.geometry import HydroelasticContactRepresentation
+from pydrake.geometry import (CollisionFilterDeclaration, GeometrySet, HydroelasticContactRepresentation, Role,
+                             SceneGraph)
 from pydrake.math import RigidTransform
 from pydrake.systems.framework import DiagramBuilder
 
 from drake_hybrid.core.arguments import instance, positive, vector
-from drake_hybrid.core.errors import ArgumentError, DimensionError, ForceSignError, OffConstraintError
+from drake_hybrid.core.errors import (ArgumentError, DimensionError, ForceSignError, OffConstraintError,
+                                      StartCollisionError)
 from drake_hybrid.core.kinematics import EndEffectorKinematics, inverse_kinematics
 from drake_hybrid.core.preconditions import check_pushing_force
 from drake_hybrid.scenario.plant import apply_model_error, build_plant
@@ -53,6 +55,7 @@ def set_initial_conditions(scenario, root_context):
     apply_model_error(plant, plant_context, scenario.robot, config.model_error)
     q0 = task.start_positions(scenario)
     check_start(scenario, q0)
+    check_robot_clearance(scenario.diagram, root_context, scenario, q0, f"task '{task.name}'")
     plant.SetPositions(plant_context, scenario.robot.arm, q0)
     plant.SetVelocities(plant_context, scenario.robot.arm, np.zeros(len(q0)))
     task.set_environment_state(scenario, plant_context)
@@ -270,6 +273,64 @@ def rest_contact_wrench(plant, plant_context, robot_geometries, p_WP):
 CENTROID = np.full(3, 1.0 / 3.0)           # a triangle's centroid in barycentric coordinates
 
 
+PENETRATION_TOLERANCE = 1e-4      # m: a robot part this far inside another geometry at the start is a collision
+
+
+def robot_penetrations(diagram, root_context, systems, q, tolerance=PENETRATION_TOLERANCE):
+    """The robot's parts other than its tool (``systems.robot.pad_geometries``) that penetrate another
+    geometry of the scene (the workpiece, a table) by more than ``tolerance`` (m) with the arm at ``q``:
+    a list of (robot body, its geometry, the other geometry, depth in m), deepest first.
+
+    ``only_tool_touches`` filters those pairs out of the simulation, so a link through the workpiece
+    would pass unseen; this asks SceneGraph for each pair's signed distance in a copy of
+    ``root_context`` whose filters allow them (``root_context`` is left as it was). Pairs whose
+    shapes have no signed distance in Drake (e.g. two meshes) are skipped."""
+    scene_graph = next((system for system in diagram.GetSystems() if isinstance(system, SceneGraph)), None)
+    if scene_graph is None:
+        return []
+    plant, robot = systems.plant, systems.robot
+    context = root_context.Clone()
+    plant.SetPositions(plant.GetMyMutableContextFromRoot(context), robot.arm, q)
+    scene_context = scene_graph.GetMyMutableContextFromRoot(context)
+    inspector = scene_graph.get_query_output_port().Eval(scene_context).inspector()
+    pad = set(robot.pad_geometries)
+    mine = {geometry: plant.get_body(index).name() for instance in robot.model_instances
+            for index in plant.GetBodyIndices(instance)
+            for geometry in plant.GetCollisionGeometriesForBody(plant.get_body(index))
+            if geometry not in pad and inspector.GetProximityProperties(geometry) is not None}
+    others = [geometry for geometry in inspector.GetAllGeometryIds(Role.kProximity)
+              if geometry not in mine and geometry not in pad]
+    if not mine or not others:
+        return []
+    scene_graph.collision_filter_manager(scene_context).Apply(
+        CollisionFilterDeclaration().AllowBetween(GeometrySet(list(mine)), GeometrySet(others)))
+    query = scene_graph.get_query_output_port().Eval(scene_context)
+    found = []
+    for geometry, body in mine.items():
+        for other in others:
+            if inspector.GetFrameId(other) == inspector.GetFrameId(geometry):
+                continue
+            try:
+                distance = query.ComputeSignedDistancePairClosestPoints(geometry, other).distance
+            except RuntimeError:             # no signed distance for this pair of shapes in Drake
+                continue
+            if distance < -tolerance:
+                found.append((body, inspector.GetName(geometry), inspector.GetName(other), -distance))
+    return sorted(found, key=lambda item: -item[3])
+
+
+def check_robot_clearance(diagram, root_context, systems, q, who):
+    """StartCollisionError naming the bodies if ``robot_penetrations`` finds any at ``q``."""
+    found = robot_penetrations(diagram, root_context, systems, q)
+    if found:
+        parts = "; ".join(f"body '{body}' ({geometry}) {depth * 1000:.1f} mm into {other}"
+                          for body, geometry, other, depth in found[:4])
+        raise StartCollisionError(
+            f"{who}: at the start the robot penetrates the scene beyond its tool: {parts}"
+            f"{' and more' if len(found) > 4 else ''}; the collision filters that let only the tool touch would "
+            "hide it in the simulation: move the start, the workpiece or the base")
+
+
 def solve_contact_start(diagram, root_context, systems, start_pose, joint_guess, desired_force=None,
                         max_depth=0.01, tolerance=1e-3):
     """Put your diagram at a start pressing with F_d, at rest, and set every state around the plant.
@@ -286,9 +347,9 @@ def solve_contact_start(diagram, root_context, systems, start_pose, joint_guess,
     Typed errors before the first step: a start pose off C = 0 beyond ``tolerance`` (C's units) or
     on the wrong branch (OffConstraintError, BranchError), E singular there (ConstraintRankError,
     ChartSingularityError), a pulling F_d (ForceSignError), a workpiece that is not where C says
-    (OffConstraintError), the inverse kinematics failing (ValueError).
+    (OffConstraintError), a link of the arm through the workpiece or the scene (StartCollisionError,
+    ``robot_penetrations``), the inverse kinematics failing (ValueError).
     """
-    del diagram                                       # (the systems' contexts are found from the root)
     owner = "solve_contact_start"
     instance(start_pose, "start_pose", owner, RigidTransform)
     plant, robot, space = systems.plant, systems.robot, systems.constraint_space
@@ -346,6 +407,7 @@ def solve_contact_start(diagram, root_context, systems, start_pose, joint_guess,
             return float(space.split_wrench(values_at, wrench)[1] @ desired) / magnitude - magnitude
 
         q0 = positions_at_depth(pressing_depth(pressing_force, desired, max_depth, owner), direction)
+    check_robot_clearance(diagram, root_context, systems, q0, owner)
     plant_context = plant.GetMyMutableContextFromRoot(root_context)
     plant.SetPositions(plant_context, robot.arm, q0)
     plant.SetVelocities(plant_context, robot.arm, np.zeros(len(q0)))

@@ -152,8 +152,8 @@ GRIPPER_CHOICES = ("weld", "remove")
 
 
 def mount_tool(plant, arm, flange_frame, X_flange_tool=None, gripper_joints=(), gripper="weld"):
-    """Mount the compliant ball pad (``models/pad_tool.sdf``: a 20 mm ball, its centre 0.05 m along the
-    tool's +z, the controlled point) on ``flange_frame`` of ``arm`` at ``X_flange_tool`` (default: the
+    """Mount the compliant ball pad (``models/pad_tool.sdf``: a ball of radius 20 mm, its centre 0.05 m
+    along the tool's +z, the controlled point) on ``flange_frame`` of ``arm`` at ``X_flange_tool`` (default: the
     identity), before ``Finalize``.
 
     Args:
@@ -166,8 +166,10 @@ def mount_tool(plant, arm, flange_frame, X_flange_tool=None, gripper_joints=(), 
             their zero position: the law needs one actuator per joint it controls.
         gripper: "weld": the gripper stays a rigid part of the wrist, drawn and colliding like the arm's
             links (``only_tool_touches`` filters its contact with the workpiece as theirs: keep it
-            clear); "remove": also its collision geometries are dropped (``RobotModel.passive_geometries``,
-            removed by ``only_tool_touches``): a gripper your model has but your station does not.
+            clear; ``scenario.start.solve_contact_start`` refuses a start where it is not); "remove":
+            the collision geometries of every body the flange carries (the gripper's fixed and moving
+            parts; ``RobotModel.passive_geometries``, dropped by ``only_tool_touches``): a gripper your
+            model has but your station does not (it stays drawn).
 
     Returns the RobotModel: the arm and tool instances, the end-effector frame ``pad_center`` and point
     (its origin), the wrist weld (where a wrist force/torque sensor sits), the pad's geometries.
@@ -178,23 +180,38 @@ def mount_tool(plant, arm, flange_frame, X_flange_tool=None, gripper_joints=(), 
         raise ConfigError(f"mount_tool: gripper must be one of {', '.join(GRIPPER_CHOICES)}, got {gripper!r}")
     if isinstance(gripper_joints, str):
         gripper_joints = [gripper_joints]
-    removed = []
     if gripper_joints:
-        gripper_bodies = {plant.GetJointByName(name, arm).child_body().index()
-                          for name in gripper_joints if plant.HasJointNamed(name, arm)}
         weld_joints(plant, list(gripper_joints), arm)
-        if gripper == "remove" and plant.geometry_source_is_registered():
-            removed = [geometry for index in gripper_bodies
-                       for geometry in plant.GetCollisionGeometriesForBody(plant.get_body(index))]
-    parser = ConfigureParser(Parser(plant))
     frame = get_frame(plant, flange_frame, arm, "flange_frame") if isinstance(flange_frame, str) else flange_frame
     if not hasattr(frame, "body"):
         raise ConfigError(f"mount_tool: flange_frame must be a Frame of the arm or its name, got {flange_frame!r}")
+    removed = []
+    if gripper == "remove" and plant.geometry_source_is_registered():
+        removed = [geometry for body in carried_bodies(plant, arm, frame.body())
+                   for geometry in plant.GetCollisionGeometriesForBody(body)]
+    parser = ConfigureParser(Parser(plant))
     tool, weld, pad = add_pad_tool(plant, parser, frame, X_flange_tool if X_flange_tool is not None
                                    else RigidTransform())
     return RobotModel(arm=arm, model_instances=[arm, tool], end_effector_frame="pad_center",
                       end_effector_point=np.zeros(3), tool_weld=weld, pad_geometries=pad,
                       passive_geometries=removed, only_pad_contact=True)
+
+
+def carried_bodies(plant, model_instance, body):
+    """The bodies of ``model_instance`` that ``body`` carries: outboard of it in the joint tree (before or
+    after ``Finalize``), ``body`` itself excluded."""
+    parent = {}
+    for index in plant.GetJointIndices(model_instance):
+        joint = plant.get_joint(index)
+        parent[joint.child_body().index()] = joint.parent_body().index()
+    carried = []
+    for index in plant.GetBodyIndices(model_instance):
+        ancestor = parent.get(index)
+        while ancestor is not None and ancestor != body.index():
+            ancestor = parent.get(ancestor)
+        if ancestor == body.index():
+            carried.append(plant.get_body(index))
+    return carried
 
 
 def robot_plant(add_robot):
