@@ -17,7 +17,7 @@ from pydrake.math import RigidTransform
 from pydrake.systems.framework import DiagramBuilder
 
 from drake_hybrid.core.arguments import instance, positive, vector
-from drake_hybrid.core.errors import (ArgumentError, DimensionError, ForceSignError, OffConstraintError,
+from drake_hybrid.core.errors import (ArgumentError, ConfigError, DimensionError, ForceSignError, OffConstraintError,
                                       StartCollisionError)
 from drake_hybrid.core.kinematics import EndEffectorKinematics, inverse_kinematics
 from drake_hybrid.core.preconditions import check_pushing_force
@@ -255,7 +255,14 @@ def rest_contact_wrench(plant, plant_context, robot_geometries, p_WP):
     query = plant.get_geometry_query_input_port().Eval(plant_context)
     robot = set(robot_geometries)
     wrench = np.zeros(6)
-    for surface in query.ComputeContactSurfaces(HydroelasticContactRepresentation.kTriangle):
+    try:
+        surfaces = query.ComputeContactSurfaces(HydroelasticContactRepresentation.kTriangle)
+    except RuntimeError as error:        # a touching pair without a hydroelastic representation
+        raise ConfigError(f"rest_contact_wrench: {str(error).splitlines()[0]} -- the start is solved on "
+                          "hydroelastic contact: give the workpiece a rigid hydroelastic geometry "
+                          "(scenario.station.add_rigid_workpiece) and let only the tool touch it "
+                          "(only_tool_touches)") from None
+    for surface in surfaces:
         if surface.id_M() in robot:
             sign = 1.0                 # the faces' normals point out of N into M: the force on M
         elif surface.id_N() in robot:
