@@ -24,7 +24,8 @@ from drake_hybrid.core.errors import (ArgumentError, ConfigError, ForceSignError
                                       StartCollisionError)
 from drake_hybrid.scenario.builder import build_scenario
 from drake_hybrid.scenario.robots import prepare_model
-from drake_hybrid.scenario.start import rest_contact_wrench, set_initial_conditions, solve_contact_start
+from drake_hybrid.scenario.contact_start import rest_contact_wrench, solve_contact_start
+from drake_hybrid.scenario.start import set_initial_conditions
 from drake_hybrid.scenario.station import (LOG_KEYS, add_hybrid_controller, add_loggers, add_rigid_workpiece,
                                            apply_contact_defaults, default_plant_config, mount_tool,
                                            only_tool_touches, read_log, robot_plant)

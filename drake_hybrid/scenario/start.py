@@ -5,22 +5,19 @@ the hybrid law can start there.
 away for the guarded approach), primes a discrete plant's sampled outputs, and sets the
 integrals, the held torque and the wrench filters; ``static_torque`` is the torque that holds the
 arm there, ``pressing_positions`` the joint positions that press with F_d (root finding on a
-static probe), ``check_start`` the typed errors for a start the law cannot use.
+static probe), ``check_start`` the typed errors for a start the law cannot use. ``prime_start``
+and ``holding_torque`` work on any diagram's systems (``scenario.station.HybridSystems``); a start
+in your own diagram is ``scenario.contact_start.solve_contact_start``.
 """
 
 import numpy as np
 from scipy.optimize import brentq
 
-from pydrake.geometry import (CollisionFilterDeclaration, GeometrySet, HydroelasticContactRepresentation, Role,
-                             SceneGraph)
-from pydrake.math import RigidTransform
 from pydrake.systems.framework import DiagramBuilder
 
-from drake_hybrid.core.arguments import instance, positive, vector
-from drake_hybrid.core.errors import (ArgumentError, ConfigError, DimensionError, ForceSignError, OffConstraintError,
-                                      StartCollisionError)
-from drake_hybrid.core.kinematics import EndEffectorKinematics, inverse_kinematics
-from drake_hybrid.core.preconditions import check_pushing_force
+from drake_hybrid.core.errors import DimensionError, ForceSignError, OffConstraintError
+from drake_hybrid.core.kinematics import EndEffectorKinematics
+from drake_hybrid.scenario.clearance import check_robot_clearance
 from drake_hybrid.scenario.plant import apply_model_error, build_plant
 from drake_hybrid.systems.sensors import ContactWrenchSensor
 
@@ -239,184 +236,3 @@ def pressing_depth(pressing_force, desired, max_depth, who):
             f"{who}: even {max_depth * 1000:.0f} mm of penetration presses with only {deepest:.3g} N, "
             f"less than the desired {magnitude:.3g} N; raise contact.pad_modulus or lower the desired force")
     return brentq(pressing_force, 0.0, max_depth, xtol=1e-10)
-
-
-
-# ------------------------------------------------------------------------------------------------
-# A contact start in your own diagram
-# ------------------------------------------------------------------------------------------------
-
-def rest_contact_wrench(plant, plant_context, robot_geometries, p_WP):
-    """The wrench on the robot at rest from its hydroelastic contacts, at the point ``p_WP`` (world),
-    as a Drake SpatialForce vector [torque; force] (N m, N): the pressure of every contact surface
-    touching ``robot_geometries`` integrated over its faces (a rest state has no dissipation and no
-    friction). A static reading of any plant, discrete or continuous, sampled output ports or not,
-    from its SceneGraph's query in ``plant_context``."""
-    query = plant.get_geometry_query_input_port().Eval(plant_context)
-    robot = set(robot_geometries)
-    wrench = np.zeros(6)
-    try:
-        surfaces = query.ComputeContactSurfaces(HydroelasticContactRepresentation.kTriangle)
-    except RuntimeError as error:        # a touching pair without a hydroelastic representation
-        raise ConfigError(f"rest_contact_wrench: {str(error).splitlines()[0]} -- the start is solved on "
-                          "hydroelastic contact: give the workpiece a rigid hydroelastic geometry "
-                          "(scenario.station.add_rigid_workpiece) and let only the tool touch it "
-                          "(only_tool_touches)") from None
-    for surface in surfaces:
-        if surface.id_M() in robot:
-            sign = 1.0                 # the faces' normals point out of N into M: the force on M
-        elif surface.id_N() in robot:
-            sign = -1.0
-        else:
-            continue
-        mesh, pressure = surface.tri_mesh_W(), surface.tri_e_MN()
-        for face in range(mesh.num_triangles()):
-            force = sign * pressure.Evaluate(face, CENTROID) * mesh.area(face) * mesh.face_normal(face)
-            wrench[:3] += np.cross(mesh.element_centroid(face) - p_WP, force)
-            wrench[3:] += force
-    return wrench
-
-
-CENTROID = np.full(3, 1.0 / 3.0)           # a triangle's centroid in barycentric coordinates
-
-
-PENETRATION_TOLERANCE = 1e-4      # m: a robot part this far inside another geometry at the start is a collision
-
-
-def robot_penetrations(diagram, root_context, systems, q, tolerance=PENETRATION_TOLERANCE):
-    """The robot's parts other than its tool (``systems.robot.pad_geometries``) that penetrate another
-    geometry of the scene (the workpiece, a table) by more than ``tolerance`` (m) with the arm at ``q``:
-    a list of (robot body, its geometry, the other geometry, depth in m), deepest first.
-
-    ``only_tool_touches`` filters those pairs out of the simulation, so a link through the workpiece
-    would pass unseen; this asks SceneGraph for each pair's signed distance in a copy of
-    ``root_context`` whose filters allow them (``root_context`` is left as it was). Pairs whose
-    shapes have no signed distance in Drake (e.g. two meshes) are skipped."""
-    scene_graph = next((system for system in diagram.GetSystems() if isinstance(system, SceneGraph)), None)
-    if scene_graph is None:
-        return []
-    plant, robot = systems.plant, systems.robot
-    context = root_context.Clone()
-    plant.SetPositions(plant.GetMyMutableContextFromRoot(context), robot.arm, q)
-    scene_context = scene_graph.GetMyMutableContextFromRoot(context)
-    inspector = scene_graph.get_query_output_port().Eval(scene_context).inspector()
-    pad = set(robot.pad_geometries)
-    mine = {geometry: plant.get_body(index).name() for instance in robot.model_instances
-            for index in plant.GetBodyIndices(instance)
-            for geometry in plant.GetCollisionGeometriesForBody(plant.get_body(index))
-            if geometry not in pad and inspector.GetProximityProperties(geometry) is not None}
-    others = [geometry for geometry in inspector.GetAllGeometryIds(Role.kProximity)
-              if geometry not in mine and geometry not in pad]
-    if not mine or not others:
-        return []
-    scene_graph.collision_filter_manager(scene_context).Apply(
-        CollisionFilterDeclaration().AllowBetween(GeometrySet(list(mine)), GeometrySet(others)))
-    query = scene_graph.get_query_output_port().Eval(scene_context)
-    found = []
-    for geometry, body in mine.items():
-        for other in others:
-            if inspector.GetFrameId(other) == inspector.GetFrameId(geometry):
-                continue
-            try:
-                distance = query.ComputeSignedDistancePairClosestPoints(geometry, other).distance
-            except RuntimeError:             # no signed distance for this pair of shapes in Drake
-                continue
-            if distance < -tolerance:
-                found.append((body, inspector.GetName(geometry), inspector.GetName(other), -distance))
-    return sorted(found, key=lambda item: -item[3])
-
-
-def check_robot_clearance(diagram, root_context, systems, q, who):
-    """StartCollisionError naming the bodies if ``robot_penetrations`` finds any at ``q``."""
-    found = robot_penetrations(diagram, root_context, systems, q)
-    if found:
-        parts = "; ".join(f"body '{body}' ({geometry}) {depth * 1000:.1f} mm into {other}"
-                          for body, geometry, other, depth in found[:4])
-        raise StartCollisionError(
-            f"{who}: at the start the robot penetrates the scene beyond its tool: {parts}"
-            f"{' and more' if len(found) > 4 else ''}; the collision filters that let only the tool touch would "
-            "hide it in the simulation: move the start, the workpiece or the base")
-
-
-def solve_contact_start(diagram, root_context, systems, start_pose, joint_guess, desired_force=None,
-                        max_depth=0.01, tolerance=1e-3):
-    """Put your diagram at a start pressing with F_d, at rest, and set every state around the plant.
-
-    ``systems`` is what ``scenario.station.add_hybrid_controller`` returned; ``start_pose`` the
-    end-effector frame E's pose (RigidTransform, world) with its point P on the surface C = 0;
-    ``joint_guess`` the arm's joint positions near it (the inverse kinematics' seed). The pad is
-    pushed into the workpiece along the direction a world force must take to give F_d
-    (``desired_force``, m entries in E_f's coordinates; default the command source's at t = 0),
-    to the depth where the contact's rest force in E_f's coordinates equals F_d (Brent's method on
-    ``rest_contact_wrench``); then ``prime_start`` with the torque that holds it there. Returns the
-    arm's joint positions.
-
-    Typed errors before the first step: a start pose off C = 0 beyond ``tolerance`` (C's units) or
-    on the wrong branch (OffConstraintError, BranchError), E singular there (ConstraintRankError,
-    ChartSingularityError), a pulling F_d (ForceSignError), a workpiece that is not where C says
-    (OffConstraintError), a link of the arm through the workpiece or the scene (StartCollisionError,
-    ``robot_penetrations``), the inverse kinematics failing (ValueError).
-    """
-    owner = "solve_contact_start"
-    instance(start_pose, "start_pose", owner, RigidTransform)
-    plant, robot, space = systems.plant, systems.robot, systems.constraint_space
-    controller = systems.controller
-    kinematics = controller.kinematics
-    joint_guess = vector(joint_guess, "joint_guess", owner, kinematics.plant.num_positions())
-    max_depth = positive(max_depth, "max_depth", owner, unit="m")
-    tolerance = positive(tolerance, "tolerance", owner)
-    if desired_force is None:
-        if systems.source is None:
-            raise ArgumentError(f"{owner}: desired_force is needed when the controller has no command source")
-        source_context = systems.source.GetMyContextFromRoot(root_context)
-        desired_force = systems.source.GetOutputPort("desired_force").Eval(source_context)
-    desired = vector(desired_force, "desired_force", owner, space.force_size)
-    mask = np.array([0.0 if i in space.constraint.kinematic_rows else 1.0 for i in range(space.force_size)])
-    desired = desired * mask
-    controller_context = kinematics.plant.CreateDefaultContext()
-
-    def positions_at_depth(depth, direction):
-        X_target = RigidTransform(start_pose.rotation(), start_pose.translation() + depth * direction)
-        return inverse_kinematics(kinematics, controller_context, X_target, joint_guess)
-
-    def configuration(q):
-        kinematics.plant.SetPositions(controller_context, q)
-        task = kinematics.evaluate(controller_context)
-        return task, space.evaluate(task.configuration, task.velocity)
-
-    q_surface = positions_at_depth(0.0, np.zeros(3))
-    task, values = configuration(q_surface)
-    try:
-        space.constraint.check_satisfied(task.configuration, tolerance)
-    except OffConstraintError as error:
-        raise OffConstraintError(f"{owner}: start_pose: {error}") from None
-    space.constraint.check_branch(task.configuration)
-    check_pushing_force(desired, force_controlled=mask, where=f"{owner} (desired_force)")
-    magnitude = float(np.linalg.norm(desired))
-    q0 = q_surface
-    if magnitude > 0:
-        # The world force at P that the rows read as F_d (least squares): the pad presses against it.
-        unit_forces = np.array([space.split_wrench(values, space.chart.generalized_force(
-            task.configuration, np.concatenate([np.zeros(3), axis])))[1] for axis in np.eye(3)]).T
-        force_W = np.linalg.lstsq(unit_forces, desired, rcond=None)[0]
-        direction = -force_W / np.linalg.norm(force_W)
-        plant_context = plant.GetMyMutableContextFromRoot(root_context)
-        frame = plant.GetFrameByName(robot.end_effector_frame)
-        pad = list(robot.pad_geometries)
-
-        def pressing_force(depth):
-            q = positions_at_depth(depth, direction)
-            plant.SetPositions(plant_context, robot.arm, q)
-            p_WP = frame.CalcPoseInWorld(plant_context).multiply(np.asarray(robot.end_effector_point, dtype=float))
-            task_at, values_at = configuration(q)
-            wrench = space.chart.generalized_force(task_at.configuration,
-                                                   rest_contact_wrench(plant, plant_context, pad, p_WP))
-            return float(space.split_wrench(values_at, wrench)[1] @ desired) / magnitude - magnitude
-
-        q0 = positions_at_depth(pressing_depth(pressing_force, desired, max_depth, owner), direction)
-    check_robot_clearance(diagram, root_context, systems, q0, owner)
-    plant_context = plant.GetMyMutableContextFromRoot(root_context)
-    plant.SetPositions(plant_context, robot.arm, q0)
-    plant.SetVelocities(plant_context, robot.arm, np.zeros(len(q0)))
-    prime_start(systems, root_context, holding_torque(systems, q0, desired))
-    return q0

@@ -46,7 +46,7 @@ The blocks:
                              supervisor) in one call, wired; returns a ``HybridSystems``
 ``add_loggers``, ``read_log``  every signal of the run, keyed as in ``log.npz`` (``LOG_KEYS``)
 
-and ``scenario.start.solve_contact_start`` (pressing with F_d, in your context).
+and ``scenario.contact_start.solve_contact_start`` (pressing with F_d, in your context).
 
 Size: the blocks share one vocabulary (the RobotModel of the mounted tool, the HybridSystems of the
 controller) and each is a few lines; apart they would import each other.
@@ -61,13 +61,14 @@ import numpy as np
 from pydrake.math import RigidTransform
 from pydrake.multibody.parsing import Parser
 from pydrake.multibody.plant import MultibodyPlant, MultibodyPlantConfig
+from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import LogVectorOutput
 
 from drake_hybrid.control.controller import HybridController
 from drake_hybrid.control.gains import ControlMode
 from drake_hybrid.control.phases import ContactPhase
 from drake_hybrid.control.supervision import ContactSupervisor
-from drake_hybrid.core.arguments import instance
+from drake_hybrid.core.arguments import function, instance, nonnegative, text
 from drake_hybrid.core.errors import ArgumentError, ConfigError
 from drake_hybrid.core.kinematics import EndEffectorKinematics
 from drake_hybrid.scenario.config import ContactConfig, ContactSensorConfig, WristSensorConfig
@@ -88,6 +89,7 @@ def default_plant_config(time_step=1.0e-3):
     """The package's MultibodyPlantConfig: SAP steps of ``time_step`` (0: continuous) with hydroelastic
     contact; a Drake struct, so ``ApplyMultibodyPlantConfig`` / ``AddMultibodyPlant`` take it and your
     own settings can replace any field."""
+    time_step = nonnegative(time_step, "time_step", "default_plant_config", unit="s")
     return MultibodyPlantConfig(time_step=time_step, contact_model="hydroelastic", discrete_contact_approximation="sap")
 
 
@@ -105,11 +107,14 @@ def weld_joints(plant, joint_names, model_instance=None):
     **every** constraint of the plant is removed first: call this before adding
     constraints of your own. Returns the new WeldJoints.
     """
+    if isinstance(joint_names, str):
+        joint_names = [joint_names]
+    joint_names = [text(name, "joint_names[]", "weld_joints") for name in joint_names]
     joints = []
     for name in joint_names:
         owner = () if model_instance is None else (model_instance,)
         if not plant.HasJointNamed(name, *owner):
-            indices = plant.GetJointIndices(*owner) if owner else range(plant.num_joints())
+            indices = plant.GetJointIndices(*owner)
             known = sorted(plant.get_joint(index).name() for index in indices)
             where = "the plant" if not owner else f"model '{plant.GetModelInstanceName(model_instance)}'"
             raise ArgumentError(f"weld_joints: {where} has no joint '{name}'; its joints: {', '.join(known)}")
@@ -136,7 +141,8 @@ def add_actuators(plant, model_instance, effort_limits=None):
     """One actuator per single-dof joint of ``model_instance`` that has none (a URDF without
     transmissions), with the effort limit ``effort_limits[joint name]`` (e.g. from
     ``urdf_effort_limits``; inf where not given). Returns the actuator names."""
-    effort_limits = effort_limits or {}
+    effort_limits = instance(effort_limits, "effort_limits", "add_actuators", dict,
+                             what="a dict {joint name: effort limit}", allow_none=True) or {}
     actuated = {plant.get_joint_actuator(index).joint().index() for index in plant.GetJointActuatorIndices()}
     names = []
     for index in plant.GetJointIndices(model_instance):
@@ -166,7 +172,7 @@ def mount_tool(plant, arm, flange_frame, X_flange_tool=None, gripper_joints=(), 
             their zero position: the law needs one actuator per joint it controls.
         gripper: "weld": the gripper stays a rigid part of the wrist, drawn and colliding like the arm's
             links (``only_tool_touches`` filters its contact with the workpiece as theirs: keep it
-            clear; ``scenario.start.solve_contact_start`` refuses a start where it is not); "remove":
+            clear; ``scenario.contact_start.solve_contact_start`` refuses a start where it is not); "remove":
             the collision geometries of every body the flange carries (the gripper's fixed and moving
             parts; ``RobotModel.passive_geometries``, dropped by ``only_tool_touches``): a gripper your
             model has but your station does not (it stays drawn).
@@ -180,6 +186,9 @@ def mount_tool(plant, arm, flange_frame, X_flange_tool=None, gripper_joints=(), 
         raise ConfigError(f"mount_tool: gripper must be one of {', '.join(GRIPPER_CHOICES)}, got {gripper!r}")
     if isinstance(gripper_joints, str):
         gripper_joints = [gripper_joints]
+    instance(plant, "plant", owner, MultibodyPlant)
+    if plant.is_finalized():
+        raise ConfigError(f"{owner}: the plant is finalized; mount the tool before plant.Finalize()")
     if gripper_joints:
         weld_joints(plant, list(gripper_joints), arm)
     frame = get_frame(plant, flange_frame, arm, "flange_frame") if isinstance(flange_frame, str) else flange_frame
@@ -217,10 +226,12 @@ def carried_bodies(plant, model_instance, body):
 def robot_plant(add_robot):
     """The controller's own model of your robot: ``add_robot(plant) -> RobotModel`` called on a new
     continuous MultibodyPlant (no SceneGraph, no workpiece), finalized. Returns the plant."""
+    function(add_robot, "add_robot", "robot_plant", "add_robot(plant) -> RobotModel")
     plant = MultibodyPlant(0.0)
     robot = add_robot(plant)
     if not isinstance(robot, RobotModel):
-        raise TypeError(f"robot_plant: add_robot must return the RobotModel of mount_tool, got {type(robot).__name__}")
+        raise ArgumentError(f"robot_plant: add_robot must return the RobotModel of mount_tool, got "
+                            f"{type(robot).__name__}")
     plant.Finalize()
     return plant
 
@@ -238,7 +249,7 @@ def apply_contact_defaults(plant, scene_graph, robot, workpiece_geometries, cont
     tool (``robot``: the RobotModel of ``mount_tool``, or the pad's geometry ids) and workpiece
     geometries: the pad's hydroelastic modulus, mesh and dissipation, SAP's relaxation times (0.03 s
     for the pair: about critically damped), friction. Call it before ``plant.Finalize()``."""
-    contact = contact if contact is not None else ContactConfig()
+    contact = instance(contact, "contact", "apply_contact_defaults", ContactConfig, allow_none=True) or ContactConfig()
     contact.validate()
     set_contact_properties(plant, scene_graph, _tool_geometries(robot), contact, pad=True)
     set_contact_properties(plant, scene_graph, list(workpiece_geometries), contact, pad=False)
@@ -439,6 +450,12 @@ def add_hybrid_controller(builder, plant, robot, constraint_space, controller_pl
     Returns a HybridSystems. Every port stays reachable by name for wiring by hand.
     """
     owner = "add_hybrid_controller"
+    instance(builder, "builder", owner, DiagramBuilder)
+    instance(plant, "plant", owner, MultibodyPlant)
+    instance(controller_plant, "controller_plant", owner, MultibodyPlant,
+             what="a finalized MultibodyPlant of the robot alone (robot_plant(add_robot))")
+    if not controller_plant.is_finalized():
+        raise ConfigError(f"{owner}: controller_plant must be finalized (robot_plant(add_robot) does it)")
     if not plant.is_finalized():
         raise ConfigError(f"{owner}: finalize the plant first (plant.Finalize())")
     instance(robot, "robot", owner, RobotModel, what="the RobotModel of mount_tool")
@@ -510,9 +527,10 @@ def add_loggers(builder, systems, period=None):
     ``period``: sample period (s); None logs every publish of the simulator's steps. A controller with
     ``sampled_diagnostics`` is logged from its ``diagnostics`` port (what each tick computed, read
     once). Returns {key: VectorLogSink or (sink, column slice)}; ``read_log`` turns it into arrays."""
+    instance(systems, "systems", "add_loggers", HybridSystems, what="the HybridSystems of add_hybrid_controller")
     controller = systems.controller
     loggers = {}
-    period = 0.0 if period is None else period
+    period = nonnegative(0.0 if period is None else period, "period", "add_loggers", unit="s")
     if getattr(controller, "sampled_diagnostics", False):
         diagnostics = LogVectorOutput(controller.GetOutputPort("diagnostics"), builder, period)
         for name, columns in controller.diagnostic_slices().items():
