@@ -21,7 +21,7 @@ added, as the manipulation course's station helpers (``AddIiwa``, ``AddWsg``) an
     only_tool_touches(plant, scene_graph, robot, workpiece)
     hybrid = add_hybrid_controller(builder, plant, robot, space, robot_plant(add_robot), gains=gains,
                                    control_period=1e-3, desired_velocity=Profile(value=[0.05, 0, 0, 0, 0]),
-                                   desired_force=Profile(value=[-8.0]))
+                                   desired_force=Profile(value=[8.0]))   # on the robot, along grad C
     loggers = add_loggers(builder, hybrid)
     diagram = builder.Build()
     context = diagram.CreateDefaultContext()
