@@ -68,7 +68,7 @@ from drake_hybrid.control.controller import HybridController
 from drake_hybrid.control.gains import ControlMode
 from drake_hybrid.control.phases import ContactPhase
 from drake_hybrid.control.supervision import ContactSupervisor
-from drake_hybrid.core.arguments import function, instance, nonnegative, text
+from drake_hybrid.core.arguments import function, instance, nonnegative, text, vector
 from drake_hybrid.core.errors import ArgumentError, ConfigError
 from drake_hybrid.core.kinematics import EndEffectorKinematics
 from drake_hybrid.scenario.config import ContactConfig, ContactSensorConfig, WristSensorConfig
@@ -412,6 +412,16 @@ def add_sensing(builder, plant, robot, controller, sensor, control_period, senso
     return wrench_sensor, true_wrench, wrench_output, injector, conditioner, wrench_filter
 
 
+def as_profile(command, size, name="command", owner="add_hybrid_controller"):
+    """``command`` as a Profile: a Profile as it is, a sequence of ``size`` numbers as a constant one,
+    None as zeros."""
+    if command is None:
+        return Profile(value=[0.0] * size)
+    if isinstance(command, Profile):
+        return command
+    return Profile(value=vector(command, name, owner, size).tolist())
+
+
 def add_hybrid_controller(builder, plant, robot, constraint_space, controller_plant, gains=None,
                           mode=ControlMode.VELOCITY_FORCE, control_period=None, desired_velocity=None,
                           desired_force=None, source=None, sensor=None, supervision=None, initial_phase=None,
@@ -432,8 +442,8 @@ def add_hybrid_controller(builder, plant, robot, constraint_space, controller_pl
         constraint_space: a ConstraintSpace (chart, C, E_p).
         controller_plant: the controller's own model of the robot (``robot_plant(add_robot)``).
         gains, mode, control_period: of the HybridController (None: continuous, for linearization).
-        desired_velocity, desired_force: Profiles (time profiles, k and m entries; default zero) for a
-            ProfileSource; or ``source``: a system of your own with the output ports desired_velocity,
+        desired_velocity, desired_force: Profiles (time profiles, k and m entries; a list of numbers is a
+            constant one; default zero) for a ProfileSource; or ``source``: a system of your own with the output ports desired_velocity,
             desired_acceleration and desired_force (wired here), or False: you wire the controller's
             desired_* input ports yourself.
         sensor: a ContactSensorConfig (default) or WristSensorConfig: which wrench, and its path (a
@@ -482,8 +492,8 @@ def add_hybrid_controller(builder, plant, robot, constraint_space, controller_pl
     builder.Connect(plant.get_state_output_port(robot.arm), controller.get_estimated_state_input_port())
     builder.Connect(controller.GetOutputPort("actuation"), plant.get_actuation_input_port(robot.arm))
     if source is None:
-        source = ProfileSource(desired_velocity or Profile(value=[0.0] * k),
-                               desired_force or Profile(value=[0.0] * m), k, m)
+        source = ProfileSource(as_profile(desired_velocity, k, "desired_velocity"),
+                               as_profile(desired_force, m, "desired_force"), k, m)
     source = connect_source(builder, plant, robot, source, controller) if source is not False else None
     supervisor = None
     if supervision is not None:
