@@ -198,8 +198,13 @@ def _notes_on(name, notes):
     return [n + 1 for n, note in enumerate(notes or ()) if pattern.search(note)]
 
 
+SCALE_WORDS = {"rows in its units": "the largest command in its units",
+               "run": "the run's command scale (speed or force)"}
+
+
 def _row_text(row, events=(), notes=()):
-    """One row's errors: absolute in its units, % of its command where it has one, settling from contact;
+    """One row's errors: absolute in its units, % of its scale (its command; for a row commanded to zero,
+    the run's speed or force: ``metrics.row_scales``), settling from contact;
     when its settled max falls in or just after a phase of the run, that phase; the numbers of the run's
     ``notes`` that name the row (the ones that say why), if any."""
     units = row["units"]
@@ -227,6 +232,8 @@ def _row_text(row, events=(), notes=()):
     if settle is not None:
         text += (f", within 1 % from {settle:.3f} s after contact on" if np.isfinite(settle)
                  else ", not within 1 % at the end")
+    if row.get("scale_of") in SCALE_WORDS:
+        text += f" (% of {row['scale']:.3g}, {SCALE_WORDS[row['scale_of']]})"
     return text + pointer
 
 

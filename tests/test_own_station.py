@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 import sympy
 
-from pydrake.geometry import Ellipsoid
+from pydrake.geometry import Box, Ellipsoid
 from pydrake.math import RigidTransform, RotationMatrix
 from pydrake.multibody.parsing import Parser
 from pydrake.multibody.plant import AddMultibodyPlant
@@ -20,10 +20,12 @@ from pydrake.systems.framework import DiagramBuilder
 from drake_hybrid import ConstraintSpace, GivenVelocityProjection, PoseChart, surface_constraint
 from drake_hybrid.analysis.linearization import design_time_constant, linearize_at_contact
 from drake_hybrid.control.gains import ControlMode, HybridGains
-from drake_hybrid.core.errors import ArgumentError, ConfigError, ForceSignError, OffConstraintError
+from drake_hybrid.core.errors import (ArgumentError, ConfigError, ForceSignError, OffConstraintError,
+                                      StartCollisionError)
 from drake_hybrid.scenario.builder import build_scenario
 from drake_hybrid.scenario.robots import prepare_model
-from drake_hybrid.scenario.start import rest_contact_wrench, set_initial_conditions, solve_contact_start
+from drake_hybrid.scenario.contact_start import rest_contact_wrench, solve_contact_start
+from drake_hybrid.scenario.start import set_initial_conditions
 from drake_hybrid.scenario.station import (LOG_KEYS, add_hybrid_controller, add_loggers, add_rigid_workpiece,
                                            apply_contact_defaults, default_plant_config, mount_tool,
                                            only_tool_touches, read_log, robot_plant)
@@ -49,7 +51,7 @@ def start_pose(dx=-0.03, dy=0.007):
                           CENTER + [dx, dy, A[2] * np.sqrt(1 - (dx / A[0])**2 - (dy / A[1])**2)])
 
 
-def build(z1, time_step, control_period, speed=SPEED, force=FORCE, finalize=True):
+def build(z1, time_step, control_period, speed=SPEED, force=FORCE, finalize=True, obstacle=None):
     def add_robot(plant):
         arm = Parser(plant).AddModels(z1.model)[0]
         return mount_tool(plant, arm, "link06", RigidTransform(RotationMatrix.MakeYRotation(np.pi / 2), [0.02, 0, 0]),
@@ -64,6 +66,8 @@ def build(z1, time_step, control_period, speed=SPEED, force=FORCE, finalize=True
     plant, scene_graph = AddMultibodyPlant(default_plant_config(time_step), builder)
     robot = add_robot(plant)
     workpiece = add_rigid_workpiece(plant, Ellipsoid(*AXES), RigidTransform(CENTER))
+    if obstacle is not None:                      # a fixture elsewhere in the scene, e.g. where a link passes
+        workpiece += add_rigid_workpiece(plant, Box(0.05, 0.05, 0.05), obstacle, name="fixture")
     apply_contact_defaults(plant, scene_graph, robot, workpiece)
     if not finalize:
         return builder, plant, robot, space, add_robot
@@ -116,6 +120,19 @@ def test_a_start_off_the_surface_is_refused(z1):
     off = RigidTransform(start_pose().rotation(), start_pose().translation() + [0, 0, 0.01])
     with pytest.raises(OffConstraintError, match="solve_contact_start: start_pose"):
         solve_contact_start(diagram, diagram.CreateDefaultContext(), hybrid, off, GUESS)
+
+
+def test_a_start_with_a_link_through_the_scene_is_refused(z1):
+    """The collision filters let only the tool touch; a link through a fixture at the start is named."""
+    diagram, hybrid, _ = build(z1, 1e-3, 1e-3)
+    context = diagram.CreateDefaultContext()
+    q0 = solve_contact_start(diagram, context, hybrid, start_pose(), GUESS)
+    plant = hybrid.plant
+    elbow = plant.GetBodyByName("link03").EvalPoseInWorld(plant.GetMyContextFromRoot(context))
+    diagram, hybrid, _ = build(z1, 1e-3, 1e-3, obstacle=elbow)
+    with pytest.raises(StartCollisionError, match="body 'link0[2-4]'.* mm into fixture"):
+        solve_contact_start(diagram, diagram.CreateDefaultContext(), hybrid, start_pose(), GUESS)
+    assert q0 is not None
 
 
 def test_blocks_name_what_is_wrong(z1):

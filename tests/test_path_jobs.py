@@ -68,8 +68,10 @@ def test_a_job_approaches_presses_follows_its_path_and_lifts_off(job, request):
     # segment's first five design time constants have passed.
     assert report["max_path_error_along_surface_mm"] < 0.1
     assert report["max_force_error_percent"] < 2.0
-    # The line changes (docs/paths.md): the discrete plant's half-step lead, h v / 2 = 25 um at 1 ms, 5 cm/s.
-    assert report["line_change_max_path_error_along_surface_mm"] < 0.03
+    # The line changes (docs/paths.md): the discrete plant's half-step lead, h v / 2 = 25 um at 1 ms, 5 cm/s;
+    # on the bump its tessellated mesh's tangential force adds up to about 10 um (docs/paths.md's table: 0.033
+    # mm in the full job; 0.0336 in this short one, with sampled or unsampled contact ports alike).
+    assert report["line_change_max_path_error_along_surface_mm"] < {"sphere_job": 0.03, "bump_job": 0.04}[job]
     # The rest of the distance from the reference point is the pad's compression along the normal.
     _, _, normal = error_parts(log)
     settled = (t > report["path_start_time"] + 0.5) & (t < report["lift_off_time"])

@@ -10,7 +10,7 @@ import pytest
 
 from drake_hybrid.cli import _residual_text, _row_text, main
 from drake_hybrid.control.phases import ContactPhase
-from drake_hybrid.experiments.metrics import contact_time, row_errors, row_units
+from drake_hybrid.experiments.metrics import contact_time, row_errors, row_units, worst
 from drake_hybrid.experiments.simulation import predicted_tracking, simulate
 from drake_hybrid.scenario.tasks import TASKS, get_task
 
@@ -29,17 +29,24 @@ def test_row_units_split_a_tasks_label_per_row():
 
 
 def test_each_row_is_in_its_own_units_and_percent_of_its_own_command():
-    """A 1 mm/s error on a 0.1 m/s row is 1 %, whatever a rad/s row next to it does; a row commanded
-    to zero gets no % (no scale in its units), only its absolute error."""
+    """A 1 mm/s error on a 0.1 m/s row is 1 %, whatever the other rows do; a row commanded to zero is
+    judged against the largest command in its units (a cross-track m/s row against the speed), else
+    against the run's command scale: no row drops out of the headline."""
     t = np.linspace(0.0, 1.0, 101)
-    desired = np.column_stack([np.full_like(t, 0.1), np.zeros_like(t)])            # m/s, rad/s
-    error = np.column_stack([np.full_like(t, 1e-3), np.full_like(t, 0.5)])        # 1 % and 0.5 rad/s
-    rows = row_errors(t, error, desired, ["x-dot", "theta-dot"], ["m/s", "rad/s"], since=0.0, settle_after=0.5)
+    desired = np.column_stack([np.full_like(t, 0.1), np.zeros_like(t), np.zeros_like(t)])     # m/s, m/s, rad/s
+    error = np.column_stack([np.full_like(t, 1e-3), np.full_like(t, 3.2e-3), np.full_like(t, 5e-4)])
+    rows = row_errors(t, error, desired, ["x-dot", "y-dot", "theta-dot"], ["m/s", "m/s", "rad/s"], since=0.0,
+                      settle_after=0.5)
     assert rows[0]["units"] == "m/s" and rows[0]["final_error_percent"] == pytest.approx(1.0)
     assert rows[0]["max_error_percent_after_5_time_constants"] == pytest.approx(1.0)
-    assert rows[1]["units"] == "rad/s" and rows[1]["final_error"] == pytest.approx(0.5)
-    assert rows[1]["final_error_percent"] is None and rows[1]["settling_time_1_percent"] is None
-    # The old headline, |(1e-3, 0.5)| / 0.1, would have read 500 %.
+    assert rows[0]["scale_of"] == "command" and rows[0]["scale"] == pytest.approx(0.1)
+    # the cross-track row, commanded zero: 3.2 mm/s is 3.2 % of the 0.1 m/s slide
+    assert rows[1]["scale_of"] == "rows in its units" and rows[1]["final_error_percent"] == pytest.approx(3.2)
+    assert rows[1]["settling_time_1_percent"] == math.inf
+    # no rad/s command: the run's command scale, |(0.1, 0, 0)|
+    assert rows[2]["scale_of"] == "run" and rows[2]["final_error"] == pytest.approx(5e-4)
+    assert rows[2]["final_error_percent"] == pytest.approx(0.5)
+    assert worst(rows, "max_error_percent_after_5_time_constants") == pytest.approx(3.2)
 
 
 def test_settling_is_counted_from_contact():

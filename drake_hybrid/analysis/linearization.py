@@ -375,7 +375,7 @@ def linearize_continuous(config, tolerance=0.05, bandwidth_hz=200.0, stages=None
 def linearize_at_contact(diagram, root_context, systems, tolerance=0.05, jacobian_tolerance=JACOBIAN_TOLERANCE,
                          stages=None, task=None, what="your diagram"):
     """Linearize your continuous closed loop at the contact equilibrium ``root_context`` holds (e.g.
-    after ``scenario.start.solve_contact_start``), with what ``drake-hybrid analyze`` reports.
+    after ``scenario.contact_start.solve_contact_start``), with what ``drake-hybrid analyze`` reports.
 
     ``systems``: the ``HybridSystems`` of ``scenario.station.add_hybrid_controller`` (or a built
     ``Scenario``). The diagram must be purely continuous (a plant with ``time_step=0``, a controller

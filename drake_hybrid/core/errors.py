@@ -74,6 +74,12 @@ class OffConstraintError(DrakeHybridError):
     configuration off the constraint)."""
 
 
+class StartCollisionError(OffConstraintError):
+    """At the start, a part of the robot other than its tool penetrates the workpiece or the scene
+    (the collision filters that let only the tool touch hide it from the simulation); the message
+    names the bodies and the geometries."""
+
+
 class UnknownFrameError(DrakeHybridError):
     """A frame named by the user (a flange, a tool frame) is not in the model; the message lists
     the model's frames."""

@@ -50,6 +50,36 @@ def row_commands(desired):
     return np.max(np.abs(np.asarray(desired, dtype=float)), axis=0)
 
 
+def run_scale(desired):
+    """The run's command scale: max over the samples of |desired| (the norm across the rows; the
+    summary's ``command_scales``: the speed, the force)."""
+    desired = np.asarray(desired, dtype=float).reshape(len(desired), -1)
+    return float(np.max(np.linalg.norm(desired, axis=1))) if desired.size else 0.0
+
+
+def row_scales(desired, units=None, fallback="run"):
+    """What each row's % figures are of (no row may drop out of the worst-row figures): its command
+    (``row_commands``); for a row commanded to zero, the largest command of the rows in its units
+    (``units``, one string per row: the cross-track m/s row of a slide against the slide's speed), else
+    the run's scale (``run_scale``: the norm of the whole command, the speed or the force the run
+    commands, the plots' scale; ``fallback="unit"`` skips it, as the sweep's verdict does to keep its
+    tolerance in each row's units), else one of its units. Returns (scales, sources), each source
+    "command", "rows in its units", "run" or "unit" (no % figure is given against a unit)."""
+    commands, scale = row_commands(desired), run_scale(desired)
+    units = list(units) if units is not None else [None] * len(commands)
+    scales, sources = [], []
+    for command, unit in zip(commands, units):
+        same = [c for c, u in zip(commands, units) if unit is not None and u == unit and c > 0]
+        run = scale if fallback == "run" else 0.0
+        for value, source in ((command, "command"), (max(same, default=0.0), "rows in its units"), (run, "run"),
+                              (1.0, "unit")):
+            if value > 0:
+                scales.append(float(value))
+                sources.append(source)
+                break
+    return np.array(scales), sources
+
+
 def last_valid(values):
     """The last row of ``values`` (samples x columns) without NaN (None if every row has one): a sample
     taken while the measured wrench was invalid reads NaN (control.law_system) and is no figure."""
@@ -63,47 +93,52 @@ def invalid_samples(values):
     return int(np.isnan(np.asarray(values, dtype=float)).any(axis=1).sum())
 
 
-def max_row_errors(t, error, desired, after):
+def max_row_errors(t, error, desired, after, units=None, fallback="run"):
     """Per row, over t >= ``after``: (max |e_i| in the row's units, or None if no sample is that late;
-    that in % of the row's command, or None for a row commanded to zero). The one definition of a
-    row's error that ``row_errors`` (summary.json) and the sweep's verdict share. Samples that read
-    NaN (the wrench invalid then) are left out."""
+    that in % of the row's scale, ``row_scales(desired, units, fallback)``: its command, or for a row
+    commanded to zero the largest command in its units or the run's speed or force; None against one
+    of its units). The one definition of a row's error that ``row_errors`` (summary.json) and the
+    sweep's verdict share. Samples that read NaN (the wrench invalid then) are left out."""
     window = t >= after
     figures = []
-    for e, command in zip(np.abs(np.asarray(error, dtype=float)).T, row_commands(desired)):
+    scales, sources = row_scales(desired, units, fallback)
+    for e, scale, source in zip(np.abs(np.asarray(error, dtype=float)).T, scales, sources):
         values = e[window & ~np.isnan(e)]
         worst = float(np.max(values)) if values.size else None
-        figures.append((worst, None if worst is None or command == 0 else 100.0 * worst / float(command)))
+        figures.append((worst, None if worst is None or source == "unit" else 100.0 * worst / float(scale)))
     return figures
 
 
 def row_errors(t, error, desired, names, units, since, settle_after):
-    """Per-row error figures, each in the row's own units and in % of that row's command.
+    """Per-row error figures, each in the row's own units and in % of that row's scale
+    (``row_scales``): its command, or, for a row commanded to zero, the largest command in its units,
+    else the run's scale (the speed or the force the run commands: the cross-track row of a slide
+    against the slide's speed), so that no row drops out of the worst-row figures.
 
     ``since``: when the law took over (contact); ``settle_after``: when the design says the
-    transient is over (contact + 5 design time constants). A row commanded to zero has no % figures
-    and no settling time (there is no scale in its units to settle to); its absolute errors are given.
-    Settling times are counted from ``since``. Samples that read NaN (the measured wrench invalid
-    then: no measurement) are left out of every figure.
+    transient is over (contact + 5 design time constants). Settling times (within 1 % of the scale)
+    are counted from ``since``. Samples that read NaN (the measured wrench invalid then: no
+    measurement) are left out of every figure.
     """
     rows = []
     commands = row_commands(desired)
-    settled = max_row_errors(t, error, desired, settle_after)
+    scales, sources = row_scales(desired, units)
+    settled = max_row_errors(t, error, desired, settle_after, units)
     last = last_valid(error)                   # the final figures: the last sample that is a measurement
     for i in range(error.shape[1]):
-        e, command = np.abs(error[:, i]), float(commands[i])
+        e, command, scale = np.abs(error[:, i]), float(commands[i]), float(scales[i])
         valid = ~np.isnan(e)
         late = (t >= settle_after) & valid
         worst_time = float(t[late][np.argmax(e[late])]) if late.any() else None
-        if command > 0 and np.isfinite(since):
+        if np.isfinite(since):
             active = (t >= since) & valid
-            settle = settling_time(t[active], e[active], 0.01 * command) - since if active.any() else None
+            settle = settling_time(t[active], e[active], 0.01 * scale) - since if active.any() else None
         else:
             settle = None
         final_error = None if last is None else float(last[i])
-        final_percent = None if final_error is None or command == 0 else 100.0 * abs(final_error) / command
+        final_percent = None if final_error is None or sources[i] == "unit" else 100.0 * abs(final_error) / scale
         rows.append({"name": names[i] if i < len(names) else f"row {i + 1}", "units": units[i],
-                     "command": command, "final_error": final_error,
+                     "command": command, "scale": scale, "scale_of": sources[i], "final_error": final_error,
                      "final_error_percent": final_percent,
                      "max_error_after_5_time_constants": settled[i][0],
                      "max_error_percent_after_5_time_constants": settled[i][1],

@@ -42,7 +42,7 @@ from drake_hybrid.analysis.linearization import controller_prediction, design_ti
 from drake_hybrid.control.gains import ControlMode
 from drake_hybrid.core.progress import quiet
 from drake_hybrid.experiments.metrics import (contact_time, impedance_check, invalid_samples, last_valid, max_after,
-                                           row_errors, row_units, worst)
+                                           row_errors, row_units, run_scale, worst)
 from drake_hybrid.experiments.path_report import before_lift_off, path_report
 from drake_hybrid.scenario.builder import build_scenario
 from drake_hybrid.scenario.path_job import PATH_LOGS
@@ -238,8 +238,7 @@ def summarize(scenario, log, wall_time):
     k, m = controller.velocity_size, controller.force_size
     predicted = controller_prediction(controller)
     tau = design_time_constant(gains, controller.mode, controller.kinematic_rows)
-    speed_scale = float(np.max(np.linalg.norm(log["desired_velocity"], axis=1)))
-    force_scale = float(np.max(np.linalg.norm(log["desired_force"], axis=1)))
+    speed_scale, force_scale = run_scale(log["desired_velocity"]), run_scale(log["desired_force"])
     labels = scenario.task.labels(scenario.config)
     start = contact_time(log)
     settle_after = start + 5 * tau

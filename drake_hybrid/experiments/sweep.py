@@ -88,7 +88,7 @@ from drake_hybrid.control.gains import ControlMode
 from drake_hybrid.core.errors import GainError
 from drake_hybrid.core.locks import process_alive
 from drake_hybrid.core.progress import quiet
-from drake_hybrid.experiments.metrics import max_row_errors, row_commands
+from drake_hybrid.experiments.metrics import max_row_errors, row_scales
 from drake_hybrid.experiments.path_report import before_lift_off
 from drake_hybrid.experiments.simulation import RunStopped, simulate
 from drake_hybrid.experiments.config_paths import apply_parameters, set_config_value
@@ -153,12 +153,13 @@ def _discrete_verdict(worst_real, step_check, margin):
 def steady_rows(log, summary, what, after, tolerance):
     """The steady-window verdict of one group of rows (``what``: "velocity" or "force"), per row in
     its own units (``metrics.max_row_errors``, as summary.json's rows): each row's max |e_i| over
-    t >= ``after`` within ``tolerance`` times its command, or times one of its units where it is
-    commanded to zero. Returns (settled, the worst row's (max |e_i|, % of its command or None,
+    t >= ``after`` within ``tolerance`` times its scale (``metrics.row_scales``: its command, or where
+    it is commanded to zero the largest command in its units, else one of its units). Returns (settled, the worst row's (max |e_i|, % of its command or None,
     "name (units)", index)), the worst row being the one furthest out relative to its scale."""
     desired = log.get(f"true_desired_{what}", log[f"desired_{what}"])     # the true rows' command (pseudo-velocity)
-    figures = max_row_errors(log["t"], log[f"{what}_error"], desired, after)
-    scales = [command if command > 0 else 1.0 for command in row_commands(desired)]
+    units = [row["units"] for row in summary[f"{what}_rows"]]
+    figures = max_row_errors(log["t"], log[f"{what}_error"], desired, after, units, fallback="unit")
+    scales = row_scales(desired, units, fallback="unit")[0]
     ratios = [error / scale for (error, _), scale in zip(figures, scales)]
     worst = int(np.argmax(ratios))
     row = summary[f"{what}_rows"][worst]
@@ -167,12 +168,12 @@ def steady_rows(log, summary, what, after, tolerance):
 
 
 def peak_row_force(log, summary):
-    """The force row whose peak |F_i| over the run is largest relative to its scale (its command, or one
-    of its units where it is commanded to zero: ``steady_rows``'s scale): (that peak in the row's units,
+    """The force row whose peak |F_i| over the run is largest relative to its scale (``metrics.row_scales``,
+    as ``steady_rows``'s): (that peak in the row's units,
     "name (units)"). Per row, never a norm across rows (the crank's mix N and N m)."""
     force = np.abs(np.asarray(log["force"], dtype=float)).reshape(len(log["t"]), -1)
     peaks = np.max(force, axis=0)
-    scales = np.array([command if command > 0 else 1.0 for command in row_commands(log["desired_force"])])
+    scales = row_scales(log["desired_force"], [row["units"] for row in summary["force_rows"]], fallback="unit")[0]
     worst = int(np.argmax(peaks / scales))
     row = summary["force_rows"][worst]
     return float(peaks[worst]), f"{row['name']} ({row['units']})"

@@ -21,7 +21,7 @@ added, as the manipulation course's station helpers (``AddIiwa``, ``AddWsg``) an
     only_tool_touches(plant, scene_graph, robot, workpiece)
     hybrid = add_hybrid_controller(builder, plant, robot, space, robot_plant(add_robot), gains=gains,
                                    control_period=1e-3, desired_velocity=Profile(value=[0.05, 0, 0, 0, 0]),
-                                   desired_force=Profile(value=[8.0]))   # pressing: on the robot along +grad C
+                                   desired_force=Profile(value=[8.0]))   # on the robot, along grad C
     loggers = add_loggers(builder, hybrid)
     diagram = builder.Build()
     context = diagram.CreateDefaultContext()
@@ -46,7 +46,7 @@ The blocks:
                              supervisor) in one call, wired; returns a ``HybridSystems``
 ``add_loggers``, ``read_log``  every signal of the run, keyed by ``LOG_KEYS`` (the ports' names)
 
-and ``scenario.start.solve_contact_start`` (pressing with F_d, in your context).
+and ``scenario.contact_start.solve_contact_start`` (pressing with F_d, in your context).
 
 Size: the blocks share one vocabulary (the RobotModel of the mounted tool, the HybridSystems of the
 controller) and each is a few lines; apart they would import each other.
@@ -61,13 +61,14 @@ import numpy as np
 from pydrake.math import RigidTransform
 from pydrake.multibody.parsing import Parser
 from pydrake.multibody.plant import MultibodyPlant, MultibodyPlantConfig
+from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import LogVectorOutput
 
 from drake_hybrid.control.controller import HybridController
 from drake_hybrid.control.gains import ControlMode
 from drake_hybrid.control.phases import ContactPhase
 from drake_hybrid.control.supervision import ContactSupervisor
-from drake_hybrid.core.arguments import instance
+from drake_hybrid.core.arguments import function, instance, nonnegative, text, vector
 from drake_hybrid.core.errors import ArgumentError, ConfigError
 from drake_hybrid.core.kinematics import EndEffectorKinematics
 from drake_hybrid.scenario.config import ContactConfig, ContactSensorConfig, WristSensorConfig
@@ -88,6 +89,7 @@ def default_plant_config(time_step=1.0e-3):
     """The package's MultibodyPlantConfig: SAP steps of ``time_step`` (0: continuous) with hydroelastic
     contact; a Drake struct, so ``ApplyMultibodyPlantConfig`` / ``AddMultibodyPlant`` take it and your
     own settings can replace any field."""
+    time_step = nonnegative(time_step, "time_step", "default_plant_config", unit="s")
     return MultibodyPlantConfig(time_step=time_step, contact_model="hydroelastic", discrete_contact_approximation="sap")
 
 
@@ -105,11 +107,14 @@ def weld_joints(plant, joint_names, model_instance=None):
     **every** constraint of the plant is removed first: call this before adding
     constraints of your own. Returns the new WeldJoints.
     """
+    if isinstance(joint_names, str):
+        joint_names = [joint_names]
+    joint_names = [text(name, "joint_names[]", "weld_joints") for name in joint_names]
     joints = []
     for name in joint_names:
         owner = () if model_instance is None else (model_instance,)
         if not plant.HasJointNamed(name, *owner):
-            indices = plant.GetJointIndices(*owner) if owner else range(plant.num_joints())
+            indices = plant.GetJointIndices(*owner)
             known = sorted(plant.get_joint(index).name() for index in indices)
             where = "the plant" if not owner else f"model '{plant.GetModelInstanceName(model_instance)}'"
             raise ArgumentError(f"weld_joints: {where} has no joint '{name}'; its joints: {', '.join(known)}")
@@ -136,7 +141,8 @@ def add_actuators(plant, model_instance, effort_limits=None):
     """One actuator per single-dof joint of ``model_instance`` that has none (a URDF without
     transmissions), with the effort limit ``effort_limits[joint name]`` (e.g. from
     ``urdf_effort_limits``; inf where not given). Returns the actuator names."""
-    effort_limits = effort_limits or {}
+    effort_limits = instance(effort_limits, "effort_limits", "add_actuators", dict,
+                             what="a dict {joint name: effort limit}", allow_none=True) or {}
     actuated = {plant.get_joint_actuator(index).joint().index() for index in plant.GetJointActuatorIndices()}
     names = []
     for index in plant.GetJointIndices(model_instance):
@@ -152,8 +158,8 @@ GRIPPER_CHOICES = ("weld", "remove")
 
 
 def mount_tool(plant, arm, flange_frame, X_flange_tool=None, gripper_joints=(), gripper="weld"):
-    """Mount the compliant ball pad (``models/pad_tool.sdf``: a 20 mm ball, its centre 0.05 m along the
-    tool's +z, the controlled point) on ``flange_frame`` of ``arm`` at ``X_flange_tool`` (default: the
+    """Mount the compliant ball pad (``models/pad_tool.sdf``: a ball of radius 20 mm, its centre 0.05 m
+    along the tool's +z, the controlled point) on ``flange_frame`` of ``arm`` at ``X_flange_tool`` (default: the
     identity), before ``Finalize``.
 
     Args:
@@ -166,8 +172,10 @@ def mount_tool(plant, arm, flange_frame, X_flange_tool=None, gripper_joints=(), 
             their zero position: the law needs one actuator per joint it controls.
         gripper: "weld": the gripper stays a rigid part of the wrist, drawn and colliding like the arm's
             links (``only_tool_touches`` filters its contact with the workpiece as theirs: keep it
-            clear); "remove": also its collision geometries are dropped (``RobotModel.passive_geometries``,
-            removed by ``only_tool_touches``): a gripper your model has but your station does not.
+            clear; ``scenario.contact_start.solve_contact_start`` refuses a start where it is not); "remove":
+            the collision geometries of every body the flange carries (the gripper's fixed and moving
+            parts; ``RobotModel.passive_geometries``, dropped by ``only_tool_touches``): a gripper your
+            model has but your station does not (it stays drawn).
 
     Returns the RobotModel: the arm and tool instances, the end-effector frame ``pad_center`` and point
     (its origin), the wrist weld (where a wrist force/torque sensor sits), the pad's geometries.
@@ -178,18 +186,19 @@ def mount_tool(plant, arm, flange_frame, X_flange_tool=None, gripper_joints=(), 
         raise ConfigError(f"mount_tool: gripper must be one of {', '.join(GRIPPER_CHOICES)}, got {gripper!r}")
     if isinstance(gripper_joints, str):
         gripper_joints = [gripper_joints]
-    removed = []
+    instance(plant, "plant", owner, MultibodyPlant)
+    if plant.is_finalized():
+        raise ConfigError(f"{owner}: the plant is finalized; mount the tool before plant.Finalize()")
     if gripper_joints:
-        gripper_bodies = {plant.GetJointByName(name, arm).child_body().index()
-                          for name in gripper_joints if plant.HasJointNamed(name, arm)}
         weld_joints(plant, list(gripper_joints), arm)
-        if gripper == "remove" and plant.geometry_source_is_registered():
-            removed = [geometry for index in gripper_bodies
-                       for geometry in plant.GetCollisionGeometriesForBody(plant.get_body(index))]
-    parser = ConfigureParser(Parser(plant))
     frame = get_frame(plant, flange_frame, arm, "flange_frame") if isinstance(flange_frame, str) else flange_frame
     if not hasattr(frame, "body"):
         raise ConfigError(f"mount_tool: flange_frame must be a Frame of the arm or its name, got {flange_frame!r}")
+    removed = []
+    if gripper == "remove" and plant.geometry_source_is_registered():
+        removed = [geometry for body in carried_bodies(plant, arm, frame.body())
+                   for geometry in plant.GetCollisionGeometriesForBody(body)]
+    parser = ConfigureParser(Parser(plant))
     tool, weld, pad = add_pad_tool(plant, parser, frame, X_flange_tool if X_flange_tool is not None
                                    else RigidTransform())
     return RobotModel(arm=arm, model_instances=[arm, tool], end_effector_frame="pad_center",
@@ -197,13 +206,32 @@ def mount_tool(plant, arm, flange_frame, X_flange_tool=None, gripper_joints=(), 
                       passive_geometries=removed, only_pad_contact=True)
 
 
+def carried_bodies(plant, model_instance, body):
+    """The bodies of ``model_instance`` that ``body`` carries: outboard of it in the joint tree (before or
+    after ``Finalize``), ``body`` itself excluded."""
+    parent = {}
+    for index in plant.GetJointIndices(model_instance):
+        joint = plant.get_joint(index)
+        parent[joint.child_body().index()] = joint.parent_body().index()
+    carried = []
+    for index in plant.GetBodyIndices(model_instance):
+        ancestor = parent.get(index)
+        while ancestor is not None and ancestor != body.index():
+            ancestor = parent.get(ancestor)
+        if ancestor == body.index():
+            carried.append(plant.get_body(index))
+    return carried
+
+
 def robot_plant(add_robot):
     """The controller's own model of your robot: ``add_robot(plant) -> RobotModel`` called on a new
     continuous MultibodyPlant (no SceneGraph, no workpiece), finalized. Returns the plant."""
+    function(add_robot, "add_robot", "robot_plant", "add_robot(plant) -> RobotModel")
     plant = MultibodyPlant(0.0)
     robot = add_robot(plant)
     if not isinstance(robot, RobotModel):
-        raise TypeError(f"robot_plant: add_robot must return the RobotModel of mount_tool, got {type(robot).__name__}")
+        raise ArgumentError(f"robot_plant: add_robot must return the RobotModel of mount_tool, got "
+                            f"{type(robot).__name__}")
     plant.Finalize()
     return plant
 
@@ -221,7 +249,7 @@ def apply_contact_defaults(plant, scene_graph, robot, workpiece_geometries, cont
     tool (``robot``: the RobotModel of ``mount_tool``, or the pad's geometry ids) and workpiece
     geometries: the pad's hydroelastic modulus, mesh and dissipation, SAP's relaxation times (0.03 s
     for the pair: about critically damped), friction. Call it before ``plant.Finalize()``."""
-    contact = contact if contact is not None else ContactConfig()
+    contact = instance(contact, "contact", "apply_contact_defaults", ContactConfig, allow_none=True) or ContactConfig()
     contact.validate()
     set_contact_properties(plant, scene_graph, _tool_geometries(robot), contact, pad=True)
     set_contact_properties(plant, scene_graph, list(workpiece_geometries), contact, pad=False)
@@ -384,6 +412,16 @@ def add_sensing(builder, plant, robot, controller, sensor, control_period, senso
     return wrench_sensor, true_wrench, wrench_output, injector, conditioner, wrench_filter
 
 
+def as_profile(command, size, name="command", owner="add_hybrid_controller"):
+    """``command`` as a Profile: a Profile as it is, a sequence of ``size`` numbers as a constant one,
+    None as zeros."""
+    if command is None:
+        return Profile(value=[0.0] * size)
+    if isinstance(command, Profile):
+        return command
+    return Profile(value=vector(command, name, owner, size).tolist())
+
+
 def add_hybrid_controller(builder, plant, robot, constraint_space, controller_plant, gains=None,
                           mode=ControlMode.VELOCITY_FORCE, control_period=None, desired_velocity=None,
                           desired_force=None, source=None, sensor=None, supervision=None, initial_phase=None,
@@ -404,8 +442,8 @@ def add_hybrid_controller(builder, plant, robot, constraint_space, controller_pl
         constraint_space: a ConstraintSpace (chart, C, E_p).
         controller_plant: the controller's own model of the robot (``robot_plant(add_robot)``).
         gains, mode, control_period: of the HybridController (None: continuous, for linearization).
-        desired_velocity, desired_force: Profiles (time profiles, k and m entries; default zero) for a
-            ProfileSource; or ``source``: a system of your own with the output ports desired_velocity,
+        desired_velocity, desired_force: Profiles (time profiles, k and m entries; a list of numbers is a
+            constant one; default zero) for a ProfileSource; or ``source``: a system of your own with the output ports desired_velocity,
             desired_acceleration and desired_force (wired here), or False: you wire the controller's
             desired_* input ports yourself.
         sensor: a ContactSensorConfig (default) or WristSensorConfig: which wrench, and its path (a
@@ -422,6 +460,12 @@ def add_hybrid_controller(builder, plant, robot, constraint_space, controller_pl
     Returns a HybridSystems. Every port stays reachable by name for wiring by hand.
     """
     owner = "add_hybrid_controller"
+    instance(builder, "builder", owner, DiagramBuilder)
+    instance(plant, "plant", owner, MultibodyPlant)
+    instance(controller_plant, "controller_plant", owner, MultibodyPlant,
+             what="a finalized MultibodyPlant of the robot alone (robot_plant(add_robot))")
+    if not controller_plant.is_finalized():
+        raise ConfigError(f"{owner}: controller_plant must be finalized (robot_plant(add_robot) does it)")
     if not plant.is_finalized():
         raise ConfigError(f"{owner}: finalize the plant first (plant.Finalize())")
     instance(robot, "robot", owner, RobotModel, what="the RobotModel of mount_tool")
@@ -448,8 +492,8 @@ def add_hybrid_controller(builder, plant, robot, constraint_space, controller_pl
     builder.Connect(plant.get_state_output_port(robot.arm), controller.get_estimated_state_input_port())
     builder.Connect(controller.GetOutputPort("actuation"), plant.get_actuation_input_port(robot.arm))
     if source is None:
-        source = ProfileSource(desired_velocity or Profile(value=[0.0] * k),
-                               desired_force or Profile(value=[0.0] * m), k, m)
+        source = ProfileSource(as_profile(desired_velocity, k, "desired_velocity"),
+                               as_profile(desired_force, m, "desired_force"), k, m)
     source = connect_source(builder, plant, robot, source, controller) if source is not False else None
     supervisor = None
     if supervision is not None:
@@ -493,9 +537,10 @@ def add_loggers(builder, systems, period=None):
     ``period``: sample period (s); None logs every publish of the simulator's steps. A controller with
     ``sampled_diagnostics`` is logged from its ``diagnostics`` port (what each tick computed, read
     once). Returns {key: VectorLogSink or (sink, column slice)}; ``read_log`` turns it into arrays."""
+    instance(systems, "systems", "add_loggers", HybridSystems, what="the HybridSystems of add_hybrid_controller")
     controller = systems.controller
     loggers = {}
-    period = 0.0 if period is None else period
+    period = nonnegative(0.0 if period is None else period, "period", "add_loggers", unit="s")
     if getattr(controller, "sampled_diagnostics", False):
         diagnostics = LogVectorOutput(controller.GetOutputPort("diagnostics"), builder, period)
         for name, columns in controller.diagnostic_slices().items():

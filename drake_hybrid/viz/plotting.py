@@ -70,7 +70,10 @@ def _set_log_limits(ax, measured):
         ax.set_ylim(max(bottom, 10.0 ** -_LOG_DECADES * top) / 2, 2 * top)
 
 
-def _tracking_axes(ax_values, ax_errors, t, actual, desired, predicted, labels, what, units=(), held=()):
+ZERO_ROW_SCALES = {"rows in its units": "the largest command in its units", "run": "the run's command scale"}
+
+
+def _tracking_axes(ax_values, ax_errors, t, actual, desired, predicted, labels, what, units=(), held=(), scales=()):
     held = set(held)
     errors = np.abs(actual - desired)
     errors[:, sorted(held)] = np.nan                # a held row has no command, hence no error to draw
@@ -97,8 +100,12 @@ def _tracking_axes(ax_values, ax_errors, t, actual, desired, predicted, labels, 
                                label=None if designed_labelled else "designed error decay")
             designed_labelled = True
         command = float(np.max(np.abs(desired[:, i])))
+        scale, source = scales[i] if i < len(scales) else (None, None)
         if command > 0:
             ax_errors.axhline(0.01 * command, color=color, lw=0.8, ls="-.", label=f"1 % of the {label} command")
+        elif source in ZERO_ROW_SCALES:        # a row commanded to zero: 1 % of the scale the summary judges it by
+            ax_errors.axhline(0.01 * scale, color=color, lw=0.8, ls="-.",
+                              label=f"1 % of {ZERO_ROW_SCALES[source]} ({label} commanded 0)")
     # The axis spans the measured errors (at most 8 decades): a designed decay far below them is cut.
     _set_log_limits(ax_errors, measured)
     ax_errors.set_xlabel("time t (s)")
@@ -144,7 +151,8 @@ def tracking_figure(log, summary, predicted, what, labels=(), units="", note=Non
     """Measured, commanded and designed ``what`` ("velocity" or "force") and the error on a log scale.
 
     Every row in its own units; the designed response starts at contact (``summary["contact_time"]``);
-    dash-dot lines: 1 % of each row's command; dotted: contact + five design time constants; shaded
+    dash-dot lines: 1 % of each row's command (of a row commanded to zero: 1 % of the scale the summary
+    judges it by, ``metrics.row_scales``); dotted: contact + five design time constants; shaded
     spans and dashed lines: the run's phases (``summary["events"]``). Under the title: what the force's
     first samples are (a start in contact), and ``note`` (the task's words on its transients).
 
@@ -162,7 +170,9 @@ def tracking_figure(log, summary, predicted, what, labels=(), units="", note=Non
         predicted = np.asarray(predicted) - log["desired_velocity"] + desired
     held = [i for i, row in enumerate(summary.get(f"{what}_rows") or []) if row.get("held")]
     units_per_row = row_units(units or "", actual.shape[1])
-    _tracking_axes(ax_values, ax_errors, log["t"], actual, desired, predicted, labels, what, units_per_row, held)
+    scales = [(row.get("scale"), row.get("scale_of")) for row in summary.get(f"{what}_rows") or []]
+    _tracking_axes(ax_values, ax_errors, log["t"], actual, desired, predicted, labels, what, units_per_row, held,
+                   scales)
     unit_text = " | ".join(dict.fromkeys(u for u in units_per_row if u))
     ax_values.set_ylabel(f"{what} ({unit_text})" if unit_text else what)
     ax_errors.set_ylabel(f"|{what} error| ({unit_text})" if unit_text else f"|{what} error|")

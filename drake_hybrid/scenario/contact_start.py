@@ -1,0 +1,138 @@
+"""A contact start in your own diagram: the arm at rest pressing with F_d, every state around it set.
+
+``solve_contact_start`` takes the systems of ``scenario.station.add_hybrid_controller`` in your
+diagram's context: inverse kinematics to your start pose, the depth where the contact's rest force
+equals F_d (``rest_contact_wrench``: the pressure of SceneGraph's hydroelastic contact surfaces,
+integrated), the typed checks (on the constraint, the branch, a pushing force, the workpiece where C
+says, the links clear of the scene), then ``scenario.start.prime_start``.
+"""
+
+import numpy as np
+
+from pydrake.geometry import HydroelasticContactRepresentation
+from pydrake.math import RigidTransform
+
+from drake_hybrid.core.arguments import instance, positive, vector
+from drake_hybrid.core.errors import ArgumentError, ConfigError, OffConstraintError
+from drake_hybrid.core.kinematics import inverse_kinematics
+from drake_hybrid.core.preconditions import check_pushing_force
+from drake_hybrid.scenario.clearance import check_robot_clearance
+from drake_hybrid.scenario.start import holding_torque, pressing_depth, prime_start
+
+
+def rest_contact_wrench(plant, plant_context, robot_geometries, p_WP):
+    """The wrench on the robot at rest from its hydroelastic contacts, at the point ``p_WP`` (world),
+    as a Drake SpatialForce vector [torque; force] (N m, N): the pressure of every contact surface
+    touching ``robot_geometries`` integrated over its faces (a rest state has no dissipation and no
+    friction). A static reading of any plant, discrete or continuous, sampled output ports or not,
+    from its SceneGraph's query in ``plant_context``."""
+    query = plant.get_geometry_query_input_port().Eval(plant_context)
+    robot = set(robot_geometries)
+    wrench = np.zeros(6)
+    try:
+        surfaces = query.ComputeContactSurfaces(HydroelasticContactRepresentation.kTriangle)
+    except RuntimeError as error:        # a touching pair without a hydroelastic representation
+        raise ConfigError(f"rest_contact_wrench: {str(error).splitlines()[0]} -- the start is solved on "
+                          "hydroelastic contact: give the workpiece a rigid hydroelastic geometry "
+                          "(scenario.station.add_rigid_workpiece) and let only the tool touch it "
+                          "(only_tool_touches)") from None
+    for surface in surfaces:
+        if surface.id_M() in robot:
+            sign = 1.0                 # the faces' normals point out of N into M: the force on M
+        elif surface.id_N() in robot:
+            sign = -1.0
+        else:
+            continue
+        mesh, pressure = surface.tri_mesh_W(), surface.tri_e_MN()
+        for face in range(mesh.num_triangles()):
+            force = sign * pressure.Evaluate(face, CENTROID) * mesh.area(face) * mesh.face_normal(face)
+            wrench[:3] += np.cross(mesh.element_centroid(face) - p_WP, force)
+            wrench[3:] += force
+    return wrench
+
+
+CENTROID = np.full(3, 1.0 / 3.0)           # a triangle's centroid in barycentric coordinates
+
+
+def solve_contact_start(diagram, root_context, systems, start_pose, joint_guess, desired_force=None,
+                        max_depth=0.01, tolerance=1e-3):
+    """Put your diagram at a start pressing with F_d, at rest, and set every state around the plant.
+
+    ``systems`` is what ``scenario.station.add_hybrid_controller`` returned; ``start_pose`` the
+    end-effector frame E's pose (RigidTransform, world) with its point P on the surface C = 0;
+    ``joint_guess`` the arm's joint positions near it (the inverse kinematics' seed). The pad is
+    pushed into the workpiece along the direction a world force must take to give F_d
+    (``desired_force``, m entries in E_f's coordinates; default the command source's at t = 0),
+    to the depth where the contact's rest force in E_f's coordinates equals F_d (Brent's method on
+    ``rest_contact_wrench``); then ``prime_start`` with the torque that holds it there. Returns the
+    arm's joint positions.
+
+    Typed errors before the first step: a start pose off C = 0 beyond ``tolerance`` (C's units) or
+    on the wrong branch (OffConstraintError, BranchError), E singular there (ConstraintRankError,
+    ChartSingularityError), a pulling F_d (ForceSignError), a workpiece that is not where C says
+    (OffConstraintError), a link of the arm through the workpiece or the scene (StartCollisionError,
+    ``robot_penetrations``), the inverse kinematics failing (ValueError).
+    """
+    owner = "solve_contact_start"
+    instance(start_pose, "start_pose", owner, RigidTransform)
+    plant, robot, space = systems.plant, systems.robot, systems.constraint_space
+    controller = systems.controller
+    kinematics = controller.kinematics
+    joint_guess = vector(joint_guess, "joint_guess", owner, kinematics.plant.num_positions())
+    max_depth = positive(max_depth, "max_depth", owner, unit="m")
+    tolerance = positive(tolerance, "tolerance", owner)
+    if desired_force is None:
+        if systems.source is None:
+            raise ArgumentError(f"{owner}: desired_force is needed when the controller has no command source")
+        source_context = systems.source.GetMyContextFromRoot(root_context)
+        desired_force = systems.source.GetOutputPort("desired_force").Eval(source_context)
+    desired = vector(desired_force, "desired_force", owner, space.force_size)
+    mask = np.array([0.0 if i in space.constraint.kinematic_rows else 1.0 for i in range(space.force_size)])
+    desired = desired * mask
+    controller_context = kinematics.plant.CreateDefaultContext()
+
+    def positions_at_depth(depth, direction):
+        X_target = RigidTransform(start_pose.rotation(), start_pose.translation() + depth * direction)
+        return inverse_kinematics(kinematics, controller_context, X_target, joint_guess)
+
+    def configuration(q):
+        kinematics.plant.SetPositions(controller_context, q)
+        task = kinematics.evaluate(controller_context)
+        return task, space.evaluate(task.configuration, task.velocity)
+
+    q_surface = positions_at_depth(0.0, np.zeros(3))
+    task, values = configuration(q_surface)
+    try:
+        space.constraint.check_satisfied(task.configuration, tolerance)
+    except OffConstraintError as error:
+        raise OffConstraintError(f"{owner}: start_pose: {error}") from None
+    space.constraint.check_branch(task.configuration)
+    check_pushing_force(desired, force_controlled=mask, where=f"{owner} (desired_force)")
+    magnitude = float(np.linalg.norm(desired))
+    q0 = q_surface
+    if magnitude > 0:
+        # The world force at P that the rows read as F_d (least squares): the pad presses against it.
+        unit_forces = np.array([space.split_wrench(values, space.chart.generalized_force(
+            task.configuration, np.concatenate([np.zeros(3), axis])))[1] for axis in np.eye(3)]).T
+        force_W = np.linalg.lstsq(unit_forces, desired, rcond=None)[0]
+        direction = -force_W / np.linalg.norm(force_W)
+        plant_context = plant.GetMyMutableContextFromRoot(root_context)
+        frame = plant.GetFrameByName(robot.end_effector_frame)
+        pad = list(robot.pad_geometries)
+
+        def pressing_force(depth):
+            q = positions_at_depth(depth, direction)
+            plant.SetPositions(plant_context, robot.arm, q)
+            p_WP = frame.CalcPoseInWorld(plant_context).multiply(np.asarray(robot.end_effector_point, dtype=float))
+            task_at, values_at = configuration(q)
+            wrench = space.chart.generalized_force(task_at.configuration,
+                                                   rest_contact_wrench(plant, plant_context, pad, p_WP))
+            return float(space.split_wrench(values_at, wrench)[1] @ desired) / magnitude - magnitude
+
+        q0 = positions_at_depth(pressing_depth(pressing_force, desired, max_depth, owner), direction)
+    check_robot_clearance(diagram, root_context, systems, q0, owner)
+    plant_context = plant.GetMyMutableContextFromRoot(root_context)
+    plant.SetPositions(plant_context, robot.arm, q0)
+    plant.SetVelocities(plant_context, robot.arm, np.zeros(len(q0)))
+    prime_start(systems, root_context, holding_torque(systems, q0, desired))
+    return q0
