@@ -181,7 +181,8 @@ def impedance_check(log, gains, since, settle_after):
                                    log["velocity_error"][first], gains.impedance_inverse_mass)
     difference = np.zeros_like(np.asarray(log["velocity_error"], dtype=float))
     difference[first:] = predicted - log["velocity_error"][first:]
-    figures = max_row_errors(t, difference, log["desired_velocity"], settle_after)
+    # % of each commanded row's own command; a row commanded to zero has its absolute figure only
+    figures = max_row_errors(t, difference, log["desired_velocity"], settle_after, fallback="unit")
     percents = [percent for _, percent in figures if percent is not None]
     return {"max_difference": [worst for worst, _ in figures],
             "max_difference_percent": max(percents) if percents else None,
