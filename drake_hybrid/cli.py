@@ -34,7 +34,8 @@ import numpy as np
 # which the entry point answers --help from; cli.DESCRIPTION stays the name tests and readers use.
 from drake_hybrid.commands import COMMAND_HELP, DESCRIPTION, top_level_parser  # noqa: F401
 from drake_hybrid.control.gains import ControlMode
-from drake_hybrid.core.errors import ConfigError
+from drake_hybrid.core.arguments import relative_tolerance
+from drake_hybrid.core.errors import ArgumentError, ConfigError
 from drake_hybrid.core.progress import Stages
 from drake_hybrid.scenario.task_options import BUILT_IN_OPTIONS, built_in_option_help, is_task_file
 
@@ -332,8 +333,10 @@ def _sampled_loop_text(config, period):
 
 
 def command_analyze(args):
-    if not 0 < args.tolerance <= 1:
-        raise UsageError(f"--tolerance must be a relative tolerance in (0, 1] (0.05: within 5 %), got {args.tolerance}")
+    try:
+        relative_tolerance(args.tolerance, "--tolerance", "drake-hybrid analyze")
+    except ArgumentError as error:
+        raise UsageError(str(error)) from None
     with _loading(args, "Drake"):
         from drake_hybrid.analysis.derivatives import DerivativeMismatchWarning
         from drake_hybrid.analysis.linearization import (linearize_continuous, linearize_discrete, nyquist_split,

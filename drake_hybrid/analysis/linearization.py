@@ -40,11 +40,16 @@ from drake_hybrid.control.damping import step_task_mobility
 from drake_hybrid.control.gains import ControlMode, ValidatedGains
 from drake_hybrid.control.law import impedance_blocks
 from drake_hybrid.control.sampling import SAMPLE_LEAD
+from drake_hybrid.core.arguments import boolean, function, nonnegative, positive, relative_tolerance, text
+from drake_hybrid.core.errors import ArgumentError, NotAtEquilibriumError
 from drake_hybrid.core.progress import quiet
 from drake_hybrid.scenario.builder import build_scenario
+from drake_hybrid.scenario.config import ScenarioConfig
+from drake_hybrid.scenario.root_context import check_root_context
 from drake_hybrid.scenario.start import set_initial_conditions
 from drake_hybrid.scenario.tasks import get_task
 from drake_hybrid.systems.faults import SensorFaultConfig
+from drake_hybrid.systems.sensors import WristForceTorqueSensor
 from drake_hybrid.systems.sources import Profile
 
 
@@ -203,6 +208,7 @@ def match_eigenvalues(designed, measured, tolerance=0.05, marginal=0, marginal_r
     ``tolerance`` times 1 1/s: slower than 5 % per second of growth is counted as marginal, not
     unstable).
     """
+    tolerance = relative_tolerance(tolerance, "tolerance", "match_eigenvalues")
     designed = np.asarray(designed, dtype=complex)
     measured = np.asarray(measured, dtype=complex)
     marginal_real = tolerance * 1.0 if marginal_real is None else marginal_real
@@ -265,6 +271,7 @@ def predicted_match(result, tolerance=0.05):
     unstable extra mode is within ``tolerance`` of the prediction of its diagnosis
     (``result.unstable_modes``, ``analysis.modes.ModeDiagnosis.explained``). ``drake-hybrid analyze``
     exits 0 on it (``--strict``: only on a plain match)."""
+    tolerance = relative_tolerance(tolerance, "tolerance", "predicted_match")
     diagnoses = getattr(result, "unstable_modes", [])
     for candidate in (result.match, getattr(result, "shifted_match", None)):
         if (candidate is not None and bool(np.all(candidate.relative_error <= tolerance))
@@ -346,7 +353,7 @@ class Linearization:
 
 
 def linearize_continuous(config, tolerance=0.05, bandwidth_hz=200.0, stages=None,
-                         jacobian_tolerance=JACOBIAN_TOLERANCE):
+                         jacobian_tolerance=JACOBIAN_TOLERANCE, require_equilibrium=True):
     """Linearize the continuous closed loop of ``config`` at its contact equilibrium.
 
     Builds ``equilibrium_config(config)``, sets the start, checks it is an
@@ -358,8 +365,15 @@ def linearize_continuous(config, tolerance=0.05, bandwidth_hz=200.0, stages=None
     ``DerivativeMismatchWarning`` is issued), and matches eig(A) against the
     designed eigenvalues. ``wall_time`` covers both derivatives. Every mode with real part
     above 0.01 1/s is named with its likely cause (``unstable_modes``, ``analysis.modes``).
-    ``stages`` (``core.progress.Stages``): one line per stage with its time.
+    ``stages`` (``core.progress.Stages``): one line per stage with its time. ``tolerance`` (relative, in
+    (0, 1]), ``jacobian_tolerance`` and ``require_equilibrium`` as for ``linearize_at_contact``.
     """
+    owner = "linearize_continuous"
+    if not isinstance(config, ScenarioConfig):
+        raise ArgumentError(f"{owner}: config must be a ScenarioConfig (e.g. get_task(name).default_config()), got "
+                            f"{type(config).__name__}")
+    relative_tolerance(tolerance, "tolerance", owner)
+    positive(bandwidth_hz, "bandwidth_hz", owner, unit="Hz")
     stages = stages or quiet()
     c = equilibrium_config(config, bandwidth_hz)
     with stages(f"{c.task}: building the continuous closed loop"):
@@ -369,11 +383,63 @@ def linearize_continuous(config, tolerance=0.05, bandwidth_hz=200.0, stages=None
         set_initial_conditions(scenario, context)
     return linearize_at_contact(scenario.diagram, context, scenario, tolerance=tolerance,
                                 jacobian_tolerance=jacobian_tolerance, stages=stages, task=scenario.task,
-                                what=c.task)
+                                what=c.task, require_equilibrium=require_equilibrium)
+
+
+# The largest max |x-dot| (per second) accepted at a linearization point, relative to the state's size
+# max(1, max |x|) (the filter's N, the joints' rad): 1 % per second. Measured at the package's own
+# equilibria (``equilibrium_config`` of every continuous registered task in every mode, after
+# ``set_initial_conditions``): 1.2e-10 to 3.3e-10 in velocity- and position-force; in impedance-force
+# 6.1e-4 (surface polishing, max |x| 8.8) and 4.5e-3 (sphere polishing, max |x| 7), i.e. at most 6.4e-4 of
+# the state's size per second. Off equilibrium (a Kinova Jaco on a cylinder, F_d 10 N): commanded to slide
+# at 3 cm/s 1.08 (about 0.1 of its size), solve_contact_start forgotten 28.6, a wrist sensor on a
+# continuous plant 593 (565 with hydroelastic_with_fallback).
+EQUILIBRIUM_RATE = 0.01
+
+
+def _largest_rates(diagram, root_context):
+    """[(max |x-dot| of a subsystem's continuous state, its name)], largest first."""
+    rates = []
+    for system in diagram.GetSystems():
+        context = system.GetMyContextFromRoot(root_context)
+        if context.num_continuous_states():
+            rate = np.max(np.abs(system.EvalTimeDerivatives(context).CopyToVector()))
+            rates.append((float(rate), system.get_name()))
+    return sorted(rates, reverse=True)
+
+
+def check_equilibrium(diagram, root_context, systems, what="your diagram"):
+    """max |x-dot| of the continuous state at ``root_context``; NotAtEquilibriumError if it is above
+    EQUILIBRIUM_RATE (1/s) times the state's size max(1, max |x|), naming the subsystem where it is
+    largest and the likely cause: a desired velocity that is not zero, a wrist force/torque sensor on
+    a continuous plant, or else the start not solved (``solve_contact_start`` / ``prime_start`` not
+    called, or the state changed after it)."""
+    derivatives = diagram.EvalTimeDerivatives(root_context).CopyToVector()
+    residual = float(np.max(np.abs(derivatives))) if derivatives.size else 0.0
+    state = root_context.get_continuous_state_vector().CopyToVector()
+    scale = max(1.0, float(np.max(np.abs(state)))) if state.size else 1.0
+    if not residual > EQUILIBRIUM_RATE * scale:
+        return residual
+    controller = systems.controller
+    velocity = controller.get_desired_velocity_input_port().Eval(controller.GetMyContextFromRoot(root_context))
+    if np.any(np.asarray(velocity) != 0):
+        cause = (f"the controller is commanded to move (desired_velocity = {np.round(velocity, 6).tolist()}): "
+                 "linearize with a zero desired velocity")
+    elif isinstance(systems.sensor, WristForceTorqueSensor):
+        cause = ("a WristForceTorqueSensor on a continuous plant: its reading is not the contact's at rest; use the "
+                 "contact sensor (sensor=None) for the continuous loop")
+    else:
+        cause = ("the start is not solved: call scenario.contact_start.solve_contact_start (or prime_start after "
+                 "setting the arm at rest pressing with F_d) on this context, and change no state after it")
+    rate, name = _largest_rates(diagram, root_context)[0]
+    raise NotAtEquilibriumError(
+        f"linearize_at_contact({what}): the state is not an equilibrium: max |x-dot| = {residual:.3g} (largest in "
+        f"'{name}', {rate:.3g}) > {EQUILIBRIUM_RATE:g}/s x the state's size {scale:.3g}, so its eigenvalues would "
+        f"not be the design's; likely cause: {cause} (require_equilibrium=False linearizes there anyway)")
 
 
 def linearize_at_contact(diagram, root_context, systems, tolerance=0.05, jacobian_tolerance=JACOBIAN_TOLERANCE,
-                         stages=None, task=None, what="your diagram"):
+                         stages=None, task=None, what="your diagram", require_equilibrium=True):
     """Linearize your continuous closed loop at the contact equilibrium ``root_context`` holds (e.g.
     after ``scenario.contact_start.solve_contact_start``), with what ``drake-hybrid analyze`` reports.
 
@@ -387,13 +453,32 @@ def linearize_at_contact(diagram, root_context, systems, tolerance=0.05, jacobia
     impedance-force mode also against the design shifted by the contact's measured stiffness and
     damping (``analysis.environment``; ``task``: a Task whose own shifts come first), and names every
     mode with real part above 0.01 1/s with its likely cause (``analysis.modes``). Returns a
-    Linearization; ``equilibrium_residual`` is max |x-dot| at the start (near 0 at an equilibrium)."""
+    Linearization; ``equilibrium_residual`` is max |x-dot| at the start (near 0 at an equilibrium).
+
+    The state must be an equilibrium (``check_equilibrium``: max |x-dot| at most EQUILIBRIUM_RATE = 1 %
+    per second of the state's size, else NotAtEquilibriumError naming the likely cause: a desired
+    velocity that is not zero, the start not solved, a wrist sensor on a continuous plant);
+    ``require_equilibrium=False`` linearizes anywhere. ArgumentError for a ``tolerance`` outside (0, 1],
+    a ``jacobian_tolerance`` that is not > 0 (inf: never replace a column), a ``diagram``,
+    ``root_context`` and ``systems`` that do not belong together (``scenario.root_context``)."""
+    owner = f"linearize_at_contact({text(what, 'what', 'linearize_at_contact')})"
+    check_root_context(diagram, root_context, systems, owner)
+    tolerance = relative_tolerance(tolerance, "tolerance", owner)
+    jacobian_tolerance = positive(jacobian_tolerance, "jacobian_tolerance", owner, allow_infinite=True,
+                                  unit="relative column error")
+    function(stages, "stages", owner, "stages(label) -> a context manager (core.progress.Stages)", allow_none=True)
+    require_equilibrium = boolean(require_equilibrium, "require_equilibrium", owner)
+    if task is not None and not hasattr(task, "eigenvalue_shifts"):
+        raise ArgumentError(f"{owner}: task must be a Task (scenario.task) or None, got {type(task).__name__}")
     stages = stages or quiet()
-    derivatives = diagram.EvalTimeDerivatives(root_context).CopyToVector()
-    residual = float(np.max(np.abs(derivatives))) if derivatives.size else 0.0
     if not (root_context.num_abstract_states() == 0 and root_context.has_only_continuous_state()):
-        raise ValueError(f"linearize_at_contact({what}): the closed loop must be purely continuous (a plant with "
-                         "time_step=0, a controller without control_period); it has discrete or abstract state")
+        raise ArgumentError(f"{owner}: the closed loop must be purely continuous (a plant with time_step=0, a "
+                            "controller without control_period); it has discrete or abstract state")
+    if require_equilibrium:
+        residual = check_equilibrium(diagram, root_context, systems, what)
+    else:
+        derivatives = diagram.EvalTimeDerivatives(root_context).CopyToVector()
+        residual = float(np.max(np.abs(derivatives))) if derivatives.size else 0.0
     start = time.perf_counter()
     with stages(f"{what}: linearizing ({root_context.num_continuous_states()} states, AutoDiffXd)"):
         linear = Linearize(diagram, root_context, equilibrium_check_tolerance=np.inf)
@@ -511,6 +596,10 @@ def linearize_discrete(config, tolerance=0.05, epsilon=1e-6, settle_time=0.0, st
     compliant constraint forces settle onto the equilibrium. ``stages`` (``core.progress.Stages``):
     one line per stage with its time.
     """
+    owner = "linearize_discrete"
+    relative_tolerance(tolerance, "tolerance", owner)
+    positive(epsilon, "epsilon", owner)
+    settle_time = nonnegative(settle_time, "settle_time", owner, unit="s")
     stages = stages or quiet()
     c = at_rest_config(config)
     if not c.plant.time_step > 0:
@@ -663,8 +752,8 @@ def linearize_sampled_loop(config, epsilon=1e-5, tolerance=0.05, periods=1):
     if config.sensor.bandwidth_hz > 0:
         raise ValueError("linearize_discrete needs sensor.bandwidth_hz = 0 (a sampled wrench filter reads the "
                          "plant's sampled contact results at the plant's steps, outside the map's vector state)")
-    if not epsilon > 0:
-        raise ValueError(f"epsilon must be positive, got {epsilon}")
+    positive(epsilon, "epsilon", "linearize_sampled_loop")
+    relative_tolerance(tolerance, "tolerance", "linearize_sampled_loop")
 
     c = at_rest_config(config)
     scenario = build_scenario(c, with_loggers=False)

@@ -74,6 +74,13 @@ class OffConstraintError(DrakeHybridError):
     configuration off the constraint)."""
 
 
+class NotAtEquilibriumError(OffConstraintError):
+    """A linearization was asked at a state that is not an equilibrium of the closed loop (max |x-dot|
+    beyond the tolerance relative to the state's size), where its eigenvalues say nothing about the
+    design; the message names the residual, the system it is largest in and the likely cause (a
+    commanded motion, a start not solved, a sensor whose reading is not the contact's at rest)."""
+
+
 class StartCollisionError(OffConstraintError):
     """At the start, a part of the robot other than its tool penetrates the workpiece or the scene
     (the collision filters that let only the tool touch hide it from the simulation); the message

@@ -8,7 +8,9 @@ where any is below -``PENETRATION_TOLERANCE`` (StartCollisionError naming the bo
 
 from pydrake.geometry import CollisionFilterDeclaration, GeometrySet, Role, SceneGraph
 
+from drake_hybrid.core.arguments import nonnegative, text, vector
 from drake_hybrid.core.errors import StartCollisionError
+from drake_hybrid.scenario.root_context import check_root_context
 
 PENETRATION_TOLERANCE = 1e-4      # m: a robot part this far inside another geometry at the start is a collision
 
@@ -21,11 +23,19 @@ def robot_penetrations(diagram, root_context, systems, q, tolerance=PENETRATION_
     ``only_tool_touches`` filters those pairs out of the simulation, so a link through the workpiece
     would pass unseen; this asks SceneGraph for each pair's signed distance in a copy of
     ``root_context`` whose filters allow them (``root_context`` is left as it was). Pairs whose
-    shapes have no signed distance in Drake (e.g. two meshes) are skipped."""
+    shapes have no signed distance in Drake (e.g. two meshes) are skipped.
+
+    ArgumentError (before any Drake call) for ``diagram``, ``root_context`` or ``systems`` that do not
+    belong together (``scenario.contact_start.check_root_context``), a ``q`` that is not a vector of the
+    arm's number of finite positions, a ``tolerance`` that is not a finite number >= 0."""
+    owner = "robot_penetrations"
+    check_root_context(diagram, root_context, systems, owner)
+    plant, robot = systems.plant, systems.robot
+    q = vector(q, "q", owner, plant.num_positions(robot.arm), unit="the arm's joint positions, rad or m")
+    tolerance = nonnegative(tolerance, "tolerance", owner, unit="m")
     scene_graph = next((system for system in diagram.GetSystems() if isinstance(system, SceneGraph)), None)
     if scene_graph is None:
         return []
-    plant, robot = systems.plant, systems.robot
     context = root_context.Clone()
     plant.SetPositions(plant.GetMyMutableContextFromRoot(context), robot.arm, q)
     scene_context = scene_graph.GetMyMutableContextFromRoot(context)
@@ -57,7 +67,9 @@ def robot_penetrations(diagram, root_context, systems, q, tolerance=PENETRATION_
 
 
 def check_robot_clearance(diagram, root_context, systems, q, who):
-    """StartCollisionError naming the bodies if ``robot_penetrations`` finds any at ``q``."""
+    """StartCollisionError naming the bodies if ``robot_penetrations`` finds any at ``q`` (``who``: the
+    caller, which begins the message; its arguments are checked as ``robot_penetrations``'s)."""
+    who = text(who, "who", "check_robot_clearance")
     found = robot_penetrations(diagram, root_context, systems, q)
     if found:
         parts = "; ".join(f"body '{body}' ({geometry}) {depth * 1000:.1f} mm into {other}"

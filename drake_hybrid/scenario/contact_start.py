@@ -12,12 +12,15 @@ import numpy as np
 from pydrake.geometry import HydroelasticContactRepresentation
 from pydrake.math import RigidTransform
 
-from drake_hybrid.core.arguments import instance, positive, vector
-from drake_hybrid.core.errors import ArgumentError, ConfigError, OffConstraintError
+from drake_hybrid.core.arguments import describe, instance, positive, vector
+from drake_hybrid.core.errors import (ArgumentError, ConfigError, DrakeHybridError, OffConstraintError,
+                                      UnreachablePoseError)
 from drake_hybrid.core.kinematics import inverse_kinematics
 from drake_hybrid.core.preconditions import check_pushing_force
 from drake_hybrid.scenario.clearance import check_robot_clearance
+from drake_hybrid.scenario.root_context import check_root_context
 from drake_hybrid.scenario.start import holding_torque, pressing_depth, prime_start
+from drake_hybrid.systems.sensors import WristForceTorqueSensor
 
 
 def rest_contact_wrench(plant, plant_context, robot_geometries, p_WP):
@@ -25,8 +28,24 @@ def rest_contact_wrench(plant, plant_context, robot_geometries, p_WP):
     as a Drake SpatialForce vector [torque; force] (N m, N): the pressure of every contact surface
     touching ``robot_geometries`` integrated over its faces (a rest state has no dissipation and no
     friction). A static reading of any plant, discrete or continuous, sampled output ports or not,
-    from its SceneGraph's query in ``plant_context``."""
-    query = plant.get_geometry_query_input_port().Eval(plant_context)
+    from its SceneGraph's query in ``plant_context``.
+
+    ArgumentError for a ``plant`` that is not a MultibodyPlant connected to a SceneGraph, a
+    ``plant_context`` that is not the plant's, a ``p_WP`` that is not 3 finite numbers (m)."""
+    owner = "rest_contact_wrench"
+    if not hasattr(plant, "get_geometry_query_input_port") or not hasattr(plant, "is_finalized"):
+        raise ArgumentError(f"{owner}: plant must be a MultibodyPlant, got {describe(plant)}")
+    p_WP = vector(p_WP, "p_WP", owner, 3, unit="m, world")
+    try:
+        plant.ValidateContext(plant_context)
+    except (RuntimeError, TypeError):
+        raise ArgumentError(f"{owner}: plant_context must be the plant's own context (plant.GetMyContextFromRoot("
+                            f"root_context)), got {describe(plant_context)} of another system") from None
+    port = plant.get_geometry_query_input_port()
+    if not port.HasValue(plant_context):
+        raise ArgumentError(f"{owner}: plant's geometry_query input is not connected: the plant must be registered "
+                            "with a SceneGraph (AddMultibodyPlant) in a built diagram")
+    query = port.Eval(plant_context)
     robot = set(robot_geometries)
     wrench = np.zeros(6)
     try:
@@ -54,6 +73,20 @@ def rest_contact_wrench(plant, plant_context, robot_geometries, p_WP):
 CENTROID = np.full(3, 1.0 / 3.0)           # a triangle's centroid in barycentric coordinates
 
 
+def check_start_sensor(systems, owner):
+    """ArgumentError for a ``WristForceTorqueSensor`` on a continuous plant: its reading is the weld's
+    reaction, which on a continuous plant depends on the accelerations the controller's torque causes
+    (and leaves out the tool's weight with strict hydroelastic contact), so neither the reading nor
+    a fixed point of priming the filter with it is the contact's rest wrench (measured on a Kinova Jaco
+    pressing 10 N: the filter primed to 11.94 N, the sensor then reading 11.46 N; iterated, the prime
+    settles at 11.54 N with max |x-dot| still 12.3; with hydroelastic_with_fallback max |x-dot| 565)."""
+    if isinstance(systems.sensor, WristForceTorqueSensor) and not systems.plant.time_step() > 0:
+        raise ArgumentError(
+            f"{owner}: systems has a WristForceTorqueSensor on a continuous plant (time_step = 0): its reading (the "
+            "weld's reaction) depends on the accelerations the controller's torque causes, so the start cannot be "
+            "put at rest; use the contact sensor (sensor=None) for the continuous loop, or a discrete plant")
+
+
 def solve_contact_start(diagram, root_context, systems, start_pose, joint_guess, desired_force=None,
                         max_depth=0.01, tolerance=1e-3):
     """Put your diagram at a start pressing with F_d, at rest, and set every state around the plant.
@@ -71,10 +104,16 @@ def solve_contact_start(diagram, root_context, systems, start_pose, joint_guess,
     on the wrong branch (OffConstraintError, BranchError), E singular there (ConstraintRankError,
     ChartSingularityError), a pulling F_d (ForceSignError), a workpiece that is not where C says
     (OffConstraintError), a link of the arm through the workpiece or the scene (StartCollisionError,
-    ``robot_penetrations``), the inverse kinematics failing (ValueError).
+    ``robot_penetrations``), the inverse kinematics failing (UnreachablePoseError naming start_pose and
+    joint_guess), a desired force the contact cannot give within ``max_depth`` (ArgumentError), a
+    ``diagram``, ``root_context`` and ``systems`` that do not belong together (ArgumentError,
+    ``scenario.root_context``), and a wrist force/torque sensor on a continuous plant (ArgumentError:
+    no primed reading makes that start a rest, see ``systems.sensors.WristForceTorqueSensor``).
     """
     owner = "solve_contact_start"
+    check_root_context(diagram, root_context, systems, owner)
     instance(start_pose, "start_pose", owner, RigidTransform)
+    check_start_sensor(systems, owner)
     plant, robot, space = systems.plant, systems.robot, systems.constraint_space
     controller = systems.controller
     kinematics = controller.kinematics
@@ -93,7 +132,14 @@ def solve_contact_start(diagram, root_context, systems, start_pose, joint_guess,
 
     def positions_at_depth(depth, direction):
         X_target = RigidTransform(start_pose.rotation(), start_pose.translation() + depth * direction)
-        return inverse_kinematics(kinematics, controller_context, X_target, joint_guess)
+        try:
+            return inverse_kinematics(kinematics, controller_context, X_target, joint_guess)
+        except DrakeHybridError:
+            raise
+        except ValueError as error:          # core.kinematics: no convergence, or outside the joint limits
+            where = "start_pose" if depth == 0 else f"start_pose pushed {depth * 1000:.3g} mm into the workpiece"
+            raise UnreachablePoseError(f"{owner}: {where} is not reached from joint_guess: {error} Give a "
+                                       "reachable start_pose or a joint_guess nearer to it") from None
 
     def configuration(q):
         kinematics.plant.SetPositions(controller_context, q)
@@ -129,7 +175,15 @@ def solve_contact_start(diagram, root_context, systems, start_pose, joint_guess,
                                                    rest_contact_wrench(plant, plant_context, pad, p_WP))
             return float(space.split_wrench(values_at, wrench)[1] @ desired) / magnitude - magnitude
 
-        q0 = positions_at_depth(pressing_depth(pressing_force, desired, max_depth, owner), direction)
+        try:
+            depth = pressing_depth(pressing_force, desired, max_depth, owner)
+        except DrakeHybridError:
+            raise
+        except ValueError as error:          # scenario.start.pressing_depth: too soft a contact for F_d
+            raise ArgumentError(f"{str(error).split('; ')[0]} (desired_force, max_depth = {max_depth:g} m): "
+                                "lower desired_force, raise max_depth or stiffen the pad (its hydroelastic "
+                                "modulus)") from None
+        q0 = positions_at_depth(depth, direction)
     check_robot_clearance(diagram, root_context, systems, q0, owner)
     plant_context = plant.GetMyMutableContextFromRoot(root_context)
     plant.SetPositions(plant_context, robot.arm, q0)

@@ -1,0 +1,39 @@
+"""The diagram, its root context and the hybrid systems in it, checked to belong together.
+
+The functions that take your built diagram (``scenario.contact_start.solve_contact_start``,
+``scenario.clearance.robot_penetrations``, ``analysis.linearization.linearize_at_contact``) take the
+diagram, its root context and the ``HybridSystems`` of ``scenario.station.add_hybrid_controller`` (or
+a built ``Scenario``). Given the context of another diagram, or a subsystem's, Drake answers with a
+two-line RuntimeError deep in the call; ``check_root_context`` says which argument it is first.
+"""
+
+from pydrake.systems.framework import Context, Diagram
+
+from drake_hybrid.core.arguments import describe, instance
+from drake_hybrid.core.errors import ArgumentError
+
+SYSTEMS_FIELDS = ("plant", "robot", "controller", "controller_plant", "constraint_space", "sensor")
+
+
+def check_root_context(diagram, root_context, systems, owner):
+    """ArgumentError naming ``owner`` and the argument unless ``diagram`` is a built Diagram,
+    ``root_context`` its root context (not another diagram's, nor a subsystem's) and ``systems`` a
+    ``HybridSystems`` (or a ``Scenario``) whose plant and controller are in that diagram."""
+    instance(diagram, "diagram", owner, Diagram, what="a built Diagram (DiagramBuilder.Build())")
+    instance(root_context, "root_context", owner, Context, what="the diagram's root Context")
+    missing = [name for name in SYSTEMS_FIELDS if not hasattr(systems, name)]
+    if missing:
+        raise ArgumentError(f"{owner}: systems must be the HybridSystems of scenario.station.add_hybrid_controller "
+                            f"(or a built Scenario), got {describe(systems)} (no {', '.join(missing)})")
+    try:
+        diagram.ValidateContext(root_context)
+    except RuntimeError:
+        raise ArgumentError(f"{owner}: root_context must be the root context of diagram "
+                            "(diagram.CreateDefaultContext() or the Simulator's), got the context of another diagram "
+                            "or of a subsystem") from None
+    for name in ("plant", "controller"):
+        try:
+            getattr(systems, name).GetMyContextFromRoot(root_context)
+        except RuntimeError:
+            raise ArgumentError(f"{owner}: systems.{name} is not in diagram: systems must be what "
+                                "add_hybrid_controller returned for this diagram's builder") from None
