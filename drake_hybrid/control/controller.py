@@ -39,11 +39,18 @@ from drake_hybrid.control.phases import ContactPhase
 from drake_hybrid.control.safety import SafetyConfig, warn_singularity
 from drake_hybrid.control.sampling import SAMPLE_LEAD
 from drake_hybrid.core.arguments import boolean, describe, instance, matrix, nonnegative, positive, vector
-from drake_hybrid.core.errors import ArgumentError, DimensionError
+from drake_hybrid.core.errors import ArgumentError, DimensionError, OffConstraintError
 from drake_hybrid.core.preconditions import check_generic_rank, check_pushing_force
 from drake_hybrid.core.kinematics import declare_task_input, resolve_frame, set_plant_state
 from drake_hybrid.core.linalg import all_finite, value
 from drake_hybrid.core.templates import default_instantiation
+
+# The largest |C| (units of C's rows) at which a controller without a guarded move may start: the
+# guarded move's default reach (supervision.max_travel). A start in contact is the pad pressed in by its
+# rest compression: measured at the package's starts (set_initial_conditions, every built-in task)
+# |C| <= 0.9 mm, and the start solvers press at most max_depth (10 mm by default). Farther off, the
+# start was not solved (e.g. a Simulator on a default context: q = 0, C = 0.233 m on a Kinova Jaco).
+START_CONSTRAINT_LIMIT = 0.05
 
 
 class LawCache:
@@ -423,15 +430,40 @@ def HybridController_(T):
             (``ForceSignError``: the measured force pushes against F_d; or, off the surface with a guarded
             move, -F_d leads away from C = 0) or a surface beyond the guarded move's reach
             (``OffConstraintError``). An initialization event calls it when a Simulator initializes;
-            call it yourself on a context you have set up (``core.preconditions``)."""
+            call it yourself on a context you have set up (``core.preconditions``).
+
+            Without a guarded move (no contact supervisor to approach the surface) it also refuses a start
+            farther than START_CONSTRAINT_LIMIT (units of C) off C = 0 (``OffConstraintError`` naming C, and
+            the joints outside the plant's limits if any): the start was not solved."""
             solution = self._solution(context)
             phase = ContactPhase(solution.contact_phase)
+            if self._phase_port is None:
+                self._check_start_on_constraint(context, np.asarray(value(solution.constraint_value), dtype=float))
             check_pushing_force(
                 self._force_port.Eval(context), force=solution.force if solution.wrench_valid else None,
                 constraint_value=solution.constraint_value, force_controlled=self._law.force_controlled,
                 off_surface=phase is not ContactPhase.CONTACT,
                 max_travel=getattr(self.guarded_move, "max_travel", None),
                 where=f"the controller's first tick (t = {float(value(context.get_time())):g} s, {phase.name})")
+
+        def _check_start_on_constraint(self, context, constraint_value):
+            """OffConstraintError if |C| at the start is above START_CONSTRAINT_LIMIT (no guarded move)."""
+            worst = float(np.max(np.abs(constraint_value))) if constraint_value.size else 0.0
+            if not worst > START_CONSTRAINT_LIMIT:
+                return
+            plant = self._float_plant
+            q = np.asarray(value(self._state_port.Eval(context)), dtype=float)[:plant.num_positions()]
+            outside = [i for i, (low, x, high) in enumerate(zip(plant.GetPositionLowerLimits(), q,
+                                                                 plant.GetPositionUpperLimits()))
+                       if not low <= x <= high]
+            limits = (f"; q = {np.round(q, 3).tolist()} is outside the plant's joint limits at position(s) {outside}"
+                      if outside else "")
+            raise OffConstraintError(
+                f"HybridController: the start is off the constraint: C = {np.round(constraint_value, 4).tolist()} "
+                f"(|C| up to {worst:.3g} > {START_CONSTRAINT_LIMIT:g} units of C) with no guarded move to approach the "
+                f"surface{limits}: put the arm at rest pressing with F_d first (scenario.contact_start."
+                "solve_contact_start, or scenario.start.prime_start after setting the state), or add a contact "
+                "supervisor (supervision=SupervisionConfig())")
 
         def _check_start_event(self, context):
             self.check_start(context)
