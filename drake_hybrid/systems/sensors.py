@@ -300,9 +300,16 @@ def WristForceTorqueSensor_(T):
 
         in world. During motion the tool's own inertia (m_t a) remains in the
         reading; for the light tools here it is far below the contact forces.
-        On a continuous plant use ``contact_model="hydroelastic_with_fallback"``
-        or a discrete plant: with strict hydroelastic, continuous reaction
-        forces leave out gravity (DRAKE_NOTES).
+        Use it on a discrete plant. On a continuous plant the weld's reaction
+        depends on the accelerations the controller's torque causes (an algebraic
+        loop through the wrench filter), so its reading at a start is not the
+        contact's rest wrench and the start cannot be put at rest, with strict
+        hydroelastic or with ``contact_model="hydroelastic_with_fallback"``
+        (measured on a Kinova Jaco pressing 10 N: the filter primed to 11.94 N,
+        the sensor then reading 11.46 N; primed to its own fixed point, 11.54 N,
+        max |x-dot| still 12.3; with the fallback model max |x-dot| 565).
+        ``scenario.contact_start.solve_contact_start`` refuses that combination:
+        give a continuous twin (for ``linearize_at_contact``) the contact sensor.
 
         With ``compensate_tool_inertia`` (issue 18) the sensor also removes the tool's inertial
         wrench, its spatial momentum rate from the tool's model (mass, centre of mass, rotational
