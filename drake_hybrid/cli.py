@@ -35,7 +35,7 @@ import numpy as np
 from drake_hybrid.commands import COMMAND_HELP, DESCRIPTION, top_level_parser  # noqa: F401
 from drake_hybrid.control.gains import ControlMode
 from drake_hybrid.core.arguments import relative_tolerance
-from drake_hybrid.core.errors import ArgumentError, ConfigError
+from drake_hybrid.core.errors import ConfigError
 from drake_hybrid.core.progress import Stages
 from drake_hybrid.scenario.task_options import BUILT_IN_OPTIONS, built_in_option_help, is_task_file
 
@@ -333,10 +333,7 @@ def _sampled_loop_text(config, period):
 
 
 def command_analyze(args):
-    try:
-        relative_tolerance(args.tolerance, "--tolerance", "drake-hybrid analyze")
-    except ArgumentError as error:
-        raise UsageError(str(error)) from None
+    relative_tolerance(args.tolerance, "--tolerance", "the command line", error=UsageError)
     with _loading(args, "Drake"):
         from drake_hybrid.analysis.derivatives import DerivativeMismatchWarning
         from drake_hybrid.analysis.linearization import (linearize_continuous, linearize_discrete, nyquist_split,
