@@ -35,6 +35,9 @@ from test_api_inputs import window
 
 PUSHING_WRENCH = [0.0, 0.0, 0.0, 0.0, 0.0, -10.0]     # the pane pushes the pad down: F = -10 along E_f
 START = np.array([0.3, 0.5, 0.4])                       # the window arm's joints: the pad at C = +0.169 m
+# The window task's start (WINDOW.start_positions, pressing 10 N: C = +0.8 mm): a start in contact without a
+# guarded move must be near C = 0 (HybridController refuses one beyond START_CONSTRAINT_LIMIT).
+IN_CONTACT = np.array([-0.11392, 1.801882, -0.117166])
 
 
 def user_diagram(desired_force, wrench, guarded_move=None, phase=ContactPhase.CONTACT, q=START):
@@ -115,18 +118,18 @@ def test_a_rank_deficient_constraint_is_refused_by_the_controller():
 # -- a pulling force: refused at the controller's first tick, in a user's own diagram ----------------------
 
 def test_a_pushing_force_in_contact_starts():
-    diagram, _ = user_diagram([-10.0], PUSHING_WRENCH)
+    diagram, _ = user_diagram([-10.0], PUSHING_WRENCH, q=IN_CONTACT)
     Simulator(diagram).Initialize()
 
 
 def test_a_pulling_force_in_contact_is_refused_at_initialize():
-    diagram, _ = user_diagram([10.0], PUSHING_WRENCH)
+    diagram, _ = user_diagram([10.0], PUSHING_WRENCH, q=IN_CONTACT)
     with pytest.raises(ForceSignError, match=r"F_d = \[10.0\] pulls at the controller's first tick .*CONTACT"):
         Simulator(diagram).Initialize()
 
 
 def test_check_start_on_a_context_the_user_set_up():
-    diagram, controller = user_diagram([10.0], PUSHING_WRENCH)
+    diagram, controller = user_diagram([10.0], PUSHING_WRENCH, q=IN_CONTACT)
     context = diagram.CreateDefaultContext()
     with pytest.raises(ForceSignError, match="flip the sign of the desired force"):
         controller.check_start(controller.GetMyContextFromRoot(context))
