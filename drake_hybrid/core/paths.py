@@ -25,10 +25,8 @@ strokes of a coverage pattern (``core.patterns``) in a view plane. ``path_from_w
 c-ddot, the normal, F and where on the path it is; before the start it holds the first point at
 rest, after the end the last. ``SurfacePath.hold(centre, normal, force)`` is the path of one point.
 
-Every argument is checked at the call (``core.arguments``), before any Drake call: a bad one is a
-one-line ``PathError`` naming the callee and the argument (t of ``evaluate`` a finite number, the
-pad's ``offset`` a finite number >= 0 (``core.surfaces.check_offset``), ``limits`` a PathLimits, a
-path of at most ``core.patterns.MAX_PATH_POINTS`` samples, ...).
+Every argument is checked at the call, before any Drake call: a bad one is a one-line ``PathError``
+naming it (``evaluate``'s t finite, ``offset`` >= 0, at most ``core.patterns.MAX_PATH_POINTS`` samples).
 """
 
 import math
@@ -195,8 +193,8 @@ class PathSegment:
         if self.normals.shape != self.contact_points.shape:
             raise PathError(f"{owner}: give one normal per contact point, got {len(self.normals)} and "
                             f"{len(self.contact_points)}")
-        start_time = number(start_time, "start_time", owner, unit="s", error=PathError)
-        start_arc = number(start_arc, "start_arc", owner, unit="m", error=PathError)
+        start_time, start_arc = (number(x, n, owner, error=PathError) for x, n in ((start_time, "start_time"),
+                                                                                  (start_arc, "start_arc")))
         self.centres = self.contact_points + offset * self.normals
         steps = np.linalg.norm(np.diff(self.centres, axis=0), axis=1)
         keep = np.concatenate([[True], steps > 1e-9])                    # repeated points (a stop) once
