@@ -27,6 +27,10 @@ rest, after the end the last. ``SurfacePath.hold(centre, normal, force)`` is the
 
 Every argument is checked at the call, before any Drake call: a bad one is a one-line ``PathError``
 naming it (``evaluate``'s t finite, ``offset`` >= 0, at most ``core.patterns.MAX_PATH_POINTS`` samples).
+
+Size: one idea, a path from its points to its time-parameterized reference (sampling, offset, splines,
+Toppra with the check of its limits, evaluation), with the checks of the builders' arguments; split, the
+builders and the segments they make would share their private helpers across modules.
 """
 
 import math
@@ -41,7 +45,7 @@ from pydrake.trajectories import PiecewisePolynomial
 
 from drake_hybrid.core.arguments import describe, instance, number, numeric_array, positive, text, vector
 from drake_hybrid.core.errors import PathError
-from drake_hybrid.core.patterns import STEP, check_point_count
+from drake_hybrid.core.patterns import STEP, check_point_count, check_strokes
 from drake_hybrid.core.surfaces import Surface, check_facing, check_offset, check_view
 
 LIMIT_CHECK_PERIOD = 1e-3        # s: how finely a time scaling is checked against the limits
@@ -335,25 +339,6 @@ def _force_profile(force, waypoint_arcs, length, what, owner):
     return ForceProfile(arcs, values, what)
 
 
-def _strokes(strokes, what, owner):
-    """The strokes as arrays of (u, v) points (at least one stroke of at least two finite points each)."""
-    if isinstance(strokes, (str, bytes, dict)) or not hasattr(strokes, "__iter__"):
-        raise PathError(f"{owner}: {what} strokes must be a list of (u, v) polylines, got {describe(strokes)}")
-    arrays = []
-    for index, stroke in enumerate(strokes):
-        name = f"{what} strokes[{index}]"
-        array = numeric_array(stroke, name, owner, what="a polyline of (u, v) points (m)", error=PathError)
-        if array.ndim != 2 or array.shape[1] != 2 or len(array) < 2:
-            raise PathError(f"{owner}: {name} must be a polyline of at least two finite (u, v) points (m), got "
-                            f"{describe(stroke)}")
-        arrays.append(array)
-    if not arrays:
-        raise PathError(f"{owner}: {what} strokes must hold at least one stroke (a polyline of (u, v) points), got none")
-    check_point_count(sum(len(array) for array in arrays), f"{owner}: {what}'s strokes",
-                      "draw the pattern with a coarser spacing or over a smaller region")
-    return arrays
-
-
 def path_from_strokes(surface, view, strokes, offset, limits, force, what="path", force_field="force"):
     """A SurfacePath from pattern strokes ((u, v) polylines in ``view``): each stroke lifted onto
     ``surface`` (PathError where the view misses it or it faces away) and made a segment. ``force_field``:
@@ -362,7 +347,7 @@ def path_from_strokes(surface, view, strokes, offset, limits, force, what="path"
     what = text(what, "what", owner, error=PathError)
     surface = instance(surface, "surface", owner, Surface, what="a core.surfaces.Surface", error=PathError)
     view = check_view(view, owner)
-    strokes = _strokes(strokes, what, owner)
+    strokes = check_strokes(strokes, what, owner)
     offset, limits = check_offset(offset, owner), _limits(limits, owner)
     limits.validated(what)
     force_name = f"{what}.{text(force_field, 'force_field', owner, error=PathError)}"

@@ -22,7 +22,7 @@ import math
 
 import numpy as np
 
-from drake_hybrid.core.arguments import positive, text, vector
+from drake_hybrid.core.arguments import describe, numeric_array, positive, text, vector
 from drake_hybrid.core.errors import PathError
 
 STEP = 0.001        # m between the samples of a stroke
@@ -40,6 +40,26 @@ def check_point_count(count, where, advice):
     if count > MAX_PATH_POINTS:
         raise PathError(f"{where} would take {count:.3g} samples, more than {MAX_PATH_POINTS} (100 m of path at "
                         f"{STEP * 1000:g} mm): {advice}")
+
+
+def check_strokes(strokes, what, owner):
+    """The strokes as arrays of (u, v) points (at least one stroke of at least two finite points each, at most
+    MAX_PATH_POINTS in all), else a PathError naming ``what``'s strokes and ``owner``."""
+    if isinstance(strokes, (str, bytes, dict)) or not hasattr(strokes, "__iter__"):
+        raise PathError(f"{owner}: {what} strokes must be a list of (u, v) polylines, got {describe(strokes)}")
+    arrays = []
+    for index, stroke in enumerate(strokes):
+        name = f"{what} strokes[{index}]"
+        array = numeric_array(stroke, name, owner, what="a polyline of (u, v) points (m)", error=PathError)
+        if array.ndim != 2 or array.shape[1] != 2 or len(array) < 2:
+            raise PathError(f"{owner}: {name} must be a polyline of at least two finite (u, v) points (m), got "
+                            f"{describe(stroke)}")
+        arrays.append(array)
+    if not arrays:
+        raise PathError(f"{owner}: {what} strokes must hold at least one stroke (a polyline of (u, v) points), got none")
+    check_point_count(sum(len(array) for array in arrays), f"{owner}: {what}'s strokes",
+                      "draw the pattern with a coarser spacing or over a smaller region")
+    return arrays
 
 
 def _segment(start, end, step=STEP):
