@@ -116,12 +116,12 @@ def test_a_spiral_turns_out_to_its_radius_with_the_spacing():
 
 
 @pytest.mark.parametrize("call, message", [
-    (lambda: raster([0, 0], [0.1, 0.1], 0.0), r"pattern\.spacing must be positive"),
-    (lambda: raster([0, 0], [0.1, -0.1], 0.01), r"pattern\.size must be positive"),
+    (lambda: raster([0, 0], [0.1, 0.1], 0.0), r"pattern\.spacing must be a finite number > 0"),
+    (lambda: raster([0, 0], [0.1, -0.1], 0.01), r"pattern\.size must be a finite number > 0"),
     (lambda: raster([0, 0], [0.1, 0.01], 0.02), r"spacing \(0\.02 m\) is larger than the region"),
-    (lambda: raster([0, 0], [0.1, 0.1], 0.01, direction="x"), "direction must be 'u' or 'v'"),
+    (lambda: raster([0, 0], [0.1, 0.1], 0.01, direction="x"), "direction must be one of 'u', 'v'"),
     (lambda: spiral([0, 0], 0.05, 0.06), r"spacing \(0\.06 m\) is larger than the radius"),
-    (lambda: spiral([0, 0], math.inf, 0.01), "radius must be positive and finite"),
+    (lambda: spiral([0, 0], math.inf, 0.01), r"radius must be a finite number > 0"),
 ])
 def test_bad_patterns_are_one_line_path_errors(call, message):
     with pytest.raises(PathError, match=message) as error:
@@ -210,9 +210,9 @@ def test_waypoints_are_projected_and_the_force_is_interpolated_along_the_arc_len
     (lambda: path_from_waypoints(SPHERE, [CENTER + [0, 0, 0.15]], PAD, LIMITS, 10.0, 1e-3), "at least two"),
     (lambda: path_from_waypoints(SPHERE, [CENTER + [0, 0, 0.15]] * 2, PAD, LIMITS, 10.0, 1e-3), "coincide"),
     (lambda: path_from_strokes(SPHERE, SPHERE.default_view(), raster([0, 0], [0.1, 0.1], 0.05), PAD,
-                               PathLimits(0.0, 0.5), 10.0), r"path\.speed must be positive"),
+                               PathLimits(0.0, 0.5), 10.0), r"PathLimits: speed must be a finite number > 0"),
     (lambda: path_from_strokes(SPHERE, SPHERE.default_view(), raster([0, 0], [0.1, 0.1], 0.05), PAD,
-                               PathLimits(0.05, math.nan), 10.0), r"path\.acceleration must be positive"),
+                               PathLimits(0.05, math.nan), 10.0), r"PathLimits: acceleration must be a finite number > 0"),
     (lambda: path_from_strokes(SPHERE, SPHERE.default_view(), raster([0, 0], [0.4, 0.1], 0.05), PAD, LIMITS, 10.0),
      "misses the surface"),
     (lambda: path_from_strokes(SPHERE, SPHERE.default_view(), raster([0, 0], [0.26, 0.02], 0.02), PAD, LIMITS,

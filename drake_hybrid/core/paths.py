@@ -24,6 +24,13 @@ strokes of a coverage pattern (``core.patterns``) in a view plane. ``path_from_w
 ``SurfacePath.evaluate(t)`` (t from the start of the path) gives the reference: c, c-dot,
 c-ddot, the normal, F and where on the path it is; before the start it holds the first point at
 rest, after the end the last. ``SurfacePath.hold(centre, normal, force)`` is the path of one point.
+
+Every argument is checked at the call, before any Drake call: a bad one is a one-line ``PathError``
+naming it (``evaluate``'s t finite, ``offset`` >= 0, at most ``core.patterns.MAX_PATH_POINTS`` samples).
+
+Size: one idea, a path from its points to its time-parameterized reference (sampling, offset, splines,
+Toppra with the check of its limits, evaluation), with the checks of the builders' arguments; split, the
+builders and the segments they make would share their private helpers across modules.
 """
 
 import math
@@ -36,9 +43,10 @@ from pydrake.multibody.plant import MultibodyPlant
 from pydrake.multibody.tree import PrismaticJoint, SpatialInertia
 from pydrake.trajectories import PiecewisePolynomial
 
+from drake_hybrid.core.arguments import describe, instance, number, numeric_array, positive, text, vector
 from drake_hybrid.core.errors import PathError
-from drake_hybrid.core.patterns import STEP
-from drake_hybrid.core.surfaces import check_facing
+from drake_hybrid.core.patterns import STEP, check_point_count, check_strokes
+from drake_hybrid.core.surfaces import Surface, check_facing, check_offset, check_view
 
 LIMIT_CHECK_PERIOD = 1e-3        # s: how finely a time scaling is checked against the limits
 LIMIT_SLACK = 1e-3               # the limits may be exceeded by this fraction (Toppra's discretization)
@@ -51,12 +59,13 @@ class PathLimits:
     speed: float
     acceleration: float
 
+    def __post_init__(self):
+        self.validated("")
+
     def validated(self, what="path"):
-        for name in ("speed", "acceleration"):
-            number = float(getattr(self, name))
-            if not 0 < number < math.inf:
-                raise PathError(f"{what}.{name} must be positive and finite ({'m/s' if name == 'speed' else 'm/s^2'}),"
-                                f" got {number}")
+        """``self`` if both limits are positive finite numbers, else a PathError naming ``what``.field."""
+        for name, unit in (("speed", "m/s"), ("acceleration", "m/s^2")):
+            positive(getattr(self, name), f"{what}.{name}" if what else name, "PathLimits", unit=unit, error=PathError)
         return self
 
 
@@ -64,8 +73,11 @@ class ForceProfile:
     """The normal force (N) along the path, piecewise linear in its arc length s (m), constant beyond."""
 
     def __init__(self, arc_lengths, forces, what="path.force"):
-        self.arc_lengths = np.asarray(arc_lengths, dtype=float).reshape(-1)
-        self.forces = np.asarray(forces, dtype=float).reshape(-1)
+        what = text(what, "what", "ForceProfile", error=PathError)
+        self.arc_lengths = numeric_array(arc_lengths, f"{what} (arc lengths)", "ForceProfile",
+                                         what="a vector of arc lengths (m)", error=PathError).reshape(-1)
+        self.forces = numeric_array(forces, f"{what} (forces)", "ForceProfile", what="a vector of forces (N)",
+                                    error=PathError).reshape(-1)
         if self.forces.size == 0 or self.arc_lengths.shape != self.forces.shape:
             raise PathError(f"{what}: give one force per arc length, got {self.forces.size} and "
                             f"{self.arc_lengths.size}")
@@ -76,7 +88,9 @@ class ForceProfile:
             raise PathError(f"{what}: the arc lengths must not decrease, got {self.arc_lengths.tolist()}")
 
     def __call__(self, s):
-        return float(np.interp(s, self.arc_lengths, self.forces))
+        """F(s), ``s`` a finite arc length (m)."""
+        return float(np.interp(number(s, "s", "ForceProfile", unit="m", error=PathError), self.arc_lengths,
+                               self.forces))
 
 
 @dataclass
@@ -176,8 +190,15 @@ class PathSegment:
     N(s) over s in [0, length], and Toppra's s(t) over [0, duration]."""
 
     def __init__(self, contact_points, normals, offset, limits, start_time=0.0, start_arc=0.0):
-        self.contact_points = np.asarray(contact_points, dtype=float)
-        self.normals = np.asarray(normals, dtype=float)
+        owner = "PathSegment"
+        offset, limits = check_offset(offset, owner), _limits(limits, owner)
+        self.contact_points = _samples(contact_points, "contact_points", owner)
+        self.normals = _samples(normals, "normals", owner)
+        if self.normals.shape != self.contact_points.shape:
+            raise PathError(f"{owner}: give one normal per contact point, got {len(self.normals)} and "
+                            f"{len(self.contact_points)}")
+        start_time, start_arc = (number(x, n, owner, error=PathError) for x, n in ((start_time, "start_time"),
+                                                                                  (start_arc, "start_arc")))
         self.centres = self.contact_points + offset * self.normals
         steps = np.linalg.norm(np.diff(self.centres, axis=0), axis=1)
         keep = np.concatenate([[True], steps > 1e-9])                    # repeated points (a stop) once
@@ -202,7 +223,8 @@ class PathSegment:
     def sample(self, t_local):
         """(c, c-dot, c-ddot, (n, n-dot, n-ddot), s) at ``t_local`` in [0, duration]; n = N / |N| of the
         normals' spline N(s), differentiated along s(t)."""
-        t_local = min(max(t_local, 0.0), self.duration)
+        t_local = min(max(number(t_local, "t_local", "PathSegment.sample", unit="s", error=PathError), 0.0),
+                      self.duration)
         timing = self.timing
         s, s_dot, s_ddot = timing.value(t_local)[0, 0], timing.EvalDerivative(t_local, 1)[0, 0], \
             timing.EvalDerivative(t_local, 2)[0, 0]
@@ -219,8 +241,15 @@ class SurfacePath:
     """Segments one after the other in time, and the force along them (module docstring)."""
 
     def __init__(self, segments, force, hold_point=None):
+        owner = "SurfacePath"
+        if isinstance(segments, (str, bytes)) or not hasattr(segments, "__iter__"):
+            raise PathError(f"{owner}: segments must be a list of PathSegment, got {describe(segments)}")
         self.segments = list(segments)
-        self.force = force
+        for index, segment in enumerate(self.segments):
+            instance(segment, f"segments[{index}]", owner, PathSegment, error=PathError)
+        self.force = instance(force, "force", owner, ForceProfile, error=PathError)
+        if not self.segments and hold_point is None:
+            raise PathError(f"{owner}: a path needs at least one segment (or SurfacePath.hold for one point)")
         time = arc = 0.0
         for segment in self.segments:
             segment.start_time, segment.start_arc = time, arc
@@ -231,9 +260,14 @@ class SurfacePath:
 
     @staticmethod
     def hold(centre, normal, force):
-        """The path of one point: the pad centre held at ``centre`` (normal ``normal``) with ``force``."""
-        return SurfacePath([], ForceProfile([0.0], [force]), hold_point=(np.asarray(centre, dtype=float),
-                                                                        np.asarray(normal, dtype=float)))
+        """The path of one point: the pad centre held at ``centre`` (normal ``normal``, made unit) with ``force``."""
+        owner = "SurfacePath.hold"
+        centre = vector(centre, "centre", owner, 3, unit="m", error=PathError)
+        normal = vector(normal, "normal", owner, 3, error=PathError)
+        if not np.linalg.norm(normal) > 1e-12:
+            raise PathError(f"{owner}: normal must be a nonzero vector, got {normal.tolist()}")
+        force = positive(force, "force", owner, unit="N; the pad presses", error=PathError)
+        return SurfacePath([], ForceProfile([0.0], [force]), hold_point=(centre, normal / np.linalg.norm(normal)))
 
     def first_point(self):
         """(centre, normal) where the path starts."""
@@ -242,7 +276,8 @@ class SurfacePath:
         return self.segments[0].centres[0], self.segments[0].normals[0]
 
     def evaluate(self, t):
-        """The PathSample at ``t`` (s from the path's start)."""
+        """The PathSample at ``t`` (s from the path's start; a finite number)."""
+        t = number(t, "t", "SurfacePath.evaluate", unit="s from the path's start", error=PathError)
         zero = np.zeros(3)
         if not self.segments:
             centre, normal = self._hold
@@ -272,27 +307,51 @@ class SurfacePath:
 # Building a path
 # ------------------------------------------------------------------------------------------------
 
-def _force_profile(force, waypoint_arcs, length, what):
-    """A ForceProfile from a number, a list with one value per waypoint (``waypoint_arcs``), or a table
-    [[s, F], ...] (s in m along the path)."""
-    values = np.asarray(force, dtype=float)
+def _limits(limits, owner):
+    """``limits`` if it is a PathLimits (checked when made), else a PathError."""
+    return instance(limits, "limits", owner, PathLimits, what="a PathLimits(speed, acceleration)", error=PathError)
+
+
+def _samples(points, name, owner):
+    """N x 3 float points (m), N >= 1, finite, else a PathError naming ``name``."""
+    allowed = "N x 3 finite [x, y, z] points (m)"
+    array = numeric_array(points, name, owner, what=allowed, error=PathError)
+    if array.ndim != 2 or array.shape[1] != 3 or len(array) == 0:
+        raise PathError(f"{owner}: {name} must be {allowed}, got {describe(points)}")
+    return array
+
+
+def _force_profile(force, waypoint_arcs, length, what, owner):
+    """A ForceProfile from a number, a list with one value per waypoint (``waypoint_arcs``, a callable
+    giving them), or a table [[s, F], ...] (s in m along the path)."""
+    allowed = "a number (N), " + ("one per waypoint, " if waypoint_arcs is not None else "") + "or a table [[s, F], ...]"
+    values = numeric_array(force, what, owner, what=allowed, error=PathError)
     if values.ndim == 0:
         return ForceProfile([0.0], [float(values)], what)
-    if values.ndim == 2 and values.shape[1] == 2:
+    if values.ndim == 2 and values.shape[1] == 2 and len(values):
         if values[0, 0] < 0 or values[-1, 0] > length + 1e-9:
             raise PathError(f"{what}: the arc lengths of the force table must lie in [0, {length:.4g}] m (the path's "
                             f"length), got {values[:, 0].tolist()}")
         return ForceProfile(values[:, 0], values[:, 1], what)
-    if waypoint_arcs is None or values.shape != (len(waypoint_arcs),):
-        count = "one per waypoint, " if waypoint_arcs is not None else ""
-        raise PathError(f"{what}: give one force (N), {count}or a table [[s, F], ...], got {values.tolist()}")
-    return ForceProfile(waypoint_arcs, values, what)
+    arcs = waypoint_arcs() if waypoint_arcs is not None else None
+    if arcs is None or values.shape != (len(arcs),):
+        raise PathError(f"{what}: give {allowed}, got {values.tolist()}")
+    return ForceProfile(arcs, values, what)
 
 
-def path_from_strokes(surface, view, strokes, offset, limits, force, what="path"):
+def path_from_strokes(surface, view, strokes, offset, limits, force, what="path", force_field="force"):
     """A SurfacePath from pattern strokes ((u, v) polylines in ``view``): each stroke lifted onto
-    ``surface`` (PathError where the view misses it or it faces away) and made a segment."""
+    ``surface`` (PathError where the view misses it or it faces away) and made a segment. ``force_field``:
+    the field the force's messages name (``what``.``force_field``)."""
+    owner = "path_from_strokes"
+    what = text(what, "what", owner, error=PathError)
+    surface = instance(surface, "surface", owner, Surface, what="a core.surfaces.Surface", error=PathError)
+    view = check_view(view, owner)
+    strokes = check_strokes(strokes, what, owner)
+    offset, limits = check_offset(offset, owner), _limits(limits, owner)
     limits.validated(what)
+    force_name = f"{what}.{text(force_field, 'force_field', owner, error=PathError)}"
+    numeric_array(force, force_name, owner, what="a number (N) or a table [[s, F], ...]", error=PathError)
     segments = []
     for index, stroke in enumerate(strokes):
         lifted = []
@@ -301,34 +360,41 @@ def path_from_strokes(surface, view, strokes, offset, limits, force, what="path"
             check_facing(n, view, f"{what}: stroke {index} at (u, v) = ({u:.4g}, {v:.4g}) m")
             lifted.append((q, n))
         segments.append(PathSegment([q for q, _ in lifted], [n for _, n in lifted], offset, limits))
-    path = SurfacePath(segments, None)
-    path.force = _force_profile(force, None, path.length, f"{what}.force")
-    return path
+    length = sum(segment.length for segment in segments)
+    return SurfacePath(segments, _force_profile(force, None, length, force_name, owner))
 
 
 def path_from_waypoints(surface, waypoints, offset, limits, force, tolerance, interpolation="smooth", view=None,
-                        what="path"):
+                        what="path", force_field="force"):
     """A SurfacePath through ``waypoints`` (N x 3, world, on the surface within ``tolerance`` m):
     one smooth segment through them all, or (``interpolation="linear"``) a segment between each
-    pair, stopping at every waypoint. ``force``: a number, one per waypoint, or a table."""
+    pair, stopping at every waypoint. ``force``: a number, one per waypoint, or a table; ``force_field``:
+    the field its messages name (``what``.``force_field``)."""
+    owner = "path_from_waypoints"
+    what = text(what, "what", owner, error=PathError)
+    surface = instance(surface, "surface", owner, Surface, what="a core.surfaces.Surface", error=PathError)
+    offset, limits = check_offset(offset, owner), _limits(limits, owner)
     limits.validated(what)
-    points = np.asarray(waypoints, dtype=float)
-    if points.ndim != 2 or points.shape[1] != 3 or len(points) < 2 or not np.all(np.isfinite(points)):
-        raise PathError(f"{what}.waypoints must be at least two finite [x, y, z] points (m), got shape "
-                        f"{list(points.shape)}")
-    if not float(tolerance) > 0:
-        raise PathError(f"{what}.tolerance must be positive (m), got {tolerance}")
+    allowed = "at least two finite [x, y, z] points (m)"
+    points = numeric_array(waypoints, f"{what}.waypoints", owner, what=allowed, error=PathError)
+    if points.ndim != 2 or points.shape[1] != 3 or len(points) < 2:
+        raise PathError(f"{what}.waypoints must be {allowed}, got shape {list(points.shape)}")
+    tolerance = positive(tolerance, f"{what}.tolerance", owner, unit="m", error=PathError)
+    interpolation = text(interpolation, f"{what}.interpolation", owner, allowed=("smooth", "linear"), error=PathError)
+    view = check_view(view, owner) if view is not None else surface.default_view()
+    force_name = f"{what}.{text(force_field, 'force_field', owner, error=PathError)}"
+    numeric_array(force, force_name, owner, what="a number (N), one per waypoint, or a table [[s, F], ...]",
+                  error=PathError)
     for index, point in enumerate(points):
         distance = surface.signed_distance(point)
         if abs(distance) > tolerance:
             raise PathError(f"{what}.waypoints[{index}] {np.round(point, 4).tolist()} is {distance * 1000:+.2f} mm off "
                             f"the surface of '{surface.name}' (tolerance {tolerance * 1000:g} mm)")
-    if interpolation not in ("smooth", "linear"):
-        raise PathError(f"{what}.interpolation must be 'smooth' or 'linear', got '{interpolation}'")
-    view = view if view is not None else surface.default_view()
     chords = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(points, axis=0), axis=1))])
     if np.any(np.diff(chords) < 1e-6):
         raise PathError(f"{what}.waypoints: two consecutive waypoints coincide")
+    check_point_count(chords[-1] / STEP, f"{owner}: {what}.waypoints {chords[-1]:.4g} m apart along the path",
+                      "the waypoints are too far apart for one job; split it")
     if interpolation == "smooth":
         curve = (PiecewisePolynomial.CubicWithContinuousSecondDerivatives(chords, points.T, False) if len(points) > 2
                  else PiecewisePolynomial.FirstOrderHold(chords, points.T))
@@ -343,15 +409,16 @@ def path_from_waypoints(surface, waypoints, offset, limits, force, tolerance, in
         for q, n in projected[:: max(1, len(projected) // 50)]:
             check_facing(n, view, f"{what}: near {np.round(q, 4).tolist()}")
         segments.append(PathSegment([q for q, _ in projected], [n for _, n in projected], offset, limits))
-    path = SurfacePath(segments, None)
-    path.force = _force_profile(force, _waypoint_arcs(path, surface, points), path.length, f"{what}.force")
-    return path
+    length = sum(segment.length for segment in segments)
+    profile = _force_profile(force, lambda: _waypoint_arcs(segments, surface, points), length, force_name, owner)
+    return SurfacePath(segments, profile)
 
 
-def _waypoint_arcs(path, surface, points):
-    """The arc length of the path at each waypoint: the nearest sample, searched forward."""
-    samples = path.contact_points()
-    arcs = np.concatenate([segment.start_arc + segment.arc_lengths for segment in path.segments])
+def _waypoint_arcs(segments, surface, points):
+    """The arc length of the path of ``segments`` at each waypoint: the nearest sample, searched forward."""
+    samples = np.vstack([segment.contact_points for segment in segments])
+    starts = np.concatenate([[0.0], np.cumsum([segment.length for segment in segments])[:-1]])
+    arcs = np.concatenate([start + segment.arc_lengths for start, segment in zip(starts, segments)])
     arcs_of_waypoints, first = [], 0
     for point in points:
         q = surface.closest_point(point)[0]

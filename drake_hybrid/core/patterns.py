@@ -13,24 +13,53 @@ rest); a spiral is one smooth stroke.
     an Archimedean spiral r = spacing theta / (2 pi) from the centre out to ``radius``, sampled
     every ``step`` m of its length (it starts half a turn out, where its curvature is finite).
 
-Bad input (a spacing or a size that is not positive, a spacing larger than the region) is a
-``PathError`` naming the field.
+Bad input (a spacing or a size that is not positive, a spacing larger than the region, a string or
+a bool where a number goes) is a ``PathError`` naming the field. So is a pattern of more than
+``MAX_PATH_POINTS`` samples (a spacing too fine for its region), refused before it is drawn.
 """
 
 import math
 
 import numpy as np
 
+from drake_hybrid.core.arguments import describe, numeric_array, positive, text, vector
 from drake_hybrid.core.errors import PathError
 
 STEP = 0.001        # m between the samples of a stroke
+# The most samples a path (a pattern, or the strokes between waypoints) may have: 100 m of path at STEP,
+# e.g. a 0.7 m x 0.7 m panel rastered at 5 mm. Building a path takes about 0.4 ms a sample (Toppra and
+# the splines; measured on this project's machine: 40 s for the bound) and a job runs it at the path's
+# speed (2000 s simulated at 0.05 m/s), so a larger pattern is a spacing mistaken by orders of magnitude
+# (1e-5 m asks for a million samples on a 0.1 m square): refused before its points are made.
+MAX_PATH_POINTS = 100_000
 
 
-def _positive(number, what):
-    number = float(number)
-    if not 0 < number < math.inf:
-        raise PathError(f"{what} must be positive and finite (m), got {number}")
-    return number
+def check_point_count(count, where, advice):
+    """PathError if a path of ``count`` samples exceeds MAX_PATH_POINTS (``where``: what asked for them;
+    ``advice``: what to change)."""
+    if count > MAX_PATH_POINTS:
+        raise PathError(f"{where} would take {count:.3g} samples, more than {MAX_PATH_POINTS} (100 m of path at "
+                        f"{STEP * 1000:g} mm): {advice}")
+
+
+def check_strokes(strokes, what, owner):
+    """The strokes as arrays of (u, v) points (at least one stroke of at least two finite points each, at most
+    MAX_PATH_POINTS in all), else a PathError naming ``what``'s strokes and ``owner``."""
+    if isinstance(strokes, (str, bytes, dict)) or not hasattr(strokes, "__iter__"):
+        raise PathError(f"{owner}: {what} strokes must be a list of (u, v) polylines, got {describe(strokes)}")
+    arrays = []
+    for index, stroke in enumerate(strokes):
+        name = f"{what} strokes[{index}]"
+        array = numeric_array(stroke, name, owner, what="a polyline of (u, v) points (m)", error=PathError)
+        if array.ndim != 2 or array.shape[1] != 2 or len(array) < 2:
+            raise PathError(f"{owner}: {name} must be a polyline of at least two finite (u, v) points (m), got "
+                            f"{describe(stroke)}")
+        arrays.append(array)
+    if not arrays:
+        raise PathError(f"{owner}: {what} strokes must hold at least one stroke (a polyline of (u, v) points), got none")
+    check_point_count(sum(len(array) for array in arrays), f"{owner}: {what}'s strokes",
+                      "draw the pattern with a coarser spacing or over a smaller region")
+    return arrays
 
 
 def _segment(start, end, step=STEP):
@@ -42,18 +71,17 @@ def _segment(start, end, step=STEP):
 
 def raster(center, size, spacing, direction="u", what="pattern"):
     """The strokes of a boustrophedon raster (module docstring)."""
-    center = np.asarray(center, dtype=float).reshape(-1)
-    size = np.asarray(size, dtype=float).reshape(-1)
-    if center.shape != (2,) or size.shape != (2,) or not np.all(np.isfinite(center)):
-        raise PathError(f"{what}: center and size must be 2 finite numbers each (u, v), got {center.tolist()} and "
-                        f"{size.tolist()}")
-    width, height = (_positive(s, f"{what}.size") for s in size)
-    spacing = _positive(spacing, f"{what}.spacing")
-    if direction not in ("u", "v"):
-        raise PathError(f"{what}.direction must be 'u' or 'v' (the axis the lines run along), got '{direction}'")
+    center = vector(center, f"{what}.center", "raster", 2, unit="u, v in m", error=PathError)
+    size = vector(size, f"{what}.size", "raster", 2, unit="width, height in m", error=PathError)
+    width, height = (positive(s, f"{what}.size", "raster", unit="m", error=PathError) for s in size)
+    spacing = positive(spacing, f"{what}.spacing", "raster", unit="m", error=PathError)
+    direction = text(direction, f"{what}.direction", "raster", allowed=("u", "v"), error=PathError)
     along, across = (width, height) if direction == "u" else (height, width)
     if spacing > across:
         raise PathError(f"{what}.spacing ({spacing:g} m) is larger than the region across the lines ({across:g} m)")
+    lines = across / spacing + 1
+    check_point_count(lines * (along + spacing) / STEP, f"raster: {what}.spacing {spacing:g} m over {along:g} m x "
+                      f"{across:g} m", "the spacing is too fine for the region (or the region too large)")
     lines = int(math.ceil(across / spacing - 1e-9)) + 1
     offsets = np.linspace(-across / 2, across / 2, lines)
     strokes = []
@@ -74,17 +102,18 @@ def _oriented(point, direction, center):
 
 def spiral(center, radius, spacing, what="pattern", step=STEP):
     """The stroke of an Archimedean spiral (module docstring)."""
-    center = np.asarray(center, dtype=float).reshape(-1)
-    if center.shape != (2,) or not np.all(np.isfinite(center)):
-        raise PathError(f"{what}.center must be 2 finite numbers (u, v), got {center.tolist()}")
-    radius = _positive(radius, f"{what}.radius")
-    spacing = _positive(spacing, f"{what}.spacing")
+    center = vector(center, f"{what}.center", "spiral", 2, unit="u, v in m", error=PathError)
+    radius = positive(radius, f"{what}.radius", "spiral", unit="m", error=PathError)
+    spacing = positive(spacing, f"{what}.spacing", "spiral", unit="m", error=PathError)
+    step = positive(step, "step", "spiral", unit="m", error=PathError)
     if spacing > radius:
         raise PathError(f"{what}.spacing ({spacing:g} m) is larger than the radius ({radius:g} m)")
     b = spacing / (2 * math.pi)
     start, end = math.pi, radius / b
     # Arc length of r = b theta: (b / 2) (theta sqrt(1 + theta^2) + asinh(theta)); sample it evenly.
     length = lambda theta: 0.5 * b * (theta * np.sqrt(1 + theta * theta) + np.arcsinh(theta))
+    check_point_count((length(end) - length(start)) / step, f"spiral: {what}.spacing {spacing:g} m out to "
+                      f"{radius:g} m", "the spacing (or the step) is too fine for the radius")
     count = max(3, int(math.ceil((length(end) - length(start)) / step)) + 1)
     fine = np.linspace(start, end, 20 * count)
     thetas = np.interp(np.linspace(length(start), length(end), count), length(fine), fine)

@@ -24,6 +24,12 @@ wherever the surface faces the viewer (``check_facing``: within ``MAX_TILT`` of 
 
 Provided: ``PlaneSurface``, ``SphereSurface``, ``CylinderSurface``; a height map (a scanned part) is
 ``core.height_map.HeightMapSurface``.
+
+The pad's offset r (``offset``, here and in ``core.paths``) is the ball pad's radius: a finite number
+>= 0 (m; 0 holds the surface point itself). A negative offset would put the controlled point inside the
+workpiece (on a sphere of radius R, -r < -R even beyond its centre), which no pad does, so it is
+refused (``check_offset``). Every argument is checked at the call (``core.arguments``): a bad one is a
+one-line ``PathError`` naming it.
 """
 
 import abc
@@ -33,6 +39,7 @@ from dataclasses import dataclass
 import numpy as np
 import sympy
 
+from drake_hybrid.core.arguments import instance, nonnegative, number, numeric_array, positive, text, vector
 from drake_hybrid.core.charts import EulerZXZChart, PoseChart
 from drake_hybrid.core.constraints import surface_constraint
 from drake_hybrid.core.errors import PathError
@@ -41,19 +48,31 @@ from drake_hybrid.core.projections import GivenVelocityProjection
 MAX_TILT = 60.0         # deg: the largest angle between the surface normal and a view's w on a path
 
 
-def _vector(values, what, size=3):
-    vector = np.asarray(values, dtype=float).reshape(-1)
-    if vector.shape != (size,) or not np.all(np.isfinite(vector)):
-        raise PathError(f"{what} must be {size} finite numbers, got {list(np.atleast_1d(values))}")
-    return vector
+def _vector(values, what, owner, size=3):
+    return vector(values, what, owner, size, error=PathError)
 
 
-def _unit(values, what):
-    vector = _vector(values, what)
-    norm = float(np.linalg.norm(vector))
+def _unit(values, what, owner):
+    direction = _vector(values, what, owner)
+    norm = float(np.linalg.norm(direction))
     if not norm > 1e-12:
-        raise PathError(f"{what} must be a nonzero vector, got {vector.tolist()}")
-    return vector / norm
+        raise PathError(f"{owner}: {what} must be a nonzero vector, got {direction.tolist()}")
+    return direction / norm
+
+
+def check_offset(offset, owner, name="offset"):
+    """The pad's offset as a float: a finite number >= 0 (m; module docstring), else a PathError."""
+    return nonnegative(offset, name, owner, unit="m, the pad's radius", error=PathError)
+
+
+def check_point(p, owner, name="p"):
+    """A world point as a float vector of 3 finite numbers (m), else a PathError."""
+    return vector(p, name, owner, 3, unit="m", error=PathError)
+
+
+def check_view(view, owner, name="view"):
+    """``view`` if it is a ViewPlane, else a PathError."""
+    return instance(view, name, owner, ViewPlane, what="a ViewPlane (ViewPlane.make)", error=PathError)
 
 
 @dataclass(frozen=True)
@@ -69,9 +88,11 @@ class ViewPlane:
     def make(origin=(0.0, 0.0, 0.0), axis_u=(1.0, 0.0, 0.0), axis_v=(0.0, 1.0, 0.0), what="view"):
         """A ViewPlane with ``axis_v`` made orthogonal to ``axis_u`` (Gram-Schmidt); PathError naming
         ``what`` for parallel or non-finite axes."""
-        o = _vector(origin, f"{what}.origin")
-        u = _unit(axis_u, f"{what}.axis_u")
-        v = _vector(axis_v, f"{what}.axis_v") - (_vector(axis_v, f"{what}.axis_v") @ u) * u
+        owner = "ViewPlane.make"
+        o = _vector(origin, f"{text(what, 'what', owner)}.origin", owner)
+        u = _unit(axis_u, f"{what}.axis_u", owner)
+        v = _vector(axis_v, f"{what}.axis_v", owner)
+        v = v - (v @ u) * u
         if not np.linalg.norm(v) > 1e-9:
             raise PathError(f"{what}.axis_v must not be parallel to axis_u, got {list(axis_v)} and {list(axis_u)}")
         return ViewPlane(tuple(o), tuple(u), tuple(v / np.linalg.norm(v)))
@@ -83,17 +104,24 @@ class ViewPlane:
 
     def point(self, u, v):
         """The world point at (u, v) of the plane."""
+        u, v = (number(x, name, "ViewPlane.point", unit="m", error=PathError) for x, name in ((u, "u"), (v, "v")))
         return np.asarray(self.origin) + u * np.asarray(self.axis_u) + v * np.asarray(self.axis_v)
 
     def coordinates(self, points):
         """(u, v) of world points (N x 3 or 3) projected onto the plane along w."""
-        d = np.asarray(points, dtype=float) - np.asarray(self.origin)
+        allowed = "a world point [x, y, z] or N x 3 world points (m)"
+        array = numeric_array(points, "points", "ViewPlane.coordinates", what=allowed, error=PathError)
+        if array.ndim not in (1, 2) or array.shape[-1] != 3:
+            raise PathError(f"ViewPlane.coordinates: points must be {allowed}, got an array of shape {list(array.shape)}")
+        d = array - np.asarray(self.origin)
         return np.stack([d @ np.asarray(self.axis_u), d @ np.asarray(self.axis_v)], axis=-1)
 
 
 def check_facing(normal, view, where, max_tilt=MAX_TILT):
     """PathError if the surface normal at ``where`` turns more than ``max_tilt`` degrees from the view's
     w: the view's rows of E_p would lose rank against E_f there (and the surface would hide itself)."""
+    if not np.all(np.isfinite(normal)):
+        raise PathError(f"{where}: the surface normal there is not finite, got {np.asarray(normal).tolist()}")
     cosine = float(np.clip(np.asarray(normal) @ view.normal, -1.0, 1.0))
     tilt = math.degrees(math.acos(cosine))
     if tilt > max_tilt:
@@ -114,7 +142,8 @@ def view_projection(chart, view, name="E_p (view)"):
     elif isinstance(chart, EulerZXZChart):
         spin = [0, 0, 0, 0, 0, 1]
     else:
-        raise TypeError(f"view_projection needs a PoseChart or an EulerZXZChart, got {type(chart).__name__}")
+        instance(chart, "chart", "view_projection", (PoseChart, EulerZXZChart), error=PathError)
+    check_view(view, "view_projection")
     u, v = (list(sympy.nsimplify(c, rational=False) for c in axis) for axis in (view.axis_u, view.axis_v))
     return GivenVelocityProjection(chart, [spin, u + [0, 0, 0], v + [0, 0, 0]], name=name)
 
@@ -150,18 +179,21 @@ class Surface(abc.ABC):
         """The unit direction along which the orientation rows of ``offset_constraint`` hold the approach
         vector (a = -it) at a point ``p`` near the offset surface: grad f_r(p) normalized (here the normal
         of the offset family through p, the same along the normal line)."""
+        check_offset(offset, f"{self.name}.held_normal")
         return self.normal(p)
 
     def offset_constraint(self, chart, offset, name=None):
         """The constraint on a point held ``offset`` along the outward normal (a ball pad's centre):
         ``surface_constraint`` of f_r, with the orientation rows (a along -grad f_r) as kinematic rows."""
+        offset = check_offset(offset, f"{self.name}.offset_constraint")
         return surface_constraint(chart, lambda p: self.implicit(p, offset), name=name or self.name,
                                   normal_rows=True)
 
     def signed_distance(self, p):
         """Distance of ``p`` from the surface, positive outside."""
+        p = check_point(p, f"{self.name}.signed_distance")
         q, n = self.closest_point(p)
-        return float((np.asarray(p, dtype=float) - q) @ n)
+        return float((p - q) @ n)
 
 
 def _largest_root(a, b, c, where):
@@ -176,9 +208,9 @@ class PlaneSurface(Surface):
     """The plane through ``point`` with outward normal ``normal``."""
 
     def __init__(self, point, normal, name="plane"):
-        self.point = _vector(point, f"{name}.point")
-        self.unit_normal = _unit(normal, f"{name}.normal")
-        self.name = name
+        self.name = text(name, "name", "PlaneSurface", error=PathError)
+        self.point = _vector(point, f"{name}.point", "PlaneSurface")
+        self.unit_normal = _unit(normal, f"{name}.normal", "PlaneSurface")
 
     def default_view(self):
         n = self.unit_normal
@@ -187,15 +219,15 @@ class PlaneSurface(Surface):
         return ViewPlane.make(self.point, u, np.cross(n, u))
 
     def implicit(self, p, offset):
-        n, o = self.unit_normal, self.point
+        n, o, offset = self.unit_normal, self.point, check_offset(offset, f"{self.name}.implicit")
         return sum(sympy.Float(n[i]) * (p[i] - sympy.Float(o[i])) for i in range(3)) - sympy.Float(offset)
 
     def closest_point(self, p):
-        p = np.asarray(p, dtype=float)
+        p = check_point(p, f"{self.name}.closest_point")
         return p - ((p - self.point) @ self.unit_normal) * self.unit_normal, self.unit_normal.copy()
 
     def lift(self, view, u, v):
-        start, w = view.point(u, v), view.normal
+        start, w = check_view(view, f"{self.name}.lift").point(u, v), view.normal
         facing = float(self.unit_normal @ w)
         if abs(facing) < 1e-12:
             raise PathError(f"{self.name}: the view's normal lies in the plane; the view sees it edge-on")
@@ -207,23 +239,21 @@ class SphereSurface(Surface):
     """The sphere of ``radius`` about ``center``."""
 
     def __init__(self, center, radius, name="sphere"):
-        self.center = _vector(center, f"{name}.center")
-        self.radius = float(radius)
-        if not 0 < self.radius < math.inf:
-            raise PathError(f"{name}.radius must be positive (m), got {radius}")
-        self.name = name
+        self.name = text(name, "name", "SphereSurface", error=PathError)
+        self.center = _vector(center, f"{name}.center", "SphereSurface")
+        self.radius = positive(radius, f"{name}.radius", "SphereSurface", unit="m", error=PathError)
 
     def default_view(self):
         """Seen from above (+z): origin at the centre, u = x, v = y."""
         return ViewPlane.make(self.center)
 
     def implicit(self, p, offset):
-        rho = sympy.Float(self.radius + offset)
+        rho = sympy.Float(self.radius + check_offset(offset, f"{self.name}.implicit"))
         P = [p[i] - sympy.Float(self.center[i]) for i in range(3)]
         return (sum(c * c for c in P) - rho * rho) / (2 * rho)
 
     def closest_point(self, p):
-        d = np.asarray(p, dtype=float) - self.center
+        d = check_point(p, f"{self.name}.closest_point") - self.center
         norm = float(np.linalg.norm(d))
         if norm < 1e-12:
             raise PathError(f"{self.name}: the centre has no closest surface point")
@@ -231,7 +261,7 @@ class SphereSurface(Surface):
         return self.center + self.radius * n, n
 
     def lift(self, view, u, v):
-        start, w = view.point(u, v), view.normal
+        start, w = check_view(view, f"{self.name}.lift").point(u, v), view.normal
         d = start - self.center
         lam = _largest_root(1.0, float(d @ w), float(d @ d) - self.radius ** 2, f"{self.name} at (u, v) = ({u:.4g}, "
                                                                                   f"{v:.4g}) m")
@@ -243,15 +273,12 @@ class CylinderSurface(Surface):
     unbounded) limits it to |(p - center) . axis| <= length / 2."""
 
     def __init__(self, center, axis, radius, length=math.inf, name="cylinder"):
-        self.center = _vector(center, f"{name}.center")
-        self.axis = _unit(axis, f"{name}.axis")
-        self.radius = float(radius)
-        self.length = float(length)
-        if not 0 < self.radius < math.inf:
-            raise PathError(f"{name}.radius must be positive (m), got {radius}")
-        if not self.length > 0:
-            raise PathError(f"{name}.length must be positive (m), got {length}")
-        self.name = name
+        self.name = text(name, "name", "CylinderSurface", error=PathError)
+        self.center = _vector(center, f"{name}.center", "CylinderSurface")
+        self.axis = _unit(axis, f"{name}.axis", "CylinderSurface")
+        self.radius = positive(radius, f"{name}.radius", "CylinderSurface", unit="m", error=PathError)
+        self.length = positive(length, f"{name}.length", "CylinderSurface", unit="m", allow_infinite=True,
+                               error=PathError)
 
     def default_view(self):
         """Seen from the world +z (or +x for a vertical axis), u along the axis."""
@@ -264,7 +291,7 @@ class CylinderSurface(Surface):
         return d - (d @ self.axis) * self.axis
 
     def implicit(self, p, offset):
-        rho = sympy.Float(self.radius + offset)
+        rho = sympy.Float(self.radius + check_offset(offset, f"{self.name}.implicit"))
         k = [sympy.Float(c) for c in self.axis]
         d = [p[i] - sympy.Float(self.center[i]) for i in range(3)]
         along = sum(k[i] * d[i] for i in range(3))
@@ -272,7 +299,8 @@ class CylinderSurface(Surface):
         return (sum(c * c for c in radial) - rho * rho) / (2 * rho)
 
     def closest_point(self, p):
-        d = np.asarray(p, dtype=float) - self.center
+        p = check_point(p, f"{self.name}.closest_point")
+        d = p - self.center
         radial = self._radial(d)
         norm = float(np.linalg.norm(radial))
         if norm < 1e-12:
@@ -281,7 +309,7 @@ class CylinderSurface(Surface):
         return p - radial + self.radius * n, n
 
     def lift(self, view, u, v):
-        start, w = view.point(u, v), view.normal
+        start, w = check_view(view, f"{self.name}.lift").point(u, v), view.normal
         d, w_radial = self._radial(start - self.center), self._radial(w)
         where = f"{self.name} at (u, v) = ({u:.4g}, {v:.4g}) m"
         lam = _largest_root(float(w_radial @ w_radial), float(d @ w_radial), float(d @ d) - self.radius ** 2, where)

@@ -2,18 +2,76 @@
 
 The one definition of a row's error that ``summary.json`` (``simulation.summarize``), the command line's
 summary and the sweep's verdict (``sweep``) share; pure numpy on the logged arrays, no Drake.
+
+Arguments are checked at the call (``core.arguments``): times a nonempty vector of finite, nondecreasing
+numbers; a group of rows an array of samples x rows (a vector is one row) with one sample per time and,
+where several arrays describe the same rows (errors, commands, units, names), one column per row in each,
+so that no row may drop out. NaN is allowed in the logged errors (a sample taken while the measured
+wrench was invalid) and nowhere else. A mismatch is a one-line ArgumentError naming the argument.
 """
 
 import math
+import numbers
 
 import numpy as np
 
 from drake_hybrid.analysis.environment import impedance_response
 from drake_hybrid.control.phases import ContactPhase
+from drake_hybrid.core.arguments import describe, number, numeric_array, text
+from drake_hybrid.core.errors import ArgumentError
+
+
+def _times(times, name, owner):
+    """A nonempty vector of finite, nondecreasing times (s)."""
+    allowed = "a nonempty vector of finite nondecreasing times (s)"
+    array = numeric_array(times, name, owner, what=allowed)
+    if array.ndim != 1 or array.size == 0 or np.any(np.diff(array) < 0):
+        raise ArgumentError(f"{owner}: {name} must be {allowed}, got {describe(times)}")
+    return array
+
+
+def _rows(values, name, owner, samples=None, columns=None, nan=False):
+    """``values`` as a float array of samples x rows (a vector: one row), NaN allowed if ``nan``; with
+    ``samples``, one sample per time; with ``columns``, that many rows."""
+    allowed = "an array of samples x rows of numbers" + ("" if nan else " (no NaN)")
+    if values is None or isinstance(values, (str, bytes, dict, bool, np.bool_)) or not isinstance(
+            values, (numbers.Real, list, tuple, np.ndarray)):
+        raise ArgumentError(f"{owner}: {name} must be {allowed}, got {describe(values)}")
+    try:
+        array = np.array(values, dtype=float)
+    except (TypeError, ValueError):
+        raise ArgumentError(f"{owner}: {name} must be {allowed}, got {describe(values)}") from None
+    if array.ndim == 1:
+        array = array[:, None]
+    if array.ndim != 2 or array.shape[0] == 0 or (not nan and np.isnan(array).any()):
+        raise ArgumentError(f"{owner}: {name} must be {allowed} (at least one sample), got {describe(values)}")
+    if samples is not None and array.shape[0] != samples:
+        raise ArgumentError(f"{owner}: {name} must have one sample per time ({samples}), got {array.shape[0]}")
+    if columns is not None and array.shape[1] != columns:
+        raise ArgumentError(f"{owner}: {name} must have one column per row ({columns}, as the errors), got "
+                            f"{array.shape[1]}: no row may drop out")
+    return array
+
+
+def _per_row(items, name, owner, count):
+    """``items`` (units, names) as a list of one entry per row."""
+    if isinstance(items, (str, bytes)) or not hasattr(items, "__len__") or len(items) != count:
+        got = f"{len(items)}: {list(items)!r:.80}" if hasattr(items, "__len__") and not isinstance(
+            items, (str, bytes)) else describe(items)
+        raise ArgumentError(f"{owner}: {name} must give one entry per row ({count}), got {got}")
+    return list(items)
 
 
 def settling_time(times, error_norm, bound):
-    """First time after which ``error_norm`` stays at or below ``bound`` (inf if never)."""
+    """First time after which ``error_norm`` stays at or below ``bound`` (inf if never): ``times`` nonempty,
+    nondecreasing; ``error_norm`` one finite value (or inf) per time; ``bound`` a finite number >= 0."""
+    owner = "settling_time"
+    times = _times(times, "times", owner)
+    error_norm = numeric_array(error_norm, "error_norm", owner, what="a vector of numbers (no NaN)", finite=False)
+    if error_norm.shape != times.shape:
+        raise ArgumentError(f"{owner}: error_norm must have one value per entry of times ({times.size}), got "
+                            f"{describe(error_norm)}")
+    bound = number(bound, "bound", owner, low=0.0)
     outside = np.nonzero(error_norm > bound)[0]
     if outside.size == 0:
         return float(times[0])
@@ -25,7 +83,9 @@ def settling_time(times, error_norm, bound):
 def contact_time(log, start_in_contact=True):
     """When the hybrid law took over: the first sample in the CONTACT phase when a contact supervisor
     ran (``contact_phase`` logged), else the first sample (a start in contact)."""
-    t = log["t"]
+    if not hasattr(log, "__contains__") or "t" not in log:
+        raise ArgumentError(f"contact_time: log must be a run's log (a mapping with 't'), got {describe(log)}")
+    t = _times(log["t"], "log['t']", "contact_time")
     if "contact_phase" in log:
         in_contact = np.nonzero(np.asarray(log["contact_phase"])[:, 0] == int(ContactPhase.CONTACT))[0]
         return float(t[in_contact[0]]) if in_contact.size else math.inf
@@ -46,14 +106,15 @@ def display_unit(unit):
 
 
 def row_commands(desired):
-    """Each row's command: max |desired_i| over the run (in the row's units; 0 for a row commanded to zero)."""
-    return np.max(np.abs(np.asarray(desired, dtype=float)), axis=0)
+    """Each row's command: max |desired_i| over the run (in the row's units; 0 for a row commanded to zero);
+    ``desired`` samples x rows (a vector: one row)."""
+    return np.max(np.abs(_rows(desired, "desired", "row_commands")), axis=0)
 
 
 def run_scale(desired):
     """The run's command scale: max over the samples of |desired| (the norm across the rows; the
     summary's ``command_scales``: the speed, the force)."""
-    desired = np.asarray(desired, dtype=float).reshape(len(desired), -1)
+    desired = _rows(desired, "desired", "run_scale")
     return float(np.max(np.linalg.norm(desired, axis=1))) if desired.size else 0.0
 
 
@@ -66,7 +127,8 @@ def row_scales(desired, units=None, fallback="run"):
     tolerance in each row's units), else one of its units. Returns (scales, sources), each source
     "command", "rows in its units", "run" or "unit" (no % figure is given against a unit)."""
     commands, scale = row_commands(desired), run_scale(desired)
-    units = list(units) if units is not None else [None] * len(commands)
+    fallback = text(fallback, "fallback", "row_scales", allowed=("run", "unit"))
+    units = _per_row(units, "units", "row_scales", len(commands)) if units is not None else [None] * len(commands)
     scales, sources = [], []
     for command, unit in zip(commands, units):
         same = [c for c, u in zip(commands, units) if unit is not None and u == unit and c > 0]
@@ -83,14 +145,14 @@ def row_scales(desired, units=None, fallback="run"):
 def last_valid(values):
     """The last row of ``values`` (samples x columns) without NaN (None if every row has one): a sample
     taken while the measured wrench was invalid reads NaN (control.law_system) and is no figure."""
-    values = np.asarray(values, dtype=float)
+    values = _rows(values, "values", "last_valid", nan=True)
     valid = np.nonzero(~np.isnan(values).any(axis=1))[0]
     return values[valid[-1]] if valid.size else None
 
 
 def invalid_samples(values):
     """How many samples (rows of ``values``) read NaN: taken while the measured wrench was invalid."""
-    return int(np.isnan(np.asarray(values, dtype=float)).any(axis=1).sum())
+    return int(np.isnan(_rows(values, "values", "invalid_samples", nan=True)).any(axis=1).sum())
 
 
 def max_row_errors(t, error, desired, after, units=None, fallback="run"):
@@ -99,10 +161,16 @@ def max_row_errors(t, error, desired, after, units=None, fallback="run"):
     commanded to zero the largest command in its units or the run's speed or force; None against one
     of its units). The one definition of a row's error that ``row_errors`` (summary.json) and the
     sweep's verdict share. Samples that read NaN (the wrench invalid then) are left out."""
-    window = t >= after
+    owner = "max_row_errors"
+    t = _times(t, "t", owner)
+    error = _rows(error, "error", owner, samples=t.size, nan=True)
+    desired = _rows(desired, "desired", owner, columns=error.shape[1])
+    if units is not None:
+        _per_row(units, "units", owner, error.shape[1])
+    window = t >= number(after, "after", owner, unit="s", allow_infinite=True)
     figures = []
     scales, sources = row_scales(desired, units, fallback)
-    for e, scale, source in zip(np.abs(np.asarray(error, dtype=float)).T, scales, sources):
+    for e, scale, source in zip(np.abs(error).T, scales, sources):
         values = e[window & ~np.isnan(e)]
         worst = float(np.max(values)) if values.size else None
         figures.append((worst, None if worst is None or source == "unit" else 100.0 * worst / float(scale)))
@@ -115,11 +183,22 @@ def row_errors(t, error, desired, names, units, since, settle_after):
     else the run's scale (the speed or the force the run commands: the cross-track row of a slide
     against the slide's speed), so that no row drops out of the worst-row figures.
 
+    ``names``: at most one per row (a row without one is called "row i"); ``units``: one per row.
     ``since``: when the law took over (contact); ``settle_after``: when the design says the
     transient is over (contact + 5 design time constants). Settling times (within 1 % of the scale)
     are counted from ``since``. Samples that read NaN (the measured wrench invalid then: no
     measurement) are left out of every figure.
     """
+    owner = "row_errors"
+    t = _times(t, "t", owner)
+    error = _rows(error, "error", owner, samples=t.size, nan=True)
+    desired = _rows(desired, "desired", owner, columns=error.shape[1])
+    units = _per_row(units, "units", owner, error.shape[1])
+    if isinstance(names, (str, bytes)) or not hasattr(names, "__len__") or len(names) > error.shape[1]:
+        raise ArgumentError(f"{owner}: names must be a list of at most one name per row ({error.shape[1]}; a row "
+                            f"without one is called 'row i'), got {describe(names)}")
+    since = number(since, "since", owner, unit="s", allow_infinite=True)
+    settle_after = number(settle_after, "settle_after", owner, unit="s", allow_infinite=True)
     rows = []
     commands = row_commands(desired)
     scales, sources = row_scales(desired, units)
@@ -150,7 +229,12 @@ def row_errors(t, error, desired, names, units, since, settle_after):
 def max_after(values, window):
     """Per column, max |values| over the samples in ``window`` that do not read NaN (a list of floats,
     None where there is none)."""
-    values = np.abs(np.asarray(values, dtype=float))[window]
+    values = np.abs(_rows(values, "values", "max_after", nan=True))
+    window = np.asarray(window)
+    if window.dtype != bool or window.shape != (values.shape[0],):
+        raise ArgumentError(f"max_after: window must be a boolean mask of one entry per sample ({values.shape[0]}), "
+                            f"got {describe(window)}")
+    values = values[window]
     return [float(np.max(column[~np.isnan(column)])) if np.any(~np.isnan(column)) else None for column in values.T]
 
 
@@ -172,6 +256,8 @@ def impedance_check(log, gains, since, settle_after):
     The caller checks the mode (every log has position errors, zeros outside position and impedance
     mode). None without position errors, with the paper's pseudo-velocity rows (the log's errors are
     then the true rows'), or without a sample that late."""
+    since = number(since, "since", "impedance_check", unit="s", allow_infinite=True)
+    settle_after = number(settle_after, "settle_after", "impedance_check", unit="s", allow_infinite=True)
     t = np.asarray(log["t"], dtype=float)
     if "position_error" not in log or "true_desired_velocity" in log or not np.any(t >= settle_after):
         return None

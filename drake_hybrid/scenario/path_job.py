@@ -29,11 +29,13 @@ from pydrake.math import RigidTransform, RotationMatrix
 from pydrake.systems.primitives import LogVectorOutput
 
 from drake_hybrid.control.phases import ContactPhase
-from drake_hybrid.core.errors import ConfigError
+from drake_hybrid.core.arguments import instance, vector
+from drake_hybrid.core.errors import ConfigError, PathError
 from drake_hybrid.core.kinematics import inverse_kinematics
 from drake_hybrid.core.paths import PathLimits, SurfacePath, path_from_strokes, path_from_waypoints
 from drake_hybrid.core.patterns import raster, spiral
-from drake_hybrid.core.surfaces import ViewPlane
+from drake_hybrid.core.surfaces import Surface, ViewPlane, check_offset
+from drake_hybrid.scenario.path_config import PathConfig
 from drake_hybrid.scenario.start import pressing_positions
 from drake_hybrid.systems.path_source import PathSource, reference_rotation
 from drake_hybrid.systems.sources import Profile
@@ -74,16 +76,26 @@ def build_path(task, config):
     return _PATHS[key]
 
 
+def _force_field(settings):
+    """The PathConfig field the path's force comes from (``PathConfig.force_argument``), for its messages."""
+    if settings.force_by_arc_length:
+        return "force_by_arc_length"
+    return "waypoints[].force" if settings.waypoints and any(w.force > 0 for w in settings.waypoints) else "force"
+
+
 def path_on(surface, offset, settings):
-    """The SurfacePath of the PathConfig ``settings`` on ``surface`` for a pad centre ``offset`` off it."""
-    settings.validate()
+    """The SurfacePath of the PathConfig ``settings`` on ``surface`` (a core.surfaces.Surface) for a pad
+    centre ``offset`` off it (m, >= 0)."""
+    instance(surface, "surface", "path_on", Surface, what="a core.surfaces.Surface", error=PathError)
+    offset = check_offset(offset, "path_on")
+    instance(settings, "settings", "path_on", PathConfig, error=PathError).validate()
     view = view_of(settings, surface)
     limits = PathLimits(settings.speed, settings.acceleration)
-    force = settings.force_argument()
+    force, force_field = settings.force_argument(), _force_field(settings)
     if settings.waypoints:
         points = [w.point for w in settings.waypoints]
         path = path_from_waypoints(surface, points, offset, limits, force, settings.tolerance,
-                                   settings.interpolation, view, what="path")
+                                   settings.interpolation, view, what="path", force_field=force_field)
     else:
         pattern = settings.pattern
         if pattern.kind == "raster":
@@ -95,7 +107,7 @@ def path_on(surface, offset, settings):
             corners = np.vstack([stroke[[0, -1]] for stroke in strokes])
             map_points = [surface.field.map_point(view.point(u, v))[:2] for u, v in corners]
             check_inside(map_points, offset, "the pattern's corner")
-        path = path_from_strokes(surface, view, strokes, offset, limits, force, what="path")
+        path = path_from_strokes(surface, view, strokes, offset, limits, force, what="path", force_field=force_field)
     if settings.holding:
         arc = settings.hold_at * path.length
         sample = path.evaluate(_time_at_arc(path, arc))
@@ -111,16 +123,22 @@ def _time_at_arc(path, arc):
 
 
 def heading_of(settings, surface):
-    """The world direction the tool's x axis keeps: ``settings.heading`` (a PathConfig) or the view's u axis."""
-    return np.asarray(settings.heading, dtype=float) if settings.heading else np.asarray(
-        view_of(settings, surface).axis_u)
+    """The world direction the tool's x axis keeps: ``settings.heading`` (a PathConfig; 3 finite numbers,
+    not zero) or the view's u axis."""
+    if not settings.heading:
+        return np.asarray(view_of(settings, surface).axis_u)
+    heading = vector(settings.heading, "path.heading", "heading_of", 3, error=PathError)
+    if not np.linalg.norm(heading) > 1e-12:
+        raise PathError(f"heading_of: path.heading must be a nonzero direction [x, y, z] (or empty), got "
+                        f"{heading.tolist()}")
+    return heading
 
 
 def start_pose_on(surface, path, settings):
     """(X_WP, normal): the pad centre's pose at the first point of ``path`` (its reference orientation,
     ``settings`` a PathConfig) and the surface's outward normal there."""
-    centre, normal = path.first_point()
-    R = reference_rotation(normal, heading_of(settings, surface))
+    centre, normal = instance(path, "path", "start_pose_on", SurfacePath, error=PathError).first_point()
+    R = reference_rotation(normal, heading_of(settings, surface), "path.heading at the path's first point")
     return RigidTransform(RotationMatrix(R), centre), np.asarray(normal, dtype=float)
 
 
@@ -235,7 +253,7 @@ def job_duration(task, config):
 def draw_path(meshcat, path, name="path"):
     """Draw ``path`` in ``meshcat`` (the animation): the pad centre's reference as a line, and the
     points on the workpiece it passes over (the contact points), under ``/name``."""
-    centres, contacts = path.centres(), path.contact_points()
+    centres, contacts = instance(path, "path", "draw_path", SurfacePath).centres(), path.contact_points()
     meshcat.SetLine(f"{name}/pad_centre", centres.T, 2.0, Rgba(0.1, 0.6, 0.2, 1.0))
     meshcat.SetLine(f"{name}/on_the_workpiece", contacts.T, 2.0, Rgba(0.9, 0.4, 0.1, 1.0))
 

@@ -43,15 +43,19 @@ import numpy as np
 
 from pydrake.autodiffutils import AutoDiffXd
 from pydrake.math import sqrt
+from pydrake.multibody.plant import MultibodyPlant
 from pydrake.systems.framework import LeafSystem_
 from pydrake.systems.scalar_conversion import TemplateSystem
 
 from drake_hybrid.control.phases import ContactPhase
 from drake_hybrid.control.sampling import SAMPLE_LEAD
+from drake_hybrid.core.arguments import boolean, describe, instance, nonnegative, number, positive, vector
 from drake_hybrid.core.charts import PoseChart
-from drake_hybrid.core.errors import DimensionError
+from drake_hybrid.core.errors import ArgumentError
 from drake_hybrid.core.kinematics import declare_cached_value, declare_task_input
 from drake_hybrid.core.linalg import value
+from drake_hybrid.core.paths import SurfacePath
+from drake_hybrid.core.projections import ConstraintSpace
 from drake_hybrid.core.templates import default_instantiation
 
 NOT_STARTED = 1.0e9          # t_0 before the first contact
@@ -61,24 +65,38 @@ def _cross(a, b):
     return np.array([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]])
 
 
-def reference_rotation(normal, heading):
-    """R_d = [o_1, a x o_1, a] with a = -normal and o_1 the heading turned into the tangent plane."""
-    return reference_frame(normal, np.zeros(3), np.zeros(3), heading)[0]
+def reference_rotation(normal, heading, owner="reference_rotation"):
+    """R_d = [o_1, a x o_1, a] with a = -normal and o_1 the heading turned into the tangent plane;
+    ArgumentError (naming ``owner``) for a heading or normal that is not 3 finite numbers, a zero normal
+    or a heading along the normal."""
+    normal = vector(normal, "normal", owner, 3)
+    if not np.linalg.norm(normal) > 1e-12:
+        raise ArgumentError(f"{owner}: normal must be a nonzero vector, got {normal.tolist()}")
+    return reference_frame(normal / np.linalg.norm(normal), np.zeros(3), np.zeros(3),
+                           vector(heading, "heading", owner, 3), owner)[0]
 
 
-def reference_frame(normal, normal_rate, normal_acceleration, heading):
+def reference_frame(normal, normal_rate, normal_acceleration, heading, owner="reference_frame"):
     """(R_d, omega_d, omega-dot_d) of the reference frame R_d = [o_1, o_2, a]: a = -n, o_1 = g / |g| with
     g = h - (h . a) a (the heading h in the tangent plane), o_2 = a x o_1; from n, n-dot, n-ddot.
 
     omega = a x a-dot + sigma a, where the spin sigma = o_1-dot . o_2 = -(h . a)(a-dot . o_2) / |g|
-    keeps o_1 in the plane of a and h; omega-dot = a x a-ddot + sigma-dot a + sigma a-dot."""
+    keeps o_1 in the plane of a and h; omega-dot = a x a-ddot + sigma-dot a + sigma a-dot. ``normal`` is a
+    unit vector (a path's); ArgumentError (naming ``owner``) for non-finite entries or a heading along it."""
     h = np.asarray(heading, dtype=float)
     a, a_dot, a_ddot = -np.asarray(normal, dtype=float), -np.asarray(normal_rate), -np.asarray(normal_acceleration)
+    vectors = (("heading", h), ("normal", a), ("normal_rate", a_dot), ("normal_acceleration", a_ddot))
+    if any(entries.shape != (3,) for _, entries in vectors) or not np.isfinite(np.concatenate([h, a, a_dot,
+                                                                                               a_ddot])).all():
+        name, entries = next((name, entries) for name, entries in vectors
+                             if entries.shape != (3,) or not np.all(np.isfinite(entries)))
+        raise ArgumentError(f"{owner}: {name} must be a vector of 3 finite numbers, got {describe(entries)}")
     h_a = h @ a
     g = h - h_a * a
     length = np.sqrt(g @ g)
-    if length < 1e-6:
-        raise ValueError(f"PathSource: the heading {h.tolist()} is along the surface normal {(-a).tolist()}")
+    if length < 1e-6 * max(1.0, np.sqrt(h @ h)):
+        raise ArgumentError(f"{owner}: heading must be a direction not along the surface normal, got {h.tolist()} "
+                            f"(normal {np.round(-a, 6).tolist()})")
     o1 = g / length
     o2 = _cross(a, o1)
     sigma = -h_a * (a_dot @ o2) / length
@@ -133,14 +151,19 @@ def PathSource_(T):
 
         Args:
             plant, end_effector_frame, end_effector_point: as for HybridController (the controller's
-                plant; the point is the pad centre).
-            constraint_space: the controller's ConstraintSpace (its E_p gives the rows).
+                plant, finalized; the point is the pad centre, 3 finite numbers in the frame, m).
+            constraint_space: the controller's ConstraintSpace on a PoseChart (its E_p gives the rows).
             path: a core.paths.SurfacePath.
-            heading: the world direction the tool's x axis keeps, turned into the tangent plane.
-            force_row: the row of C whose force is the normal force (0 for the surface constraints).
-            dwell: s between the start (or the first contact) and the path's start.
-            wait_for_contact: start the path's clock at the first CONTACT on ``contact_phase``.
-            period: the control period (s) at which ``contact_phase`` is read (with wait_for_contact).
+            heading: the world direction the tool's x axis keeps, turned into the tangent plane (3 finite
+                numbers, not along the path's first normal).
+            force_row: the row of C whose force is the normal force (an integer, 0 for the surface
+                constraints; not a kinematic row).
+            dwell: s between the start (or the first contact) and the path's start (finite, >= 0).
+            wait_for_contact: True or False: start the path's clock at the first CONTACT on ``contact_phase``.
+            period: the control period (s, positive and finite) at which ``contact_phase`` is read (needed
+                with wait_for_contact; else None or ignored).
+
+        Every argument is checked here (``core.arguments``): a bad one is a one-line ArgumentError naming it.
         """
 
         def _construct(self, plant, end_effector_frame, end_effector_point, constraint_space, path,
@@ -149,28 +172,37 @@ def PathSource_(T):
             LeafSystem_[T].__init__(self, converter)
             self._arguments = (plant, end_effector_frame, end_effector_point, constraint_space, path, heading,
                                force_row, dwell, wait_for_contact, period)
+            owner = "PathSource"
+            instance(plant, "plant", owner, MultibodyPlant, what="a MultibodyPlant (float, finalized)")
+            if not plant.is_finalized():
+                raise ArgumentError(f"{owner}: plant must be finalized (plant.Finalize())")
+            end_effector_point = vector(end_effector_point, "end_effector_point", owner, 3, unit="m")
+            instance(constraint_space, "constraint_space", owner, ConstraintSpace)
             chart = constraint_space.chart
             if not isinstance(chart, PoseChart):
-                raise TypeError(f"PathSource needs a PoseChart (a path over a surface turns the tool through any "
-                                f"direction, where Euler angles are singular), got {chart.name}")
-            self.constraint_space, self.path, self.chart = constraint_space, path, chart
-            self.heading = np.asarray(heading, dtype=float)
+                raise ArgumentError(f"{owner}: constraint_space must be on a PoseChart (a path over a surface turns "
+                                    f"the tool through any direction, where Euler angles are singular), got its "
+                                    f"{chart.name} chart")
+            self.constraint_space, self.chart = constraint_space, chart
+            self.path = instance(path, "path", owner, SurfacePath, what="a core.paths.SurfacePath")
+            self.heading = vector(heading, "heading", owner, 3)
             k, m = constraint_space.velocity_size, constraint_space.force_size
-            if not 0 <= int(force_row) < m or int(force_row) in constraint_space.constraint.kinematic_rows:
-                raise DimensionError(f"PathSource: force_row {force_row} must be a force-controlled row of C "
-                                     f"(0..{m - 1}, not kinematic {list(constraint_space.constraint.kinematic_rows)})")
-            self.force_row, self.dwell = int(force_row), float(dwell)
-            if not self.dwell >= 0:
-                raise ValueError(f"PathSource: dwell must be >= 0 (s), got {dwell}")
-            reference_rotation(path.first_point()[1], self.heading)        # the heading is usable
-            self.wait_for_contact = bool(wait_for_contact)
+            kinematic = list(constraint_space.constraint.kinematic_rows)
+            self.force_row = number(force_row, "force_row", owner, low=0, high=m - 1, integer=True)
+            if self.force_row in kinematic:
+                raise ArgumentError(f"{owner}: force_row must be a force-controlled row of C (0..{m - 1}, not "
+                                    f"kinematic {kinematic}), got {self.force_row}")
+            self.dwell = nonnegative(dwell, "dwell", owner, unit="s")
+            reference_rotation(path.first_point()[1], self.heading, owner)        # the heading is usable
+            self.wait_for_contact = boolean(wait_for_contact, "wait_for_contact", owner)
+            period = positive(period, "period", owner, unit="s", allow_none=True)
             _, self.kinematics, self._state_port, plant_context = declare_task_input(
                 self, T, plant, end_effector_frame, end_effector_point, chart)
             self._phase_port = None
             time_tickets = {self.time_ticket()}
             if self.wait_for_contact:
-                if not (period is not None and float(period) > 0):
-                    raise ValueError(f"PathSource: wait_for_contact needs the control period, got {period}")
+                if period is None:
+                    raise ArgumentError(f"{owner}: wait_for_contact needs period (the control period, s), got None")
                 self._phase_port = self.DeclareVectorInputPort("contact_phase", 1)
                 self.DeclareDiscreteState(np.array([NOT_STARTED]))
                 self.DeclarePeriodicDiscreteUpdateEvent(float(period), float(period) * (1.0 - SAMPLE_LEAD),
