@@ -353,9 +353,6 @@ class ScenarioConfig:
             if getattr(self, name) >= self.duration:
                 raise ConfigError(f"{name} ({getattr(self, name):g} s) must be shorter than duration "
                                   f"({self.duration:g} s)")
-        if not isinstance(self.sensor, (ContactSensorConfig, WristSensorConfig)):
-            raise ConfigError(f"sensor must be a ContactSensorConfig or a WristSensorConfig (YAML tags "
-                              f"!ContactSensorConfig, !WristSensorConfig), got {self.sensor!r}")
         validate_plant_config(self.plant)
         validate_simulator_config(self.simulator)
         self.contact.validate()
