@@ -711,7 +711,7 @@ BAD_CONFIGURATIONS = [
     BadInput("config: negative pad modulus", lambda: _scenario({"contact.pad_modulus": -1.0}), ValueError,
              "contact.pad_modulus must be positive"),
     BadInput("config: unknown sensor", lambda: _scenario({"sensor": "vision"}), ValueError,
-             "sensor must be a ContactSensorConfig or a WristSensorConfig"),
+             "sensor: expected a ContactSensorConfig or a WristSensorConfig"),
     BadInput("config: start.force_integral of 2 entries", lambda: _scenario({"start.force_integral": [0.1, 0.2]}),
              ValueError, "start.force_integral must have m = 1 entries, got 2"),
     BadInput("config: zero payload scale", lambda: _scenario({"model_error.payload_mass_scale": 0.0}), ValueError,

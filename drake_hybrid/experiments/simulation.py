@@ -45,6 +45,7 @@ from drake_hybrid.experiments.metrics import (contact_time, impedance_check, inv
                                            row_errors, row_units, run_scale, worst)
 from drake_hybrid.experiments.path_report import before_lift_off, path_report
 from drake_hybrid.scenario.builder import build_scenario
+from drake_hybrid.scenario.config import check_scenario_config
 from drake_hybrid.scenario.path_job import PATH_LOGS
 from drake_hybrid.scenario.start import set_initial_conditions
 
@@ -131,6 +132,7 @@ def simulate(config, progress=False, meshcat=None, record_html=False, setup=None
 
     Raises RunStopped (with the result up to the stop) if the run ends early: see the module
     docstring."""
+    check_scenario_config(config, "simulate")
     stages = stages or quiet()
     with stages(f"{config.task}: building the diagram (plant, constraint, controller)"):
         scenario = build_scenario(config, meshcat=meshcat)

@@ -31,9 +31,9 @@ from drake_hybrid.control.baselines import make_baseline
 from drake_hybrid.control.controller import HybridController
 from drake_hybrid.control.gains import ControlMode, gain_matrix
 from drake_hybrid.control.phases import ContactPhase
-from drake_hybrid.core.arguments import instance
+from drake_hybrid.core.errors import ConfigError
 from drake_hybrid.core.kinematics import EndEffectorKinematics
-from drake_hybrid.scenario.config import ScenarioConfig
+from drake_hybrid.scenario.config import ScenarioConfig, check_scenario_config
 from drake_hybrid.scenario.path_job import (add_path_loggers, connect_path, draw_path, lifts_off, make_path_source,
                                              with_path_commands)
 from drake_hybrid.scenario.plant import RobotModel, build_controller_plant, build_plant
@@ -112,11 +112,10 @@ def prepare_config(config):
     """(task, mode, constraint space, config) with every field validated once (``config.validate``,
     the task's typed options) and the desired force padded with zeros on the kinematic rows (given
     for the force-controlled rows only): what every diagram built from a config starts from."""
-    instance(config, "config", "build_scenario", ScenarioConfig,
-             what="a ScenarioConfig (e.g. get_task('window-washing').default_config())")
-    task = get_task(config.task)
-    mode = ControlMode.parse(config.mode)
+    check_scenario_config(config, "build_scenario")
     config.validate()
+    task = get_task(config.task, where="task", error=ConfigError)
+    mode = ControlMode.parse(config.mode)
     task.options(config)
     constraint_space = task.constraint_space(config)
     config = dataclasses.replace(config, desired_force=pad_kinematic_rows(
@@ -137,8 +136,6 @@ def build_scenario(config, meshcat=None, with_loggers=True, sampled_plant_output
 
     ``sampled_plant_outputs``: see ``scenario.plant.build_plant`` (default: sampled only under a
     continuous controller). ``controller_sample_lead`` exists for ``analysis.linearize_discrete``."""
-    if not isinstance(config, ScenarioConfig):
-        raise TypeError(f"build_scenario: expected a ScenarioConfig, got {type(config).__name__}")
     task, mode, constraint_space, config = prepare_config(config)
     control_period = config.control_period if config.control_period > 0 else None
 

@@ -36,8 +36,9 @@ from drake_hybrid.control.baselines import BaselineGains
 from drake_hybrid.control.gains import ControlMode, HybridGains
 from drake_hybrid.control.safety import SafetyConfig
 from drake_hybrid.control.supervision import SupervisionConfig
+from drake_hybrid.core.arguments import instance
 from drake_hybrid.core.errors import ConfigError, check_fields, check_finite
-from drake_hybrid.core.schema import check_yaml_against_schema, read_yaml_file
+from drake_hybrid.core.schema import check_types, check_yaml_against_schema, read_yaml_file, unknown_field
 from drake_hybrid.scenario.path_config import PathConfig
 from drake_hybrid.systems.faults import SensorFaultConfig
 from drake_hybrid.systems.sources import Profile
@@ -312,8 +313,13 @@ class ScenarioConfig:
     path: PathConfig = field(default_factory=PathConfig)
 
     def replace(self, **changes):
-        """A copy with some top-level fields changed."""
-        return dataclasses.replace(self, **changes)
+        """A copy with some top-level fields changed; ConfigError (one line, as for a YAML file) for a name
+        that is not a field or a value not of the field's type (``core.schema.check_types``; the values
+        are checked by ``validate``)."""
+        unknown = unknown_field(ScenarioConfig, changes, "the config")
+        if unknown:
+            raise ConfigError(unknown)
+        return check_types(dataclasses.replace(self, **changes), ScenarioConfig)
 
     @property
     def supervised(self):
@@ -325,9 +331,11 @@ class ScenarioConfig:
         return self.plant.time_step == 0
 
     def validate(self):
-        """Check every field's value, once (the types were checked by the YAML loader); ConfigError
-        naming the field. The gains and profiles are checked against the task's sizes by the systems
-        that use them (HybridController, ProfileSource), the start by ``scenario.start.check_start``."""
+        """Check every field's type (by the YAML loader's rules, ``core.schema.check_types``: a config
+        built or changed in Python is checked as a file is) and value, once; ConfigError naming the
+        field. The gains and profiles are checked against the task's sizes by the systems that use
+        them (HybridController, ProfileSource), the start by ``scenario.start.check_start``."""
+        check_types(self, ScenarioConfig)
         check_finite(self, allow_infinite=ALLOWED_INFINITE)
         try:
             ControlMode.parse(self.mode)
@@ -345,9 +353,6 @@ class ScenarioConfig:
             if getattr(self, name) >= self.duration:
                 raise ConfigError(f"{name} ({getattr(self, name):g} s) must be shorter than duration "
                                   f"({self.duration:g} s)")
-        if not isinstance(self.sensor, (ContactSensorConfig, WristSensorConfig)):
-            raise ConfigError(f"sensor must be a ContactSensorConfig or a WristSensorConfig (YAML tags "
-                              f"!ContactSensorConfig, !WristSensorConfig), got {self.sensor!r}")
         validate_plant_config(self.plant)
         validate_simulator_config(self.simulator)
         self.contact.validate()
@@ -399,6 +404,12 @@ class ScenarioConfig:
         return self
 
 
+def check_scenario_config(config, owner):
+    """``config`` if it is a ScenarioConfig, else ArgumentError (one line) naming ``owner``'s argument."""
+    return instance(config, "config", owner, ScenarioConfig,
+                    what="a ScenarioConfig (e.g. get_task('window-washing').default_config(); from YAML: load_config)")
+
+
 # Fields where inf is a meaningful value (all others must be finite numbers; NaN never).
 ALLOWED_INFINITE = ("sensor.fault_time", "safety.effort_limits", "supervision.max_travel")
 
@@ -409,6 +420,11 @@ def load_config(path=None, data=None, defaults=None):
     where = f"{path}: " if path else ""
     if path is not None:
         data = read_yaml_file(path, "config file")
+    elif not isinstance(data, str):
+        raise ConfigError(f"load_config: data must be a YAML text (a str; a ScenarioConfig is built in Python with "
+                          f"ScenarioConfig(...) or config.replace(...)), got a {type(data).__name__}")
+    if defaults is not None:
+        check_types(defaults, ScenarioConfig, "defaults")
     parsed = check_yaml_against_schema(data, ScenarioConfig, where)
     if not isinstance(parsed, dict):
         raise ConfigError(f"{where}a config is a YAML mapping of fields (e.g. 'duration: 2.0'), got "

@@ -33,6 +33,7 @@ from typing import List
 import numpy as np
 
 from drake_hybrid.core.errors import PathError
+from drake_hybrid.core.schema import check_types
 
 PATTERN_KINDS = ("", "raster", "spiral")
 
@@ -123,7 +124,8 @@ class PathConfig:
 
     def validate(self, prefix="path."):
         """PathError naming the first field that is not allowed (every field, also of an inactive path:
-        a misspelt value is refused wherever it is)."""
+        a misspelt value is refused wherever it is); the types first (``core.schema.check_types``)."""
+        check_types(self, PathConfig, prefix.rstrip("."), error=PathError)
         if self.waypoints and self.pattern.kind:
             raise PathError(f"{prefix}: give waypoints or a pattern, not both")
         if self.pattern.kind not in PATTERN_KINDS:
@@ -157,6 +159,8 @@ class PathConfig:
         for name in ("origin", "axis_u", "axis_v"):
             if len(getattr(self.view, name)) not in (0, 3):
                 raise PathError(f"{prefix}view.{name} must be [x, y, z] or empty, got {getattr(self.view, name)}")
-        if len(self.heading) not in (0, 3):
-            raise PathError(f"{prefix}heading must be a world direction [x, y, z] or empty, got {self.heading}")
+        if self.heading and (len(self.heading) != 3 or not np.all(np.isfinite(np.asarray(self.heading, dtype=float)))
+                             or not np.linalg.norm(np.asarray(self.heading, dtype=float)) > 0):
+            raise PathError(f"{prefix}heading must be a world direction [x, y, z] (finite, not zero) or empty, got "
+                            f"{list(self.heading)}")
         return self

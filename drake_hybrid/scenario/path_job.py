@@ -34,7 +34,9 @@ from drake_hybrid.core.errors import ConfigError, PathError
 from drake_hybrid.core.kinematics import inverse_kinematics
 from drake_hybrid.core.paths import PathLimits, SurfacePath, path_from_strokes, path_from_waypoints
 from drake_hybrid.core.patterns import raster, spiral
+from drake_hybrid.core.schema import unknown_field
 from drake_hybrid.core.surfaces import Surface, ViewPlane, check_offset
+from drake_hybrid.scenario.config import check_scenario_config
 from drake_hybrid.scenario.path_config import PathConfig
 from drake_hybrid.scenario.start import pressing_positions
 from drake_hybrid.systems.path_source import PathSource, reference_rotation
@@ -272,5 +274,10 @@ def with_path_commands(config, constraint_space):
 
 
 def with_path(config, **changes):
-    """A copy of ``config`` with ``config.path`` fields changed (e.g. ``hold_at=0.5``)."""
-    return dataclasses.replace(config, path=dataclasses.replace(config.path, **changes))
+    """A copy of ``config`` with ``config.path`` fields changed (e.g. ``hold_at=0.5``); ConfigError (one
+    line, as for a YAML file) for a name that is not a PathConfig field or a value not of its type."""
+    check_scenario_config(config, "with_path")
+    unknown = unknown_field(PathConfig, changes, "path")
+    if unknown:
+        raise ConfigError(unknown)
+    return config.replace(path=dataclasses.replace(config.path, **changes))

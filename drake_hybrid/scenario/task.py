@@ -26,7 +26,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from drake_hybrid.core.arguments import instance
 from drake_hybrid.core.errors import ConfigError
+from drake_hybrid.core.schema import unknown_field
 from drake_hybrid.scenario.config import ScenarioConfig
 from drake_hybrid.scenario.path_job import path_events
 from drake_hybrid.scenario.task_options import option_help
@@ -100,8 +102,11 @@ def pad_kinematic_rows(profile, force_size, kinematic_rows):
 
 
 def as_profile(value):
-    """A Profile from a Profile or a list of constant values."""
-    return value if isinstance(value, Profile) else Profile(kind="constant", value=[float(v) for v in value])
+    """A constant Profile from a list (a tuple, a 1-D array) of values; anything else as it is (its type
+    is checked with the config's, ``ScenarioConfig.replace``)."""
+    if isinstance(value, (list, tuple)) or (isinstance(value, np.ndarray) and value.ndim == 1):
+        return Profile(kind="constant", value=list(value))
+    return value
 
 
 class Task(abc.ABC):
@@ -123,20 +128,22 @@ class Task(abc.ABC):
 
     def default_config(self, options=None, **changes):
         """The task's default ScenarioConfig with ``options`` (names of ``Options``) and ``changes``
-        (top-level ScenarioConfig fields; desired_velocity and desired_force may be lists)."""
-        options = dict(options or {})
+        (top-level ScenarioConfig fields; desired_velocity and desired_force may be lists), validated
+        (``ScenarioConfig.validate``: ConfigError naming the field)."""
+        options = dict(instance(options, "options", f"{self.name}.default_config", dict, allow_none=True,
+                                what="a dict {option name: value}", error=ConfigError) or {})
         config = self.base_config(options)
         for name, raw in options.items():
             self._set_option(config, name, raw)
         for name in ("desired_velocity", "desired_force"):
             if name in changes:
                 changes[name] = as_profile(changes[name])
-        unknown = sorted(set(changes) - {f.name for f in dataclasses.fields(ScenarioConfig)})
+        unknown = unknown_field(ScenarioConfig, changes, f"{self.name}.default_config")
         if unknown:
-            raise ConfigError(f"{self.name}.default_config: {unknown[0]} is not a ScenarioConfig field")
-        config = dataclasses.replace(config, **changes) if changes else config
+            raise ConfigError(unknown)
+        config = config.replace(**changes) if changes else config
         self.options(config)
-        return config
+        return config.validate()
 
     def _set_option(self, config, name, raw):
         """Store option ``name`` in task_parameters (numbers) or task_options (words and booleans)."""

@@ -6,6 +6,8 @@ how to add its robot and workpiece to a plant, its chart, constraint and
 velocity projection, its default ScenarioConfig and its start configuration.
 """
 
+from drake_hybrid.core.arguments import text
+from drake_hybrid.core.errors import ArgumentError
 from drake_hybrid.scenario.tasks.crank_turning import CrankTurning
 from drake_hybrid.scenario.tasks.grinding import Grinding
 from drake_hybrid.scenario.tasks.sphere_polishing import SpherePolishing
@@ -24,13 +26,17 @@ def register_task(task):
     ``build_scenario``, ``simulate`` and ``linearize_continuous``. A task registered earlier under
     the same name is replaced (re-running a notebook cell); a built-in task cannot be. Returns it."""
     if task.name in BUILT_IN_TASKS:
-        raise ValueError(f"'{task.name}' is a built-in task; give your task another name")
+        raise ArgumentError(f"'{task.name}' is a built-in task; give your task another name")
     TASKS[task.name] = task
     return task
 
 
-def get_task(name):
+def get_task(name, *, where="get_task", error=ArgumentError):
+    """The task registered as ``name`` (``TASKS``); ``error`` (one line, prefixed by ``where``: a config's
+    ``task`` field gives its own) naming the known tasks for another name."""
+    text(name, "name", where, error=error)
     try:
         return TASKS[name]
     except KeyError:
-        raise ValueError(f"unknown task '{name}'; available tasks: {', '.join(sorted(TASKS))}") from None
+        raise error(f"{where}: unknown task '{name}'; available tasks: {', '.join(sorted(TASKS))} "
+                    "(register_task adds your own)") from None
