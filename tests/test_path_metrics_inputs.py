@@ -11,7 +11,7 @@ import pytest
 
 from pydrake.multibody.plant import MultibodyPlant
 
-from drake_hybrid.core.errors import ArgumentError, DrakeHybridError, PathError
+from drake_hybrid.core.errors import ArgumentError, ConfigError, DrakeHybridError, PathError
 from drake_hybrid.core.paths import ForceProfile, PathLimits, SurfacePath, path_from_strokes, path_from_waypoints
 from drake_hybrid.core.patterns import MAX_PATH_POINTS, raster, spiral
 from drake_hybrid.core.surfaces import CylinderSurface, PlaneSurface, SphereSurface, ViewPlane
@@ -217,7 +217,8 @@ def test_bad_arguments_of_path_on(polishing, change, name):
 
 def test_a_bool_speed_is_refused(polishing):
     task, config = polishing
-    refused(lambda: build_path(task, with_path(config, speed=True)), PathError, "speed")
+    # with_path checks the changed PathConfig like a file's (a bool is not a number) before build_path
+    refused(lambda: build_path(task, with_path(config, speed=True)), ConfigError, "path.speed")
 
 
 # ------------------------------------------------------------------------------------------------
