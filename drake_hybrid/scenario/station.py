@@ -268,8 +268,6 @@ def mount_tool(plant, arm, flange_frame, X_flange_tool=None, gripper_joints=(), 
     the pad's geometries.
     """
     owner = "mount_tool"
-    unfinalized_plant(plant, owner)
-    model_instance_of(plant, arm, "arm", owner)
     instance(X_flange_tool, "X_flange_tool", owner, RigidTransform, allow_none=True)
     if gripper not in GRIPPER_CHOICES:
         raise ConfigError(f"mount_tool: gripper must be one of {', '.join(GRIPPER_CHOICES)}, got {describe(gripper)}")
@@ -282,6 +280,8 @@ def mount_tool(plant, arm, flange_frame, X_flange_tool=None, gripper_joints=(), 
     if not _TOOL_NAME.match(name):
         raise ArgumentError(f"{owner}: name must be a model name of letters, digits, '_', '.' and '-' (not "
                             f"starting with a digit), got {describe(name)}")
+    unfinalized_plant(plant, owner)
+    model_instance_of(plant, arm, "arm", owner)
     center = tool_center_frame(name)
     if plant.HasModelInstanceNamed(name) or plant.HasFrameNamed(center):
         raise ArgumentError(f"{owner}: the plant already has a model '{name}' (or a frame '{center}'): a tool "
