@@ -222,7 +222,7 @@ def moved_by(plant, model_instance, body):
 def _flange(plant, arm, flange_frame, owner):
     """The Frame ``flange_frame`` (a Frame or the name of one of ``arm``'s), checked to be moved by ``arm``."""
     if isinstance(flange_frame, str):
-        return get_frame(plant, flange_frame, arm, "flange_frame")
+        return get_frame(plant, flange_frame, arm, f"{owner}: flange_frame")
     try:
         parent, body, name = flange_frame.GetParentPlant(), flange_frame.body(), flange_frame.name()
     except (AttributeError, TypeError):
