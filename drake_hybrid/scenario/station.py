@@ -561,15 +561,12 @@ def _check_source(source, owner):
              + " (or None: a ProfileSource of desired_velocity and desired_force; False: you wire them)")
     for name in SOURCE_OUTPUTS:
         port_of(source, name, "output", owner, "source")
-    if source.num_input_ports() > 1:
-        raise ArgumentError(f"{owner}: source must have no input or one (the arm's state), got "
-                            f"{source.num_input_ports()} inputs")
 
 
 def connect_source(builder, plant, robot, source, controller):
     """Add the command source ``source`` (a system with the output ports desired_velocity,
-    desired_acceleration and desired_force, and optionally one input: the arm's state, as
-    ``DesiredFieldSource``'s) to ``builder`` as "desired" (or "desired_<arm>" if the builder has one)
+    desired_acceleration and desired_force; if it has inputs, its first is the arm's state, as
+    ``DesiredFieldSource``'s and ``PathSource``'s) to ``builder`` as "desired" (or "desired_<arm>" if the builder has one)
     and wire it to ``controller``. Returns it."""
     owner = "connect_source"
     _station_parts(builder, plant, robot, owner)
