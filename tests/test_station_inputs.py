@@ -204,7 +204,7 @@ def test_mount_tool_names_the_bad_argument():
 
 def test_a_frame_on_a_part_the_arm_carries_is_a_flange():
     plant, arm = arm_alone()
-    tool = mount_tool(plant, arm, "tool0", name="adapter")
+    mount_tool(plant, arm, "tool0", name="adapter")
     carried = plant.GetFrameByName("adapter_center")
     robot = mount_tool(plant, arm, carried, name="second")        # on the first tool: moved by the arm
     assert robot.end_effector_frame == "second_center"
@@ -270,7 +270,7 @@ def test_weld_joints_and_add_actuators_name_the_bad_argument():
 
 
 def test_apply_contact_defaults_names_the_bad_argument():
-    builder, plant, scene_graph, robot, workpiece = station(finalize=False)
+    _, plant, scene_graph, robot, workpiece = station(finalize=False)
     _, other_scene_graph = AddMultibodyPlant(default_plant_config(), DiagramBuilder())
     for arguments, words in [((plant, scene_graph, robot, None), "workpiece_geometries must be the GeometryIds"),
                              ((plant, scene_graph, robot, ["workpiece"]), "workpiece_geometries"),

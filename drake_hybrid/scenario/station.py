@@ -37,16 +37,20 @@ The blocks:
 
 ``default_plant_config``     the package's MultibodyPlantConfig: 1 ms SAP steps, hydroelastic contact
 ``mount_tool``               the compliant pad on a frame of any arm, at an offset; a gripper's joints
-                             welded (its geometry kept, or removed); returns a ``RobotModel``
+                             welded (its geometry kept, or removed); ``name=`` for a further tool in the
+                             plant; returns a ``RobotModel``
 ``add_rigid_workpiece``      a rigid hydroelastic shape at a pose, its mesh as fine as its curvature needs
 ``apply_contact_defaults``   the pad's modulus, dissipation and mesh, SAP's relaxation times, friction
 ``only_tool_touches``        collision filters: the robot touches the workpiece with its tool only
 ``robot_plant``              the controller's own model: your robot alone, in a continuous plant
 ``add_hybrid_controller``    controller, wrench sensor, wrench filter, command source (and contact
-                             supervisor) in one call, wired; returns a ``HybridSystems``
+                             supervisor) in one call, wired (one per arm); returns a ``HybridSystems``
 ``add_loggers``, ``read_log``  every signal of the run, keyed by ``LOG_KEYS`` (the ports' names)
 
 and ``scenario.contact_start.solve_contact_start`` (pressing with F_d, in your context).
+
+Every block checks each input port it wires before ``Connect`` (``builder.IsConnectedOrExported``):
+Drake ends the process at an input connected twice, the blocks raise an ArgumentError naming the port.
 
 Size: the blocks share one vocabulary (the RobotModel of the mounted tool, the HybridSystems of the
 controller) and each is a few lines; apart they would import each other.
@@ -66,7 +70,7 @@ from pydrake.math import RigidTransform
 from pydrake.multibody.parsing import Parser
 from pydrake.multibody.plant import MultibodyPlant, MultibodyPlantConfig
 from pydrake.multibody.tree import ModelInstanceIndex
-from pydrake.systems.framework import DiagramBuilder, InputPort, OutputPort, System
+from pydrake.systems.framework import DiagramBuilder, OutputPort, System
 from pydrake.systems.primitives import LogVectorOutput
 
 from drake_hybrid.control.controller import HybridController
@@ -114,9 +118,9 @@ def weld_joints(plant, joint_names, model_instance=None):
     constraints of your own. Returns the new WeldJoints.
     """
     owner = "weld_joints"
-    unfinalized_plant(plant, owner)
+    _unfinalized_plant(plant, owner)
     if model_instance is not None:
-        model_instance_of(plant, model_instance, "model_instance", owner)
+        _model_instance_of(plant, model_instance, "model_instance", owner)
     if isinstance(joint_names, str):
         joint_names = [joint_names]
     if not isinstance(joint_names, (list, tuple)):
@@ -154,8 +158,8 @@ def add_actuators(plant, model_instance, effort_limits=None):
     """One actuator per single-dof joint of ``model_instance`` that has none (a URDF without
     transmissions), with the effort limit ``effort_limits[joint name]`` (e.g. from
     ``urdf_effort_limits``; inf where not given). Returns the actuator names."""
-    unfinalized_plant(plant, "add_actuators")
-    model_instance_of(plant, model_instance, "model_instance", "add_actuators")
+    _unfinalized_plant(plant, "add_actuators")
+    _model_instance_of(plant, model_instance, "model_instance", "add_actuators")
     effort_limits = instance(effort_limits, "effort_limits", "add_actuators", dict,
                              what="a dict {joint name: effort limit}", allow_none=True) or {}
     actuated = {plant.get_joint_actuator(index).joint().index() for index in plant.GetJointActuatorIndices()}
@@ -170,11 +174,11 @@ def add_actuators(plant, model_instance, effort_limits=None):
 
 
 GRIPPER_CHOICES = ("weld", "remove")
-DEFAULT_TOOL = "pad_tool"                  # the first tool's model instance; its end-effector frame "pad_center"
+_DEFAULT_TOOL = "pad_tool"                  # the first tool's model instance; its end-effector frame "pad_center"
 _TOOL_NAME = re.compile(r"^[A-Za-z_][A-Za-z0-9_.-]*$")
 
 
-def unfinalized_plant(plant, owner):
+def _unfinalized_plant(plant, owner):
     """``plant`` if it is a MultibodyPlant not yet finalized (what adds to a model); typed errors otherwise."""
     instance(plant, "plant", owner, MultibodyPlant)
     if plant.is_finalized():
@@ -182,7 +186,7 @@ def unfinalized_plant(plant, owner):
     return plant
 
 
-def model_instance_of(plant, model_instance, name, owner):
+def _model_instance_of(plant, model_instance, name, owner):
     """``model_instance`` if it is a ModelInstanceIndex of ``plant``; ArgumentError naming ``name`` otherwise."""
     if not isinstance(model_instance, ModelInstanceIndex):
         raise ArgumentError(f"{owner}: {name} must be a ModelInstanceIndex of the plant (e.g. "
@@ -193,13 +197,13 @@ def model_instance_of(plant, model_instance, name, owner):
     return model_instance
 
 
-def tool_center_frame(name):
+def _tool_center_frame(name):
     """The end-effector frame of the pad tool mounted as ``name``: ``pad_center`` for the default tool,
     ``<name>_center`` for another (so that each tool's frame has a name of its own in the plant)."""
-    return "pad_center" if name == DEFAULT_TOOL else f"{name}_center"
+    return "pad_center" if name == _DEFAULT_TOOL else f"{name}_center"
 
 
-def moved_by(plant, model_instance, body):
+def _moved_by(plant, model_instance, body):
     """True if ``body`` belongs to ``model_instance`` or hangs, in the joint tree (before or after
     ``Finalize``), from a body or a joint of it."""
     parent = {}
@@ -231,7 +235,7 @@ def _flange(plant, arm, flange_frame, owner):
     if parent is not plant:
         raise ArgumentError(f"{owner}: flange_frame '{name}' is a frame of another plant; pass a frame of this "
                             f"plant's arm (or its name)")
-    if not moved_by(plant, arm, body):
+    if not _moved_by(plant, arm, body):
         arm_name = plant.GetModelInstanceName(arm)
         raise ArgumentError(f"{owner}: flange_frame '{name}' (on body '{body.name()}' of model "
                             f"'{plant.GetModelInstanceName(body.model_instance())}') is not moved by the arm "
@@ -239,7 +243,7 @@ def _flange(plant, arm, flange_frame, owner):
     return flange_frame
 
 
-def mount_tool(plant, arm, flange_frame, X_flange_tool=None, gripper_joints=(), gripper="weld", name=DEFAULT_TOOL):
+def mount_tool(plant, arm, flange_frame, X_flange_tool=None, gripper_joints=(), gripper="weld", name="pad_tool"):
     """Mount the compliant ball pad (``models/pad_tool.sdf``: a ball of radius 20 mm, its centre 0.05 m
     along the tool's +z, the controlled point) on ``flange_frame`` of ``arm`` at ``X_flange_tool`` (default: the
     identity), before ``Finalize``.
@@ -280,9 +284,9 @@ def mount_tool(plant, arm, flange_frame, X_flange_tool=None, gripper_joints=(), 
     if not _TOOL_NAME.match(name):
         raise ArgumentError(f"{owner}: name must be a model name of letters, digits, '_', '.' and '-' (not "
                             f"starting with a digit), got {describe(name)}")
-    unfinalized_plant(plant, owner)
-    model_instance_of(plant, arm, "arm", owner)
-    center = tool_center_frame(name)
+    _unfinalized_plant(plant, owner)
+    _model_instance_of(plant, arm, "arm", owner)
+    center = _tool_center_frame(name)
     if plant.HasModelInstanceNamed(name) or plant.HasFrameNamed(center):
         raise ArgumentError(f"{owner}: the plant already has a model '{name}' (or a frame '{center}'): a tool "
                             f"mounted before? Pass name= to mount another tool (e.g. name='{name}_2')")
@@ -341,7 +345,7 @@ def robot_plant(add_robot):
 # The workpiece and the contact
 # ------------------------------------------------------------------------------------------------
 
-def geometry_ids(value, name, owner, what):
+def _geometry_ids(value, name, owner, what):
     """``value`` (a GeometryId or a list of them) as a list of GeometryIds; ArgumentError naming ``name``."""
     if isinstance(value, GeometryId):
         return [value]
@@ -353,7 +357,7 @@ def geometry_ids(value, name, owner, what):
 def _tool_geometries(robot, owner):
     if isinstance(robot, RobotModel):
         return list(robot.pad_geometries)
-    return geometry_ids(robot, "robot", owner, "the RobotModel of mount_tool or a list of the pad's GeometryIds")
+    return _geometry_ids(robot, "robot", owner, "the RobotModel of mount_tool or a list of the pad's GeometryIds")
 
 
 def apply_contact_defaults(plant, scene_graph, robot, workpiece_geometries, contact=None):
@@ -362,12 +366,12 @@ def apply_contact_defaults(plant, scene_graph, robot, workpiece_geometries, cont
     geometries: the pad's hydroelastic modulus, mesh and dissipation, SAP's relaxation times (0.03 s
     for the pair: about critically damped), friction. Call it before ``plant.Finalize()``."""
     owner = "apply_contact_defaults"
-    unfinalized_plant(plant, owner)
+    _unfinalized_plant(plant, owner)
     instance(scene_graph, "scene_graph", owner, SceneGraph, what="the SceneGraph of the plant (AddMultibodyPlant's)")
     if not plant.geometry_source_is_registered():
         raise ArgumentError(f"{owner}: the plant has no SceneGraph (make it with AddMultibodyPlant(config, builder))")
     tool = _tool_geometries(robot, owner)
-    workpiece = geometry_ids(workpiece_geometries, "workpiece_geometries", owner,
+    workpiece = _geometry_ids(workpiece_geometries, "workpiece_geometries", owner,
                              "the GeometryIds of add_rigid_workpiece (a list)")
     contact = instance(contact, "contact", owner, ContactConfig, allow_none=True) or ContactConfig()
     contact.validate()
@@ -427,26 +431,26 @@ def robot_bodies(plant, robot):
     return [plant.get_body(index) for instance in robot.model_instances for index in plant.GetBodyIndices(instance)]
 
 
-def port_label(port):
+def _port_label(port):
     """'system.port' of an input or output port, for a message."""
     return f"'{port.get_system().get_name()}.{port.get_name()}'"
 
 
-def refuse_wired(builder, input_port, owner, hint=""):
+def _refuse_wired(builder, input_port, owner, hint=""):
     """ArgumentError naming ``input_port`` (and ``hint``) if the builder already wires or exports it: Drake
     ends the process at a second Connect instead of raising."""
     if builder.IsConnectedOrExported(input_port):
-        raise ArgumentError(f"{owner}: the input port {port_label(input_port)} is already connected in the "
+        raise ArgumentError(f"{owner}: the input port {_port_label(input_port)} is already connected in the "
                             f"builder{hint}; an input takes one source")
 
 
-def connect(builder, output_port, input_port, owner):
-    """``builder.Connect(output_port, input_port)`` after ``refuse_wired``."""
-    refuse_wired(builder, input_port, owner)
+def _connect(builder, output_port, input_port, owner):
+    """``builder.Connect(output_port, input_port)`` after ``_refuse_wired``."""
+    _refuse_wired(builder, input_port, owner)
     builder.Connect(output_port, input_port)
 
 
-def unique_name(builder, name, suffix):
+def _unique_name(builder, name, suffix):
     """``name``, or ``name_<suffix>`` (then ``_2``, ...) if the builder already has a system of that name:
     a diagram's systems need names of their own (Drake ends the process at Build otherwise)."""
     taken = {system.get_name() for system in builder.GetSystems()}
@@ -454,16 +458,16 @@ def unique_name(builder, name, suffix):
     return next(candidate for candidate in candidates if candidate not in taken)
 
 
-def add_named(builder, name, system, robot_name):
-    """``builder.AddNamedSystem`` with ``unique_name``."""
-    return builder.AddNamedSystem(unique_name(builder, name, robot_name), system)
+def _add_named(builder, name, system, robot_name):
+    """``builder.AddNamedSystem`` with ``_unique_name``."""
+    return builder.AddNamedSystem(_unique_name(builder, name, robot_name), system)
 
 
 def _arm_name(plant, robot):
     return plant.GetModelInstanceName(robot.arm)
 
 
-def port_of(system, name, kind, owner, argument):
+def _port_of(system, name, kind, owner, argument):
     """``system``'s input (``kind`` "input") or output port ``name``; ArgumentError naming ``argument``."""
     has = system.HasInputPort(name) if kind == "input" else system.HasOutputPort(name)
     if not has:
@@ -480,7 +484,7 @@ def _station_parts(builder, plant, robot, owner):
     instance(robot, "robot", owner, RobotModel, what="the RobotModel of mount_tool")
     if not plant.is_finalized():
         raise ConfigError(f"{owner}: finalize the plant first (plant.Finalize())")
-    model_instance_of(plant, robot.arm, "robot.arm", owner)
+    _model_instance_of(plant, robot.arm, "robot.arm", owner)
 
 
 def add_wrench_sensor(builder, plant, robot, sensor=None):
@@ -497,20 +501,20 @@ def add_wrench_sensor(builder, plant, robot, sensor=None):
         if robot.tool_weld is None:
             raise ConfigError("sensor: the robot has no wrist weld (mount_tool makes one) for a WristSensorConfig; "
                               "use ContactSensorConfig")
-        system = add_named(builder, "wrench_sensor", WristForceTorqueSensor(
+        system = _add_named(builder, "wrench_sensor", WristForceTorqueSensor(
             plant, robot.tool_weld, robot.end_effector_frame, robot.end_effector_point,
             compensate_tool_inertia=sensor.compensate_tool_inertia), arm)
-        connect(builder, plant.get_reaction_forces_output_port(), system.get_input_port(0), owner)
+        _connect(builder, plant.get_reaction_forces_output_port(), system.get_input_port(0), owner)
         if system.compensate_tool_inertia:
-            connect(builder, plant.get_body_spatial_velocities_output_port(),
+            _connect(builder, plant.get_body_spatial_velocities_output_port(),
                     system.GetInputPort("body_spatial_velocities"), owner)
-            connect(builder, plant.get_body_spatial_accelerations_output_port(),
+            _connect(builder, plant.get_body_spatial_accelerations_output_port(),
                     system.GetInputPort("body_spatial_accelerations"), owner)
     else:
-        system = add_named(builder, "wrench_sensor", ContactWrenchSensor(
+        system = _add_named(builder, "wrench_sensor", ContactWrenchSensor(
             plant, robot_bodies(plant, robot), robot.end_effector_frame, robot.end_effector_point), arm)
-        connect(builder, plant.get_contact_results_output_port(), system.get_input_port(0), owner)
-    connect(builder, plant.get_body_poses_output_port(), system.get_input_port(1), owner)
+        _connect(builder, plant.get_contact_results_output_port(), system.get_input_port(0), owner)
+    _connect(builder, plant.get_body_poses_output_port(), system.get_input_port(1), owner)
     return system
 
 
@@ -527,15 +531,15 @@ def add_wrench_path(builder, wrench_output, sensor, period, sequence=None, tare=
     instance(sensor, "sensor", owner, (ContactSensorConfig, WristSensorConfig))
     conditioner = wrench_filter = None
     if sensor.condition:
-        conditioner = add_named(builder, "wrench_conditioner", WrenchConditioner(
+        conditioner = _add_named(builder, "wrench_conditioner", WrenchConditioner(
             period, sensor.bandwidth_hz, sensor.max_hold_time, use_sequence=sequence is not None, tare=tare), suffix)
-        connect(builder, wrench_output, conditioner.GetInputPort("raw_wrench"), owner)
+        _connect(builder, wrench_output, conditioner.GetInputPort("raw_wrench"), owner)
         if sequence is not None:
-            connect(builder, sequence, conditioner.GetInputPort("sequence"), owner)
+            _connect(builder, sequence, conditioner.GetInputPort("sequence"), owner)
         wrench_output = conditioner.GetOutputPort("wrench")
     elif sensor.bandwidth_hz > 0:
-        wrench_filter = add_named(builder, "wrench_filter", LowPassFilter(6, sensor.bandwidth_hz, period), suffix)
-        connect(builder, wrench_output, wrench_filter.get_input_port(0), owner)
+        wrench_filter = _add_named(builder, "wrench_filter", LowPassFilter(6, sensor.bandwidth_hz, period), suffix)
+        _connect(builder, wrench_output, wrench_filter.get_input_port(0), owner)
         wrench_output = wrench_filter.get_output_port(0)
     return wrench_output, conditioner, wrench_filter
 
@@ -550,36 +554,36 @@ def wrench_lag(sensor, plant, control_period):
     return low_pass_lag(sensor.bandwidth_hz, control_period) + age
 
 
-SOURCE_OUTPUTS = ("desired_velocity", "desired_acceleration", "desired_force")
-CONTROLLER_INPUTS = ("estimated_state", "measured_wrench") + SOURCE_OUTPUTS
-SUPERVISED_INPUTS = ("contact_phase", "approach_reference")
-SUPERVISED_OUTPUTS = ("force", "constraint_value")
+_SOURCE_OUTPUTS = ("desired_velocity", "desired_acceleration", "desired_force")
+_CONTROLLER_INPUTS = ("estimated_state", "measured_wrench") + _SOURCE_OUTPUTS
+_SUPERVISED_INPUTS = ("contact_phase", "approach_reference")
+_SUPERVISED_OUTPUTS = ("force", "constraint_value")
 
 
 def _check_source(source, owner):
-    instance(source, "source", owner, System, what="a System with the output ports " + ", ".join(SOURCE_OUTPUTS)
+    instance(source, "source", owner, System, what="a System with the output ports " + ", ".join(_SOURCE_OUTPUTS)
              + " (or None: a ProfileSource of desired_velocity and desired_force; False: you wire them)")
-    for name in SOURCE_OUTPUTS:
-        port_of(source, name, "output", owner, "source")
+    for name in _SOURCE_OUTPUTS:
+        _port_of(source, name, "output", owner, "source")
 
 
 def connect_source(builder, plant, robot, source, controller):
     """Add the command source ``source`` (a system with the output ports desired_velocity,
     desired_acceleration and desired_force; if it has inputs, its first is the arm's state, as
-    ``DesiredFieldSource``'s and ``PathSource``'s) to ``builder`` as "desired" (or "desired_<arm>" if the builder has one)
-    and wire it to ``controller``. Returns it."""
+    ``DesiredFieldSource``'s and ``PathSource``'s) to ``builder`` as "desired" (or "desired_<arm>" if the
+    builder has one) and wire it to ``controller``. Returns it."""
     owner = "connect_source"
     _station_parts(builder, plant, robot, owner)
     _check_source(source, owner)
     instance(controller, "controller", owner, System)
-    inputs = [port_of(controller, name, "input", owner, "controller") for name in SOURCE_OUTPUTS]
+    inputs = [_port_of(controller, name, "input", owner, "controller") for name in _SOURCE_OUTPUTS]
     for port in inputs:
-        refuse_wired(builder, port, owner, " (the controller already has a command source)")
-    source = add_named(builder, "desired", source, _arm_name(plant, robot))
+        _refuse_wired(builder, port, owner, " (the controller already has a command source)")
+    source = _add_named(builder, "desired", source, _arm_name(plant, robot))
     if source.num_input_ports():
-        connect(builder, plant.get_state_output_port(robot.arm), source.get_input_port(0), owner)
-    for name, port in zip(SOURCE_OUTPUTS, inputs):
-        connect(builder, source.GetOutputPort(name), port, owner)
+        _connect(builder, plant.get_state_output_port(robot.arm), source.get_input_port(0), owner)
+    for name, port in zip(_SOURCE_OUTPUTS, inputs):
+        _connect(builder, source.GetOutputPort(name), port, owner)
     return source
 
 
@@ -599,33 +603,33 @@ def add_contact_supervisor(builder, controller, wrench_output, supervision, cont
     instance(supervision, "supervision", owner, SupervisionConfig)
     instance(wrench_output, "wrench_output", owner, OutputPort, what="an OutputPort (the wrench the controller reads)")
     instance(controller, "controller", owner, System)
-    phase = contact_phase(initial_phase, owner)
-    inputs = [port_of(controller, name, "input", owner, "controller") for name in SUPERVISED_INPUTS]
-    outputs = [port_of(controller, name, "output", owner, "controller") for name in SUPERVISED_OUTPUTS]
+    phase = _contact_phase(initial_phase, owner)
+    inputs = [_port_of(controller, name, "input", owner, "controller") for name in _SUPERVISED_INPUTS]
+    outputs = [_port_of(controller, name, "output", owner, "controller") for name in _SUPERVISED_OUTPUTS]
     for port in inputs:
-        refuse_wired(builder, port, owner, " (the controller already has a contact supervisor)")
+        _refuse_wired(builder, port, owner, " (the controller already has a contact supervisor)")
     for name in ("force_size", "kinematic_rows"):
         if not hasattr(controller, name):
             raise ArgumentError(f"{owner}: controller must be a HybridController (or have its {name}), got "
                                 f"{describe(controller)}")
-    supervisor = add_named(builder, "contact_supervisor", ContactSupervisor(
+    supervisor = _add_named(builder, "contact_supervisor", ContactSupervisor(
         supervision, controller.force_size, controller.kinematic_rows, control_period, phase,
         lift_off=lift_off), suffix)
-    for name, port in zip(SUPERVISED_OUTPUTS, outputs):
-        connect(builder, port, supervisor.GetInputPort(name), owner)
+    for name, port in zip(_SUPERVISED_OUTPUTS, outputs):
+        _connect(builder, port, supervisor.GetInputPort(name), owner)
     if source is not None:
-        connect(builder, port_of(source, "desired_force", "output", owner, "source"),
+        _connect(builder, _port_of(source, "desired_force", "output", owner, "source"),
                 supervisor.GetInputPort("desired_force"), owner)
-    connect(builder, wrench_output, supervisor.GetInputPort("measured_wrench"), owner)
+    _connect(builder, wrench_output, supervisor.GetInputPort("measured_wrench"), owner)
     for name, port in zip(("contact_phase", "approach_reference"), inputs):
-        connect(builder, supervisor.GetOutputPort(name), port, owner)
+        _connect(builder, supervisor.GetOutputPort(name), port, owner)
     if conditioner is not None:
-        connect(builder, supervisor.GetOutputPort("contact_phase"),
-                port_of(conditioner, "contact_phase", "input", owner, "conditioner"), owner)
+        _connect(builder, supervisor.GetOutputPort("contact_phase"),
+                _port_of(conditioner, "contact_phase", "input", owner, "conditioner"), owner)
     return supervisor
 
 
-def contact_phase(initial_phase, owner):
+def _contact_phase(initial_phase, owner):
     """``initial_phase`` (a ContactPhase or its value; None: CONTACT) as a ContactPhase; ArgumentError otherwise."""
     if initial_phase is None:
         return ContactPhase.CONTACT
@@ -646,20 +650,20 @@ def add_sensing(builder, plant, robot, controller, sensor, control_period, senso
     _station_parts(builder, plant, robot, owner)
     instance(controller, "controller", owner, System)
     instance(sensor_faults, "sensor_faults", owner, SensorFaultConfig, allow_none=True)
-    measured = port_of(controller, "measured_wrench", "input", owner, "controller")
-    refuse_wired(builder, measured, owner, " (the controller already reads a wrench)")
+    measured = _port_of(controller, "measured_wrench", "input", owner, "controller")
+    _refuse_wired(builder, measured, owner, " (the controller already reads a wrench)")
     arm = _arm_name(plant, robot)
     wrench_sensor = add_wrench_sensor(builder, plant, robot, sensor)
     true_wrench = wrench_output = wrench_sensor.get_output_port(0)
     injector = None
     if sensor_faults is not None and sensor_faults.active():
-        injector = add_named(builder, "sensor_faults", SensorFaultInjector(sensor_faults, control_period), arm)
-        connect(builder, wrench_output, injector.GetInputPort("wrench"), owner)
+        injector = _add_named(builder, "sensor_faults", SensorFaultInjector(sensor_faults, control_period), arm)
+        _connect(builder, wrench_output, injector.GetInputPort("wrench"), owner)
         wrench_output = injector.GetOutputPort("faulty_wrench")
     wrench_output, conditioner, wrench_filter = add_wrench_path(
         builder, wrench_output, sensor if sensor is not None else ContactSensorConfig(), control_period,
         sequence=injector.GetOutputPort("sequence") if injector is not None else None, tare=tare, suffix=arm)
-    connect(builder, wrench_output, measured, owner)
+    _connect(builder, wrench_output, measured, owner)
     return wrench_sensor, true_wrench, wrench_output, injector, conditioner, wrench_filter
 
 
@@ -678,15 +682,15 @@ CONTROLLER_OPTIONS = tuple(name for name in inspect.signature(HybridController._
                            if name not in ("self", "plant", "end_effector_frame", "end_effector_point",
                                            "constraint_space", "gains", "mode", "control_period", "guarded_move",
                                            "converter"))
-MATCH_TOLERANCE = 1e-6      # m and rad: the controller plant's end-effector pose against the plant's
-MATCH_CONFIGURATIONS = 3    # the default positions and two random ones within the limits
+_MATCH_TOLERANCE = 1e-6      # m and rad: the controller plant's end-effector pose against the plant's
+_MATCH_CONFIGURATIONS = 3    # the default positions and two random ones within the limits
 
 
 def check_controller_plant(plant, robot, controller_plant, owner="add_hybrid_controller"):
     """ArgumentError naming ``controller_plant`` if it does not model ``plant``'s arm ``robot.arm``: the
     numbers of positions, velocities and actuators, and the end-effector pose (``robot``'s frame and
     point) at the arm's default positions and two random ones within the joint limits (to
-    ``MATCH_TOLERANCE`` m and rad)."""
+    1e-6 m and rad)."""
     arm, arm_name = robot.arm, plant.GetModelInstanceName(robot.arm)
     counts = {"positions": (plant.num_positions(arm), controller_plant.num_positions()),
               "velocities": (plant.num_velocities(arm), controller_plant.num_velocities()),
@@ -707,7 +711,7 @@ def check_controller_plant(plant, robot, controller_plant, owner="add_hybrid_con
     low = np.where(np.isfinite(lower[in_arm]), lower[in_arm], -np.pi)
     high = np.where(np.isfinite(upper[in_arm]), upper[in_arm], np.pi)
     generator = np.random.default_rng(0)
-    configurations = [default] + [generator.uniform(low, high) for _ in range(MATCH_CONFIGURATIONS - 1)]
+    configurations = [default] + [generator.uniform(low, high) for _ in range(_MATCH_CONFIGURATIONS - 1)]
     point = np.asarray(robot.end_effector_point, dtype=float)
     for number, q in enumerate(configurations):
         plant.SetPositions(context, arm, q)
@@ -716,7 +720,7 @@ def check_controller_plant(plant, robot, controller_plant, owner="add_hybrid_con
         X_model = controller_plant.GetFrameByName(frame).CalcPoseInWorld(model_context)
         distance = float(np.linalg.norm(X_sim.multiply(point) - X_model.multiply(point)))
         angle = float(X_sim.rotation().InvertAndCompose(X_model.rotation()).ToAngleAxis().angle())
-        if distance > MATCH_TOLERANCE or angle > MATCH_TOLERANCE:
+        if distance > _MATCH_TOLERANCE or angle > _MATCH_TOLERANCE:
             where = "the arm's default positions" if number == 0 else f"q = {np.round(q, 3).tolist()}"
             raise ArgumentError(f"{owner}: controller_plant does not model the plant's arm '{arm_name}': its "
                                 f"end-effector frame '{frame}' is {distance:.3g} m and {angle:.3g} rad from the "
@@ -737,7 +741,7 @@ def _check_actuation_free(builder, plant, robot, owner):
         hint = f" by your system '{driver.get_name()}': leave the arm's actuation input to the hybrid controller"
     else:
         hint = " (exported): leave the arm's actuation input to the hybrid controller"
-    raise ArgumentError(f"{owner}: the input port {port_label(port)} is already connected in the builder{hint}")
+    raise ArgumentError(f"{owner}: the input port {_port_label(port)} is already connected in the builder{hint}")
 
 
 def add_hybrid_controller(builder, plant, robot, constraint_space, controller_plant, gains=None,
@@ -767,9 +771,9 @@ def add_hybrid_controller(builder, plant, robot, constraint_space, controller_pl
             configurations).
         gains, mode, control_period: of the HybridController (None: continuous, for linearization).
         desired_velocity, desired_force: Profiles (time profiles, k and m entries; a list of numbers is a
-            constant one; default zero) for a ProfileSource; or ``source``: a system of your own with the output ports desired_velocity,
-            desired_acceleration and desired_force (wired here), or False: you wire the controller's
-            desired_* input ports yourself.
+            constant one, ``[10.0]`` for one force row; default zero) for a ProfileSource; or ``source``: a
+            system of your own with the output ports desired_velocity, desired_acceleration and
+            desired_force (wired here), or False: you wire the controller's desired_* input ports yourself.
         sensor: a ContactSensorConfig (default) or WristSensorConfig: which wrench, and its path (a
             low-pass of ``bandwidth_hz``, a conditioner). A continuous controller needs a low-pass
             (default then ``CONTINUOUS_LOOP_BANDWIDTH``): its actuation feeds through to the wrench.
@@ -808,7 +812,7 @@ def add_hybrid_controller(builder, plant, robot, constraint_space, controller_pl
                           "low-pass (> 0 Hz): its actuation feeds through to the measured wrench")
     instance(supervision, "supervision", owner, SupervisionConfig, allow_none=True)
     instance(sensor_faults, "sensor_faults", owner, SensorFaultConfig, allow_none=True)
-    phase = contact_phase(initial_phase, owner)
+    phase = _contact_phase(initial_phase, owner)
     k, m = constraint_space.velocity_size, constraint_space.force_size
     if source is None:
         source = ProfileSource(as_profile(desired_velocity, k, "desired_velocity"),
@@ -818,10 +822,10 @@ def add_hybrid_controller(builder, plant, robot, constraint_space, controller_pl
     if controller is not None:
         instance(controller, "controller", owner, System, what="a controller System with the HybridController's "
                  "ports (e.g. a baseline of control.baselines) or None")
-        for name in CONTROLLER_INPUTS + (SUPERVISED_INPUTS if supervision is not None else ()):
-            port_of(controller, name, "input", owner, "controller")
-        for name in ("actuation",) + (SUPERVISED_OUTPUTS if supervision is not None else ()):
-            port_of(controller, name, "output", owner, "controller")
+        for name in _CONTROLLER_INPUTS + (_SUPERVISED_INPUTS if supervision is not None else ()):
+            _port_of(controller, name, "input", owner, "controller")
+        for name in ("actuation",) + (_SUPERVISED_OUTPUTS if supervision is not None else ()):
+            _port_of(controller, name, "output", owner, "controller")
     check_controller_plant(plant, robot, controller_plant, owner)
     _check_actuation_free(builder, plant, robot, owner)
     if controller is None:
@@ -832,12 +836,12 @@ def add_hybrid_controller(builder, plant, robot, constraint_space, controller_pl
                                       constraint_space, gains=gains, mode=mode, control_period=control_period,
                                       guarded_move=supervision, **options)
     arm = _arm_name(plant, robot)
-    controller = add_named(builder, "controller", controller, arm)
+    controller = _add_named(builder, "controller", controller, arm)
     tare = supervision is not None and supervision.tare_time > 0 and phase == ContactPhase.TARE
     wrench_sensor, true_wrench, wrench_output, injector, conditioner, wrench_filter = add_sensing(
         builder, plant, robot, controller, sensor, control_period, sensor_faults, tare)
-    connect(builder, plant.get_state_output_port(robot.arm), controller.GetInputPort("estimated_state"), owner)
-    connect(builder, controller.GetOutputPort("actuation"), plant.get_actuation_input_port(robot.arm), owner)
+    _connect(builder, plant.get_state_output_port(robot.arm), controller.GetInputPort("estimated_state"), owner)
+    _connect(builder, controller.GetOutputPort("actuation"), plant.get_actuation_input_port(robot.arm), owner)
     source = connect_source(builder, plant, robot, source, controller) if source is not False else None
     supervisor = None
     if supervision is not None:
