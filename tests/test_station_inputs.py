@@ -19,9 +19,9 @@ from drake_hybrid import ConstraintSpace, GivenVelocityProjection, PoseChart, su
 from drake_hybrid.control.gains import HybridGains
 from drake_hybrid.core.errors import ArgumentError, ConfigError, DrakeHybridError, UnknownFrameError
 from drake_hybrid.scenario.station import (add_actuators, add_hybrid_controller, add_loggers, add_rigid_workpiece,
-                                           add_wrench_sensor, apply_contact_defaults, connect_source,
+                                           add_wrench_sensor, apply_contact_defaults, carried_bodies, connect_source,
                                            default_plant_config, logged, mount_tool, only_tool_touches, read_log,
-                                           robot_plant, weld_joints)
+                                           robot_plant, urdf_effort_limits, weld_joints, wrench_lag)
 from drake_hybrid.systems.sources import Profile, ProfileSource
 
 CENTER, RADIUS, PAD = np.array([0.45, 0.0, 0.10]), 0.15, 0.02
@@ -323,3 +323,17 @@ def test_the_tools_frame_names_are_distinct_in_both_plants():
     tool0 = model.GetFrameByName("tool0", model.GetModelInstanceByName("arm_at_1::ur5e"))
     np.testing.assert_allclose(frame.CalcPoseInWorld(context).translation(),
                                tool0.CalcPoseInWorld(context).multiply([0.0, 0.0, 0.05]), atol=1e-12)
+
+
+def test_the_other_public_helpers_name_the_bad_argument(tmp_path):
+    plant, arm = arm_alone()
+    broken = tmp_path / "broken.urdf"
+    broken.write_text("<robot><joint")
+    for call, words in [(lambda: urdf_effort_limits(None), "urdf_effort_limits: path must be the path"),
+                        (lambda: urdf_effort_limits(tmp_path / "none.urdf"), "urdf_effort_limits: path: no file"),
+                        (lambda: urdf_effort_limits(broken), "urdf_effort_limits: path: .* is not XML"),
+                        (lambda: wrench_lag("contact", plant, 1e-3), "wrench_lag: sensor must be"),
+                        (lambda: carried_bodies(plant, "ur5e", plant.world_body()), "carried_bodies: model_instance"),
+                        (lambda: carried_bodies(plant, arm, "tool0"), "carried_bodies: body must be a RigidBody")]:
+        with pytest.raises(ArgumentError, match=words):
+            call()

@@ -58,6 +58,7 @@ controller) and each is a few lines; apart they would import each other.
 
 import inspect
 import numbers
+import os
 import re
 from dataclasses import dataclass
 from typing import Dict, Optional
@@ -149,7 +150,14 @@ def weld_joints(plant, joint_names, model_instance=None):
 def urdf_effort_limits(path):
     """{joint name: effort limit (N m or N)} from the ``<limit effort=...>`` tags of a URDF file.
     (Drake keeps a URDF's effort limits only on the actuators of its transmissions.)"""
-    root = ElementTree.parse(path).getroot()
+    if not isinstance(path, (str, os.PathLike)):
+        raise ArgumentError(f"urdf_effort_limits: path must be the path of a URDF file, got {describe(path)}")
+    if not os.path.isfile(path):
+        raise ArgumentError(f"urdf_effort_limits: path: no file '{os.fspath(path)}'")
+    try:
+        root = ElementTree.parse(path).getroot()
+    except ElementTree.ParseError as error:
+        raise ArgumentError(f"urdf_effort_limits: path: '{os.fspath(path)}' is not XML ({error})") from None
     return {joint.get("name"): float(joint.find("limit").get("effort"))
             for joint in root.iter("joint") if joint.find("limit") is not None and joint.find("limit").get("effort")}
 
@@ -308,6 +316,10 @@ def mount_tool(plant, arm, flange_frame, X_flange_tool=None, gripper_joints=(), 
 def carried_bodies(plant, model_instance, body):
     """The bodies of ``model_instance`` that ``body`` carries: outboard of it in the joint tree (before or
     after ``Finalize``), ``body`` itself excluded."""
+    instance(plant, "plant", "carried_bodies", MultibodyPlant)
+    _model_instance_of(plant, model_instance, "model_instance", "carried_bodies")
+    if not hasattr(body, "index") or not hasattr(body, "model_instance"):
+        raise ArgumentError(f"carried_bodies: body must be a RigidBody of the plant, got {describe(body)}")
     parent = {}
     for index in plant.GetJointIndices(model_instance):
         joint = plant.get_joint(index)
@@ -550,6 +562,8 @@ def wrench_lag(sensor, plant, control_period):
     contact sensor on a discrete plant's sampled results, their one step of age
     (``systems.sensors.sampled_reading_age``; the wrist sensor's reaction force is read as current,
     as a real sensor's)."""
+    instance(sensor, "sensor", "wrench_lag", (ContactSensorConfig, WristSensorConfig))
+    instance(plant, "plant", "wrench_lag", MultibodyPlant)
     age = sampled_reading_age(plant) if isinstance(sensor, ContactSensorConfig) else 0.0
     return low_pass_lag(sensor.bandwidth_hz, control_period) + age
 
