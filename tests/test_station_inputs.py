@@ -16,6 +16,7 @@ from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import ConstantVectorSource, PassThrough
 
 from drake_hybrid import ConstraintSpace, GivenVelocityProjection, PoseChart, surface_constraint
+from drake_hybrid.control.baselines import JointServoHybridController
 from drake_hybrid.control.gains import HybridGains
 from drake_hybrid.core.errors import ArgumentError, ConfigError, DrakeHybridError, UnknownFrameError
 from drake_hybrid.scenario.station import (add_actuators, add_hybrid_controller, add_loggers, add_rigid_workpiece,
@@ -337,3 +338,13 @@ def test_the_other_public_helpers_name_the_bad_argument(tmp_path):
                         (lambda: carried_bodies(plant, arm, "tool0"), "carried_bodies: body must be a RigidBody")]:
         with pytest.raises(ArgumentError, match=words):
             call()
+
+
+def test_a_baseline_controller_of_its_own_is_wired(space, controller_plant):
+    builder, plant, _, robot, _ = station()
+    baseline = JointServoHybridController(controller_plant, robot.end_effector_frame, robot.end_effector_point, space,
+                                          control_period=1e-3)
+    hybrid = add_hybrid_controller(builder, plant, robot, space, controller_plant, controller=baseline,
+                                   **ARGUMENTS)
+    assert hybrid.controller is baseline
+    builder.Build()
