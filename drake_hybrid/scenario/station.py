@@ -37,47 +37,58 @@ The blocks:
 
 ``default_plant_config``     the package's MultibodyPlantConfig: 1 ms SAP steps, hydroelastic contact
 ``mount_tool``               the compliant pad on a frame of any arm, at an offset; a gripper's joints
-                             welded (its geometry kept, or removed); returns a ``RobotModel``
+                             welded (its geometry kept, or removed); ``name=`` for a further tool in the
+                             plant; returns a ``RobotModel``
 ``add_rigid_workpiece``      a rigid hydroelastic shape at a pose, its mesh as fine as its curvature needs
 ``apply_contact_defaults``   the pad's modulus, dissipation and mesh, SAP's relaxation times, friction
 ``only_tool_touches``        collision filters: the robot touches the workpiece with its tool only
 ``robot_plant``              the controller's own model: your robot alone, in a continuous plant
 ``add_hybrid_controller``    controller, wrench sensor, wrench filter, command source (and contact
-                             supervisor) in one call, wired; returns a ``HybridSystems``
+                             supervisor) in one call, wired (one per arm); returns a ``HybridSystems``
 ``add_loggers``, ``read_log``  every signal of the run, keyed by ``LOG_KEYS`` (the ports' names)
 
 and ``scenario.contact_start.solve_contact_start`` (pressing with F_d, in your context).
+
+Every block checks each input port it wires before ``Connect`` (``builder.IsConnectedOrExported``):
+Drake ends the process at an input connected twice, the blocks raise an ArgumentError naming the port.
 
 Size: the blocks share one vocabulary (the RobotModel of the mounted tool, the HybridSystems of the
 controller) and each is a few lines; apart they would import each other.
 """
 
+import inspect
+import numbers
+import os
+import re
 from dataclasses import dataclass
 from typing import Dict, Optional
 from xml.etree import ElementTree
 
 import numpy as np
 
+from pydrake.geometry import GeometryId, SceneGraph
 from pydrake.math import RigidTransform
 from pydrake.multibody.parsing import Parser
 from pydrake.multibody.plant import MultibodyPlant, MultibodyPlantConfig
-from pydrake.systems.framework import DiagramBuilder
+from pydrake.multibody.tree import ModelInstanceIndex
+from pydrake.systems.framework import DiagramBuilder, OutputPort, System
 from pydrake.systems.primitives import LogVectorOutput
 
 from drake_hybrid.control.controller import HybridController
 from drake_hybrid.control.gains import ControlMode
 from drake_hybrid.control.phases import ContactPhase
-from drake_hybrid.control.supervision import ContactSupervisor
-from drake_hybrid.core.arguments import function, instance, nonnegative, text, vector
-from drake_hybrid.core.errors import ArgumentError, ConfigError
+from drake_hybrid.control.supervision import ContactSupervisor, SupervisionConfig
+from drake_hybrid.core.arguments import describe, function, instance, nonnegative, text, vector
+from drake_hybrid.core.errors import ArgumentError, ConfigError, DrakeHybridError
 from drake_hybrid.core.kinematics import EndEffectorKinematics
+from drake_hybrid.core.projections import ConstraintSpace
 from drake_hybrid.scenario.config import ContactConfig, ContactSensorConfig, WristSensorConfig
 from drake_hybrid.scenario.parsing import ConfigureParser
 from drake_hybrid.scenario.plant import (RobotModel, get_frame, only_tool_touches,  # noqa: F401 (a block here too)
                                          set_contact_properties)
 from drake_hybrid.scenario.tasks.robots import add_pad_tool
 from drake_hybrid.scenario.workpieces import add_rigid_workpiece, default_resolution  # noqa: F401 (blocks here too)
-from drake_hybrid.systems.faults import SensorFaultInjector
+from drake_hybrid.systems.faults import SensorFaultConfig, SensorFaultInjector
 from drake_hybrid.systems.sensors import (ContactWrenchSensor, LowPassFilter, WrenchConditioner, WristForceTorqueSensor,
                                           low_pass_lag, sampled_reading_age)
 from drake_hybrid.systems.sources import Profile, ProfileSource
@@ -107,9 +118,16 @@ def weld_joints(plant, joint_names, model_instance=None):
     **every** constraint of the plant is removed first: call this before adding
     constraints of your own. Returns the new WeldJoints.
     """
+    owner = "weld_joints"
+    _unfinalized_plant(plant, owner)
+    if model_instance is not None:
+        _model_instance_of(plant, model_instance, "model_instance", owner)
     if isinstance(joint_names, str):
         joint_names = [joint_names]
-    joint_names = [text(name, "joint_names[]", "weld_joints") for name in joint_names]
+    if not isinstance(joint_names, (list, tuple)):
+        raise ArgumentError(f"{owner}: joint_names must be a joint name or a list of joint names, got "
+                            f"{describe(joint_names)}")
+    joint_names = [text(name, "joint_names[]", owner) for name in joint_names]
     joints = []
     for name in joint_names:
         owner = () if model_instance is None else (model_instance,)
@@ -132,7 +150,14 @@ def weld_joints(plant, joint_names, model_instance=None):
 def urdf_effort_limits(path):
     """{joint name: effort limit (N m or N)} from the ``<limit effort=...>`` tags of a URDF file.
     (Drake keeps a URDF's effort limits only on the actuators of its transmissions.)"""
-    root = ElementTree.parse(path).getroot()
+    if not isinstance(path, (str, os.PathLike)):
+        raise ArgumentError(f"urdf_effort_limits: path must be the path of a URDF file, got {describe(path)}")
+    if not os.path.isfile(path):
+        raise ArgumentError(f"urdf_effort_limits: path: no file '{os.fspath(path)}'")
+    try:
+        root = ElementTree.parse(path).getroot()
+    except ElementTree.ParseError as error:
+        raise ArgumentError(f"urdf_effort_limits: path: '{os.fspath(path)}' is not XML ({error})") from None
     return {joint.get("name"): float(joint.find("limit").get("effort"))
             for joint in root.iter("joint") if joint.find("limit") is not None and joint.find("limit").get("effort")}
 
@@ -141,6 +166,8 @@ def add_actuators(plant, model_instance, effort_limits=None):
     """One actuator per single-dof joint of ``model_instance`` that has none (a URDF without
     transmissions), with the effort limit ``effort_limits[joint name]`` (e.g. from
     ``urdf_effort_limits``; inf where not given). Returns the actuator names."""
+    _unfinalized_plant(plant, "add_actuators")
+    _model_instance_of(plant, model_instance, "model_instance", "add_actuators")
     effort_limits = instance(effort_limits, "effort_limits", "add_actuators", dict,
                              what="a dict {joint name: effort limit}", allow_none=True) or {}
     actuated = {plant.get_joint_actuator(index).joint().index() for index in plant.GetJointActuatorIndices()}
@@ -155,9 +182,76 @@ def add_actuators(plant, model_instance, effort_limits=None):
 
 
 GRIPPER_CHOICES = ("weld", "remove")
+_DEFAULT_TOOL = "pad_tool"                  # the first tool's model instance; its end-effector frame "pad_center"
+_TOOL_NAME = re.compile(r"^[A-Za-z_][A-Za-z0-9_.-]*$")
 
 
-def mount_tool(plant, arm, flange_frame, X_flange_tool=None, gripper_joints=(), gripper="weld"):
+def _unfinalized_plant(plant, owner):
+    """``plant`` if it is a MultibodyPlant not yet finalized (what adds to a model); typed errors otherwise."""
+    instance(plant, "plant", owner, MultibodyPlant)
+    if plant.is_finalized():
+        raise ConfigError(f"{owner}: the plant is finalized; call {owner} before plant.Finalize()")
+    return plant
+
+
+def _model_instance_of(plant, model_instance, name, owner):
+    """``model_instance`` if it is a ModelInstanceIndex of ``plant``; ArgumentError naming ``name`` otherwise."""
+    if not isinstance(model_instance, ModelInstanceIndex):
+        raise ArgumentError(f"{owner}: {name} must be a ModelInstanceIndex of the plant (e.g. "
+                            f"Parser(plant).AddModels(...)[0]), got {describe(model_instance)}")
+    if not int(model_instance) < plant.num_model_instances():
+        raise ArgumentError(f"{owner}: {name} {int(model_instance)} is not a model instance of the plant (it has "
+                            f"{plant.num_model_instances()})")
+    return model_instance
+
+
+def _tool_center_frame(name):
+    """The end-effector frame of the pad tool mounted as ``name``: ``pad_center`` for the default tool,
+    ``<name>_center`` for another (so that each tool's frame has a name of its own in the plant)."""
+    return "pad_center" if name == _DEFAULT_TOOL else f"{name}_center"
+
+
+def _moved_by(plant, model_instance, body):
+    """True if ``body`` belongs to ``model_instance`` or hangs, in the joint tree (before or after
+    ``Finalize``), from a body or a joint of it."""
+    parent = {}
+    for index in plant.GetJointIndices():
+        joint = plant.get_joint(index)
+        parent[joint.child_body().index()] = (joint.parent_body().index(), joint.model_instance())
+    index, seen = body.index(), set()
+    while index not in seen:
+        seen.add(index)
+        if plant.get_body(index).model_instance() == model_instance:
+            return True
+        if index not in parent:
+            return False
+        index, joint_instance = parent[index]
+        if joint_instance == model_instance:
+            return True
+    return False
+
+
+def _flange(plant, arm, flange_frame, owner):
+    """The Frame ``flange_frame`` (a Frame or the name of one of ``arm``'s), checked to be moved by ``arm``."""
+    if isinstance(flange_frame, str):
+        return get_frame(plant, flange_frame, arm, f"{owner}: flange_frame")
+    try:
+        parent, body, name = flange_frame.GetParentPlant(), flange_frame.body(), flange_frame.name()
+    except (AttributeError, TypeError):
+        raise ArgumentError(f"{owner}: flange_frame must be a Frame of the arm or its name, got "
+                            f"{describe(flange_frame)}") from None
+    if parent is not plant:
+        raise ArgumentError(f"{owner}: flange_frame '{name}' is a frame of another plant; pass a frame of this "
+                            f"plant's arm (or its name)")
+    if not _moved_by(plant, arm, body):
+        arm_name = plant.GetModelInstanceName(arm)
+        raise ArgumentError(f"{owner}: flange_frame '{name}' (on body '{body.name()}' of model "
+                            f"'{plant.GetModelInstanceName(body.model_instance())}') is not moved by the arm "
+                            f"'{arm_name}'; pass one of the arm's frames (or a frame on a part it carries)")
+    return flange_frame
+
+
+def mount_tool(plant, arm, flange_frame, X_flange_tool=None, gripper_joints=(), gripper="weld", name="pad_tool"):
     """Mount the compliant ball pad (``models/pad_tool.sdf``: a ball of radius 20 mm, its centre 0.05 m
     along the tool's +z, the controlled point) on ``flange_frame`` of ``arm`` at ``X_flange_tool`` (default: the
     identity), before ``Finalize``.
@@ -165,7 +259,8 @@ def mount_tool(plant, arm, flange_frame, X_flange_tool=None, gripper_joints=(), 
     Args:
         plant: your MultibodyPlant (with or without a SceneGraph: the controller's own model too).
         arm: the ModelInstanceIndex of the arm.
-        flange_frame: a frame of ``arm`` or its name (UnknownFrameError lists the model's frames).
+        flange_frame: a frame of ``arm`` (or of a part the arm carries) or its name (UnknownFrameError
+            lists the model's frames).
         X_flange_tool: RigidTransform of the tool's mounting frame in the flange frame (an adapter's
             length, a rotation about the flange axis).
         gripper_joints: joints of a gripper (or anything else the task does not move) to weld at
@@ -176,32 +271,44 @@ def mount_tool(plant, arm, flange_frame, X_flange_tool=None, gripper_joints=(), 
             the collision geometries of every body the flange carries (the gripper's fixed and moving
             parts; ``RobotModel.passive_geometries``, dropped by ``only_tool_touches``): a gripper your
             model has but your station does not (it stays drawn).
+        name: the tool's model instance name. The default ("pad_tool", end-effector frame
+            ``pad_center``) is for one tool per plant; give each further tool a name of its own (two
+            arms, each with its pad): its end-effector frame is then ``<name>_center``.
 
-    Returns the RobotModel: the arm and tool instances, the end-effector frame ``pad_center`` and point
-    (its origin), the wrist weld (where a wrist force/torque sensor sits), the pad's geometries.
+    Returns the RobotModel: the arm and tool instances, the end-effector frame (``pad_center``, or
+    ``<name>_center``) and point (its origin), the wrist weld (where a wrist force/torque sensor sits),
+    the pad's geometries.
     """
     owner = "mount_tool"
     instance(X_flange_tool, "X_flange_tool", owner, RigidTransform, allow_none=True)
     if gripper not in GRIPPER_CHOICES:
-        raise ConfigError(f"mount_tool: gripper must be one of {', '.join(GRIPPER_CHOICES)}, got {gripper!r}")
+        raise ConfigError(f"mount_tool: gripper must be one of {', '.join(GRIPPER_CHOICES)}, got {describe(gripper)}")
     if isinstance(gripper_joints, str):
         gripper_joints = [gripper_joints]
-    instance(plant, "plant", owner, MultibodyPlant)
-    if plant.is_finalized():
-        raise ConfigError(f"{owner}: the plant is finalized; mount the tool before plant.Finalize()")
+    if not isinstance(gripper_joints, (list, tuple)):
+        raise ArgumentError(f"{owner}: gripper_joints must be a joint name or a list of joint names, got "
+                            f"{describe(gripper_joints)}")
+    text(name, "name", owner)
+    if not _TOOL_NAME.match(name):
+        raise ArgumentError(f"{owner}: name must be a model name of letters, digits, '_', '.' and '-' (not "
+                            f"starting with a digit), got {describe(name)}")
+    _unfinalized_plant(plant, owner)
+    _model_instance_of(plant, arm, "arm", owner)
+    center = _tool_center_frame(name)
+    if plant.HasModelInstanceNamed(name) or plant.HasFrameNamed(center):
+        raise ArgumentError(f"{owner}: the plant already has a model '{name}' (or a frame '{center}'): a tool "
+                            f"mounted before? Pass name= to mount another tool (e.g. name='{name}_2')")
+    frame = _flange(plant, arm, flange_frame, owner)
     if gripper_joints:
         weld_joints(plant, list(gripper_joints), arm)
-    frame = get_frame(plant, flange_frame, arm, "flange_frame") if isinstance(flange_frame, str) else flange_frame
-    if not hasattr(frame, "body"):
-        raise ConfigError(f"mount_tool: flange_frame must be a Frame of the arm or its name, got {flange_frame!r}")
     removed = []
     if gripper == "remove" and plant.geometry_source_is_registered():
         removed = [geometry for body in carried_bodies(plant, arm, frame.body())
                    for geometry in plant.GetCollisionGeometriesForBody(body)]
     parser = ConfigureParser(Parser(plant))
     tool, weld, pad = add_pad_tool(plant, parser, frame, X_flange_tool if X_flange_tool is not None
-                                   else RigidTransform())
-    return RobotModel(arm=arm, model_instances=[arm, tool], end_effector_frame="pad_center",
+                                   else RigidTransform(), name=name, center_frame=center)
+    return RobotModel(arm=arm, model_instances=[arm, tool], end_effector_frame=center,
                       end_effector_point=np.zeros(3), tool_weld=weld, pad_geometries=pad,
                       passive_geometries=removed, only_pad_contact=True)
 
@@ -209,6 +316,10 @@ def mount_tool(plant, arm, flange_frame, X_flange_tool=None, gripper_joints=(), 
 def carried_bodies(plant, model_instance, body):
     """The bodies of ``model_instance`` that ``body`` carries: outboard of it in the joint tree (before or
     after ``Finalize``), ``body`` itself excluded."""
+    instance(plant, "plant", "carried_bodies", MultibodyPlant)
+    _model_instance_of(plant, model_instance, "model_instance", "carried_bodies")
+    if not hasattr(body, "index") or not hasattr(body, "model_instance"):
+        raise ArgumentError(f"carried_bodies: body must be a RigidBody of the plant, got {describe(body)}")
     parent = {}
     for index in plant.GetJointIndices(model_instance):
         joint = plant.get_joint(index)
@@ -228,7 +339,13 @@ def robot_plant(add_robot):
     continuous MultibodyPlant (no SceneGraph, no workpiece), finalized. Returns the plant."""
     function(add_robot, "add_robot", "robot_plant", "add_robot(plant) -> RobotModel")
     plant = MultibodyPlant(0.0)
-    robot = add_robot(plant)
+    try:
+        robot = add_robot(plant)
+    except Exception as error:
+        # The package's own errors keep their type; any other is an ArgumentError; the cause stays chained.
+        kind = type(error) if isinstance(error, DrakeHybridError) else ArgumentError
+        first_line = (str(error).strip().splitlines() or [""])[0]
+        raise kind(f"robot_plant: add_robot(plant) raised {type(error).__name__}: {first_line}") from error
     if not isinstance(robot, RobotModel):
         raise ArgumentError(f"robot_plant: add_robot must return the RobotModel of mount_tool, got "
                             f"{type(robot).__name__}")
@@ -240,8 +357,19 @@ def robot_plant(add_robot):
 # The workpiece and the contact
 # ------------------------------------------------------------------------------------------------
 
-def _tool_geometries(robot):
-    return list(robot.pad_geometries) if isinstance(robot, RobotModel) else list(robot)
+def _geometry_ids(value, name, owner, what):
+    """``value`` (a GeometryId or a list of them) as a list of GeometryIds; ArgumentError naming ``name``."""
+    if isinstance(value, GeometryId):
+        return [value]
+    if not isinstance(value, (list, tuple)) or not all(isinstance(entry, GeometryId) for entry in value):
+        raise ArgumentError(f"{owner}: {name} must be {what}, got {describe(value)}")
+    return list(value)
+
+
+def _tool_geometries(robot, owner):
+    if isinstance(robot, RobotModel):
+        return list(robot.pad_geometries)
+    return _geometry_ids(robot, "robot", owner, "the RobotModel of mount_tool or a list of the pad's GeometryIds")
 
 
 def apply_contact_defaults(plant, scene_graph, robot, workpiece_geometries, contact=None):
@@ -249,10 +377,27 @@ def apply_contact_defaults(plant, scene_graph, robot, workpiece_geometries, cont
     tool (``robot``: the RobotModel of ``mount_tool``, or the pad's geometry ids) and workpiece
     geometries: the pad's hydroelastic modulus, mesh and dissipation, SAP's relaxation times (0.03 s
     for the pair: about critically damped), friction. Call it before ``plant.Finalize()``."""
-    contact = instance(contact, "contact", "apply_contact_defaults", ContactConfig, allow_none=True) or ContactConfig()
+    owner = "apply_contact_defaults"
+    _unfinalized_plant(plant, owner)
+    instance(scene_graph, "scene_graph", owner, SceneGraph, what="the SceneGraph of the plant (AddMultibodyPlant's)")
+    if not plant.geometry_source_is_registered():
+        raise ArgumentError(f"{owner}: the plant has no SceneGraph (make it with AddMultibodyPlant(config, builder))")
+    tool = _tool_geometries(robot, owner)
+    workpiece = _geometry_ids(workpiece_geometries, "workpiece_geometries", owner,
+                             "the GeometryIds of add_rigid_workpiece (a list)")
+    contact = instance(contact, "contact", owner, ContactConfig, allow_none=True) or ContactConfig()
     contact.validate()
-    set_contact_properties(plant, scene_graph, _tool_geometries(robot), contact, pad=True)
-    set_contact_properties(plant, scene_graph, list(workpiece_geometries), contact, pad=False)
+    inspector, source = scene_graph.model_inspector(), plant.get_source_id()
+    if not inspector.SourceIsRegistered(source):
+        raise ArgumentError(f"{owner}: scene_graph is not the plant's SceneGraph (AddMultibodyPlant returns the pair)")
+    known = set(inspector.GetAllGeometryIds())
+    for name, ids in (("robot", tool), ("workpiece_geometries", workpiece)):
+        for geometry_id in ids:
+            if geometry_id not in known or not inspector.BelongsToSource(geometry_id, source):
+                raise ArgumentError(f"{owner}: {name} holds a geometry ({geometry_id}) that is not the plant's in "
+                                    f"scene_graph (another plant's or another SceneGraph's?)")
+    set_contact_properties(plant, scene_graph, tool, contact, pad=True)
+    set_contact_properties(plant, scene_graph, workpiece, contact, pad=False)
 
 
 # ------------------------------------------------------------------------------------------------
@@ -298,50 +443,115 @@ def robot_bodies(plant, robot):
     return [plant.get_body(index) for instance in robot.model_instances for index in plant.GetBodyIndices(instance)]
 
 
+def _port_label(port):
+    """'system.port' of an input or output port, for a message."""
+    return f"'{port.get_system().get_name()}.{port.get_name()}'"
+
+
+def _refuse_wired(builder, input_port, owner, hint=""):
+    """ArgumentError naming ``input_port`` (and ``hint``) if the builder already wires or exports it: Drake
+    ends the process at a second Connect instead of raising."""
+    if builder.IsConnectedOrExported(input_port):
+        raise ArgumentError(f"{owner}: the input port {_port_label(input_port)} is already connected in the "
+                            f"builder{hint}; an input takes one source")
+
+
+def _connect(builder, output_port, input_port, owner):
+    """``builder.Connect(output_port, input_port)`` after ``_refuse_wired``."""
+    _refuse_wired(builder, input_port, owner)
+    builder.Connect(output_port, input_port)
+
+
+def _unique_name(builder, name, suffix):
+    """``name``, or ``name_<suffix>`` (then ``_2``, ...) if the builder already has a system of that name:
+    a diagram's systems need names of their own (Drake ends the process at Build otherwise)."""
+    taken = {system.get_name() for system in builder.GetSystems()}
+    candidates = [name, f"{name}_{suffix}"] + [f"{name}_{suffix}_{count}" for count in range(2, 1000)]
+    return next(candidate for candidate in candidates if candidate not in taken)
+
+
+def _add_named(builder, name, system, robot_name):
+    """``builder.AddNamedSystem`` with ``_unique_name``."""
+    return builder.AddNamedSystem(_unique_name(builder, name, robot_name), system)
+
+
+def _arm_name(plant, robot):
+    return plant.GetModelInstanceName(robot.arm)
+
+
+def _port_of(system, name, kind, owner, argument):
+    """``system``'s input (``kind`` "input") or output port ``name``; ArgumentError naming ``argument``."""
+    has = system.HasInputPort(name) if kind == "input" else system.HasOutputPort(name)
+    if not has:
+        ports = (system.get_input_port(i) for i in range(system.num_input_ports())) if kind == "input" else (
+            system.get_output_port(i) for i in range(system.num_output_ports()))
+        raise ArgumentError(f"{owner}: {argument} ('{system.get_name()}') has no {kind} port '{name}'; its {kind} "
+                            f"ports: {', '.join(port.get_name() for port in ports) or 'none'}")
+    return system.GetInputPort(name) if kind == "input" else system.GetOutputPort(name)
+
+
+def _station_parts(builder, plant, robot, owner):
+    instance(builder, "builder", owner, DiagramBuilder)
+    instance(plant, "plant", owner, MultibodyPlant)
+    instance(robot, "robot", owner, RobotModel, what="the RobotModel of mount_tool")
+    if not plant.is_finalized():
+        raise ConfigError(f"{owner}: finalize the plant first (plant.Finalize())")
+    _model_instance_of(plant, robot.arm, "robot.arm", owner)
+
+
 def add_wrench_sensor(builder, plant, robot, sensor=None):
     """The wrench sensor of ``sensor`` (a ContactSensorConfig, default; or a WristSensorConfig) on your
     plant, its inputs wired: the environment's wrench on the robot at the end-effector point, in
-    world (the contact results of the robot's bodies, or the wrist weld's reaction force). Returns it."""
+    world (the contact results of the robot's bodies, or the wrist weld's reaction force). Returns it
+    (named "wrench_sensor", or "wrench_sensor_<arm>" if the builder has one)."""
+    owner = "add_wrench_sensor"
+    _station_parts(builder, plant, robot, owner)
     sensor = sensor if sensor is not None else ContactSensorConfig()
+    instance(sensor, "sensor", owner, (ContactSensorConfig, WristSensorConfig))
+    arm = _arm_name(plant, robot)
     if isinstance(sensor, WristSensorConfig):
         if robot.tool_weld is None:
             raise ConfigError("sensor: the robot has no wrist weld (mount_tool makes one) for a WristSensorConfig; "
                               "use ContactSensorConfig")
-        system = builder.AddNamedSystem("wrench_sensor", WristForceTorqueSensor(
+        system = _add_named(builder, "wrench_sensor", WristForceTorqueSensor(
             plant, robot.tool_weld, robot.end_effector_frame, robot.end_effector_point,
-            compensate_tool_inertia=sensor.compensate_tool_inertia))
-        builder.Connect(plant.get_reaction_forces_output_port(), system.get_input_port(0))
+            compensate_tool_inertia=sensor.compensate_tool_inertia), arm)
+        _connect(builder, plant.get_reaction_forces_output_port(), system.get_input_port(0), owner)
         if system.compensate_tool_inertia:
-            builder.Connect(plant.get_body_spatial_velocities_output_port(),
-                            system.GetInputPort("body_spatial_velocities"))
-            builder.Connect(plant.get_body_spatial_accelerations_output_port(),
-                            system.GetInputPort("body_spatial_accelerations"))
-    elif isinstance(sensor, ContactSensorConfig):
-        system = builder.AddNamedSystem("wrench_sensor", ContactWrenchSensor(
-            plant, robot_bodies(plant, robot), robot.end_effector_frame, robot.end_effector_point))
-        builder.Connect(plant.get_contact_results_output_port(), system.get_input_port(0))
+            _connect(builder, plant.get_body_spatial_velocities_output_port(),
+                    system.GetInputPort("body_spatial_velocities"), owner)
+            _connect(builder, plant.get_body_spatial_accelerations_output_port(),
+                    system.GetInputPort("body_spatial_accelerations"), owner)
     else:
-        raise ConfigError(f"sensor must be a ContactSensorConfig or a WristSensorConfig, got {type(sensor).__name__}")
-    builder.Connect(plant.get_body_poses_output_port(), system.get_input_port(1))
+        system = _add_named(builder, "wrench_sensor", ContactWrenchSensor(
+            plant, robot_bodies(plant, robot), robot.end_effector_frame, robot.end_effector_point), arm)
+        _connect(builder, plant.get_contact_results_output_port(), system.get_input_port(0), owner)
+    _connect(builder, plant.get_body_poses_output_port(), system.get_input_port(1), owner)
     return system
 
 
-def add_wrench_path(builder, wrench_output, sensor, period, sequence=None, tare=False):
+def add_wrench_path(builder, wrench_output, sensor, period, sequence=None, tare=False, suffix="wrench"):
     """The wrench's way to the controller (``sensor``: a ContactSensorConfig or WristSensorConfig): a
     WrenchConditioner with ``sensor.condition`` (fed the sample ``sequence`` output when given;
-    ``tare``), else a low-pass filter when ``sensor.bandwidth_hz`` > 0, else nothing. Returns (the
-    output port the controller reads, the conditioner or None, the filter or None)."""
+    ``tare``), else a low-pass filter when ``sensor.bandwidth_hz`` > 0, else nothing (``suffix``: what
+    their names end with when the builder already has a system of that name). Returns (the output
+    port the controller reads, the conditioner or None, the filter or None)."""
+    owner = "add_wrench_path"
+    instance(builder, "builder", owner, DiagramBuilder)
+    instance(wrench_output, "wrench_output", owner, OutputPort, what="an OutputPort (the wrench sensor's)")
+    instance(sequence, "sequence", owner, OutputPort, allow_none=True)
+    instance(sensor, "sensor", owner, (ContactSensorConfig, WristSensorConfig))
     conditioner = wrench_filter = None
     if sensor.condition:
-        conditioner = builder.AddNamedSystem("wrench_conditioner", WrenchConditioner(
-            period, sensor.bandwidth_hz, sensor.max_hold_time, use_sequence=sequence is not None, tare=tare))
-        builder.Connect(wrench_output, conditioner.GetInputPort("raw_wrench"))
+        conditioner = _add_named(builder, "wrench_conditioner", WrenchConditioner(
+            period, sensor.bandwidth_hz, sensor.max_hold_time, use_sequence=sequence is not None, tare=tare), suffix)
+        _connect(builder, wrench_output, conditioner.GetInputPort("raw_wrench"), owner)
         if sequence is not None:
-            builder.Connect(sequence, conditioner.GetInputPort("sequence"))
+            _connect(builder, sequence, conditioner.GetInputPort("sequence"), owner)
         wrench_output = conditioner.GetOutputPort("wrench")
     elif sensor.bandwidth_hz > 0:
-        wrench_filter = builder.AddNamedSystem("wrench_filter", LowPassFilter(6, sensor.bandwidth_hz, period))
-        builder.Connect(wrench_output, wrench_filter.get_input_port(0))
+        wrench_filter = _add_named(builder, "wrench_filter", LowPassFilter(6, sensor.bandwidth_hz, period), suffix)
+        _connect(builder, wrench_output, wrench_filter.get_input_port(0), owner)
         wrench_output = wrench_filter.get_output_port(0)
     return wrench_output, conditioner, wrench_filter
 
@@ -352,24 +562,47 @@ def wrench_lag(sensor, plant, control_period):
     contact sensor on a discrete plant's sampled results, their one step of age
     (``systems.sensors.sampled_reading_age``; the wrist sensor's reaction force is read as current,
     as a real sensor's)."""
+    instance(sensor, "sensor", "wrench_lag", (ContactSensorConfig, WristSensorConfig))
+    instance(plant, "plant", "wrench_lag", MultibodyPlant)
     age = sampled_reading_age(plant) if isinstance(sensor, ContactSensorConfig) else 0.0
     return low_pass_lag(sensor.bandwidth_hz, control_period) + age
 
 
+_SOURCE_OUTPUTS = ("desired_velocity", "desired_acceleration", "desired_force")
+_CONTROLLER_INPUTS = ("estimated_state", "measured_wrench") + _SOURCE_OUTPUTS
+_SUPERVISED_INPUTS = ("contact_phase", "approach_reference")
+_SUPERVISED_OUTPUTS = ("force", "constraint_value")
+
+
+def _check_source(source, owner):
+    instance(source, "source", owner, System, what="a System with the output ports " + ", ".join(_SOURCE_OUTPUTS)
+             + " (or None: a ProfileSource of desired_velocity and desired_force; False: you wire them)")
+    for name in _SOURCE_OUTPUTS:
+        _port_of(source, name, "output", owner, "source")
+
+
 def connect_source(builder, plant, robot, source, controller):
     """Add the command source ``source`` (a system with the output ports desired_velocity,
-    desired_acceleration and desired_force, and optionally one input: the arm's state, as
-    ``DesiredFieldSource``'s) to ``builder`` as "desired" and wire it to ``controller``. Returns it."""
-    source = builder.AddNamedSystem("desired", source)
+    desired_acceleration and desired_force; if it has inputs, its first is the arm's state, as
+    ``DesiredFieldSource``'s and ``PathSource``'s) to ``builder`` as "desired" (or "desired_<arm>" if the
+    builder has one) and wire it to ``controller``. Returns it."""
+    owner = "connect_source"
+    _station_parts(builder, plant, robot, owner)
+    _check_source(source, owner)
+    instance(controller, "controller", owner, System)
+    inputs = [_port_of(controller, name, "input", owner, "controller") for name in _SOURCE_OUTPUTS]
+    for port in inputs:
+        _refuse_wired(builder, port, owner, " (the controller already has a command source)")
+    source = _add_named(builder, "desired", source, _arm_name(plant, robot))
     if source.num_input_ports():
-        builder.Connect(plant.get_state_output_port(robot.arm), source.get_input_port(0))
-    for name in ("desired_velocity", "desired_acceleration", "desired_force"):
-        builder.Connect(source.GetOutputPort(name), controller.GetInputPort(name))
+        _connect(builder, plant.get_state_output_port(robot.arm), source.get_input_port(0), owner)
+    for name, port in zip(_SOURCE_OUTPUTS, inputs):
+        _connect(builder, source.GetOutputPort(name), port, owner)
     return source
 
 
 def add_contact_supervisor(builder, controller, wrench_output, supervision, control_period, initial_phase,
-                           source=None, conditioner=None, lift_off=False):
+                           source=None, conditioner=None, lift_off=False, suffix="supervisor"):
     """Add a ContactSupervisor (``supervision``: a SupervisionConfig; starting in ``initial_phase``)
     between ``controller`` (a HybridController built with ``guarded_move=supervision``) and the
     wrench it reads (``wrench_output``), wired both ways::
@@ -379,47 +612,150 @@ def add_contact_supervisor(builder, controller, wrench_output, supervision, cont
 
     (``source``: the command source; ``conditioner``: a taring WrenchConditioner; ``lift_off``: the
     supervisor takes a ``path_done`` input and lifts off). Returns it."""
-    supervisor = builder.AddNamedSystem("contact_supervisor", ContactSupervisor(
-        supervision, controller.force_size, controller.kinematic_rows, control_period, initial_phase,
-        lift_off=lift_off))
-    for name in ("force", "constraint_value"):
-        builder.Connect(controller.GetOutputPort(name), supervisor.GetInputPort(name))
+    owner = "add_contact_supervisor"
+    instance(builder, "builder", owner, DiagramBuilder)
+    instance(supervision, "supervision", owner, SupervisionConfig)
+    instance(wrench_output, "wrench_output", owner, OutputPort, what="an OutputPort (the wrench the controller reads)")
+    instance(controller, "controller", owner, System)
+    phase = _contact_phase(initial_phase, owner)
+    inputs = [_port_of(controller, name, "input", owner, "controller") for name in _SUPERVISED_INPUTS]
+    outputs = [_port_of(controller, name, "output", owner, "controller") for name in _SUPERVISED_OUTPUTS]
+    for port in inputs:
+        _refuse_wired(builder, port, owner, " (the controller already has a contact supervisor)")
+    for name in ("force_size", "kinematic_rows"):
+        if not hasattr(controller, name):
+            raise ArgumentError(f"{owner}: controller must be a HybridController (or have its {name}), got "
+                                f"{describe(controller)}")
+    supervisor = _add_named(builder, "contact_supervisor", ContactSupervisor(
+        supervision, controller.force_size, controller.kinematic_rows, control_period, phase,
+        lift_off=lift_off), suffix)
+    for name, port in zip(_SUPERVISED_OUTPUTS, outputs):
+        _connect(builder, port, supervisor.GetInputPort(name), owner)
     if source is not None:
-        builder.Connect(source.GetOutputPort("desired_force"), supervisor.GetInputPort("desired_force"))
-    builder.Connect(wrench_output, supervisor.GetInputPort("measured_wrench"))
-    builder.Connect(supervisor.GetOutputPort("contact_phase"), controller.get_contact_phase_input_port())
-    builder.Connect(supervisor.GetOutputPort("approach_reference"), controller.get_approach_reference_input_port())
+        _connect(builder, _port_of(source, "desired_force", "output", owner, "source"),
+                supervisor.GetInputPort("desired_force"), owner)
+    _connect(builder, wrench_output, supervisor.GetInputPort("measured_wrench"), owner)
+    for name, port in zip(("contact_phase", "approach_reference"), inputs):
+        _connect(builder, supervisor.GetOutputPort(name), port, owner)
     if conditioner is not None:
-        builder.Connect(supervisor.GetOutputPort("contact_phase"), conditioner.GetInputPort("contact_phase"))
+        _connect(builder, supervisor.GetOutputPort("contact_phase"),
+                _port_of(conditioner, "contact_phase", "input", owner, "conditioner"), owner)
     return supervisor
+
+
+def _contact_phase(initial_phase, owner):
+    """``initial_phase`` (a ContactPhase or its value; None: CONTACT) as a ContactPhase; ArgumentError otherwise."""
+    if initial_phase is None:
+        return ContactPhase.CONTACT
+    if isinstance(initial_phase, str) and initial_phase.upper() in ContactPhase.__members__:
+        return ContactPhase[initial_phase.upper()]
+    if (isinstance(initial_phase, (bool, np.bool_)) or not isinstance(initial_phase, numbers.Integral)
+            or int(initial_phase) not in {phase.value for phase in ContactPhase}):
+        allowed = ", ".join(f"ContactPhase.{phase.name} ({phase.value})" for phase in ContactPhase)
+        raise ArgumentError(f"{owner}: initial_phase must be one of {allowed} or None, got {describe(initial_phase)}")
+    return ContactPhase(initial_phase)
 
 
 def add_sensing(builder, plant, robot, controller, sensor, control_period, sensor_faults=None, tare=False):
     """The wrench sensor (``add_wrench_sensor``), a SensorFaultInjector when ``sensor_faults`` is active,
     and the wrench path (``add_wrench_path``), wired into ``controller``'s measured_wrench. Returns
     (sensor, its own output, the output the controller reads, injector, conditioner, filter)."""
+    owner = "add_sensing"
+    _station_parts(builder, plant, robot, owner)
+    instance(controller, "controller", owner, System)
+    instance(sensor_faults, "sensor_faults", owner, SensorFaultConfig, allow_none=True)
+    measured = _port_of(controller, "measured_wrench", "input", owner, "controller")
+    _refuse_wired(builder, measured, owner, " (the controller already reads a wrench)")
+    arm = _arm_name(plant, robot)
     wrench_sensor = add_wrench_sensor(builder, plant, robot, sensor)
     true_wrench = wrench_output = wrench_sensor.get_output_port(0)
     injector = None
     if sensor_faults is not None and sensor_faults.active():
-        injector = builder.AddNamedSystem("sensor_faults", SensorFaultInjector(sensor_faults, control_period))
-        builder.Connect(wrench_output, injector.GetInputPort("wrench"))
+        injector = _add_named(builder, "sensor_faults", SensorFaultInjector(sensor_faults, control_period), arm)
+        _connect(builder, wrench_output, injector.GetInputPort("wrench"), owner)
         wrench_output = injector.GetOutputPort("faulty_wrench")
     wrench_output, conditioner, wrench_filter = add_wrench_path(
-        builder, wrench_output, sensor, control_period,
-        sequence=injector.GetOutputPort("sequence") if injector is not None else None, tare=tare)
-    builder.Connect(wrench_output, controller.get_measured_wrench_input_port())
+        builder, wrench_output, sensor if sensor is not None else ContactSensorConfig(), control_period,
+        sequence=injector.GetOutputPort("sequence") if injector is not None else None, tare=tare, suffix=arm)
+    _connect(builder, wrench_output, measured, owner)
     return wrench_sensor, true_wrench, wrench_output, injector, conditioner, wrench_filter
 
 
 def as_profile(command, size, name="command", owner="add_hybrid_controller"):
-    """``command`` as a Profile: a Profile as it is, a sequence of ``size`` numbers as a constant one,
-    None as zeros."""
+    """``command`` as a Profile of ``size`` entries: a Profile as it is (checked), a sequence of ``size``
+    numbers as a constant one, None as zeros. Typed errors name ``name``."""
     if command is None:
         return Profile(value=[0.0] * size)
     if isinstance(command, Profile):
+        command.validate(size, f"{owner}: {name}")
         return command
     return Profile(value=vector(command, name, owner, size).tolist())
+
+
+CONTROLLER_OPTIONS = tuple(name for name in inspect.signature(HybridController._construct).parameters
+                           if name not in ("self", "plant", "end_effector_frame", "end_effector_point",
+                                           "constraint_space", "gains", "mode", "control_period", "guarded_move",
+                                           "converter"))
+_MATCH_TOLERANCE = 1e-6      # m and rad: the controller plant's end-effector pose against the plant's
+_MATCH_CONFIGURATIONS = 3    # the default positions and two random ones within the limits
+
+
+def check_controller_plant(plant, robot, controller_plant, owner="add_hybrid_controller"):
+    """ArgumentError naming ``controller_plant`` if it does not model ``plant``'s arm ``robot.arm``: the
+    numbers of positions, velocities and actuators, and the end-effector pose (``robot``'s frame and
+    point) at the arm's default positions and two random ones within the joint limits (to
+    1e-6 m and rad)."""
+    arm, arm_name = robot.arm, plant.GetModelInstanceName(robot.arm)
+    counts = {"positions": (plant.num_positions(arm), controller_plant.num_positions()),
+              "velocities": (plant.num_velocities(arm), controller_plant.num_velocities()),
+              "actuators": (plant.num_actuated_dofs(arm), controller_plant.num_actuated_dofs())}
+    for what, (simulated, model) in counts.items():
+        if simulated != model:
+            raise ArgumentError(f"{owner}: controller_plant has {model} {what}, the plant's arm '{arm_name}' "
+                                f"{simulated}: pass the controller's model of this arm (robot_plant(add_robot))")
+    frame = robot.end_effector_frame
+    for name, model in (("plant", plant), ("controller_plant", controller_plant)):
+        if not model.HasFrameNamed(frame):
+            raise ArgumentError(f"{owner}: {name} has no end-effector frame '{frame}' (robot.end_effector_frame): "
+                                f"pass the controller's model of this arm (robot_plant(add_robot))")
+    context, model_context = plant.CreateDefaultContext(), controller_plant.CreateDefaultContext()
+    lower, upper = plant.GetPositionLowerLimits(), plant.GetPositionUpperLimits()
+    default = plant.GetPositions(context, arm)
+    in_arm = plant.GetPositionsFromArray(arm, np.arange(plant.num_positions(), dtype=float)).astype(int)
+    low = np.where(np.isfinite(lower[in_arm]), lower[in_arm], -np.pi)
+    high = np.where(np.isfinite(upper[in_arm]), upper[in_arm], np.pi)
+    generator = np.random.default_rng(0)
+    configurations = [default] + [generator.uniform(low, high) for _ in range(_MATCH_CONFIGURATIONS - 1)]
+    point = np.asarray(robot.end_effector_point, dtype=float)
+    for number, q in enumerate(configurations):
+        plant.SetPositions(context, arm, q)
+        controller_plant.SetPositions(model_context, q)
+        X_sim = plant.GetFrameByName(frame).CalcPoseInWorld(context)
+        X_model = controller_plant.GetFrameByName(frame).CalcPoseInWorld(model_context)
+        distance = float(np.linalg.norm(X_sim.multiply(point) - X_model.multiply(point)))
+        angle = float(X_sim.rotation().InvertAndCompose(X_model.rotation()).ToAngleAxis().angle())
+        if distance > _MATCH_TOLERANCE or angle > _MATCH_TOLERANCE:
+            where = "the arm's default positions" if number == 0 else f"q = {np.round(q, 3).tolist()}"
+            raise ArgumentError(f"{owner}: controller_plant does not model the plant's arm '{arm_name}': its "
+                                f"end-effector frame '{frame}' is {distance:.3g} m and {angle:.3g} rad from the "
+                                f"plant's at {where}; pass robot_plant(add_robot) of the add_robot that built the "
+                                f"plant's arm")
+
+
+def _check_actuation_free(builder, plant, robot, owner):
+    port = plant.get_actuation_input_port(robot.arm)
+    if not builder.IsConnectedOrExported(port):
+        return
+    source = builder.connection_map().get((plant, port.get_index()))
+    driver = source[0] if source is not None else None
+    if driver is not None and driver.HasInputPort("estimated_state") and driver.HasOutputPort("actuation"):
+        hint = (f" by '{driver.get_name()}': the builder already has a hybrid controller on this arm (one "
+                f"controller per arm)")
+    elif driver is not None:
+        hint = f" by your system '{driver.get_name()}': leave the arm's actuation input to the hybrid controller"
+    else:
+        hint = " (exported): leave the arm's actuation input to the hybrid controller"
+    raise ArgumentError(f"{owner}: the input port {_port_label(port)} is already connected in the builder{hint}")
 
 
 def add_hybrid_controller(builder, plant, robot, constraint_space, controller_plant, gains=None,
@@ -436,39 +772,51 @@ def add_hybrid_controller(builder, plant, robot, constraint_space, controller_pl
         controller ─actuation─► plant (robot.arm)  ◄───────────────────────────────────────────────────────────┘
         [supervisor: controller ─force, constraint_value─► supervisor ─contact_phase, approach_reference─► controller]
 
+    One controller per arm: the arm's actuation input must not be wired yet (ArgumentError naming the
+    port otherwise). The systems are named controller, wrench_sensor, desired, ... ; a second arm's
+    (a second call with another ``robot``) get its model instance name appended.
+
     Args:
         builder: your DiagramBuilder; ``plant``: your finalized MultibodyPlant in it (with its SceneGraph).
         robot: the RobotModel of ``mount_tool``.
         constraint_space: a ConstraintSpace (chart, C, E_p).
-        controller_plant: the controller's own model of the robot (``robot_plant(add_robot)``).
+        controller_plant: the controller's own model of the robot (``robot_plant(add_robot)``): checked
+            against the plant's arm (positions, velocities, actuators, the end-effector pose at three
+            configurations).
         gains, mode, control_period: of the HybridController (None: continuous, for linearization).
         desired_velocity, desired_force: Profiles (time profiles, k and m entries; a list of numbers is a
-            constant one; default zero) for a ProfileSource; or ``source``: a system of your own with the output ports desired_velocity,
-            desired_acceleration and desired_force (wired here), or False: you wire the controller's
-            desired_* input ports yourself.
+            constant one, ``[10.0]`` for one force row; default zero) for a ProfileSource; or ``source``: a
+            system of your own with the output ports desired_velocity, desired_acceleration and
+            desired_force (wired here), or False: you wire the controller's desired_* input ports yourself.
         sensor: a ContactSensorConfig (default) or WristSensorConfig: which wrench, and its path (a
             low-pass of ``bandwidth_hz``, a conditioner). A continuous controller needs a low-pass
             (default then ``CONTINUOUS_LOOP_BANDWIDTH``): its actuation feeds through to the wrench.
         supervision: a SupervisionConfig: a ContactSupervisor (guarded approach, contact loss) starting
-            in ``initial_phase`` (default CONTACT).
+            in ``initial_phase`` (a ContactPhase; default CONTACT).
         sensor_faults: a SensorFaultConfig: its injector between the sensor and the wrench path.
         controller: a controller system of your own with the HybridController's ports (e.g. a baseline
             of ``control.baselines``) instead of building one.
-        controller_options: further HybridController arguments (safety, velocity_row_inertia,
-            compensate_tangential_force, sample_lead, sampled_diagnostics, plant_time_step, fast_law).
+        controller_options: further HybridController arguments (``CONTROLLER_OPTIONS``: safety,
+            velocity_row_inertia, compensate_tangential_force, sample_lead, sampled_diagnostics,
+            plant_time_step, fast_law, ...); only when ``controller`` is None.
 
     Returns a HybridSystems. Every port stays reachable by name for wiring by hand.
     """
     owner = "add_hybrid_controller"
-    instance(builder, "builder", owner, DiagramBuilder)
-    instance(plant, "plant", owner, MultibodyPlant)
+    _station_parts(builder, plant, robot, owner)
     instance(controller_plant, "controller_plant", owner, MultibodyPlant,
              what="a finalized MultibodyPlant of the robot alone (robot_plant(add_robot))")
     if not controller_plant.is_finalized():
         raise ConfigError(f"{owner}: controller_plant must be finalized (robot_plant(add_robot) does it)")
-    if not plant.is_finalized():
-        raise ConfigError(f"{owner}: finalize the plant first (plant.Finalize())")
-    instance(robot, "robot", owner, RobotModel, what="the RobotModel of mount_tool")
+    instance(constraint_space, "constraint_space", owner, ConstraintSpace,
+             what="a ConstraintSpace (a constraint with its velocity projection)")
+    unknown = sorted(set(controller_options) - set(CONTROLLER_OPTIONS))
+    if unknown:
+        raise ArgumentError(f"{owner}: unknown argument(s) {', '.join(unknown)}; the HybridController options are "
+                            f"{', '.join(CONTROLLER_OPTIONS)}")
+    if controller is not None and controller_options:
+        raise ArgumentError(f"{owner}: {', '.join(sorted(controller_options))} configure the HybridController "
+                            f"built here, not your controller: pass them to your controller")
     if sensor is None:
         sensor = ContactSensorConfig(bandwidth_hz=CONTINUOUS_LOOP_BANDWIDTH if control_period is None else 0.0)
     instance(sensor, "sensor", owner, (ContactSensorConfig, WristSensorConfig))
@@ -476,7 +824,24 @@ def add_hybrid_controller(builder, plant, robot, constraint_space, controller_pl
     if control_period is None and not (sensor.bandwidth_hz > 0):
         raise ConfigError("sensor.bandwidth_hz: a continuous controller (control_period None) needs a wrench "
                           "low-pass (> 0 Hz): its actuation feeds through to the measured wrench")
+    instance(supervision, "supervision", owner, SupervisionConfig, allow_none=True)
+    instance(sensor_faults, "sensor_faults", owner, SensorFaultConfig, allow_none=True)
+    phase = _contact_phase(initial_phase, owner)
     k, m = constraint_space.velocity_size, constraint_space.force_size
+    if source is None:
+        source = ProfileSource(as_profile(desired_velocity, k, "desired_velocity"),
+                               as_profile(desired_force, m, "desired_force"), k, m)
+    elif source is not False:
+        _check_source(source, owner)
+    if controller is not None:
+        instance(controller, "controller", owner, System, what="a controller System with the HybridController's "
+                 "ports (e.g. a baseline of control.baselines) or None")
+        for name in _CONTROLLER_INPUTS + (_SUPERVISED_INPUTS if supervision is not None else ()):
+            _port_of(controller, name, "input", owner, "controller")
+        for name in ("actuation",) + (_SUPERVISED_OUTPUTS if supervision is not None else ()):
+            _port_of(controller, name, "output", owner, "controller")
+    check_controller_plant(plant, robot, controller_plant, owner)
+    _check_actuation_free(builder, plant, robot, owner)
     if controller is None:
         options = dict(sampled_diagnostics=control_period is not None, plant_time_step=plant.time_step(),
                        wrench_lag=wrench_lag(sensor, plant, control_period))
@@ -484,21 +849,18 @@ def add_hybrid_controller(builder, plant, robot, constraint_space, controller_pl
         controller = HybridController(controller_plant, robot.end_effector_frame, robot.end_effector_point,
                                       constraint_space, gains=gains, mode=mode, control_period=control_period,
                                       guarded_move=supervision, **options)
-    controller = builder.AddNamedSystem("controller", controller)
-    phase = ContactPhase.CONTACT if initial_phase is None else ContactPhase(initial_phase)
+    arm = _arm_name(plant, robot)
+    controller = _add_named(builder, "controller", controller, arm)
     tare = supervision is not None and supervision.tare_time > 0 and phase == ContactPhase.TARE
     wrench_sensor, true_wrench, wrench_output, injector, conditioner, wrench_filter = add_sensing(
         builder, plant, robot, controller, sensor, control_period, sensor_faults, tare)
-    builder.Connect(plant.get_state_output_port(robot.arm), controller.get_estimated_state_input_port())
-    builder.Connect(controller.GetOutputPort("actuation"), plant.get_actuation_input_port(robot.arm))
-    if source is None:
-        source = ProfileSource(as_profile(desired_velocity, k, "desired_velocity"),
-                               as_profile(desired_force, m, "desired_force"), k, m)
+    _connect(builder, plant.get_state_output_port(robot.arm), controller.GetInputPort("estimated_state"), owner)
+    _connect(builder, controller.GetOutputPort("actuation"), plant.get_actuation_input_port(robot.arm), owner)
     source = connect_source(builder, plant, robot, source, controller) if source is not False else None
     supervisor = None
     if supervision is not None:
         supervisor = add_contact_supervisor(builder, controller, wrench_output, supervision, control_period, phase,
-                                            source=source, conditioner=conditioner if tare else None)
+                                            source=source, conditioner=conditioner if tare else None, suffix=arm)
     kinematics = EndEffectorKinematics(plant, robot.end_effector_frame, robot.end_effector_point,
                                        constraint_space.chart)
     return HybridSystems(plant=plant, robot=robot, controller_plant=controller_plant,
@@ -537,6 +899,7 @@ def add_loggers(builder, systems, period=None):
     ``period``: sample period (s); None logs every publish of the simulator's steps. A controller with
     ``sampled_diagnostics`` is logged from its ``diagnostics`` port (what each tick computed, read
     once). Returns {key: VectorLogSink or (sink, column slice)}; ``read_log`` turns it into arrays."""
+    instance(builder, "builder", "add_loggers", DiagramBuilder)
     instance(systems, "systems", "add_loggers", HybridSystems, what="the HybridSystems of add_hybrid_controller")
     controller = systems.controller
     loggers = {}
@@ -564,6 +927,9 @@ def add_loggers(builder, systems, period=None):
 
 def logged(loggers, root_context, name):
     """(times, samples x size) of logger ``name`` of ``loggers`` (``add_loggers``) in ``root_context``."""
+    instance(loggers, "loggers", "logged", dict, what="the dict of add_loggers")
+    if name not in loggers:
+        raise ArgumentError(f"logged: no logger '{name}'; these were logged: {', '.join(loggers)}")
     logger, columns = loggers[name], slice(None)
     if isinstance(logger, tuple):
         logger, columns = logger
@@ -574,6 +940,7 @@ def logged(loggers, root_context, name):
 def read_log(loggers: Dict[str, object], root_context):
     """{key: array} of every logger of ``add_loggers`` in ``root_context``, with "t" (the sample times of
     the first), keyed by ``LOG_KEYS`` (log.npz calls a few otherwise: velocity, constraint, torque, q and v)."""
+    instance(loggers, "loggers", "read_log", dict, what="the dict of add_loggers")
     log = {}
     for name in loggers:
         times, values = logged(loggers, root_context, name)

@@ -12,9 +12,10 @@ from pydrake.common import MemoryFile
 from pydrake.geometry import (AddRigidHydroelasticProperties, Capsule, Cylinder, Ellipsoid, InMemoryMesh, Mesh,
                              ProximityProperties, Shape, Sphere)
 from pydrake.math import RigidTransform
-from pydrake.multibody.plant import CoulombFriction
+from pydrake.multibody.plant import CoulombFriction, MultibodyPlant
 
-from drake_hybrid.core.arguments import instance, positive, vector
+from drake_hybrid.core.arguments import instance, positive, text, vector
+from drake_hybrid.core.errors import ArgumentError
 
 MAX_RESOLUTION = 0.005            # m, the coarsest workpiece mesh
 FACETS_PER_RADIUS = 20            # a curved shape's mesh: radius / 20 (2.5 mm at R = 5 cm)
@@ -39,8 +40,14 @@ def add_rigid_workpiece(plant, shape, X_WG, name="workpiece", resolution_hint=No
     """Register ``shape`` (a pydrake.geometry Shape) on the world body at X_WG as a rigid
     hydroelastic collision geometry (mesh resolution ``resolution_hint``, m; default
     ``default_resolution``: tied to the curvature) and a visual one. Returns the collision
-    geometry ids. Contact friction is set from the scenario config."""
+    geometry ids. Contact friction is set from the scenario config. ``name``: the geometry's name,
+    one of its own per workpiece (pass another for a second workpiece)."""
     owner = "add_rigid_workpiece"
+    instance(plant, "plant", owner, MultibodyPlant)
+    if plant.is_finalized() or not plant.geometry_source_is_registered():
+        raise ArgumentError(f"{owner}: plant must be a MultibodyPlant with a SceneGraph (AddMultibodyPlant), not "
+                            f"yet finalized")
+    text(name, "name", owner)
     instance(shape, "shape", owner, Shape, what="a pydrake.geometry Shape (Box, Sphere, Cylinder, Ellipsoid, ...)")
     instance(X_WG, "X_WG", owner, RigidTransform)
     resolution_hint = positive(resolution_hint, "resolution_hint", owner, unit="m", allow_none=True)
@@ -50,8 +57,14 @@ def add_rigid_workpiece(plant, shape, X_WG, name="workpiece", resolution_hint=No
     AddRigidHydroelasticProperties(default_resolution(shape) if resolution_hint is None else resolution_hint,
                                    properties)
     properties.AddProperty("material", "coulomb_friction", CoulombFriction(0.0, 0.0))
-    geometry = plant.RegisterCollisionGeometry(world, X_WG, shape, name, properties)
-    plant.RegisterVisualGeometry(world, X_WG, shape, f"{name}_visual", np.asarray(color, dtype=float))
+    try:
+        geometry = plant.RegisterCollisionGeometry(world, X_WG, shape, name, properties)
+        plant.RegisterVisualGeometry(world, X_WG, shape, f"{name}_visual", np.asarray(color, dtype=float))
+    except RuntimeError as error:
+        if "already been used" not in str(error):
+            raise
+        raise ArgumentError(f"{owner}: the plant already has a geometry named '{name}' (a workpiece added "
+                            f"before?); pass name= to add another workpiece") from None
     return [geometry]
 
 
