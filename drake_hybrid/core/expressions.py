@@ -16,14 +16,19 @@ comprehensions, strings, comparisons, names starting with '_') is refused. Limit
 hostile text from costing time or memory before anything is built: at most ``MAX_LENGTH``
 characters, ``MAX_DEPTH`` levels of nesting, ``MAX_NODES`` tree nodes, numeric literals of at most
 ``MAX_DIGITS`` characters, numeric exponents of magnitude at most ``MAX_EXPONENT``, and a number
-raised to a number must stay below 1e300.
+raised to a number, and every constant of the result, must stay below 1e300.
+
+Names are read as Python reads identifiers: NFKC-normalized ('ℌ' is 'H', the micro sign 'µ' is the
+Greek 'μ'); parameter names that are one name once normalized are refused (``check_parameter_names``).
 
     expression_to_sympy("y - (height - radius)", symbols=chart.configuration_symbols,
                         parameters={"height": 1.0, "radius": 0.02}, where="task.yaml: constraint.rows[0]")
 """
 
 import ast
+import keyword
 import math
+import unicodedata
 
 import sympy
 
@@ -52,14 +57,30 @@ def _refuse(where, reason, token):
     raise ConfigError(f"{where}: {reason} '{token}'")
 
 
+def normalized(name):
+    """``name`` as an expression reads it: Python's parser NFKC-normalizes identifiers, so the text
+    'ℌ' or 'µ' (MICRO SIGN) is the name 'H' or 'μ' (GREEK SMALL LETTER MU)."""
+    return unicodedata.normalize("NFKC", name)
+
+
 def check_parameter_names(parameters, symbols, where="parameters"):
-    """ConfigError if a parameter name is not a plain identifier, starts with '_', or shadows a
-    chart coordinate, a function or a constant; or if its value is not a finite number."""
-    taken = {str(s) for s in symbols}
+    """ConfigError if a parameter name is not a plain identifier, is a Python keyword, starts with '_',
+    shadows a chart coordinate, a function or a constant, or is another parameter's name once
+    normalized as expressions read names (``normalized``: 'ℌ' is 'H'); or if its value is not a finite
+    number."""
+    taken = {normalized(str(s)) for s in symbols}
+    seen = {}
     for name, number in parameters.items():
-        if not isinstance(name, str) or not name.isidentifier() or name.startswith("_"):
+        if not isinstance(name, str) or not name.isidentifier() or normalized(name).startswith("_"):
             raise ConfigError(f"{where}: a parameter name must be an identifier not starting with '_', got '{name}'")
-        if name in taken or name in FUNCTIONS or name in CONSTANTS:
+        if keyword.iskeyword(normalized(name)):
+            raise ConfigError(f"{where}: a parameter name must not be a Python keyword, got '{name}'")
+        read = normalized(name)
+        if read in seen:
+            raise ConfigError(f"{where}: the parameters '{seen[read]}' and '{name}' are one name ('{read}') in an "
+                              "expression (Unicode NFKC normalization); rename one")
+        seen[read] = name
+        if read in taken or read in FUNCTIONS or read in CONSTANTS:
             raise ConfigError(f"{where}.{name}: the name is taken by a chart coordinate, a function or a constant; "
                               "rename the parameter")
         if isinstance(number, bool) or not isinstance(number, (int, float)) or not math.isfinite(number):
@@ -83,7 +104,7 @@ def expression_to_sympy(text, symbols=(), parameters=None, where="expression", r
     if isinstance(text, (int, float)):
         if not math.isfinite(text):
             _refuse(where, "numbers must be finite, got", text)
-        number = sympy.Integer(text) if isinstance(text, int) else sympy.Float(text)
+        number = _finite(sympy.Integer(text) if isinstance(text, int) else sympy.Float(text), where, str(text)[:60])
         return [number] if row else number
     if not isinstance(text, str):
         _refuse(where, "expected an expression (text), got", type(text).__name__)
@@ -103,12 +124,24 @@ def expression_to_sympy(text, symbols=(), parameters=None, where="expression", r
     nodes = sum(1 for _ in ast.walk(tree))
     if nodes > MAX_NODES:
         _refuse(where, f"the expression has more than {MAX_NODES} terms:", text[:40] + "...")
-    by_name = {str(s): s for s in symbols}
-    values = {name: sympy.Float(float(number)) for name, number in (parameters or {}).items()}
+    # names as the parser reads them (NFKC): the lookup of an ast.Name's id
+    by_name = {normalized(str(s)): s for s in symbols}
+    values = {normalized(name): sympy.Float(float(number)) for name, number in (parameters or {}).items()}
     converter = _Converter(text, where, by_name, values)
     if row and isinstance(tree.body, ast.Tuple):
-        return [converter.convert(item, 2) for item in tree.body.elts]
-    return [converter.convert(tree.body, 1)] if row else converter.convert(tree.body, 1)
+        return [_finite(converter.convert(item, 2), where, text) for item in tree.body.elts]
+    result = _finite(converter.convert(tree.body, 1), where, text)
+    return [result] if row else result
+
+
+def _finite(expression, where, text):
+    """``expression`` if each of its numbers (the products and quotients of the numbers written, as sympy
+    collects them) is below 10**MAX_MAGNITUDE_LOG10; else ConfigError."""
+    limit = sympy.Integer(10)**MAX_MAGNITUDE_LOG10
+    for number in expression.atoms(sympy.Number):
+        if abs(number) > limit:
+            _refuse(where, f"a constant beyond 1e{MAX_MAGNITUDE_LOG10} ({sympy.Float(number, 3)}) in", text[:60])
+    return expression
 
 
 def expression_row_to_sympy(text, size, symbols=(), parameters=None, where="expression"):

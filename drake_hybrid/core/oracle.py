@@ -121,7 +121,7 @@ def _autodiff_values(result):
                      for entry in np.asarray(result, dtype=object).reshape(-1)])
 
 
-def check_against_sympy(name, entries, argument_symbols, paths, points=1, seed=0, at=None):
+def check_against_sympy(name, entries, argument_symbols, paths, points=1, seed=0, at=None, then=None):
     """Compare compiled functions with sympy's 30-digit evaluation of their ``entries``.
 
     Args:
@@ -135,6 +135,8 @@ def check_against_sympy(name, entries, argument_symbols, paths, points=1, seed=0
             with probability zero; tests/test_code_generation.py checks thousands).
         seed: the sample points' seed (deterministic).
         at: check at this point (a list of arrays) instead of sample points.
+        then: called as then(point, substitutions) at each point where every path agrees (more checks
+            there, e.g. ``check_gradients``).
 
     Returns the number of points checked (0: no sample point lies in every entry's domain).
     Raises CodeGenerationError naming the function, the entry, the term, the point and both values.
@@ -175,7 +177,85 @@ def check_against_sympy(name, entries, argument_symbols, paths, points=1, seed=0
                         f"compiled {name} ({label}) entry {index} = {describe(entry)} gives {value!r} at "
                         f"{{{where}}}; sympy gives {expected!r} (allowed difference {allowed:.3g}): the generated "
                         "code is wrong for this term")
+        if then is not None:
+            then(point, substitutions)
         checked += 1
         if checked >= points:
             break
     return checked
+
+
+_STEP = 1e-6               # central differences: h = _STEP max(1, |v|)
+_ROUNDING = 1e3 * np.finfo(float).eps
+
+
+def _differences(float_path, point, index, step):
+    """(central, forward, backward, size) differences of the flattened float path along argument entry
+    ``index`` (an index into the concatenated arguments; size: the largest |value| used), or None where a
+    shifted point leaves the domain."""
+    offsets = np.cumsum([0] + [len(a) for a in point])
+    group = int(np.searchsorted(offsets, index, side="right") - 1)
+    values = []
+    for shift in (step, 0.0, -step):
+        moved = [np.array(a, dtype=float) for a in point]
+        moved[group][index - offsets[group]] += shift
+        try:
+            values.append(np.asarray(float_path(*moved), dtype=float).reshape(-1))
+        except (ArithmeticError, ValueError):
+            return None
+    plus, middle, minus = values
+    size = np.maximum(np.maximum(np.abs(plus), np.abs(minus)), np.abs(middle))
+    return (plus - minus) / (2 * step), (plus - middle) / step, (middle - minus) / step, size
+
+
+def check_gradients(name, entries, argument_symbols, float_path, autodiff_path, point, substitutions):
+    """Check the AutoDiffXd path's derivatives at ``point`` (where its values agree with sympy).
+
+    The path runs seeded with d/d(every argument entry) = I. Each derivative is compared first with the
+    central difference of the float path (a cheap triage, within 1e-6 and the difference's rounding); one
+    that differs is compared with sympy's derivative of the entry at 30 digits (``agrees_with_sympy``);
+    where that is undefined or differs, with the one-sided differences (at a kink, |x| at 0 or a Piecewise
+    on its boundary, either one-sided derivative is a right answer). Raises CodeGenerationError naming the
+    function, the entry, the variable, the point and both values.
+    """
+    symbols = [symbol for group in argument_symbols for symbol in group]
+    count = len(symbols)
+    seeded, position = [], 0
+    for array in point:
+        seeded.append(np.array([AutoDiffXd(float(v), np.eye(count)[position + i]) for i, v in enumerate(array)],
+                               dtype=object))
+        position += len(array)
+    try:
+        result = np.asarray(autodiff_path(*seeded), dtype=object).reshape(-1)
+    except (ArithmeticError, ValueError):
+        return
+    gradients = np.zeros((len(result), count))
+    for i, entry in enumerate(result):
+        if isinstance(entry, AutoDiffXd) and entry.derivatives().size:
+            gradients[i] = entry.derivatives()
+    for index, symbol in enumerate(symbols):
+        step = _STEP * max(1.0, abs(float(substitutions[symbol])))
+        differences = _differences(float_path, point, index, step)
+        for entry_index, entry in enumerate(entries):
+            derivative = float(gradients[entry_index, index])
+            rounding = 0.0
+            if differences is not None:
+                central, forward, backward, size = (float(d[entry_index]) for d in differences)
+                rounding = _ROUNDING * size / step
+                if abs(derivative - central) <= 1e-6 * max(abs(derivative), abs(central)) + rounding:
+                    continue
+            agrees, exact, _ = agrees_with_sympy(sympy.diff(entry, symbol), substitutions, derivative)
+            if agrees and exact is not None:
+                continue
+            if differences is not None and \
+                    min(abs(derivative - forward), abs(derivative - backward)) <= 1e-4 * max(1.0, abs(derivative)) + \
+                    rounding:
+                continue
+            if exact is None and differences is None:
+                continue                 # nothing defined to compare with
+            where = ", ".join(f"{s}={v:.6g}" for s, v in substitutions.items())
+            source, expected = ("sympy", exact) if exact is not None else ("central differences", central)
+            raise CodeGenerationError(
+                f"compiled {name} (AutoDiffXd) d(entry {entry_index} = {describe(entry)})/d{symbol} gives "
+                f"{derivative!r} at {{{where}}}; {source} gives {expected!r}: the generated derivative is wrong "
+                "for this term")

@@ -30,9 +30,10 @@ from sympy.printing.pycode import PythonCodePrinter
 
 import pydrake.math as drake_math
 import pydrake.symbolic as drake_symbolic
+from pydrake.autodiffutils import AutoDiffXd
 
 from drake_hybrid.core.errors import DimensionError, ExpressionError, UnknownVariableError
-from drake_hybrid.core.oracle import check_against_sympy, describe, to_autodiff
+from drake_hybrid.core.oracle import check_against_sympy, check_gradients, describe, to_autodiff
 
 class RealAbs(sympy.Function):
     """|u| of a real u. sympy's Abs differentiates as a complex function (re, im and arg of u appear
@@ -74,26 +75,29 @@ class RealSign(sympy.Function):
 
 
 # The elementary functions generated code calls by name: math's for float (and numba), pydrake.math's
-# for AutoDiffXd. |u| and sign(u) become RealAbs and RealSign (printed abs and _sign); DiracDelta (a
-# derivative of sign, zero wherever it is defined) prints as 0; Piecewise as a conditional expression.
+# for AutoDiffXd (asinh, acosh, atanh: math's value with the derivative, _AUTODIFF_INVERSE_HYPERBOLIC).
+# |u| and sign(u) become RealAbs and RealSign (printed abs and _sign); DiracDelta (a derivative of sign,
+# zero wherever it is defined) prints as 0; Piecewise as a conditional expression.
 ELEMENTARY_FUNCTIONS = ("sin", "cos", "tan", "asin", "acos", "atan", "atan2", "sqrt", "exp", "log", "sinh",
-                        "cosh", "tanh")
+                        "cosh", "tanh", "asinh", "acosh", "atanh")
 FUNCTIONS = frozenset([getattr(sympy, name) for name in ELEMENTARY_FUNCTIONS]
                       + [RealAbs, RealSign, sympy.DiracDelta, sympy.Piecewise])
-# Functions rewritten into FUNCTIONS before anything is differentiated (exact identities for real arguments).
+# Terms rewritten into FUNCTIONS before anything is differentiated (exact identities for real arguments;
+# none that loses accuracy in floating point: asinh, acosh and atanh are evaluated as themselves).
 _REWRITES = {
     sympy.sec: lambda u: 1 / sympy.cos(u), sympy.csc: lambda u: 1 / sympy.sin(u), sympy.cot: lambda u: 1 / sympy.tan(u),
-    sympy.asinh: lambda u: sympy.log(u + sympy.sqrt(u**2 + 1)),
-    sympy.acosh: lambda u: sympy.log(u + sympy.sqrt(u - 1) * sympy.sqrt(u + 1)),
-    sympy.atanh: lambda u: (sympy.log(1 + u) - sympy.log(1 - u)) / 2,
     sympy.acot: lambda u: sympy.atan(1 / u),
     sympy.Max: lambda *a: sympy.Max(*a).rewrite(sympy.Piecewise),
     sympy.Min: lambda *a: sympy.Min(*a).rewrite(sympy.Piecewise),
     sympy.Heaviside: lambda *a: sympy.Heaviside(*a).rewrite(sympy.Piecewise),
     sympy.Abs: RealAbs, sympy.sign: RealSign,
 }
-_ALLOWED_WORDS = ", ".join(ELEMENTARY_FUNCTIONS) + ", Abs, sign, Piecewise, sec, csc, cot, acot, asinh, acosh, " \
-    "atanh, Max, Min, Heaviside"
+_ALLOWED_WORDS = ", ".join(ELEMENTARY_FUNCTIONS) + ", Abs, sign, Piecewise, sec, csc, cot, acot, Max, Min, Heaviside" \
+    " (and numbers, coordinates, + - * / **, and the conditions of a Piecewise)"
+# The nodes every path evaluates, besides FUNCTIONS: a row is built from these alone (check_functions).
+_TERMS = (sympy.Symbol, sympy.Number, sympy.NumberSymbol, sympy.Add, sympy.Mul, sympy.Pow)
+_CONDITIONS = (sympy.core.relational.Relational, sympy.And, sympy.Or, sympy.Not, sympy.logic.boolalg.BooleanAtom,
+               sympy.functions.elementary.piecewise.ExprCondPair)
 _LARGEST_EXACT_INTEGER = 2**31     # larger integer literals print as floats (numba's int64 must not overflow)
 
 
@@ -104,20 +108,59 @@ def _sign(value):
 
 SIGN_SOURCE = "def _sign(value):\n    return 1.0 if value > 0 else (-1.0 if value < 0 else 0.0)\n"
 
+
+def _autodiff_function(function, derivative):
+    """``function`` of a float, or of an AutoDiffXd u: function(u) to full float accuracy (math's), with the
+    derivative ``derivative``(u) du. pydrake.math has no asinh, acosh, atanh; their log forms cancel
+    (asinh at u << 0, atanh near 0)."""
+    def evaluate(u):
+        if isinstance(u, AutoDiffXd):
+            value = u.value()
+            return AutoDiffXd(function(value), derivative(value) * u.derivatives())
+        return function(u)
+    evaluate.__name__ = function.__name__
+    return evaluate
+
+
+def _acosh_derivative(u):
+    square = (u - 1.0) * (u + 1.0)
+    return 1.0 / math.sqrt(square) if square > 0 else math.inf
+
+
+_AUTODIFF_INVERSE_HYPERBOLIC = {
+    "asinh": _autodiff_function(math.asinh, lambda u: 1.0 / math.hypot(u, 1.0)),
+    "acosh": _autodiff_function(math.acosh, _acosh_derivative),
+    "atanh": _autodiff_function(math.atanh, lambda u: 1.0 / ((1.0 - u) * (1.0 + u))),
+}
+
 _FLOAT_NAMESPACE = {name: getattr(math, name) for name in ELEMENTARY_FUNCTIONS}
 _FLOAT_NAMESPACE.update(pi=math.pi, E=math.e, abs=abs, pow=math.pow, _sign=_sign)
 
-_AUTODIFF_NAMESPACE = {name: getattr(drake_math, name) for name in ELEMENTARY_FUNCTIONS}
+_AUTODIFF_NAMESPACE = {name: _AUTODIFF_INVERSE_HYPERBOLIC.get(name) or getattr(drake_math, name)
+                       for name in ELEMENTARY_FUNCTIONS}
 _AUTODIFF_NAMESPACE.update(pi=math.pi, E=math.e, abs=abs, pow=drake_math.pow, _sign=_sign)
 
 _counter = itertools.count()
 
 
 class _Printer(PythonCodePrinter):
-    """Prints bare function names (``sin(x)``), resolved in the namespaces above."""
+    """Prints bare function names (``sin(x)``), resolved in the namespaces above, and every symbol by a
+    generated name (``names``; a symbol not in it gets the next ``_s<k>``): a coordinate's own name may be
+    no identifier ("x y", "x\u2081"), or one the generated code uses (pi, sqrt, _array)."""
 
-    def __init__(self):
+    def __init__(self, names=None):
         super().__init__({"fully_qualified_modules": False, "inline": True})
+        self.names = dict(names or {})
+        self._next = len(set(self.names.values()))
+
+    def _print_Symbol(self, expr):
+        name = self.names.get(expr)
+        if name is None:
+            name = self.names[expr] = f"_s{self._next}"
+            self._next += 1
+        return name
+
+    _print_Dummy = _print_Symbol
 
     def _print_Pow(self, expr, rational=False):
         base, exponent = expr.args
@@ -140,11 +183,13 @@ class _Printer(PythonCodePrinter):
 
     def _print_Integer(self, expr):
         if abs(int(expr)) >= _LARGEST_EXACT_INTEGER:
-            return repr(float(expr))
+            return repr(float(int(expr)))             # finite: prepare_expression refuses the rest
         return str(int(expr))
 
     def _print_Rational(self, expr):
-        return f"({self._print(sympy.Integer(expr.p))}/{self._print(sympy.Integer(expr.q))})"
+        if abs(expr.p) < _LARGEST_EXACT_INTEGER and expr.q < _LARGEST_EXACT_INTEGER:
+            return f"({expr.p}/{expr.q})"             # IEEE division: the correctly rounded value
+        return repr(expr.p / expr.q)                  # Python's int division is correctly rounded too
 
     def _print_Half(self, expr):
         return "0.5"
@@ -173,33 +218,49 @@ class _Printer(PythonCodePrinter):
 # ------------------------------------------------------------------------------------------------
 
 def prepare_expression(expression, what="expression"):
-    """``expression`` (sympy) with the functions of ``_REWRITES`` rewritten into ``FUNCTIONS``.
+    """``expression`` (sympy) with the terms of ``_REWRITES`` rewritten into ``FUNCTIONS``.
 
-    Raises ExpressionError naming ``what`` and the term: a non-finite constant (nan, oo, zoo), the
-    imaginary unit, or a function no generated path evaluates (the message lists the allowed ones).
+    Raises ExpressionError naming ``what`` and the term: not an expression (a Boolean, a Relational, a
+    Poly), a non-finite constant (nan, oo, zoo, a number beyond the float range), the imaginary unit, or a
+    term no generated path evaluates (the message lists the allowed ones: ``check_functions``).
     """
     if not isinstance(expression, sympy.Basic):
         expression = sympy.sympify(expression)
+    check_is_expression(expression, what)
     for constant, words in ((sympy.nan, "nan"), (sympy.zoo, "complex infinity (zoo)"), (sympy.oo, "infinity (oo)"),
                             (-sympy.oo, "infinity (-oo)"), (sympy.I, "the imaginary unit I")):
         if expression.has(constant):
             raise ExpressionError(f"{what}: {describe(expression)} contains {words}; expressions must be finite and "
                                   "real")
-    for number in expression.atoms(sympy.Float):
-        if not math.isfinite(float(number)):
-            raise ExpressionError(f"{what}: {describe(expression)} contains the constant {number}, which is not a "
-                                  "finite float")
-    check_constant_terms(expression, what)
-    replacements = {}
-    for function in expression.atoms(sympy.Function):
-        rewrite = _REWRITES.get(type(function))
-        if rewrite is not None:
-            replacements[function] = rewrite(*function.args)
+    for number in expression.atoms(sympy.Float, sympy.Rational):
+        if not _is_finite_float(number):
+            shown = sympy.Float(number, 6)
+            raise ExpressionError(f"{what}: the constant {shown} in {describe(expression.xreplace({number: shown}))} "
+                                  "is beyond the float range (|c| < 1.8e308); expressions must be finite")
+    replacements = {term: _REWRITES[type(term)](*term.args) for term in expression.atoms(*_REWRITES)}
     if replacements:
         expression = expression.xreplace(replacements)
         return prepare_expression(expression, what)       # a rewritten argument may hold another rewrite
     check_functions(expression, what)
+    check_constant_terms(expression, what)
     return expression
+
+
+def _is_finite_float(number):
+    """Whether the sympy Float or Rational ``number`` is a finite float (underflow to 0 is finite)."""
+    try:
+        value = float(number) if isinstance(number, sympy.Float) else number.p / number.q
+    except OverflowError:
+        return False
+    return math.isfinite(value)
+
+
+def check_is_expression(expression, what="expression"):
+    """ExpressionError naming ``what`` if ``expression`` is not a sympy expression (a number-valued term):
+    a comparison (x > 0), a Boolean, a Poly, a set."""
+    if not isinstance(expression, sympy.Expr):
+        raise ExpressionError(f"{what}: {describe(expression)} (a {type(expression).__name__}) is not an expression; "
+                              "a row must be a number-valued sympy or pydrake.symbolic expression")
 
 
 def check_constant_terms(expression, what="expression"):
@@ -218,13 +279,17 @@ def check_constant_terms(expression, what="expression"):
 
 
 def check_functions(expression, what="expression"):
-    """ExpressionError naming ``what`` and the function if ``expression`` calls one outside ``FUNCTIONS``
-    (after differentiation too: e.g. an unevaluated Derivative of a user function)."""
-    for function in expression.atoms(sympy.Function, sympy.Derivative, sympy.Subs, sympy.Integral):
-        if type(function) not in FUNCTIONS:
-            name = getattr(type(function), "__name__", str(type(function)))
-            raise ExpressionError(f"{what}: the function {name} in {describe(function)} cannot be compiled; "
-                                  f"allowed: {_ALLOWED_WORDS}")
+    """ExpressionError naming ``what`` and the term if ``expression`` holds a node no generated path
+    evaluates: a function outside ``FUNCTIONS`` (after differentiation too: an unevaluated Derivative of a
+    user function), or any other sympy node (Sum, Product, Order, AccumBounds, Contains, Integral, ...).
+    Allowed: symbols, numbers, + * **, ``FUNCTIONS`` and, in a Piecewise, comparisons joined by And, Or, Not."""
+    for term in sympy.preorder_traversal(expression):
+        if isinstance(term, _TERMS) or type(term) in FUNCTIONS or isinstance(term, _CONDITIONS):
+            continue
+        name = getattr(type(term), "__name__", str(type(term)))
+        kind = "function" if isinstance(term, sympy.Function) else "term"
+        raise ExpressionError(f"{what}: the {kind} {name} in {describe(term)} cannot be compiled; "
+                              f"allowed: {_ALLOWED_WORDS}")
 
 
 def to_sympy_matrix(expressions, known_symbols, what="expression"):
@@ -236,29 +301,34 @@ def to_sympy_matrix(expressions, known_symbols, what="expression"):
     variable that is not in ``known_symbols``, and ExpressionError for what cannot be
     compiled (``prepare_expression``).
     """
-    by_name = {str(s): s for s in known_symbols}
+    # By name: a pydrake.symbolic Variable converts to a sympy Dummy of the Variable's name (its .name, not
+    # str(), which prefixes '_'); a sympy Symbol of a coordinate's name but other assumptions is that
+    # coordinate (else C would not depend on the chart's symbol: E_f = 0).
+    by_name = {s.name: s for s in known_symbols}
 
     def convert(item):
         if isinstance(item, sympy.Basic):
-            return item
-        if hasattr(item, "GetVariables") or type(item).__module__.startswith("pydrake.symbolic"):
+            converted = item
+        elif hasattr(item, "GetVariables") or type(item).__module__.startswith("pydrake.symbolic"):
             converted = drake_symbolic.to_sympy(item)
-            substitutions = {s: by_name[str(s).lstrip("_")] for s in converted.free_symbols if str(s).lstrip("_") in by_name}
-            return converted.xreplace(substitutions)
-        try:
-            return sympy.sympify(item, strict=True)
-        except (sympy.SympifyError, TypeError, ValueError) as error:
-            raise ExpressionError(f"{what}: {item!r} ({type(item).__name__}) is not an expression") from error
+        else:
+            try:
+                converted = sympy.sympify(item, strict=True)
+            except (sympy.SympifyError, TypeError, ValueError) as error:
+                raise ExpressionError(f"{what}: {item!r} ({type(item).__name__}) is not an expression") from error
+        check_is_expression(converted, what)
+        return converted.xreplace({s: by_name[s.name] for s in converted.free_symbols
+                                   if s.name in by_name and s != by_name[s.name]})
 
     if isinstance(expressions, sympy.MatrixBase):
-        matrix = sympy.Matrix(expressions)
+        matrix = sympy.Matrix(expressions).applyfunc(convert)
     else:
         rows = list(expressions) if not isinstance(expressions, sympy.Basic) else [expressions]
         if rows and isinstance(rows[0], (list, tuple, np.ndarray)):
             matrix = sympy.Matrix([[convert(e) for e in row] for row in rows])
         else:
             matrix = sympy.Matrix([convert(e) for e in rows])
-    unknown = sorted({str(s) for s in matrix.free_symbols} - set(by_name))
+    unknown = sorted({s.name for s in matrix.free_symbols} - set(by_name))
     if unknown:
         raise UnknownVariableError(
             f"{what} uses variables {unknown} that are not coordinates of the chart; "
@@ -280,12 +350,15 @@ class CompiledFunction:
     ``vector=True``). If any argument has dtype object (AutoDiffXd), the
     AutoDiffXd version runs and the result has dtype object.
 
-    Both versions are checked against sympy when compiled (``check_against_sympy``); where no sample
-    point lies in the domain of every entry, the first float call is checked instead.
-    ``checked_points`` says how many points were checked.
+    Both versions are checked against sympy when compiled (``check_against_sympy``: the values; and
+    ``check_gradients``: the AutoDiffXd path's derivatives); where no sample point lies in the domain of
+    every entry, the first call that does (float or AutoDiffXd, at its values; up to ``FIRST_CALLS_CHECKED``
+    calls) is checked instead. ``checked_points`` says how many points were checked.
 
     Raises ExpressionError (what cannot be compiled) and CodeGenerationError (a disagreement).
     """
+
+    FIRST_CALLS_CHECKED = 20      # calls tried for a point in the domain when no sample point was
 
     def __init__(self, name, argument_symbols, matrix, vector=False):
         self.name = name
@@ -299,7 +372,7 @@ class CompiledFunction:
         self._float = self._build(source, _FLOAT_NAMESPACE, float)
         self._autodiff = self._build(source, _AUTODIFF_NAMESPACE, object)
         self.checked_points = self._check()
-        self._check_first_call = self.checked_points == 0
+        self._calls_to_check = 0 if self.checked_points else self.FIRST_CALLS_CHECKED
 
     def _generate_source(self, matrix):
         assignments, results, printer = straight_line_program(list(matrix), self.name)
@@ -327,8 +400,13 @@ class CompiledFunction:
         float_at = None if at is None else [np.asarray(a, dtype=float) for a in at]
         paths = {"float": self._float,
                  "AutoDiffXd": lambda *arguments: self._autodiff(*[to_autodiff(a) for a in arguments])}
+
+        def gradients(point, substitutions):
+            check_gradients(self.name, self._entries, self.argument_symbols, self._float, self._autodiff, point,
+                            substitutions)
+
         return check_against_sympy(self.name, self._entries, self.argument_symbols, paths,
-                                   seed=zlib.crc32(self.source[0].encode()), at=float_at)
+                                   seed=zlib.crc32(self.source[0].encode()), at=float_at, then=gradients)
 
     def __call__(self, *arguments):
         if len(arguments) != len(self.argument_sizes):
@@ -339,22 +417,40 @@ class CompiledFunction:
                 raise DimensionError(f"{self.name}: expected an argument of size {size}, got {len(argument)}")
             if getattr(argument, "dtype", None) == object:
                 autodiff = True
+        if self._calls_to_check:
+            self._calls_to_check -= 1
+            at = [_values(argument) for argument in arguments] if autodiff else list(arguments)
+            self.checked_points = self._check(at=at)
+            if self.checked_points:
+                self._calls_to_check = 0
         if autodiff:
             return self._autodiff(*arguments)
-        if self._check_first_call:
-            self._check_first_call = False
-            self.checked_points = self._check(at=list(arguments))
         return self._float(*arguments)
+
+
+def _values(argument):
+    """The float values of an argument that may hold AutoDiffXd scalars."""
+    return np.array([entry.value() if isinstance(entry, AutoDiffXd) else float(entry) for entry in argument])
 
 
 def straight_line_program(entries, what="expression"):
     """(assignments, results, printer) of one CSE program for the sympy ``entries``, printed as Python with
     bare function names (``sin(x)``), as the compiled functions above: ``assignments`` is a list of
-    (name, code), ``results`` the code of each entry. control/fast_law.py compiles it with numba (with
-    ``SIGN_SOURCE`` and the elementary functions from ``math`` in its module)."""
+    (name, code), ``results`` the code of each entry. Every symbol is printed by a generated name
+    (``_s0``, ``_s1``, ...; ``printer.doprint(symbol)`` gives a symbol's, so callers bind their arguments by
+    it) and every CSE temporary as ``_t0``, ``_t1``, ...: no name of the user's reaches the code.
+    control/fast_law.py compiles it with numba (with ``SIGN_SOURCE`` and the elementary functions from
+    ``math`` in its module)."""
     entries = [prepare_expression(entry, what) for entry in entries]
-    printer = _Printer()
-    replacements, reduced = sympy.cse(list(entries), symbols=sympy.numbered_symbols("_t"), optimizations="basic")
+    symbols = list(sympy.ordered(set().union(*[entry.free_symbols for entry in entries])))
+    safe = {symbol: sympy.Dummy(f"s{i}", **symbol.assumptions0) for i, symbol in enumerate(symbols)}
+    names = {symbol: f"_s{i}" for i, symbol in enumerate(symbols)}
+    names.update({safe[symbol]: name for symbol, name in names.items()})
+    entries = [entry.xreplace(safe) for entry in entries]
+    replacements, reduced = sympy.cse(entries, symbols=sympy.numbered_symbols("t", cls=sympy.Dummy),
+                                      optimizations="basic")
+    names.update({symbol: f"_t{i}" for i, (symbol, _) in enumerate(replacements)})
+    printer = _Printer(names)
     assignments = [(printer.doprint(symbol), printer.doprint(expression)) for symbol, expression in replacements]
     return assignments, [printer.doprint(e) for e in reduced], printer
 
