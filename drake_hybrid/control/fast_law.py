@@ -158,9 +158,12 @@ def generate_source(space):
     return "\n\n\n".join(parts) + "\n"
 
 
+NUMBA_POINTS = 3           # sample points verify_generated checks (sympy's 30-digit evaluation: ~10 ms each)
+
+
 def verify_generated(module, space):
     """Check the generated module's compiled terms of every piece (and the selector) against sympy at
-    sample points (``symbolic.check_against_sympy``); raises CodeGenerationError naming the term. Called
+    ``NUMBA_POINTS`` sample points (``symbolic.check_against_sympy``); raises CodeGenerationError naming the term. Called
     where the module is first compiled or loaded: the numba path is exact, or it does not run."""
     pieces, chart = _compiled_pieces(space), space.chart
     arguments = [chart.configuration_symbols, chart.velocity_symbols]
@@ -172,10 +175,11 @@ def verify_generated(module, space):
         terms = _piece_terms(piece, space.velocity_projection, chart)
         function = getattr(module, f"_terms_{i}")
         check_against_sympy(f"numba terms of '{piece.name}'", [entry for matrix in terms for entry in matrix],
-                            arguments, {"numba": lambda x, nu, function=function: flat(function(x, nu))})
+                            arguments, {"numba": lambda x, nu, function=function: flat(function(x, nu))},
+                            points=NUMBA_POINTS)
     if len(pieces) > 1:
         check_against_sympy(f"numba selector of '{space.constraint.name}'", list(space.constraint.selector),
-                            arguments, {"numba": lambda x, nu: flat(module._selector(x, nu)[:1])})
+                            arguments, {"numba": lambda x, nu: flat(module._selector(x, nu)[:1])}, points=NUMBA_POINTS)
 
 
 def load_generated(source):

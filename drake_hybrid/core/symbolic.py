@@ -12,12 +12,16 @@ straight-line program; ``control/fast_law.py`` compiles the same program with nu
 
 Exact by construction, and checked. The printer parenthesizes every operand by its precedence
 (a small integer power printed as a product is one operand: ``a/((b)*(b))``), prints constants as
-numbers or names every path defines, and refuses what no path can evaluate (``ExpressionError``:
-non-finite or complex constants, functions outside ``FUNCTIONS``). Then every compiled function is
-evaluated where it is compiled, at sample points, and compared with sympy's own evaluation of the
-expression it came from at 30 significant digits (``expr.evalf(30, subs=...)``, which shares none of
-this machinery), the way a linearization checks Drake's AutoDiffXd Jacobian against central
-differences: a disagreement raises ``CodeGenerationError`` naming the term (``core.oracle``).
+numbers (an integer or rational of any size as its correctly rounded float) or names every path
+defines, prints every symbol by a generated name (``_s0``, ``_s1``, ...: a coordinate may be called
+anything), and refuses what no path can evaluate (``ExpressionError``: a row that is not an
+expression, constants beyond the float range or complex, any node but numbers, symbols, + * ** and
+``FUNCTIONS``). Then every compiled function is evaluated where it is compiled, at sample points (or
+at its first call in the domain), and compared with sympy's own evaluation of the expression it came
+from at 30 significant digits (``expr.evalf(30, subs=...)``, which shares none of this machinery); the
+AutoDiffXd path's derivatives are compared with central differences of the float path, and with
+sympy's derivative where those differ (``check_gradients``): a disagreement raises
+``CodeGenerationError`` naming the term (``core.oracle``).
 """
 
 import itertools
