@@ -275,6 +275,20 @@ def test_generated_code_holds_no_user_name():
     assert "x y" not in code and "pi" not in code and [target for target, _ in assignments] == ["_t0"]
 
 
+def test_numba_path_with_adversarial_names(tmp_path, monkeypatch):
+    """The numba module of control/fast_law.py binds its arguments by the generated names too."""
+    monkeypatch.setenv("DRAKE_HYBRID_CACHE", str(tmp_path))
+    chart = chart_of(["pi", "x y", "_t0"])
+    a, b, c = chart.configuration_symbols
+    constraint = Constraint(chart, [a * sympy.pi + sympy.sqrt(b**2 + 1) - sympy.exp(c)], name="names")
+    module = fast_law.load_generated(fast_law.MODULE_HEADER +
+                                     fast_law._piece_source("_terms_0", list(constraint.symbolic_terms), chart))
+    point = np.array([0.3, -0.4, 0.5])
+    C, E_f, _ = module._terms_0(point, np.array([1.0, 0.0, 0.0]))
+    assert C[0] == pytest.approx(0.3 * math.pi + math.sqrt(1.16) - math.exp(0.5), rel=1e-15)
+    assert list(E_f[0]) == pytest.approx([math.pi, -0.4 / math.sqrt(1.16), -math.exp(0.5)], rel=1e-15)
+
+
 # ------------------------------------------------------------------------------------------------
 # D6: pydrake.symbolic variables and sympy symbols matched by their names only
 # ------------------------------------------------------------------------------------------------
