@@ -150,6 +150,22 @@ def vector(value, name, owner, size=None, *, unit="", finite=True, error=Argumen
     return array
 
 
+_JOINT_KINDS = {"positions": ("num_positions", "joint positions, rad or m"),
+                "velocities": ("num_velocities", "joint velocities, rad/s or m/s"),
+                "actuators": ("num_actuated_dofs", "actuation, N m or N")}
+
+
+def joint_vector(value, name, owner, plant, model_instance=None, *, kind="positions", unit=None,
+                 error=ArgumentError):
+    """``value`` as a vector of ``plant``'s number of finite ``kind`` ("positions", "velocities" or
+    "actuators"; those of ``model_instance`` if given): the check before a user's vector reaches Drake's
+    SetPositions / SetVelocities / SetPositionsAndVelocities or an actuation port, which end the process
+    (an assertion, no exception) on a wrong size or a NaN. ``unit`` replaces the kind's own words."""
+    method, words = _JOINT_KINDS[kind]
+    count = getattr(plant, method)() if model_instance is None else getattr(plant, method)(model_instance)
+    return vector(value, name, owner, count, unit=unit or words, error=error)
+
+
 def matrix(value, name, owner, shape, *, finite=True, error=ArgumentError):
     """``value`` as a float ndarray of ``shape`` (rows, columns)."""
     allowed = f"a {shape[0]}x{shape[1]} matrix of {'finite ' if finite else ''}numbers"

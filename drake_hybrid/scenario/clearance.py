@@ -8,7 +8,7 @@ where any is below -``PENETRATION_TOLERANCE`` (StartCollisionError naming the bo
 
 from pydrake.geometry import CollisionFilterDeclaration, GeometrySet, Role, SceneGraph
 
-from drake_hybrid.core.arguments import nonnegative, text, vector
+from drake_hybrid.core.arguments import joint_vector, nonnegative, text
 from drake_hybrid.core.errors import StartCollisionError
 from drake_hybrid.scenario.root_context import check_root_context
 
@@ -31,7 +31,7 @@ def robot_penetrations(diagram, root_context, systems, q, tolerance=PENETRATION_
     owner = "robot_penetrations"
     check_root_context(diagram, root_context, systems, owner)
     plant, robot = systems.plant, systems.robot
-    q = vector(q, "q", owner, plant.num_positions(robot.arm), unit="the arm's joint positions, rad or m")
+    q = joint_vector(q, "q", owner, plant, robot.arm, unit="the arm's joint positions, rad or m")
     tolerance = nonnegative(tolerance, "tolerance", owner, unit="m")
     scene_graph = next((system for system in diagram.GetSystems() if isinstance(system, SceneGraph)), None)
     if scene_graph is None:

@@ -21,19 +21,34 @@ def check_root_context(diagram, root_context, systems, owner):
     ``HybridSystems`` (or a ``Scenario``) whose plant and controller are in that diagram."""
     instance(diagram, "diagram", owner, Diagram, what="a built Diagram (DiagramBuilder.Build())")
     instance(root_context, "root_context", owner, Context, what="the diagram's root Context")
-    missing = [name for name in SYSTEMS_FIELDS if not hasattr(systems, name)]
-    if missing:
-        raise ArgumentError(f"{owner}: systems must be the HybridSystems of scenario.station.add_hybrid_controller "
-                            f"(or a built Scenario), got {describe(systems)} (no {', '.join(missing)})")
+    check_systems(systems, owner)
     try:
         diagram.ValidateContext(root_context)
     except RuntimeError:
         raise ArgumentError(f"{owner}: root_context must be the root context of diagram "
                             "(diagram.CreateDefaultContext() or the Simulator's), got the context of another diagram "
                             "or of a subsystem") from None
+    check_systems_context(root_context, systems, owner)
+
+
+def check_systems(systems, owner):
+    """ArgumentError naming ``owner`` unless ``systems`` is a ``HybridSystems`` (or a built ``Scenario``)."""
+    missing = [name for name in SYSTEMS_FIELDS if not hasattr(systems, name)]
+    if missing:
+        raise ArgumentError(f"{owner}: systems must be the HybridSystems of scenario.station.add_hybrid_controller "
+                            f"(or a built Scenario), got {describe(systems)} (no {', '.join(missing)})")
+    return systems
+
+
+def check_systems_context(root_context, systems, owner):
+    """ArgumentError naming ``owner`` unless ``root_context`` is the root context of the diagram that
+    holds ``systems``' plant and controller (not a subsystem's context, e.g. the plant's)."""
+    instance(root_context, "root_context", owner, Context, what="the diagram's root Context")
+    check_systems(systems, owner)
     for name in ("plant", "controller"):
         try:
             getattr(systems, name).GetMyContextFromRoot(root_context)
         except RuntimeError:
-            raise ArgumentError(f"{owner}: systems.{name} is not in diagram: systems must be what "
-                                "add_hybrid_controller returned for this diagram's builder") from None
+            raise ArgumentError(f"{owner}: systems.{name} is not in diagram of root_context: root_context must be "
+                                "the diagram's root context (diagram.CreateDefaultContext() or the Simulator's), not a "
+                                "subsystem's, and systems what add_hybrid_controller returned for its builder") from None

@@ -15,10 +15,12 @@ from scipy.optimize import brentq
 
 from pydrake.systems.framework import DiagramBuilder
 
+from drake_hybrid.core.arguments import joint_vector, vector
 from drake_hybrid.core.errors import DimensionError, ForceSignError, OffConstraintError
 from drake_hybrid.core.kinematics import EndEffectorKinematics
 from drake_hybrid.scenario.clearance import check_robot_clearance
 from drake_hybrid.scenario.plant import apply_model_error, build_plant
+from drake_hybrid.scenario.root_context import check_systems, check_systems_context
 from drake_hybrid.systems.sensors import ContactWrenchSensor
 
 
@@ -77,7 +79,15 @@ def prime_start(systems, root_context, held_torque, integrals=None):
     supervisor's entry value of C.
 
     ``systems``: a ``scenario.station.HybridSystems`` (``add_hybrid_controller``) or a built
-    ``Scenario``; ``root_context``: the diagram's context."""
+    ``Scenario``; ``root_context``: the diagram's root context.
+
+    ArgumentError (before any state is set) for ``systems`` that are not HybridSystems, a
+    ``root_context`` that is not the root context of their diagram (e.g. the plant's context), a
+    ``held_torque`` that is not a vector of the controller plant's number of finite actuations
+    (checked for a sampled controller, the one that holds it), ``integrals`` that are not a vector of
+    the controller's finite [xi; e_p] entries."""
+    owner = "prime_start"
+    check_systems_context(root_context, systems, owner)
     plant, controller = systems.plant, systems.controller
     plant_context = plant.GetMyMutableContextFromRoot(root_context)
     q0 = plant.GetPositions(plant_context, systems.robot.arm)
@@ -85,12 +95,13 @@ def prime_start(systems, root_context, held_torque, integrals=None):
     controller_context = controller.GetMyMutableContextFromRoot(root_context)
     xi_slice, e_p_slice = controller.integral_state_slices()
     size = xi_slice.stop + (e_p_slice.stop - e_p_slice.start)
-    integrals = np.zeros(size) if integrals is None else np.asarray(integrals, dtype=float)
-    if integrals.shape != (size,):
-        raise DimensionError(f"prime_start: integrals must have {size} entries ([xi; e_p]), got {integrals.shape}")
+    integrals = np.zeros(size) if integrals is None else vector(integrals, "integrals", owner, size,
+                                                                unit="[xi; e_p] of the controller")
     if controller.control_period is None:
         controller_context.SetContinuousState(integrals)
     else:
+        held_torque = joint_vector(held_torque, "held_torque", owner, systems.controller_plant, kind="actuators",
+                                   unit="the controller plant's actuation, N m or N: holding_torque")
         controller_context.SetDiscreteState(0, np.concatenate([integrals, held_torque]))
     if plant.time_step() > 0 and plant.has_sampled_output_ports():
         # A discrete plant's contact results and reaction forces are sampled at its steps; before the
@@ -126,10 +137,11 @@ def prime_start(systems, root_context, held_torque, integrals=None):
 def check_start(scenario, q):
     """Raise a typed error if the arm at ``q`` is not a valid start of the hybrid law: off the
     constraint (OffConstraintError), on the wrong branch (BranchError), at a chart singularity
-    (ChartSingularityError) or where E loses rank (ConstraintRankError)."""
-    plant = scenario.controller_plant
+    (ChartSingularityError) or where E loses rank (ConstraintRankError); ArgumentError for a ``q`` that
+    is not a vector of the controller plant's number of finite positions."""
+    plant = check_systems(scenario, "check_start").controller_plant
     context = plant.CreateDefaultContext()
-    plant.SetPositions(context, q)
+    plant.SetPositions(context, joint_vector(q, "q", "check_start", plant))
     task = scenario.controller.kinematics.evaluate(context)
     x = task.configuration
     scenario.constraint_space.evaluate(x, task.velocity)
@@ -145,7 +157,9 @@ def check_start(scenario, q):
 
 def static_torque(scenario, q, pressing=True):
     """tau = g(q) - J^T E_f^T F_d(0): the actuation that holds the robot at rest pressing with the
-    config's F_d (``pressing=False``: g(q) only, in free space)."""
+    config's F_d (``pressing=False``: g(q) only, in free space). ArgumentError for a ``q`` that is
+    not a vector of the controller plant's number of finite positions."""
+    q = joint_vector(q, "q", "static_torque", check_systems(scenario, "static_torque").controller_plant)
     desired = np.asarray(scenario.config.desired_force.evaluate(0.0)[0], dtype=float)
     return holding_torque(scenario, q, desired * (1.0 if pressing else 0.0))
 
@@ -153,14 +167,21 @@ def static_torque(scenario, q, pressing=True):
 def holding_torque(systems, q, desired_force):
     """tau = g(q) - J^T E_f^T F_d (2.3-4 at rest): the actuation that holds the robot at rest at ``q``
     pressing with ``desired_force`` (m, in E_f's coordinates; zeros: gravity only), mapped to the
-    actuators, on the controller's own model (``systems.controller_plant``)."""
-    plant = systems.controller_plant
+    actuators, on the controller's own model (``systems.controller_plant``).
+
+    ArgumentError for ``systems`` that are not HybridSystems, a ``q`` that is not a vector of the
+    controller plant's number of finite positions, a ``desired_force`` that is not a vector of m finite
+    numbers."""
+    owner = "holding_torque"
+    plant = check_systems(systems, owner).controller_plant
     context = plant.CreateDefaultContext()
-    plant.SetPositions(context, q)
+    plant.SetPositions(context, joint_vector(q, "q", owner, plant))
     task = systems.controller.kinematics.evaluate(context)
     values = systems.constraint_space.evaluate(task.configuration, task.velocity)
+    desired_force = vector(desired_force, "desired_force", owner, values.force_projection.shape[0],
+                           unit="N, in E_f's coordinates")
     gravity = -plant.CalcGravityGeneralizedForces(context)
-    torque = gravity - task.jacobian.T @ (values.force_projection.T @ np.asarray(desired_force, dtype=float))
+    torque = gravity - task.jacobian.T @ (values.force_projection.T @ desired_force)
     return np.linalg.solve(plant.MakeActuationMatrix(), torque)
 
 
