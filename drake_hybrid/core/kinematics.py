@@ -13,11 +13,11 @@ from dataclasses import dataclass
 import numpy as np
 
 from pydrake.common.value import AbstractValue
-from pydrake.math import RotationMatrix
+from pydrake.math import RigidTransform, RotationMatrix
 from pydrake.multibody.tree import FrameIndex, JacobianWrtVariable
 from pydrake.systems.framework import ValueProducer
 
-from drake_hybrid.core.arguments import describe, vector
+from drake_hybrid.core.arguments import describe, instance, joint_vector, number, positive, vector
 from drake_hybrid.core.errors import ArgumentError, DimensionError, UnknownFrameError
 from drake_hybrid.core.linalg import all_finite, value
 
@@ -176,10 +176,23 @@ def inverse_kinematics(kinematics, plant_context, X_target, q_guess, tolerance=1
     Uses the world-frame pose error [log(R_target R^T); p_target - p] and J_g, so it works for
     every chart; for a redundant arm it moves as little as possible from ``q_guess``. Steps are
     limited to 0.2 rad, the result is wrapped to the turn nearest ``q_guess`` and checked against
-    the plant's position limits. Raises ValueError if it does not converge or violates a limit.
+    the plant's position limits. Raises ValueError if it does not converge or violates a limit;
+    ArgumentError (before any Drake call) for a ``kinematics`` that is not an EndEffectorKinematics, a
+    ``plant_context`` not of its plant, an ``X_target`` that is not a RigidTransform, a ``q_guess`` that
+    is not a vector of the plant's number of finite positions, a ``tolerance`` that is not a positive
+    number, a ``max_iterations`` that is not an integer >= 1.
     """
-    plant = kinematics.plant
-    q_guess = np.array(q_guess, dtype=float)
+    owner = "inverse_kinematics"
+    plant = instance(kinematics, "kinematics", owner, EndEffectorKinematics).plant
+    try:
+        plant.ValidateContext(plant_context)
+    except (RuntimeError, TypeError):
+        raise ArgumentError(f"{owner}: plant_context must be a context of kinematics.plant "
+                            f"(plant.CreateDefaultContext()), got {describe(plant_context)}") from None
+    instance(X_target, "X_target", owner, RigidTransform)
+    q_guess = joint_vector(q_guess, "q_guess", owner, plant)
+    tolerance = positive(tolerance, "tolerance", owner)
+    max_iterations = number(max_iterations, "max_iterations", owner, low=1, integer=True)
     q = q_guess.copy()
     target_R = X_target.rotation()
     target_p = X_target.translation()

@@ -55,7 +55,7 @@ from pydrake.multibody.tree import JacobianWrtVariable
 from pydrake.solvers import Solve
 from pydrake.systems.framework import DiagramBuilder
 
-from drake_hybrid.core.arguments import number, vector
+from drake_hybrid.core.arguments import function, joint_vector, number, positive
 from drake_hybrid.core.errors import ConfigError, UnreachablePoseError
 from drake_hybrid.scenario.custom import attach_pad_tool
 from drake_hybrid.scenario.plant import get_frame
@@ -495,10 +495,11 @@ class LoadedArm:
         return self.plant.GetPositionLowerLimits(), self.plant.GetPositionUpperLimits()
 
     def pad_jacobian(self, q):
-        """The 6 x n spatial Jacobian (angular; translational, world frame) of the pad centre at ``q``."""
+        """The 6 x n spatial Jacobian (angular; translational, world frame) of the pad centre at ``q``
+        (ArgumentError unless a vector of the arm's number of finite positions)."""
         plant = self.plant
         context = plant.CreateDefaultContext()
-        plant.SetPositions(context, q)
+        plant.SetPositions(context, joint_vector(q, "q", "LoadedArm.pad_jacobian", plant))
         frame = plant.GetFrameByName(self.robot.end_effector_frame)
         return plant.CalcJacobianSpatialVelocity(context, JacobianWrtVariable.kV, frame, np.zeros(3),
                                                  plant.world_frame(), plant.world_frame())
@@ -506,7 +507,12 @@ class LoadedArm:
     def condition_number(self, q, length_scale=None):
         """cond(S J) of the pad's spatial Jacobian at ``q``, its translational rows divided by
         ``length_scale`` (m; default: the distance from the base to the pad, at least 0.1 m) so that
-        the number does not depend on the unit of length."""
+        the number does not depend on the unit of length. ArgumentError for a ``q`` that is not a
+        vector of the arm's number of finite positions or a ``length_scale`` that is not a positive
+        finite number or None."""
+        q = joint_vector(q, "q", "LoadedArm.condition_number", self.plant)
+        length_scale = positive(length_scale, "length_scale", "LoadedArm.condition_number", unit="m",
+                                allow_none=True)
         J = self.pad_jacobian(q)
         if length_scale is None:
             base = self.base_pose.translation() if self.base_pose is not None else np.zeros(3)
@@ -515,15 +521,20 @@ class LoadedArm:
         return float(singular[0] / singular[-1]) if singular[-1] > 0 else float("inf")
 
     def pad_pose(self, q):
-        """X_WE of the pad centre frame at joint positions ``q``."""
+        """X_WE of the pad centre frame at joint positions ``q`` (ArgumentError unless a vector of the
+        arm's number of finite positions)."""
         plant = self.plant
         context = plant.CreateDefaultContext()
-        plant.SetPositions(context, q)
+        plant.SetPositions(context, joint_vector(q, "q", "LoadedArm.pad_pose", plant))
         return plant.GetFrameByName(self.robot.end_effector_frame).CalcPoseInWorld(context)
 
     def workpiece_penetrations(self, add_workpiece, q):
         """Names of the arm's bodies (the pad excepted) whose collision shapes penetrate the
-        workpiece of ``add_workpiece(plant) -> geometry ids`` (CustomTask's) at joint positions ``q``."""
+        workpiece of ``add_workpiece(plant) -> geometry ids`` (CustomTask's) at joint positions ``q``
+        (ArgumentError unless a vector of the arm's number of finite positions)."""
+        owner = "LoadedArm.workpiece_penetrations"
+        function(add_workpiece, "add_workpiece", owner, "add_workpiece(plant) -> geometry ids")
+        q = joint_vector(q, "q", owner, self.plant)
         if getattr(self, "_clearance_probe", (None,))[0] is not add_workpiece:
             builder = DiagramBuilder()
             plant, scene_graph = AddMultibodyPlant(MultibodyPlantConfig(time_step=0.0), builder)
@@ -564,7 +575,7 @@ class LoadedArm:
         high = np.where(np.isfinite(upper), upper, np.pi) - limit_margin
         generator = np.random.default_rng(rng)
         if near is not None:
-            near = vector(near, "near", "LoadedArm.find_joint_guess", len(low), unit="rad, m: one per arm joint")
+            near = joint_vector(near, "near", "LoadedArm.find_joint_guess", self.plant, unit="rad, m: one per arm joint")
         seeds = number(seeds, "seeds", "LoadedArm.find_joint_guess", low=1, integer=True)
         starts = ([np.clip(near, low, high)] if near is not None else []) + [(low + high) / 2]
         starts += [generator.uniform(low, high) for _ in range(max(seeds - len(starts), 0))]
