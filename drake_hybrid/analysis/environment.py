@@ -49,6 +49,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
+from drake_hybrid.core.arguments import joint_vector
 from drake_hybrid.scenario.task import EigenvalueShift
 
 # m (rad) along a motion row, and m/s (rad/s) of its velocity: the central differences' steps.
@@ -62,9 +63,12 @@ SHIFT_THRESHOLD = 0.01
 def row_forces(scenario, context, q=None, v=None):
     """[F_v; F] = E^-T w: the wrench sensor's reading split as the law splits it
     (``ConstraintSpace.split_wrench``), with the arm's positions ``q`` and velocities ``v`` (None:
-    those of ``context``; the rest of ``context`` kept, ``context`` itself untouched)."""
-    work = context.Clone()
+    those of ``context``; the rest of ``context`` kept, ``context`` itself untouched). ArgumentError
+    for a ``q`` or ``v`` that is not a vector of the plant's number of finite positions or velocities."""
     plant, space = scenario.plant, scenario.constraint_space
+    q = None if q is None else joint_vector(q, "q", "row_forces", plant)
+    v = None if v is None else joint_vector(v, "v", "row_forces", plant, kind="velocities")
+    work = context.Clone()
     plant_context = plant.GetMyMutableContextFromRoot(work)
     if q is not None:
         plant.SetPositions(plant_context, q)

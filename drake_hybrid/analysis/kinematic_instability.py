@@ -38,6 +38,7 @@ from drake_hybrid.control.baselines import (AxisPDOpenLoopForceController, Joint
                                             joint_servo_eigenvalues)
 from drake_hybrid.control.controller import HybridController
 from drake_hybrid.control.gains import HybridGains
+from drake_hybrid.core.arguments import joint_vector
 from drake_hybrid.core.charts import PlanarPointChart
 from drake_hybrid.core.constraints import Constraint
 from drake_hybrid.core.kinematics import EndEffectorKinematics
@@ -77,8 +78,9 @@ def two_link_plant(builder=None):
 
 
 def tip_position(plant, q):
+    """The 2R arm's tip position in the world at joint positions ``q``."""
     context = plant.CreateDefaultContext()
-    plant.SetPositions(context, q)
+    plant.SetPositions(context, joint_vector(q, "q", "tip_position", plant))
     return plant.GetFrameByName("tip").CalcPoseInWorld(context).translation()
 
 
@@ -98,7 +100,7 @@ def build_two_link_loop(controller, q0=HINTED_CONFIGURATION, joint_gains=JOINT_G
     zero (no motion, F_d = 0), the measured wrench zero (nothing to push on)."""
     builder = DiagramBuilder()
     plant, _ = two_link_plant(builder)
-    q0 = np.asarray(q0, dtype=float)
+    q0 = joint_vector(q0, "q0", "build_two_link_loop", plant)
     space = point_task(plant, q0)
     tip = plant.GetFrameByName("tip")
     if controller == "li-sastry":
@@ -143,7 +145,7 @@ def analytic_eigenvalues(controller, q0=HINTED_CONFIGURATION, joint_gains=JOINT_
         return predicted_eigenvalues(validated, "position-force").velocity
     plant, _ = two_link_plant()
     context = plant.CreateDefaultContext()
-    plant.SetPositions(context, q0)
+    plant.SetPositions(context, joint_vector(q0, "q0", "analytic_eigenvalues", plant))
     space = point_task(plant, q0)
     kinematics = EndEffectorKinematics(plant, plant.GetFrameByName("tip"), np.zeros(3), space.chart)
     task = kinematics.evaluate(context)

@@ -40,7 +40,8 @@ from drake_hybrid.control.damping import step_task_mobility
 from drake_hybrid.control.gains import ControlMode, ValidatedGains
 from drake_hybrid.control.law import impedance_blocks
 from drake_hybrid.control.sampling import SAMPLE_LEAD
-from drake_hybrid.core.arguments import boolean, function, nonnegative, positive, relative_tolerance, text
+from drake_hybrid.core.arguments import (boolean, function, joint_rows, nonnegative, positive, relative_tolerance,
+                                         text)
 from drake_hybrid.core.errors import ArgumentError, NotAtEquilibriumError
 from drake_hybrid.core.progress import quiet
 from drake_hybrid.scenario.builder import build_scenario
@@ -686,9 +687,11 @@ def impedance_realization(scenario, log):
     xi = xi0 + np.cumsum(log["force_error"] * period[:, None], axis=0) - log["force_error"] * period[:, None]
     g_f = log["force_error"] @ (np.eye(m) + gains.force_proportional).T + xi @ gains.force_integral.T
     plant = scenario.controller_plant
+    positions = joint_rows(log["q"], "log['q']", "impedance_realization", plant)
+    velocities = joint_rows(log["v"], "log['v']", "impedance_realization", plant, kind="velocities")
     context = plant.CreateDefaultContext()
     predicted = []
-    for q, v, F_tangent, F in zip(log["q"], log["v"], F_v, log["force"]):
+    for q, v, F_tangent, F in zip(positions, velocities, F_v, log["force"]):
         plant.SetPositions(context, q)
         plant.SetVelocities(context, v)
         task = controller.kinematics.evaluate(context)

@@ -161,9 +161,23 @@ def joint_vector(value, name, owner, plant, model_instance=None, *, kind="positi
     "actuators"; those of ``model_instance`` if given): the check before a user's vector reaches Drake's
     SetPositions / SetVelocities / SetPositionsAndVelocities or an actuation port, which end the process
     (an assertion, no exception) on a wrong size or a NaN. ``unit`` replaces the kind's own words."""
-    method, words = _JOINT_KINDS[kind]
-    count = getattr(plant, method)() if model_instance is None else getattr(plant, method)(model_instance)
+    count, words = _joint_count(plant, model_instance, kind)
     return vector(value, name, owner, count, unit=unit or words, error=error)
+
+
+def joint_rows(value, name, owner, plant, model_instance=None, *, kind="positions", unit=None, error=ArgumentError):
+    """``value`` as a 2-D float array whose rows are ``joint_vector``s (a log's q or v, one row a sample)."""
+    count, words = _joint_count(plant, model_instance, kind)
+    allowed = f"a matrix of rows of {count} finite numbers ({unit or words})"
+    array = numeric_array(value, name, owner, what=allowed, error=error)
+    if array.ndim != 2 or array.shape[1] != count:
+        _fail(error, owner, name, allowed, value)
+    return array
+
+
+def _joint_count(plant, model_instance, kind):
+    method, words = _JOINT_KINDS[kind]
+    return (getattr(plant, method)() if model_instance is None else getattr(plant, method)(model_instance)), words
 
 
 def matrix(value, name, owner, shape, *, finite=True, error=ArgumentError):

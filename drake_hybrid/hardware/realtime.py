@@ -25,6 +25,7 @@ import numpy as np
 from pydrake.lcm import DrakeLcm
 from pydrake.systems.analysis import Simulator
 
+from drake_hybrid.core.arguments import joint_vector
 from drake_hybrid.control.sampling import SAMPLE_LEAD
 from drake_hybrid.hardware.controller_side import build_controller_station
 from drake_hybrid.hardware.loop import run_hardware_loop, start_state
@@ -157,7 +158,8 @@ def start_controller_state(config, start):
         law_context = station.controller.GetMyMutableContextFromRoot(context)
         law_context.SetDiscreteState(0, np.concatenate([integrals, held]))
         plant_context = station.plant.CreateDefaultContext()
-        station.plant.SetPositions(plant_context, q0)
+        q = joint_vector(q0, "start's q0", "start_controller_state", station.plant)
+        station.plant.SetPositions(plant_context, q)
         gravity = -station.plant.CalcGravityGeneralizedForces(plant_context)
         command = held - gravity if station.hardware.driver_compensates_gravity else held
         station.safety.set_initial_command(station.safety.GetMyMutableContextFromRoot(context), command)

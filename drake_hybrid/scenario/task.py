@@ -26,7 +26,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from drake_hybrid.core.arguments import instance
+from drake_hybrid.core.arguments import instance, joint_rows
 from drake_hybrid.core.errors import ConfigError
 from drake_hybrid.core.schema import unknown_field
 from drake_hybrid.scenario.config import ScenarioConfig
@@ -261,7 +261,7 @@ def piece_switches(scenario, log):
     plant = scenario.controller_plant
     context = plant.CreateDefaultContext()
     pieces = []
-    for q in log["q"]:
+    for q in joint_rows(log["q"], "log['q']", "piece_switches", plant):
         plant.SetPositions(context, q)
         pieces.append(constraint.select(scenario.controller.kinematics.evaluate(context).configuration))
     changes = np.nonzero(np.diff(pieces))[0] + 1

@@ -36,6 +36,7 @@ from pydrake.multibody.plant import MultibodyPlantConfig
 from pydrake.multibody.tree import JacobianWrtVariable
 
 from drake_hybrid.control.gains import HybridGains
+from drake_hybrid.core.arguments import joint_rows
 from drake_hybrid.core.charts import EulerZXZChart, PoseChart
 from drake_hybrid.core.constraints import crank_constraint
 from drake_hybrid.core.errors import ConfigError
@@ -66,7 +67,8 @@ def true_velocities(scenario, log, center=CRANK_CENTER, radius=CRANK_RADIUS):
     plant = scenario.controller_plant
     context = plant.CreateDefaultContext()
     rates = []
-    for q, v in zip(log["q"], log["v"]):
+    for q, v in zip(joint_rows(log["q"], "log['q']", "true_velocities", plant),
+                    joint_rows(log["v"], "log['v']", "true_velocities", plant, kind="velocities")):
         plant.SetPositions(context, q)
         plant.SetVelocities(context, v)
         task = scenario.controller.kinematics.evaluate(context)

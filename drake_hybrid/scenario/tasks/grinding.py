@@ -29,6 +29,7 @@ from pydrake.math import RigidTransform
 from pydrake.multibody.plant import CoulombFriction
 
 from drake_hybrid.control.gains import ControlMode, HybridGains
+from drake_hybrid.core.arguments import joint_rows
 from drake_hybrid.core.errors import ConfigError
 from drake_hybrid.scenario.task import Task
 from drake_hybrid.scenario.task_options import SPHERE_ONLY, GrindingOptions, built_in_option_help
@@ -131,7 +132,7 @@ def pad_positions(scenario, log):
     plant = scenario.controller_plant
     context = plant.CreateDefaultContext()
     x = []
-    for q in log["q"]:
+    for q in joint_rows(log["q"], "log['q']", "pad_positions", plant):
         plant.SetPositions(context, q)
         x.append(scenario.controller.kinematics.evaluate(context).configuration[0])
     return np.array(x)

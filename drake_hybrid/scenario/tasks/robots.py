@@ -13,6 +13,7 @@ import numpy as np
 from pydrake.math import RigidTransform
 from pydrake.multibody.parsing import Parser
 
+from drake_hybrid.core.arguments import joint_rows
 from drake_hybrid.scenario.parsing import ConfigureParser, add_model, models_directory
 from drake_hybrid.scenario.plant import RobotModel
 
@@ -72,7 +73,7 @@ def worst_condition_number(kinematics, plant, positions):
     """max over rows of ``positions`` of cond(J_g) (the geometric Jacobian at the pad centre)."""
     context = plant.CreateDefaultContext()
     worst = 0.0
-    for q in positions:
+    for q in joint_rows(positions, "positions", "worst_condition_number", plant):
         plant.SetPositions(context, q)
         J = kinematics.evaluate(context, check=False).spatial_jacobian
         worst = max(worst, float(np.linalg.cond(J)))
