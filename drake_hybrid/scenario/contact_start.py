@@ -12,7 +12,7 @@ import numpy as np
 from pydrake.geometry import HydroelasticContactRepresentation
 from pydrake.math import RigidTransform
 
-from drake_hybrid.core.arguments import describe, instance, positive, vector
+from drake_hybrid.core.arguments import describe, instance, joint_vector, positive, vector
 from drake_hybrid.core.errors import (ArgumentError, ConfigError, DrakeHybridError, OffConstraintError,
                                       UnreachablePoseError)
 from drake_hybrid.core.kinematics import inverse_kinematics
@@ -117,7 +117,7 @@ def solve_contact_start(diagram, root_context, systems, start_pose, joint_guess,
     plant, robot, space = systems.plant, systems.robot, systems.constraint_space
     controller = systems.controller
     kinematics = controller.kinematics
-    joint_guess = vector(joint_guess, "joint_guess", owner, kinematics.plant.num_positions())
+    joint_guess = joint_vector(joint_guess, "joint_guess", owner, kinematics.plant)
     max_depth = positive(max_depth, "max_depth", owner, unit="m")
     tolerance = positive(tolerance, "tolerance", owner)
     if desired_force is None:
