@@ -78,8 +78,44 @@ def build_path(task, config):
     key = (task.name, repr(config.path), repr(sorted(config.task_parameters.items())),
            repr(sorted(config.task_options.items())))
     if key not in _PATHS:
-        _PATHS[key] = path_on(*workpiece_surface(task, config), config.path)
+        surface, offset = workpiece_surface(task, config)
+        path = path_on(surface, offset, config.path)
+        if config.path.heading:
+            check_heading_along(path, heading_of(config.path, surface))
+        _PATHS[key] = path
     return _PATHS[key]
+
+
+# The normals sampled per segment by check_heading_along: four per knot of its normals' spline, within these bounds.
+_HEADING_SAMPLES = (64, 512)
+
+
+def check_heading_along(path, heading):
+    """PathError naming path.heading, the arc length and the path time where ``heading`` lies along the
+    path's surface normal: the reference frame keeps the tool's x axis on the heading turned into the
+    tangent plane (``systems.path_source.reference_frame``), which has no direction there. The normals'
+    spline of each segment is sampled (four per knot, 64 to 512 per segment); a heading within the angle
+    between neighbouring samples of a sample's normal line is refused, so a normal that passes through
+    the heading between two samples is caught too."""
+    h = np.asarray(heading, dtype=float) / np.linalg.norm(heading)
+    for segment in path.segments:
+        count = int(np.clip(4 * len(segment.arc_lengths), *_HEADING_SAMPLES))
+        arcs = np.linspace(0.0, segment.length, count)
+        normals = np.asarray(segment.normal.vector_values(arcs)).T
+        normals /= np.linalg.norm(normals, axis=1)[:, None]
+        off_line = np.arccos(np.clip(np.abs(normals @ h), 0.0, 1.0))          # angle to the normal's line
+        turns = np.arccos(np.clip(np.sum(normals[1:] * normals[:-1], axis=1), -1.0, 1.0))
+        reach = np.maximum(np.concatenate([turns, [0.0]]), np.concatenate([[0.0], turns]))
+        along = np.nonzero(off_line <= np.maximum(reach, 1e-6))[0]
+        if along.size:
+            i = along[np.argmin(off_line[along])]
+            arc = segment.start_arc + arcs[i]
+            raise PathError(
+                f"build_path: path.heading {np.asarray(heading).tolist()} is along the surface normal "
+                f"{np.round(normals[i], 4).tolist()} at arc length {arc:.4g} m of the path (path time "
+                f"{_time_at_arc(path, arc):.4g} s, segment {path.segments.index(segment)}): the tool's x axis keeps "
+                "the heading turned into the tangent plane, which has no direction there; give a heading that the "
+                "path's normals do not reach (or none: the view's u axis)")
 
 
 def _force_field(settings):

@@ -254,8 +254,13 @@ def PathSource_(T):
             """The path's reference at t_path (time only): the sample, R_d, omega_d, omega-dot_d, F_d."""
             t = self.path_time(context)
             sample = self.path.evaluate(t)
-            R_d, omega_d, omega_dot = reference_frame(sample.normal, sample.normal_rate, sample.normal_acceleration,
-                                                      self.heading)
+            try:
+                R_d, omega_d, omega_dot = reference_frame(sample.normal, sample.normal_rate,
+                                                          sample.normal_acceleration, self.heading)
+            except ArgumentError as error:
+                raise ArgumentError(f"{self.get_name() or 'PathSource'}: heading (path.heading) at arc length "
+                                    f"{sample.arc_length:.4g} m (path time {t:.4g} s): "
+                                    f"{str(error).split(': ', 1)[-1]}") from None
             force = np.zeros(self.constraint_space.force_size)
             force[self.force_row] = sample.force
             return {"sample": sample, "R_d": R_d, "omega": omega_d, "omega_dot": omega_dot, "c": sample.position,
