@@ -273,6 +273,9 @@ def test_the_sphere_constraints_piece_switches_are_events():
     from drake_hybrid.scenario.task import piece_switches
 
     class Plant:
+        def num_positions(self):                 # piece_switches checks the log's rows against it
+            return 3
+
         def CreateDefaultContext(self):
             return {}
 
