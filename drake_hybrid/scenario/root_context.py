@@ -37,3 +37,16 @@ def check_root_context(diagram, root_context, systems, owner):
         except RuntimeError:
             raise ArgumentError(f"{owner}: systems.{name} is not in diagram: systems must be what "
                                 "add_hybrid_controller returned for this diagram's builder") from None
+
+
+def subsystem_context(system, root_context, owner, what):
+    """``system``'s context in ``root_context`` (``GetMyContextFromRoot``), where the diagram itself is not
+    at hand (a logger's, ``scenario.station.read_log``); ArgumentError naming ``owner`` and root_context
+    for a Context that is not a root context, or is the root context of a diagram without ``system``
+    (``what`` says which diagram that is)."""
+    instance(root_context, "root_context", owner, Context, what="the diagram's root Context")
+    try:
+        return system.GetMyContextFromRoot(root_context)
+    except RuntimeError:
+        raise ArgumentError(f"{owner}: root_context must be the root context of {what} (diagram.CreateDefaultContext() "
+                            "or the Simulator's), got the context of another diagram or of a subsystem") from None
