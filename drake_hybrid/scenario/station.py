@@ -405,7 +405,7 @@ def apply_contact_defaults(plant, scene_graph, robot, workpiece_geometries, cont
     workpiece = _geometry_ids(workpiece_geometries, "workpiece_geometries", owner,
                              "the GeometryIds of add_rigid_workpiece (a list)")
     contact = instance(contact, "contact", owner, ContactConfig, allow_none=True) or ContactConfig()
-    contact.validate()
+    contact.validate(f"{owner}: contact.")
     inspector, source = scene_graph.model_inspector(), plant.get_source_id()
     if not inspector.SourceIsRegistered(source):
         raise ArgumentError(f"{owner}: scene_graph is not the plant's SceneGraph (AddMultibodyPlant returns the pair)")
@@ -511,11 +511,30 @@ def _port_of(system, name, kind, owner, argument):
 
 def _station_parts(builder, plant, robot, owner):
     instance(builder, "builder", owner, DiagramBuilder)
+    _finalized_robot_plant(plant, robot, owner)
+
+
+def _finalized_robot_plant(plant, robot, owner):
     instance(plant, "plant", owner, MultibodyPlant)
     instance(robot, "robot", owner, RobotModel, what="the RobotModel of mount_tool")
     if not plant.is_finalized():
         raise ConfigError(f"{owner}: finalize the plant first (plant.Finalize())")
     _model_instance_of(plant, robot.arm, "robot.arm", owner)
+
+
+def _sensor_config(sensor, owner):
+    """``sensor`` (a ContactSensorConfig or WristSensorConfig) with its fields checked, naming ``owner``."""
+    instance(sensor, "sensor", owner, (ContactSensorConfig, WristSensorConfig))
+    sensor.validate(f"{owner}: sensor.")
+    return sensor
+
+
+def _controller_model(controller_plant, owner):
+    instance(controller_plant, "controller_plant", owner, MultibodyPlant,
+             what="a finalized MultibodyPlant of the robot alone (robot_plant(add_robot))")
+    if not controller_plant.is_finalized():
+        raise ConfigError(f"{owner}: controller_plant must be finalized (robot_plant(add_robot) does it)")
+    return controller_plant
 
 
 def add_wrench_sensor(builder, plant, robot, sensor=None):
@@ -525,8 +544,7 @@ def add_wrench_sensor(builder, plant, robot, sensor=None):
     (named "wrench_sensor", or "wrench_sensor_<arm>" if the builder has one)."""
     owner = "add_wrench_sensor"
     _station_parts(builder, plant, robot, owner)
-    sensor = sensor if sensor is not None else ContactSensorConfig()
-    instance(sensor, "sensor", owner, (ContactSensorConfig, WristSensorConfig))
+    sensor = _sensor_config(sensor if sensor is not None else ContactSensorConfig(), owner)
     arm = _arm_name(plant, robot)
     if isinstance(sensor, WristSensorConfig):
         if robot.tool_weld is None:
@@ -559,7 +577,7 @@ def add_wrench_path(builder, wrench_output, sensor, period, sequence=None, tare=
     instance(builder, "builder", owner, DiagramBuilder)
     instance(wrench_output, "wrench_output", owner, OutputPort, what="an OutputPort (the wrench sensor's)")
     instance(sequence, "sequence", owner, OutputPort, allow_none=True)
-    instance(sensor, "sensor", owner, (ContactSensorConfig, WristSensorConfig))
+    _sensor_config(sensor, owner)
     conditioner = wrench_filter = None
     if sensor.condition:
         conditioner = _add_named(builder, "wrench_conditioner", WrenchConditioner(
@@ -719,11 +737,14 @@ _MATCH_TOLERANCE = 1e-6      # m and rad: the controller plant's end-effector po
 _MATCH_CONFIGURATIONS = 3    # the default positions and two random ones within the limits
 
 
-def check_controller_plant(plant, robot, controller_plant, owner="add_hybrid_controller"):
+def check_controller_plant(plant, robot, controller_plant, owner="check_controller_plant"):
     """ArgumentError naming ``controller_plant`` if it does not model ``plant``'s arm ``robot.arm``: the
     numbers of positions, velocities and actuators, and the end-effector pose (``robot``'s frame and
     point) at the arm's default positions and two random ones within the joint limits (to
-    1e-6 m and rad)."""
+    1e-6 m and rad). Checked first: ``plant`` a finalized MultibodyPlant, ``robot`` the RobotModel of
+    ``mount_tool`` on it, ``controller_plant`` a finalized MultibodyPlant (ArgumentError, ConfigError)."""
+    _finalized_robot_plant(plant, robot, owner)
+    _controller_model(controller_plant, owner)
     arm, arm_name = robot.arm, plant.GetModelInstanceName(robot.arm)
     counts = {"positions": (plant.num_positions(arm), controller_plant.num_positions()),
               "velocities": (plant.num_velocities(arm), controller_plant.num_velocities()),
@@ -823,10 +844,7 @@ def add_hybrid_controller(builder, plant, robot, constraint_space, controller_pl
     """
     owner = "add_hybrid_controller"
     _station_parts(builder, plant, robot, owner)
-    instance(controller_plant, "controller_plant", owner, MultibodyPlant,
-             what="a finalized MultibodyPlant of the robot alone (robot_plant(add_robot))")
-    if not controller_plant.is_finalized():
-        raise ConfigError(f"{owner}: controller_plant must be finalized (robot_plant(add_robot) does it)")
+    _controller_model(controller_plant, owner)
     instance(constraint_space, "constraint_space", owner, ConstraintSpace,
              what="a ConstraintSpace (a constraint with its velocity projection)")
     unknown = sorted(set(controller_options) - set(CONTROLLER_OPTIONS))
@@ -838,8 +856,7 @@ def add_hybrid_controller(builder, plant, robot, constraint_space, controller_pl
                             f"built here, not your controller: pass them to your controller")
     if sensor is None:
         sensor = ContactSensorConfig(bandwidth_hz=CONTINUOUS_LOOP_BANDWIDTH if control_period is None else 0.0)
-    instance(sensor, "sensor", owner, (ContactSensorConfig, WristSensorConfig))
-    sensor.validate()
+    _sensor_config(sensor, owner)
     if control_period is None and not (sensor.bandwidth_hz > 0):
         raise ConfigError("sensor.bandwidth_hz: a continuous controller (control_period None) needs a wrench "
                           "low-pass (> 0 Hz): its actuation feeds through to the measured wrench")
