@@ -7,7 +7,7 @@ a built ``Scenario``). Given the context of another diagram, or a subsystem's, D
 two-line RuntimeError deep in the call; ``check_root_context`` says which argument it is first.
 """
 
-from pydrake.systems.framework import Context, Diagram
+from pydrake.systems.framework import Context, Diagram, System
 
 from drake_hybrid.core.arguments import describe, instance
 from drake_hybrid.core.errors import ArgumentError
@@ -25,18 +25,27 @@ def check_root_context(diagram, root_context, systems, owner):
     if missing:
         raise ArgumentError(f"{owner}: systems must be the HybridSystems of scenario.station.add_hybrid_controller "
                             f"(or a built Scenario), got {describe(systems)} (no {', '.join(missing)})")
-    try:
-        diagram.ValidateContext(root_context)
-    except RuntimeError:
-        raise ArgumentError(f"{owner}: root_context must be the root context of diagram "
-                            "(diagram.CreateDefaultContext() or the Simulator's), got the context of another diagram "
-                            "or of a subsystem") from None
+    check_system_context(diagram, root_context, owner, "diagram", "root_context", root=True)
     for name in ("plant", "controller"):
         try:
             getattr(systems, name).GetMyContextFromRoot(root_context)
         except RuntimeError:
             raise ArgumentError(f"{owner}: systems.{name} is not in diagram: systems must be what "
                                 "add_hybrid_controller returned for this diagram's builder") from None
+
+
+def check_system_context(system, context, owner, system_name="diagram", context_name="context", root=False):
+    """ArgumentError naming ``owner`` and the argument unless ``system`` is a Drake System and ``context``
+    its own Context (not another system's, nor a subsystem's: ``ValidateContext``)."""
+    instance(system, system_name, owner, System, what="a Drake System (a built Diagram)")
+    instance(context, context_name, owner, Context, what=f"the {'root ' if root else ''}Context of {system_name}")
+    try:
+        system.ValidateContext(context)
+    except RuntimeError:
+        raise ArgumentError(f"{owner}: {context_name} must be the {'root ' if root else ''}context of {system_name} "
+                            f"({system_name}.CreateDefaultContext() or the Simulator's), got the context of another "
+                            "diagram or of a subsystem") from None
+    return context
 
 
 def subsystem_context(system, root_context, owner, what):
