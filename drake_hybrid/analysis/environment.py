@@ -52,7 +52,7 @@ from scipy.optimize import linear_sum_assignment
 from drake_hybrid.core.arguments import (complex_vector, describe, matrix, number, numeric_array, positive,
                                          relative_tolerance, vector)
 from drake_hybrid.core.errors import ArgumentError
-from drake_hybrid.scenario.root_context import subsystem_context
+from drake_hybrid.scenario.root_context import check_systems_context
 
 from drake_hybrid.scenario.task import EigenvalueShift
 
@@ -62,19 +62,6 @@ ENVIRONMENT_STEP = 1e-6
 # A designed eigenvalue the environment moves by less than this (relative) keeps its designed value:
 # 1 % of it, a fifth of the match's 5 % tolerance (the sphere-polishing task's ball: 0.35 % at most).
 SHIFT_THRESHOLD = 0.01
-
-
-_SCENARIO_FIELDS = ("plant", "robot", "sensor", "constraint_space", "kinematics", "controller")
-
-
-def _scenario_context(scenario, context, owner):
-    """ArgumentError naming ``owner`` unless ``scenario`` is a built Scenario (or HybridSystems) and
-    ``context`` the root context of its diagram."""
-    missing = [name for name in _SCENARIO_FIELDS if not hasattr(scenario, name)]
-    if missing:
-        raise ArgumentError(f"{owner}: scenario must be a built Scenario or the HybridSystems of "
-                            f"add_hybrid_controller, got {describe(scenario)} (no {', '.join(missing)})")
-    subsystem_context(scenario.plant, context, owner, "the scenario's diagram")
 
 
 def _gain_matrices(owner, velocity_gain, position_gain, **optional):
@@ -92,7 +79,7 @@ def row_forces(scenario, context, q=None, v=None):
     (``ConstraintSpace.split_wrench``), with the arm's positions ``q`` and velocities ``v`` (None:
     those of ``context``; the rest of ``context`` kept, ``context`` itself untouched)."""
     owner = "row_forces"
-    _scenario_context(scenario, context, owner)
+    check_systems_context(scenario, context, owner)
     plant, space = scenario.plant, scenario.constraint_space
     if q is not None:
         q = vector(q, "q", owner, plant.num_positions(), unit="the plant's positions")
@@ -115,7 +102,7 @@ def row_directions(scenario, context):
     """(E, dq per row): the stacked [E_p; E_f] at ``context`` and, as columns, the joint motions
     J^+ E^-1 e_i that move the pad by 1 along each row i (None if the plant's positions and
     velocities differ, a free body)."""
-    _scenario_context(scenario, context, "row_directions")
+    check_systems_context(scenario, context, "row_directions")
     plant, space = scenario.plant, scenario.constraint_space
     plant_context = plant.GetMyContextFromRoot(context)
     task = scenario.kinematics.evaluate(plant_context, check=False)
@@ -140,7 +127,7 @@ def contact_environment(scenario, context, rows, step=ENVIRONMENT_STEP):
     """K_e and B_e on ``rows`` (indices into [velocity rows; E_f rows]) by central differences of
     ``row_forces`` at ``context``, or None for a free-body plant."""
     owner = "contact_environment"
-    _scenario_context(scenario, context, owner)
+    check_systems_context(scenario, context, owner)
     size = scenario.constraint_space.velocity_size + scenario.constraint_space.force_size
     if not isinstance(rows, (list, tuple, range, np.ndarray)):
         raise ArgumentError(f"{owner}: rows must be a list of row indices (0 to {size - 1}), got {describe(rows)}")
@@ -230,7 +217,7 @@ def impedance_environment_shifts(scenario, context, designed, step=ENVIRONMENT_S
     (the shifts take theirs). Where a root moves by more than ``tolerance``, the reason names the
     impedance mass that would keep every root within it (``mass_factor_within``)."""
     owner = "impedance_environment_shifts"
-    _scenario_context(scenario, context, owner)
+    check_systems_context(scenario, context, owner)
     designed = complex_vector(designed, "designed", owner)
     step = positive(step, "step", owner, unit="m or rad along a row")
     tolerance = relative_tolerance(tolerance, "tolerance", owner)

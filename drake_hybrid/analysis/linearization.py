@@ -76,11 +76,7 @@ def _design(gains, mode, owner):
     """(``gains``, ``mode`` as a ControlMode) checked: ValidatedGains (``HybridGains.matrices(k, m, mode)``)
     and a control mode; ArgumentError naming ``owner`` otherwise."""
     instance(gains, "gains", owner, ValidatedGains, what="ValidatedGains (HybridGains(...).matrices(k, m, mode))")
-    try:
-        return gains, ControlMode.parse(mode)
-    except ArgumentError:
-        raise ArgumentError(f"{owner}: mode must be one of {[m.value for m in ControlMode]}, got "
-                            f"{describe(mode)}") from None
+    return gains, ControlMode.parse(mode, owner)
 
 
 def _kinematic_rows(kinematic_rows, force_size, owner):

@@ -59,3 +59,14 @@ def subsystem_context(system, root_context, owner, what):
     except RuntimeError:
         raise ArgumentError(f"{owner}: root_context must be the root context of {what} (diagram.CreateDefaultContext() "
                             "or the Simulator's), got the context of another diagram or of a subsystem") from None
+
+
+def check_systems_context(systems, root_context, owner):
+    """ArgumentError naming ``owner`` unless ``systems`` is a built Scenario (or the HybridSystems of
+    ``add_hybrid_controller``) and ``root_context`` the root context of the diagram its plant is in
+    (what ``analysis.environment`` and ``analysis.modes`` take as ``scenario`` and ``context``)."""
+    missing = [name for name in SYSTEMS_FIELDS + ("kinematics",) if not hasattr(systems, name)]
+    if missing:
+        raise ArgumentError(f"{owner}: scenario must be a built Scenario or the HybridSystems of "
+                            f"add_hybrid_controller, got {describe(systems)} (no {', '.join(missing)})")
+    return subsystem_context(systems.plant, root_context, owner, "the scenario's diagram")
