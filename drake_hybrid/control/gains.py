@@ -54,13 +54,13 @@ class ControlMode(enum.Enum):
         """``mode`` (a ControlMode or its value) as a ControlMode; ArgumentError (naming ``owner`` if given)."""
         if isinstance(mode, cls):
             return mode
-        if owner is not None and not isinstance(mode, str):
-            raise ArgumentError(f"{owner}: mode must be one of {[m.value for m in cls]}, got {describe(mode)}")
         try:
-            return cls(str(mode))
+            return cls(mode if owner is not None else str(mode))
         except ValueError:
-            where = f"{owner}: " if owner is not None else ""
-            raise ArgumentError(f"{where}unknown control mode '{mode}'; mode must be one of {[m.value for m in cls]}") \
+            if owner is not None:
+                raise ArgumentError(f"{owner}: mode must be one of {[m.value for m in cls]}, got {describe(mode)}") \
+                    from None
+            raise ArgumentError(f"unknown control mode '{mode}'; mode must be one of {[m.value for m in cls]}") \
                 from None
 
     @property
