@@ -11,7 +11,6 @@ import airo_models
 import numpy as np
 import pytest
 import sympy
-
 from pydrake.geometry import GeometryId, Sphere
 from pydrake.math import RigidTransform, RotationMatrix
 from pydrake.multibody.parsing import Parser
@@ -19,25 +18,69 @@ from pydrake.multibody.plant import AddMultibodyPlant, MultibodyPlant
 from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import ConstantVectorSource, Integrator
 
-from drake_hybrid import ConstraintSpace, GivenVelocityProjection, PoseChart, surface_constraint
-from drake_hybrid.analysis.derivatives import (central_difference_jacobian, checked_state_jacobian, column_errors,
-                                               state_names)
-from drake_hybrid.analysis.environment import (contact_environment, impedance_loop, impedance_matrix,
-                                               impedance_response, mass_factor_within, root_pairs, row_forces)
-from drake_hybrid.analysis.linearization import (check_equilibrium, designed_eigenvalues_by_row, equilibrium_config,
-                                                 linearize_continuous, linearize_discrete, linearize_sampled_loop,
-                                                 match_eigenvalues, predicted_eigenvalues, predicted_errors)
-from drake_hybrid.analysis.modes import diagnose_unstable_modes, drift_eigenvalues, explained_modes
+from drake_hybrid import (
+    ConstraintSpace,
+    GivenVelocityProjection,
+    PoseChart,
+    surface_constraint,
+)
+from drake_hybrid.analysis.derivatives import (
+    central_difference_jacobian,
+    checked_state_jacobian,
+    column_errors,
+    state_names,
+)
+from drake_hybrid.analysis.environment import (
+    contact_environment,
+    impedance_loop,
+    impedance_matrix,
+    impedance_response,
+    mass_factor_within,
+    root_pairs,
+    row_forces,
+)
+from drake_hybrid.analysis.linearization import (
+    check_equilibrium,
+    designed_eigenvalues_by_row,
+    equilibrium_config,
+    linearize_continuous,
+    linearize_discrete,
+    linearize_sampled_loop,
+    match_eigenvalues,
+    predicted_eigenvalues,
+    predicted_errors,
+)
+from drake_hybrid.analysis.modes import (
+    diagnose_unstable_modes,
+    drift_eigenvalues,
+    explained_modes,
+)
 from drake_hybrid.control.gains import HybridGains
-from drake_hybrid.core.errors import ArgumentError, ConfigError, OffConstraintError, PathError
+from drake_hybrid.core.errors import (
+    ArgumentError,
+    ConfigError,
+    OffConstraintError,
+    PathError,
+)
 from drake_hybrid.core.surfaces import SphereSurface
 from drake_hybrid.experiments.config_paths import config_value
 from drake_hybrid.scenario.config import ContactConfig, ContactSensorConfig
 from drake_hybrid.scenario.contact_start import rest_contact_wrench, solve_contact_start
-from drake_hybrid.scenario.station import (add_actuators, add_hybrid_controller, add_loggers, add_rigid_workpiece,
-                                           add_wrench_sensor, apply_contact_defaults, check_controller_plant,
-                                           default_plant_config, logged, mount_tool, only_tool_touches, read_log,
-                                           robot_plant)
+from drake_hybrid.scenario.station import (
+    add_actuators,
+    add_hybrid_controller,
+    add_loggers,
+    add_rigid_workpiece,
+    add_wrench_sensor,
+    apply_contact_defaults,
+    check_controller_plant,
+    default_plant_config,
+    logged,
+    mount_tool,
+    only_tool_touches,
+    read_log,
+    robot_plant,
+)
 from drake_hybrid.scenario.tasks import get_task
 from drake_hybrid.systems.sources import Profile
 
@@ -136,8 +179,8 @@ def test_apply_contact_defaults_checks_a_contact_config_built_in_python(field, v
 
 @pytest.mark.parametrize("field, value", [("bandwidth_hz", "x"), ("bandwidth_hz", math.nan), ("condition", 1),
                                           ("fault_time", -math.inf)])
-def test_add_wrench_sensor_checks_a_sensor_config_built_in_python(station, field, value):
-    builder, plant, scene_graph, robot, workpiece = parts()
+def test_add_wrench_sensor_checks_a_sensor_config_built_in_python(field, value):
+    builder, plant, _, robot, _ = parts()
     plant.Finalize()
     sensor = dataclasses.replace(ContactSensorConfig(), **{field: value})
     with pytest.raises(ConfigError, match=rf"^add_wrench_sensor: sensor\.{field}[^\n]*$"):
@@ -246,8 +289,8 @@ def test_check_equilibrium_checks_its_arguments(station, other_station, which, w
 @pytest.mark.parametrize("arguments, words", [(dict(where=5), "where must be a string"),
                                               (dict(error="oops"), "error must be a DrakeHybridError subclass"),
                                               (dict(error=None), "error must be a DrakeHybridError subclass"),
-                                              (dict(error=ValueError), "error must be a DrakeHybridError subclass "
-                                                                       r"\(.*\), got ValueError")])
+                                              (dict(error=ValueError), ("error must be a DrakeHybridError subclass "
+                                                                        r"\(.*\), got ValueError"))])
 def test_get_task_checks_where_and_error(arguments, words):
     with pytest.raises(ArgumentError, match=rf"^get_task: {words}"):
         get_task("no-such-task", **arguments)
