@@ -61,13 +61,14 @@ BAD_TOLERANCE = [-1.0, math.nan, math.inf, "x", None]
 
 
 @pytest.mark.parametrize("q", BAD_Q)
-@pytest.mark.parametrize("function", [robot_penetrations,
-                                      lambda d, c, s, q: check_robot_clearance(d, c, s, q, "a start")])
-def test_clearance_refuses_a_q_that_is_not_the_arms_finite_positions(discrete, function, q):
+@pytest.mark.parametrize("function, caller", [(robot_penetrations, "robot_penetrations"),
+                                              (lambda d, c, s, q: check_robot_clearance(d, c, s, q, "a start"),
+                                               "a start")])
+def test_clearance_refuses_a_q_that_is_not_the_arms_finite_positions(discrete, function, caller, q):
     scenario, context = discrete
     size = scenario.plant.num_positions(scenario.robot.arm)
     q = {"nan": [math.nan] * size, "short": [0.0] * (size - 1)}.get(q, q) if isinstance(q, str) else q
-    with pytest.raises(ArgumentError, match=r"robot_penetrations: q must be a vector of \d+ finite numbers"):
+    with pytest.raises(ArgumentError, match=rf"^{caller}: q must be a vector of \d+ finite numbers"):
         function(scenario.diagram, context, scenario, q)
 
 
@@ -142,7 +143,8 @@ def test_solve_contact_start_names_start_pose_when_the_inverse_kinematics_fails(
 def test_solve_contact_start_names_desired_force_when_the_contact_cannot_give_it(discrete, start):
     scenario, _ = discrete
     huge = 1e6 * np.sign(scenario.config.desired_force.evaluate(0.0)[0])       # pushing, far beyond the pad
-    with pytest.raises(ArgumentError, match=r"solve_contact_start: even 1 mm .* \(desired_force, max_depth"):
+    with pytest.raises(ArgumentError, match=r"solve_contact_start: max_depth = 0.001 m of penetration presses with only .* "
+                                           r"less than \|desired_force\|"):
         solve_contact_start(scenario.diagram, scenario.diagram.CreateDefaultContext(), scenario, *start,
                             desired_force=huge, max_depth=1e-3)
 

@@ -34,6 +34,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from drake_hybrid.core.arguments import describe, number, positive, text
+from drake_hybrid.core.errors import ArgumentError
+from drake_hybrid.scenario.root_context import check_system_context
+
 JACOBIAN_TOLERANCE = 1e-3          # largest relative column error at which AutoDiffXd is trusted
 COLUMN_FLOOR = 1e-8                # relative column errors are scaled by at least this times max |A|
 JACOBIAN_STEP = 1e-5               # central-difference step, relative to max(1, |x_j|)
@@ -91,9 +95,18 @@ class JacobianCheck:
 def central_difference_jacobian(diagram, context, epsilon=JACOBIAN_STEP, columns=None):
     """d(x-dot)/dx of ``diagram``'s continuous state at ``context`` by central differences
     (step ``epsilon * max(1, |x_j|)``), for ``columns`` (default all; the others are left 0);
-    ``context`` is left as it was."""
-    work = context.Clone()
+    ``context`` is left as it was. ArgumentError for a ``context`` that is not ``diagram``'s, an ``epsilon``
+    that is not > 0, ``columns`` that are not state indices."""
+    owner = "central_difference_jacobian"
+    check_system_context(diagram, context, owner)
+    epsilon = positive(epsilon, "epsilon", owner, unit="relative step")
     x0 = context.get_continuous_state_vector().CopyToVector()
+    if columns is not None:
+        if not isinstance(columns, (list, tuple, range, np.ndarray)):
+            raise ArgumentError(f"{owner}: columns must be a list of state indices (0 to {x0.size - 1}) or None, "
+                                f"got {describe(columns)}")
+        columns = [number(j, "columns", owner, low=0, high=x0.size - 1, integer=True) for j in columns]
+    work = context.Clone()
     A = np.zeros((x0.size, x0.size))
     for j in (range(x0.size) if columns is None else columns):
         step = epsilon * max(1.0, abs(x0[j]))
@@ -107,12 +120,27 @@ def central_difference_jacobian(diagram, context, epsilon=JACOBIAN_STEP, columns
     return A
 
 
+def _jacobian(value, name, owner, shape=None):
+    """``value`` as a float matrix (of ``shape`` if given; NaN and inf kept: a Jacobian's bad entries are what
+    the check finds); ArgumentError naming ``name`` otherwise."""
+    try:
+        array = None if isinstance(value, (str, bytes)) or value is None else np.asarray(value, dtype=float)
+    except (TypeError, ValueError):
+        array = None
+    if array is None or array.ndim != 2 or (shape is not None and array.shape != tuple(shape)):
+        size = f"a {shape[0]}x{shape[1]} matrix" if shape is not None else "a matrix"
+        raise ArgumentError(f"{owner}: {name} must be {size} of numbers, got {describe(value)}")
+    return array
+
+
 def column_errors(A_autodiff, A_differences):
     """(relative, absolute) error of each column of the AutoDiffXd Jacobian against central
     differences. The relative one is scaled by the larger of the two columns' max norms, floored
     at ``COLUMN_FLOOR`` times the largest entry of A: a column that is zero but for rounding (the
     Panda's base joint on a level plane: entries of 1e-9 in a matrix of 1e7) is not compared
-    with itself."""
+    with itself. ArgumentError for two arguments that are not matrices of one shape."""
+    A_autodiff = _jacobian(A_autodiff, "A_autodiff", "column_errors")
+    A_differences = _jacobian(A_differences, "A_differences", "column_errors", A_autodiff.shape)
     difference = np.max(np.abs(A_autodiff - A_differences), axis=0)
     scale = np.maximum(np.max(np.abs(A_autodiff), axis=0), np.max(np.abs(A_differences), axis=0))
     scale = np.maximum(scale, COLUMN_FLOOR * np.max(np.abs(A_differences), initial=0.0))
@@ -123,6 +151,7 @@ def column_errors(A_autodiff, A_differences):
 def state_names(diagram, context):
     """A name for each continuous state of ``diagram`` ("plant q[2]", "controller x[0]", ...): plant
     positions and velocities by joint, other systems by their name and index."""
+    check_system_context(diagram, context, "state_names")
     names = []
     for system in diagram.GetSystems():
         size = system.GetMyContextFromRoot(context).num_continuous_states()
@@ -149,8 +178,16 @@ def checked_state_jacobian(diagram, context, A_autodiff, tolerance=JACOBIAN_TOLE
     A column where the two steps disagree with each other as well is left to AutoDiffXd and
     counted as unresolved.
 
-    Returns (A, JacobianCheck)."""
-    A_autodiff = np.asarray(A_autodiff, dtype=float)
+    Returns (A, JacobianCheck). ArgumentError for a ``context`` that is not ``diagram``'s, an ``A_autodiff``
+    that is not n x n (n continuous states), a ``tolerance`` or ``epsilon`` that is not > 0 (tolerance inf:
+    never replace a column)."""
+    owner = "checked_state_jacobian"
+    check_system_context(diagram, context, owner)
+    size = context.num_continuous_states()
+    A_autodiff = _jacobian(A_autodiff, "A_autodiff", owner, (size, size))
+    tolerance = positive(tolerance, "tolerance", owner, allow_infinite=True, unit="relative column error")
+    epsilon = positive(epsilon, "epsilon", owner, unit="relative step")
+    what = text(what, "what", owner)
     A_coarse = central_difference_jacobian(diagram, context, epsilon)
     relative, absolute = column_errors(A_autodiff, A_coarse)
     evaluations = 2 * A_coarse.shape[1]

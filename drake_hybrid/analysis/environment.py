@@ -49,7 +49,19 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
-from drake_hybrid.core.arguments import joint_vector
+from drake_hybrid.core.arguments import (
+    complex_vector,
+    describe,
+    joint_vector,
+    matrix,
+    number,
+    numeric_array,
+    positive,
+    relative_tolerance,
+    vector,
+)
+from drake_hybrid.core.errors import ArgumentError
+from drake_hybrid.scenario.root_context import check_systems_context
 from drake_hybrid.scenario.task import EigenvalueShift
 
 # m (rad) along a motion row, and m/s (rad/s) of its velocity: the central differences' steps.
@@ -60,14 +72,26 @@ ENVIRONMENT_STEP = 1e-6
 SHIFT_THRESHOLD = 0.01
 
 
+def _gain_matrices(owner, velocity_gain, position_gain, **optional):
+    """[K_v, K_p, then each of ``optional`` (None kept)] as k x k float matrices, k from ``velocity_gain``."""
+    velocity_gain = numeric_array(velocity_gain, "velocity_gain", owner, what="a square matrix")
+    k = velocity_gain.shape[0] if velocity_gain.ndim == 2 else 0
+    if velocity_gain.ndim != 2 or velocity_gain.shape != (k, k) or k == 0:
+        raise ArgumentError(f"{owner}: velocity_gain must be a square matrix (k x k), got {describe(velocity_gain)}")
+    checked = [velocity_gain, matrix(position_gain, "position_gain", owner, (k, k))]
+    return checked + [None if value is None else matrix(value, name, owner, (k, k)) for name, value in optional.items()]
+
+
 def row_forces(scenario, context, q=None, v=None):
     """[F_v; F] = E^-T w: the wrench sensor's reading split as the law splits it
     (``ConstraintSpace.split_wrench``), with the arm's positions ``q`` and velocities ``v`` (None:
     those of ``context``; the rest of ``context`` kept, ``context`` itself untouched). ArgumentError
     for a ``q`` or ``v`` that is not a vector of the plant's number of finite positions or velocities."""
+    owner = "row_forces"
+    check_systems_context(scenario, context, owner)
     plant, space = scenario.plant, scenario.constraint_space
-    q = None if q is None else joint_vector(q, "q", "row_forces", plant)
-    v = None if v is None else joint_vector(v, "v", "row_forces", plant, kind="velocities")
+    q = None if q is None else joint_vector(q, "q", owner, plant)
+    v = None if v is None else joint_vector(v, "v", owner, plant, kind="velocities")
     work = context.Clone()
     plant_context = plant.GetMyMutableContextFromRoot(work)
     if q is not None:
@@ -85,6 +109,7 @@ def row_directions(scenario, context):
     """(E, dq per row): the stacked [E_p; E_f] at ``context`` and, as columns, the joint motions
     J^+ E^-1 e_i that move the pad by 1 along each row i (None if the plant's positions and
     velocities differ, a free body)."""
+    check_systems_context(scenario, context, "row_directions")
     plant, space = scenario.plant, scenario.constraint_space
     plant_context = plant.GetMyContextFromRoot(context)
     task = scenario.kinematics.evaluate(plant_context, check=False)
@@ -108,13 +133,19 @@ class ContactEnvironment:
 def contact_environment(scenario, context, rows, step=ENVIRONMENT_STEP):
     """K_e and B_e on ``rows`` (indices into [velocity rows; E_f rows]) by central differences of
     ``row_forces`` at ``context``, or None for a free-body plant."""
+    owner = "contact_environment"
+    check_systems_context(scenario, context, owner)
+    size = scenario.constraint_space.velocity_size + scenario.constraint_space.force_size
+    if not isinstance(rows, (list, tuple, range, np.ndarray)):
+        raise ArgumentError(f"{owner}: rows must be a list of row indices (0 to {size - 1}), got {describe(rows)}")
+    rows = [number(row, "rows", owner, low=0, high=size - 1, integer=True) for row in rows]
+    step = positive(step, "step", owner, unit="m or rad along a row")
     plant = scenario.plant
     plant_context = plant.GetMyContextFromRoot(context)
     q0, v0 = plant.GetPositions(plant_context).copy(), plant.GetVelocities(plant_context).copy()
     _, directions = row_directions(scenario, context)
     if directions is None:
         return None
-    rows = list(rows)
     stiffness, damping = np.zeros((len(rows), len(rows))), np.zeros((len(rows), len(rows)))
     for column, row in enumerate(rows):
         dq = step * directions[:, row]
@@ -127,7 +158,11 @@ def contact_environment(scenario, context, rows, step=ENVIRONMENT_STEP):
 
 def impedance_matrix(velocity_gain, position_gain, stiffness=None, damping=None, inverse_mass=None):
     """A of d/dt [y; y-dot] = A [y; y-dot] for y-ddot = -(K_v - M_d^-1 B_e) y-dot - (K_p - M_d^-1 K_e) y
-    (None: K_e, B_e = 0; ``inverse_mass`` M_d^-1, None: the paper's unit mass)."""
+    (None: K_e, B_e = 0; ``inverse_mass`` M_d^-1, None: the paper's unit mass). ArgumentError for
+    arguments that are not k x k matrices of finite numbers."""
+    velocity_gain, position_gain, stiffness, damping, inverse_mass = _gain_matrices(
+        "impedance_matrix", velocity_gain, position_gain, stiffness=stiffness, damping=damping,
+        inverse_mass=inverse_mass)
     k = velocity_gain.shape[0]
     K_e = np.zeros((k, k)) if stiffness is None else stiffness
     B_e = np.zeros((k, k)) if damping is None else damping
@@ -144,6 +179,8 @@ def impedance_loop(velocity_gain, position_gain, stiffness=None, damping=None, i
 def root_pairs(designed, moved):
     """Each root of ``designed`` paired with one of ``moved`` (Hungarian, on the relative distance, as
     match_eigenvalues pairs): (index pairs, relative distances of the pairs)."""
+    designed = complex_vector(designed, "designed", "root_pairs", nonzero=True)
+    moved = complex_vector(moved, "moved", "root_pairs")
     cost = np.abs(moved[None, :] - designed[:, None]) / np.abs(designed)[:, None]
     rows, columns = linear_sum_assignment(cost)
     return list(zip(rows, columns)), cost[rows, columns]
@@ -155,6 +192,11 @@ def mass_factor_within(velocity_gain, position_gain, stiffness, damping, inverse
     through the contact's ``stiffness`` and ``damping`` keeps every root of s^2 + K_v s + K_p within
     ``tolerance`` (relative) of its designed value; 1 if the current mass does, None if no c up to 1e4
     does. The shift falls as 1 / c for small shifts."""
+    owner = "mass_factor_within"
+    velocity_gain, position_gain, stiffness, damping, inverse_mass = _gain_matrices(
+        owner, velocity_gain, position_gain, stiffness=stiffness, damping=damping, inverse_mass=inverse_mass)
+    tolerance = relative_tolerance(tolerance, "tolerance", owner)
+    velocity_rows = number(velocity_rows, "velocity_rows", owner, low=0, high=velocity_gain.shape[0], integer=True)
     alone = impedance_loop(velocity_gain, position_gain)
     rows = np.arange(inverse_mass.shape[0]) < velocity_rows
 
@@ -181,6 +223,11 @@ def impedance_environment_shifts(scenario, context, designed, step=ENVIRONMENT_S
     a plant with joints beyond the arm's, a mechanism). ``designed``: the controller's designed eigenvalues
     (the shifts take theirs). Where a root moves by more than ``tolerance``, the reason names the
     impedance mass that would keep every root within it (``mass_factor_within``)."""
+    owner = "impedance_environment_shifts"
+    check_systems_context(scenario, context, owner)
+    designed = complex_vector(designed, "designed", owner)
+    step = positive(step, "step", owner, unit="m or rad along a row")
+    tolerance = relative_tolerance(tolerance, "tolerance", owner)
     plant = scenario.plant
     if plant.num_positions() != plant.num_positions(scenario.robot.arm):
         return []      # a mechanism (the crank's handle): moving the arm alone would measure its joints, not a contact
@@ -230,13 +277,24 @@ def impedance_response(velocity_gain, position_gain, t, tangential_force, positi
     logged F_v (``tangential_force``, samples at ``t``, linear between them) from e_p(0), e_p'(0): the
     velocity errors a run realizing the impedance has (module docstring; ``inverse_mass`` M_d^-1,
     None: the paper's unit mass)."""
-    from scipy.signal import lsim      # about a second to load: only where used (tests/test_architecture.py)
+    from scipy.signal import (
+        lsim,  # about a second to load: only where used (tests/test_architecture.py)
+    )
 
+    owner = "impedance_response"
+    velocity_gain, position_gain, inverse_mass = _gain_matrices(owner, velocity_gain, position_gain,
+                                                                inverse_mass=inverse_mass)
     k = velocity_gain.shape[0]
+    t = vector(t, "t", owner, unit="s")
+    tangential_force = numeric_array(tangential_force, "tangential_force", owner, what=f"a {len(t)}x{k} matrix")
+    if tangential_force.shape not in ((len(t), k),) + (((len(t),),) if k == 1 else ()):
+        raise ArgumentError(f"{owner}: tangential_force must be a {len(t)}x{k} matrix (a sample per time of t), got "
+                            f"{describe(tangential_force)}")
+    position_error0 = vector(position_error0, "position_error0", owner, k)
+    velocity_error0 = vector(velocity_error0, "velocity_error0", owner, k)
     A = impedance_matrix(velocity_gain, position_gain)
     B = np.vstack([np.zeros((k, k)), np.eye(k) if inverse_mass is None else inverse_mass])
     C = np.hstack([np.zeros((k, k)), np.eye(k)])
     x0 = np.concatenate([position_error0, velocity_error0])
-    _, response, _ = lsim((A, B, C, np.zeros((k, k))), np.asarray(tangential_force, dtype=float),
-                          np.asarray(t, dtype=float), X0=x0)
+    _, response, _ = lsim((A, B, C, np.zeros((k, k))), tangential_force, t, X0=x0)
     return np.asarray(response).reshape(len(t), k)

@@ -23,26 +23,45 @@ module (issue 13 closing note).
 
 import copy
 import dataclasses
+import numbers
 import time
 from dataclasses import dataclass, field
 
 import numpy as np
+from pydrake.systems.analysis import ApplySimulatorConfig, InitializeParams, Simulator
+from pydrake.systems.primitives import Linearize
 from scipy.linalg import expm
 from scipy.optimize import linear_sum_assignment
 
-from pydrake.systems.analysis import ApplySimulatorConfig, InitializeParams, Simulator
-from pydrake.systems.primitives import Linearize
-
-from drake_hybrid.analysis.derivatives import JACOBIAN_TOLERANCE, JacobianCheck, checked_state_jacobian
-from drake_hybrid.analysis.environment import impedance_environment_shifts, impedance_matrix
+from drake_hybrid.analysis.derivatives import (
+    JACOBIAN_TOLERANCE,
+    JacobianCheck,
+    checked_state_jacobian,
+)
+from drake_hybrid.analysis.environment import (
+    impedance_environment_shifts,
+    impedance_matrix,
+)
 from drake_hybrid.analysis.modes import diagnose_unstable_modes, explained_modes
 from drake_hybrid.control.damping import step_task_mobility
 from drake_hybrid.control.gains import ControlMode, ValidatedGains
 from drake_hybrid.control.law import impedance_blocks
 from drake_hybrid.control.sampling import SAMPLE_LEAD
-from drake_hybrid.core.arguments import (boolean, function, joint_rows, nonnegative, positive, relative_tolerance,
-                                         text)
-from drake_hybrid.core.errors import ArgumentError, NotAtEquilibriumError
+from drake_hybrid.core.arguments import (
+    boolean,
+    complex_vector,
+    describe,
+    function,
+    instance,
+    joint_rows,
+    nonnegative,
+    number,
+    positive,
+    relative_tolerance,
+    text,
+    vector,
+)
+from drake_hybrid.core.errors import ArgumentError, ConfigError, NotAtEquilibriumError
 from drake_hybrid.core.progress import quiet
 from drake_hybrid.scenario.builder import build_scenario
 from drake_hybrid.scenario.config import ScenarioConfig
@@ -71,9 +90,31 @@ class PredictedEigenvalues:
         return np.concatenate([self.designed, np.zeros(self.marginal)])
 
 
+def _design(gains, mode, owner):
+    """(``gains``, ``mode`` as a ControlMode) checked: ValidatedGains (``HybridGains.matrices(k, m, mode)``)
+    and a control mode; ArgumentError naming ``owner`` otherwise."""
+    instance(gains, "gains", owner, ValidatedGains, what="ValidatedGains (HybridGains(...).matrices(k, m, mode))")
+    return gains, ControlMode.parse(mode, owner)
+
+
+def _kinematic_rows(kinematic_rows, force_size, owner):
+    """The rows held kinematically: a count (the first ones) or a list of distinct row indices < ``force_size``."""
+    allowed = f"a count or a list of distinct row indices < {force_size}"
+    if isinstance(kinematic_rows, numbers.Integral) and not isinstance(kinematic_rows, (bool, np.bool_)):
+        count = number(kinematic_rows, "kinematic_rows", owner, low=0, high=force_size, integer=True)
+        return list(range(count))
+    if not isinstance(kinematic_rows, (list, tuple, range, np.ndarray)):
+        raise ArgumentError(f"{owner}: kinematic_rows must be {allowed}, got {describe(kinematic_rows)}")
+    rows = [number(row, "kinematic_rows", owner, low=0, high=force_size - 1, integer=True) for row in kinematic_rows]
+    if len(set(rows)) != len(rows):
+        raise ArgumentError(f"{owner}: kinematic_rows must be {allowed}, got {describe(kinematic_rows)}")
+    return rows
+
+
 def velocity_loop_matrix(gains, mode):
     """A of the velocity loop: e_p'-dot = A e_p' (velocity mode) or d/dt [e_p; e_p'] = A [e_p; e_p']."""
-    if ControlMode.parse(mode).integrates_position:
+    gains, mode = _design(gains, mode, "velocity_loop_matrix")
+    if mode.integrates_position:
         return impedance_matrix(gains.velocity, gains.position)      # (3.2-11) with no environment
     return -gains.velocity
 
@@ -96,10 +137,12 @@ def predicted_eigenvalues(gains, mode, kinematic_rows=0, redundancy=0):
     A redundant arm (``redundancy`` = n - d > 0) adds its self-motion: the
     null-space damping q-ddot_0 = -K_n q-dot gives -K_n and a zero per extra joint.
     """
-    mode = ControlMode.parse(mode)
-    velocity = np.linalg.eigvals(velocity_loop_matrix(gains, mode))
-    kinematic = list(kinematic_rows) if not isinstance(kinematic_rows, int) else list(range(kinematic_rows))
+    owner = "predicted_eigenvalues"
+    gains, mode = _design(gains, mode, owner)
     m = gains.force_rate.shape[0]
+    kinematic = _kinematic_rows(kinematic_rows, m, owner)
+    redundancy = number(redundancy, "redundancy", owner, low=0, integer=True, unit="joints beyond the task's d")
+    velocity = np.linalg.eigvals(velocity_loop_matrix(gains, mode))
     physical = [i for i in range(m) if i not in kinematic]
     force = np.linalg.eigvals(-gains.force_rate[np.ix_(physical, physical)]) if physical else np.zeros(0)
     held = np.tile([-gains.constraint_frequency, -2.0 * gains.constraint_frequency], len(kinematic)).astype(complex)
@@ -118,10 +161,14 @@ def designed_eigenvalues_by_row(gains, mode, kinematic_rows=(), redundancy=0):
     -K_fi[j, j] / (1 + K_fp[j, j]), or -w_c and -2 w_c when the controller holds it (``kinematic_rows``).
     Each is ``predicted_eigenvalues`` of that row's gains alone.
     """
+    owner = "designed_eigenvalues_by_row"
+    gains, mode = _design(gains, mode, owner)
+    kinematic_rows = _kinematic_rows(kinematic_rows, gains.force_integral.shape[0], owner)
+    redundancy = number(redundancy, "redundancy", owner, low=0, integer=True, unit="joints beyond the task's d")
     matrices = (gains.velocity, gains.position, gains.force_proportional, gains.force_integral, gains.impedance_mass)
     if any(np.count_nonzero(matrix - np.diag(np.diag(matrix))) for matrix in matrices):
         return None
-    kinematic = set(kinematic_rows if not isinstance(kinematic_rows, int) else range(kinematic_rows))
+    kinematic = set(kinematic_rows)
 
     def row_gains(i, j):
         pick = lambda matrix, index: matrix[index:index + 1, index:index + 1] if index is not None else np.eye(1)
@@ -141,9 +188,15 @@ def predicted_errors(gains, mode, times, velocity_error0, force_integral0, posit
     Kinematic rows have no force loop (their force error is zero).
     Returns (velocity_error (N x k), force_error (N x m), position_error (N x k)).
     """
-    mode = ControlMode.parse(mode)
-    times = np.asarray(times, dtype=float)
-    k = gains.velocity.shape[0]
+    owner = "predicted_errors"
+    gains, mode = _design(gains, mode, owner)
+    k, m = gains.velocity.shape[0], gains.force_integral.shape[0]
+    times = vector(times, "times", owner, unit="s")
+    velocity_error0 = vector(velocity_error0, "velocity_error0", owner, k)
+    force_integral0 = vector(force_integral0, "force_integral0", owner, m)
+    if position_error0 is not None:
+        position_error0 = vector(position_error0, "position_error0", owner, k)
+    kinematic_rows = _kinematic_rows(kinematic_rows, m, owner)
     A = velocity_loop_matrix(gains, mode)
     if mode.integrates_position:
         e_p0 = np.zeros(k) if position_error0 is None else np.asarray(position_error0, dtype=float)
@@ -164,12 +217,14 @@ def predicted_errors(gains, mode, times, velocity_error0, force_integral0, posit
 
 def controller_prediction(controller):
     """``predicted_eigenvalues`` for a HybridController (its gains, mode, kinematic rows, n - d)."""
+    if not all(hasattr(controller, name) for name in ("validated_gains", "mode", "kinematic_rows", "num_joints")):
+        raise ArgumentError(f"controller_prediction: controller must be a HybridController, got {describe(controller)}")
     return predicted_eigenvalues(controller.validated_gains(), controller.mode, controller.kinematic_rows,
                                  controller.num_joints - controller.task_size)
 
 
 def design_time_constant(gains, mode, kinematic_rows=()):
-    """The slowest designed time constant 1 / min |Re(lambda)| (s)."""
+    """The slowest designed time constant 1 / min |Re(lambda)| (s) (arguments as ``predicted_eigenvalues``)."""
     eigenvalues = predicted_eigenvalues(gains, mode, kinematic_rows).designed
     return 1.0 / np.min(np.abs(eigenvalues.real))
 
@@ -208,11 +263,21 @@ def match_eigenvalues(designed, measured, tolerance=0.05, marginal=0, marginal_r
     unmatched eigenvalue (marginal or extra) has a real part above ``marginal_real`` (default
     ``tolerance`` times 1 1/s: slower than 5 % per second of growth is counted as marginal, not
     unstable).
+
+    ArgumentError for ``designed`` and ``measured`` that are not vectors of finite numbers (``designed``
+    nonzero, no more of them than measured), a ``marginal`` that is not an integer >= 0, a ``tolerance``
+    outside (0, 1].
     """
-    tolerance = relative_tolerance(tolerance, "tolerance", "match_eigenvalues")
-    designed = np.asarray(designed, dtype=complex)
-    measured = np.asarray(measured, dtype=complex)
-    marginal_real = tolerance * 1.0 if marginal_real is None else marginal_real
+    owner = "match_eigenvalues"
+    tolerance = relative_tolerance(tolerance, "tolerance", owner)
+    designed = complex_vector(designed, "designed", owner, nonzero=True)
+    measured = complex_vector(measured, "measured", owner)
+    marginal = number(marginal, "marginal", owner, low=0, integer=True, unit="zero eigenvalues")
+    marginal_real = number(tolerance * 1.0 if marginal_real is None else marginal_real, "marginal_real", owner,
+                           unit="1/s", allow_none=True)
+    if designed.size > measured.size:
+        raise ArgumentError(f"{owner}: measured has {measured.size} eigenvalues, fewer than the {designed.size} "
+                            "designed ones")
     cost = np.abs(measured[None, :] - designed[:, None]) / np.abs(designed)[:, None]
     rows, cols = linear_sum_assignment(cost)
     order = np.argsort(rows)
@@ -300,15 +365,13 @@ def _task_shifts(task, scenario, root_context, predicted, measured, tolerance):
 # Linearization of a scenario's closed loop
 # ------------------------------------------------------------------------------------------------
 
-def at_rest_config(config):
+def at_rest_config(config, owner="at_rest_config"):
     """A copy of ``config`` at rest, its sampling kept: zero desired velocity, constant F_d(0), zero
     start integrals, starting in contact, no contact supervisor, sensor faults or wrench conditioner
     (sampled systems outside the law, with their own timing); the model error is kept; a job's path
     held at a point (``path.hold_at``, its first point unless set). Its start is an equilibrium of
-    the closed loop."""
-
-
-    c = copy.deepcopy(config)
+    the closed loop. ArgumentError (naming ``owner``) for a ``config`` that is not a ScenarioConfig."""
+    c = copy.deepcopy(_scenario_config(config, owner))
     size = get_task(c.task).constraint_space(c).velocity_size
     c.desired_velocity = Profile(kind="constant", value=[0.0] * size)
     c.desired_force = Profile(kind="constant", value=list(c.desired_force.evaluate(0.0)[0]))
@@ -323,14 +386,17 @@ def at_rest_config(config):
     return c
 
 
-def equilibrium_config(config, bandwidth_hz=200.0):
+def equilibrium_config(config, bandwidth_hz=200.0, owner="equilibrium_config"):
     """The continuous-time version of ``at_rest_config(config)``: continuous plant and controller,
     a low-pass on the wrench (to break the algebraic loop), and no friction.
 
     Friction is removed because at rest it sticks: the pad is then held in the tangent directions
     by the contact, not by the designed loop, whose modes become marginal (DRAKE_NOTES); the
-    designed loop is the paper's frictionless one (section 3.1)."""
-    c = at_rest_config(config)
+    designed loop is the paper's frictionless one (section 3.1). ArgumentError (naming ``owner``) for a
+    ``config`` that is not a ScenarioConfig, a ``bandwidth_hz`` that is not a finite number > 0."""
+    _scenario_config(config, owner)
+    bandwidth_hz = positive(bandwidth_hz, "bandwidth_hz", owner, unit="Hz")
+    c = at_rest_config(config, owner)
     c.plant.time_step = 0.0
     c.control_period = 0.0
     c.contact.friction = 0.0
@@ -353,6 +419,18 @@ class Linearization:
     unstable_modes: list = field(default_factory=list)   # analysis.modes.ModeDiagnosis, real part > 0.01 1/s
 
 
+def _stages(stages, owner):
+    """``stages`` (a ``core.progress.Stages``, or None: silent) checked, naming ``owner``."""
+    function(stages, "stages", owner, "stages(label) -> a context manager (core.progress.Stages)", allow_none=True)
+    return stages or quiet()
+
+
+def _scenario_config(config, owner):
+    """``config`` if it is a ScenarioConfig; ArgumentError naming ``owner`` otherwise."""
+    return instance(config, "config", owner, ScenarioConfig,
+                    what="a ScenarioConfig (e.g. get_task(name).default_config())")
+
+
 def linearize_continuous(config, tolerance=0.05, bandwidth_hz=200.0, stages=None,
                          jacobian_tolerance=JACOBIAN_TOLERANCE, require_equilibrium=True):
     """Linearize the continuous closed loop of ``config`` at its contact equilibrium.
@@ -370,13 +448,10 @@ def linearize_continuous(config, tolerance=0.05, bandwidth_hz=200.0, stages=None
     (0, 1]), ``jacobian_tolerance`` and ``require_equilibrium`` as for ``linearize_at_contact``.
     """
     owner = "linearize_continuous"
-    if not isinstance(config, ScenarioConfig):
-        raise ArgumentError(f"{owner}: config must be a ScenarioConfig (e.g. get_task(name).default_config()), got "
-                            f"{type(config).__name__}")
+    _scenario_config(config, owner)
     relative_tolerance(tolerance, "tolerance", owner)
-    positive(bandwidth_hz, "bandwidth_hz", owner, unit="Hz")
-    stages = stages or quiet()
-    c = equilibrium_config(config, bandwidth_hz)
+    stages = _stages(stages, owner)
+    c = equilibrium_config(config, bandwidth_hz, owner)
     with stages(f"{c.task}: building the continuous closed loop"):
         scenario = build_scenario(c, with_loggers=False)
         context = scenario.diagram.CreateDefaultContext()
@@ -409,12 +484,15 @@ def _largest_rates(diagram, root_context):
     return sorted(rates, reverse=True)
 
 
-def check_equilibrium(diagram, root_context, systems, what="your diagram"):
+def check_equilibrium(diagram, root_context, systems, what="your diagram", owner="check_equilibrium"):
     """max |x-dot| of the continuous state at ``root_context``; NotAtEquilibriumError if it is above
     EQUILIBRIUM_RATE (1/s) times the state's size max(1, max |x|), naming the subsystem where it is
     largest and the likely cause: a desired velocity that is not zero, a wrist force/torque sensor on
     a continuous plant, or else the start not solved (``solve_contact_start`` / ``prime_start`` not
-    called, or the state changed after it)."""
+    called, or the state changed after it). ArgumentError (naming ``owner``) for a ``diagram``,
+    ``root_context`` and ``systems`` that do not belong together (``scenario.root_context``)."""
+    where = f"{owner}({text(what, 'what', owner)})"
+    check_root_context(diagram, root_context, systems, where)
     derivatives = diagram.EvalTimeDerivatives(root_context).CopyToVector()
     residual = float(np.max(np.abs(derivatives))) if derivatives.size else 0.0
     state = root_context.get_continuous_state_vector().CopyToVector()
@@ -434,7 +512,7 @@ def check_equilibrium(diagram, root_context, systems, what="your diagram"):
                  "setting the arm at rest pressing with F_d) on this context, and change no state after it")
     rate, name = _largest_rates(diagram, root_context)[0]
     raise NotAtEquilibriumError(
-        f"linearize_at_contact({what}): the state is not an equilibrium: max |x-dot| = {residual:.3g} (largest in "
+        f"{where}: the state is not an equilibrium: max |x-dot| = {residual:.3g} (largest in "
         f"'{name}', {rate:.3g}) > {EQUILIBRIUM_RATE:g}/s x the state's size {scale:.3g}, so its eigenvalues would "
         f"not be the design's; likely cause: {cause} (require_equilibrium=False linearizes there anyway)")
 
@@ -467,16 +545,15 @@ def linearize_at_contact(diagram, root_context, systems, tolerance=0.05, jacobia
     tolerance = relative_tolerance(tolerance, "tolerance", owner)
     jacobian_tolerance = positive(jacobian_tolerance, "jacobian_tolerance", owner, allow_infinite=True,
                                   unit="relative column error")
-    function(stages, "stages", owner, "stages(label) -> a context manager (core.progress.Stages)", allow_none=True)
+    stages = _stages(stages, owner)
     require_equilibrium = boolean(require_equilibrium, "require_equilibrium", owner)
     if task is not None and not hasattr(task, "eigenvalue_shifts"):
         raise ArgumentError(f"{owner}: task must be a Task (scenario.task) or None, got {type(task).__name__}")
-    stages = stages or quiet()
     if not (root_context.num_abstract_states() == 0 and root_context.has_only_continuous_state()):
         raise ArgumentError(f"{owner}: the closed loop must be purely continuous (a plant with time_step=0, a "
                             "controller without control_period); it has discrete or abstract state")
     if require_equilibrium:
-        residual = check_equilibrium(diagram, root_context, systems, what)
+        residual = check_equilibrium(diagram, root_context, systems, what, "linearize_at_contact")
     else:
         derivatives = diagram.EvalTimeDerivatives(root_context).CopyToVector()
         residual = float(np.max(np.abs(derivatives))) if derivatives.size else 0.0
@@ -598,13 +675,14 @@ def linearize_discrete(config, tolerance=0.05, epsilon=1e-6, settle_time=0.0, st
     one line per stage with its time.
     """
     owner = "linearize_discrete"
+    _scenario_config(config, owner)
     relative_tolerance(tolerance, "tolerance", owner)
     positive(epsilon, "epsilon", owner)
     settle_time = nonnegative(settle_time, "settle_time", owner, unit="s")
-    stages = stages or quiet()
-    c = at_rest_config(config)
+    stages = _stages(stages, owner)
+    c = at_rest_config(config, owner)
     if not c.plant.time_step > 0:
-        raise ValueError("linearize_discrete needs a discrete plant (time_step > 0)")
+        raise ConfigError(f"{owner}: config.plant.time_step must be > 0 (a discrete plant), got {c.plant.time_step:g}")
     c.control_period = c.plant.time_step
     c.log_period = c.plant.time_step
     c.sensor.bandwidth_hz = 0.0
@@ -620,7 +698,8 @@ def linearize_discrete(config, tolerance=0.05, epsilon=1e-6, settle_time=0.0, st
         with stages(f"{c.task}: settling at rest for {settle_time:g} s"):
             simulator.AdvanceTo(settle_time)
     if context.num_abstract_states() != 0 or context.num_continuous_states() != 0:
-        raise ValueError("linearize_discrete needs a closed loop with discrete state only")
+        raise ConfigError(f"{owner} needs a closed loop with discrete state only (no wrench filter or other "
+                          "continuous or abstract state)")
     diagram = scenario.diagram
 
     def state_vector(ctx):
@@ -740,25 +819,29 @@ def linearize_sampled_loop(config, epsilon=1e-5, tolerance=0.05, periods=1):
     Needs a discrete plant, a sampled controller with a period that is a whole
     number of plant steps, and no wrench filter (a filter would sample the
     contact results at k h, where the stale abstract state would enter).
+
+    ArgumentError for a ``config`` that is not a ScenarioConfig, an ``epsilon`` that is not > 0, a
+    ``tolerance`` outside (0, 1], ``periods`` that is not an integer >= 1; ConfigError for a config
+    without the loop above.
     """
-
-
-
+    owner = "linearize_sampled_loop"
+    _scenario_config(config, owner)
+    positive(epsilon, "epsilon", owner)
+    relative_tolerance(tolerance, "tolerance", owner)
+    periods = number(periods, "periods", owner, low=1, integer=True, unit="control periods")
     h, time_step = float(config.control_period), float(config.plant.time_step)
     if not (time_step > 0 and h > 0):
-        raise ValueError("linearize_discrete needs a discrete plant (time_step > 0) and a sampled controller "
-                         f"(control_period > 0); got time_step = {time_step}, control_period = {h}")
+        raise ConfigError(f"{owner} needs a discrete plant (time_step > 0) and a sampled controller "
+                          f"(control_period > 0); got time_step = {time_step:g}, control_period = {h:g}")
     steps = h / time_step
     if abs(steps - round(steps)) > 1e-9 * steps:
-        raise ValueError(f"linearize_discrete needs control_period to be a whole number of plant steps; "
-                         f"got control_period = {h}, time_step = {time_step}")
+        raise ConfigError(f"{owner} needs control_period to be a whole number of plant steps; "
+                          f"got control_period = {h:g}, time_step = {time_step:g}")
     if config.sensor.bandwidth_hz > 0:
-        raise ValueError("linearize_discrete needs sensor.bandwidth_hz = 0 (a sampled wrench filter reads the "
-                         "plant's sampled contact results at the plant's steps, outside the map's vector state)")
-    positive(epsilon, "epsilon", "linearize_sampled_loop")
-    relative_tolerance(tolerance, "tolerance", "linearize_sampled_loop")
+        raise ConfigError(f"{owner} needs sensor.bandwidth_hz = 0 (a sampled wrench filter reads the plant's "
+                          "sampled contact results at the plant's steps, outside the map's vector state)")
 
-    c = at_rest_config(config)
+    c = at_rest_config(config, owner)
     scenario = build_scenario(c, with_loggers=False)
     diagram = scenario.diagram
     base = diagram.CreateDefaultContext()

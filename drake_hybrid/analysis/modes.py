@@ -44,12 +44,17 @@ A mode that prediction matches is
 named with it (``ModeDiagnosis.predicted``, ``explained``).
 """
 
+import numbers
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from drake_hybrid.analysis.environment import impedance_matrix, row_directions, row_forces
 from drake_hybrid.control.gains import ControlMode
+from drake_hybrid.core.arguments import (complex_vector, describe, matrix, number, numeric_array, positive,
+                                         relative_tolerance)
+from drake_hybrid.core.errors import ArgumentError
+from drake_hybrid.scenario.root_context import check_systems_context
 
 UNSTABLE_RATE = 0.01                  # 1/s: a mode growing faster than 1 % per second is named
 # m (or rad) along a velocity row: the step of the row forces' central differences in row_force_drift.
@@ -90,6 +95,13 @@ class ModeDiagnosis:
 def explained_modes(unstable, diagnoses, tolerance):
     """True when every eigenvalue in ``unstable`` has a diagnosis (same eigenvalue) whose
     prediction it is within ``tolerance`` of (``ModeDiagnosis.explained``)."""
+    owner = "explained_modes"
+    unstable = complex_vector(np.atleast_1d(unstable) if isinstance(unstable, (numbers.Number, np.ndarray))
+                              else unstable, "unstable", owner)
+    tolerance = relative_tolerance(tolerance, "tolerance", owner)
+    if not isinstance(diagnoses, (list, tuple)) or not all(isinstance(d, ModeDiagnosis) for d in diagnoses):
+        raise ArgumentError(f"{owner}: diagnoses must be a list of ModeDiagnosis (diagnose_unstable_modes), got "
+                            f"{describe(diagnoses)}")
     for value in np.atleast_1d(unstable):
         same = [d for d in diagnoses if abs(d.eigenvalue - value) <= 1e-6 * max(1.0, abs(value))]
         if not any(d.explained(tolerance) for d in same):
@@ -101,10 +113,14 @@ def drift_eigenvalues(mobility, stiffness, velocity_gain, position_gain=None):
     """Eigenvalues of y-ddot = -K_v y-dot - K_p y + G y, G = ``mobility`` @ ``stiffness`` (k x u
     and u x k: the velocity rows' mobility to the rows u and dF_u/dy); ``position_gain`` K_p is
     None in velocity-force mode. Sorted by real part, largest first."""
-    G = np.asarray(mobility, dtype=float) @ np.asarray(stiffness, dtype=float)
-    k = G.shape[0]
-    K_v = np.asarray(velocity_gain, dtype=float)
-    K_p = np.zeros((k, k)) if position_gain is None else np.asarray(position_gain, dtype=float)
+    owner = "drift_eigenvalues"
+    mobility = numeric_array(mobility, "mobility", owner, what="a k x u matrix")
+    if mobility.ndim != 2:
+        raise ArgumentError(f"{owner}: mobility must be a k x u matrix, got {describe(mobility)}")
+    k, u = mobility.shape
+    G = mobility @ matrix(stiffness, "stiffness", owner, (u, k))
+    K_v = matrix(velocity_gain, "velocity_gain", owner, (k, k))
+    K_p = np.zeros((k, k)) if position_gain is None else matrix(position_gain, "position_gain", owner, (k, k))
     values = np.linalg.eigvals(impedance_matrix(K_v, K_p, stiffness=G))       # G acts as the environment's K_e
     return values[np.argsort(-values.real)]
 
@@ -138,6 +154,10 @@ def row_force_drift(scenario, context, mode, step=DRIFT_STEP):
 
     ``scenario``, ``context``: the closed loop at its linearization point (the arm's positions
     are moved by ``step`` along each velocity row, dq = J^+ E^-1 e_i, on clones of ``context``)."""
+    owner = "row_force_drift"
+    check_systems_context(scenario, context, owner)
+    mode = ControlMode.parse(mode, owner)
+    step = positive(step, "step", owner, unit="m or rad along a row")
     space = scenario.constraint_space
     k = space.velocity_size
     if k == 0 or mode is ControlMode.IMPEDANCE_FORCE:
@@ -187,6 +207,16 @@ def diagnose_unstable_modes(scenario, context, A, mode, designed, threshold=UNST
 
     ``scenario``, ``context``: the linearized closed loop and its linearization point; ``mode``:
     the ControlMode; ``designed``: the designed eigenvalues (to tell slow modes from fast ones)."""
+    owner = "diagnose_unstable_modes"
+    check_systems_context(scenario, context, owner)
+    if getattr(scenario, "diagram", None) is None:
+        raise ArgumentError(f"{owner}: scenario must have its diagram (a built Scenario, or HybridSystems with "
+                            "diagram set: dataclasses.replace(systems, diagram=diagram))")
+    size = context.num_continuous_states()
+    A = matrix(A, "A", owner, (size, size))
+    mode = ControlMode.parse(mode, owner)
+    designed = complex_vector(designed, "designed", owner)
+    threshold = number(threshold, "threshold", owner, unit="1/s")
     eigenvalues, vectors = np.linalg.eig(A)
     plant = scenario.plant
     plant_context = plant.GetMyContextFromRoot(context)

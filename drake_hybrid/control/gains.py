@@ -38,7 +38,7 @@ from typing import List
 
 import numpy as np
 
-from drake_hybrid.core.arguments import number, numeric_array
+from drake_hybrid.core.arguments import describe, number, numeric_array
 from drake_hybrid.core.errors import ArgumentError, GainError
 
 
@@ -50,12 +50,16 @@ class ControlMode(enum.Enum):
     IMPEDANCE_FORCE = "impedance-force"    # (3.2-6)
 
     @classmethod
-    def parse(cls, mode):
+    def parse(cls, mode, owner=None):
+        """``mode`` (a ControlMode or its value) as a ControlMode; ArgumentError (naming ``owner`` if given)."""
         if isinstance(mode, cls):
             return mode
         try:
-            return cls(str(mode))
+            return cls(mode if owner is not None else str(mode))
         except ValueError:
+            if owner is not None:
+                raise ArgumentError(f"{owner}: mode must be one of {[m.value for m in cls]}, got {describe(mode)}") \
+                    from None
             raise ArgumentError(f"unknown control mode '{mode}'; mode must be one of {[m.value for m in cls]}") \
                 from None
 

@@ -230,3 +230,17 @@ def relative_tolerance(value, name, owner, *, error=ArgumentError):
     means nothing)."""
     return number(value, name, owner, low=0.0, low_inclusive=False, high=1.0, unit="relative: 0.05 is within 5 %",
                   error=error)
+
+
+def complex_vector(value, name, owner, *, nonzero=False, error=ArgumentError):
+    """``value`` as a 1-D complex ndarray (eigenvalues): real or complex numbers only (no string, bool or
+    None entries), finite, and none zero if ``nonzero``."""
+    allowed = "a vector of finite " + ("nonzero " if nonzero else "") + "real or complex numbers"
+    entries = np.ravel(value) if isinstance(value, np.ndarray) else value
+    if not isinstance(entries, (list, tuple, np.ndarray)) or not all(
+            isinstance(entry, numbers.Number) and not isinstance(entry, (bool, np.bool_)) for entry in entries):
+        _fail(error, owner, name, allowed, value)
+    array = np.asarray(value, dtype=complex)
+    if array.ndim != 1 or not np.all(np.isfinite(array)) or (nonzero and np.any(array == 0)):
+        _fail(error, owner, name, allowed, value)
+    return array

@@ -35,7 +35,7 @@ from pydrake.math import RigidTransform
 
 from drake_hybrid.core.errors import PathError
 from drake_hybrid.core.height_field import DEGREE, HeightField, HeightFieldConstraint
-from drake_hybrid.core.surfaces import Surface, ViewPlane
+from drake_hybrid.core.surfaces import Surface, ViewPlane, check_chart
 
 MIN_SAMPLES = DEGREE + 1          # per axis: a quintic spline needs six samples
 
@@ -139,6 +139,7 @@ class HeightMapSurface(Surface):
         raise TypeError(f"{self.name}: a height map has no closed-form f(p); use offset_constraint")
 
     def offset_constraint(self, chart, offset, name=None):
+        check_chart(chart, f"{self.name}.offset_constraint")
         return HeightFieldConstraint(chart, self.offset_field(offset), name=name or self.name)
 
     def held_normal(self, p, offset):

@@ -60,6 +60,12 @@ def _unit(values, what, owner):
     return direction / norm
 
 
+def check_chart(chart, owner):
+    """``chart`` if it is a 3-D end-effector chart (PoseChart or EulerZXZChart), else a PathError."""
+    return instance(chart, "chart", owner, (PoseChart, EulerZXZChart), what="a PoseChart or an EulerZXZChart",
+                    error=PathError)
+
+
 def check_offset(offset, owner, name="offset"):
     """The pad's offset as a float: a finite number >= 0 (m; module docstring), else a PathError."""
     return nonnegative(offset, name, owner, unit="m, the pad's radius", error=PathError)
@@ -185,6 +191,7 @@ class Surface(abc.ABC):
     def offset_constraint(self, chart, offset, name=None):
         """The constraint on a point held ``offset`` along the outward normal (a ball pad's centre):
         ``surface_constraint`` of f_r, with the orientation rows (a along -grad f_r) as kinematic rows."""
+        check_chart(chart, f"{self.name}.offset_constraint")
         offset = check_offset(offset, f"{self.name}.offset_constraint")
         return surface_constraint(chart, lambda p: self.implicit(p, offset), name=name or self.name,
                                   normal_rows=True)

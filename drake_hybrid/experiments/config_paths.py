@@ -12,7 +12,7 @@ import re
 
 from drake_hybrid.scenario.config import dump_config, load_config
 
-_SEGMENT = re.compile(r"^([A-Za-z_][A-Za-z0-9_]*)(?:\[(\d+)\])?$")
+_SEGMENT = re.compile(r"([A-Za-z_][A-Za-z0-9_]*)(?:\[(\d+)\])?")     # the whole segment (fullmatch)
 
 
 def _fields(target):
@@ -31,7 +31,7 @@ def _locate(config, path):
     segments = path.split(".")
     target = config
     for depth, segment in enumerate(segments):
-        match = _SEGMENT.match(segment)
+        match = _SEGMENT.fullmatch(segment)
         if not match:
             raise ValueError(f"config path '{path}': '{segment}' is not a field name (optionally with [index])")
         name, index = match.group(1), match.group(2)

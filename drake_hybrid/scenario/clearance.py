@@ -28,7 +28,11 @@ def robot_penetrations(diagram, root_context, systems, q, tolerance=PENETRATION_
     ArgumentError (before any Drake call) for ``diagram``, ``root_context`` or ``systems`` that do not
     belong together (``scenario.contact_start.check_root_context``), a ``q`` that is not a vector of the
     arm's number of finite positions, a ``tolerance`` that is not a finite number >= 0."""
-    owner = "robot_penetrations"
+    return _penetrations(diagram, root_context, systems, q, tolerance, "robot_penetrations")
+
+
+def _penetrations(diagram, root_context, systems, q, tolerance, owner):
+    """``robot_penetrations``, its errors naming ``owner``."""
     check_root_context(diagram, root_context, systems, owner)
     plant, robot = systems.plant, systems.robot
     q = joint_vector(q, "q", owner, plant, robot.arm, unit="the arm's joint positions, rad or m")
@@ -68,9 +72,9 @@ def robot_penetrations(diagram, root_context, systems, q, tolerance=PENETRATION_
 
 def check_robot_clearance(diagram, root_context, systems, q, who):
     """StartCollisionError naming the bodies if ``robot_penetrations`` finds any at ``q`` (``who``: the
-    caller, which begins the message; its arguments are checked as ``robot_penetrations``'s)."""
+    caller, which begins every message; its arguments are checked as ``robot_penetrations``'s)."""
     who = text(who, "who", "check_robot_clearance")
-    found = robot_penetrations(diagram, root_context, systems, q)
+    found = _penetrations(diagram, root_context, systems, q, PENETRATION_TOLERANCE, who)
     if found:
         parts = "; ".join(f"body '{body}' ({geometry}) {depth * 1000:.1f} mm into {other}"
                           for body, geometry, other, depth in found[:4])

@@ -132,6 +132,10 @@ class ContactConfig:
     # (docs/contact_resolution.md measures both hints' accuracy against their cost)
 
     def validate(self, prefix="contact."):
+        """ConfigError naming ``prefix`` and the field: the types first (``core.schema.check_types``: a
+        config built in Python is checked as a file is), NaN and inf, then the values."""
+        check_types(self, ContactConfig, prefix.rstrip("."))
+        check_finite(self, prefix)
         check_fields(self, prefix, positive=("pad_modulus", "pad_resolution"),
                      nonnegative=("pad_dissipation", "friction", "workpiece_resolution"))
 
@@ -147,6 +151,9 @@ class WrenchPathConfig:
                                                  # the run stops there and reports it (inf = never)
 
     def validate(self, prefix="sensor."):
+        """As ``ContactConfig.validate`` (``fault_time`` may be inf: never)."""
+        check_types(self, type(self), prefix.rstrip("."))
+        check_finite(self, prefix, allow_infinite=("fault_time",))
         check_fields(self, prefix, nonnegative=("bandwidth_hz", "max_hold_time"), positive=("fault_time",))
 
 

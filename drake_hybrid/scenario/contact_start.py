@@ -9,7 +9,7 @@ says, the links clear of the scene), then ``scenario.start.prime_start``.
 
 import numpy as np
 
-from pydrake.geometry import HydroelasticContactRepresentation
+from pydrake.geometry import GeometryId, HydroelasticContactRepresentation
 from pydrake.math import RigidTransform
 
 from drake_hybrid.core.arguments import describe, instance, joint_vector, positive, vector
@@ -31,7 +31,9 @@ def rest_contact_wrench(plant, plant_context, robot_geometries, p_WP):
     from its SceneGraph's query in ``plant_context``.
 
     ArgumentError for a ``plant`` that is not a MultibodyPlant connected to a SceneGraph, a
-    ``plant_context`` that is not the plant's, a ``p_WP`` that is not 3 finite numbers (m)."""
+    ``plant_context`` that is not the plant's, ``robot_geometries`` that is not a non-empty collection of
+    GeometryIds registered in that SceneGraph (e.g. ``RobotModel.pad_geometries``), a ``p_WP`` that is not
+    3 finite numbers (m)."""
     owner = "rest_contact_wrench"
     if not hasattr(plant, "get_geometry_query_input_port") or not hasattr(plant, "is_finalized"):
         raise ArgumentError(f"{owner}: plant must be a MultibodyPlant, got {describe(plant)}")
@@ -46,7 +48,7 @@ def rest_contact_wrench(plant, plant_context, robot_geometries, p_WP):
         raise ArgumentError(f"{owner}: plant's geometry_query input is not connected: the plant must be registered "
                             "with a SceneGraph (AddMultibodyPlant) in a built diagram")
     query = port.Eval(plant_context)
-    robot = set(robot_geometries)
+    robot = _registered_geometries(robot_geometries, query.inspector(), owner)
     wrench = np.zeros(6)
     try:
         surfaces = query.ComputeContactSurfaces(HydroelasticContactRepresentation.kTriangle)
@@ -68,6 +70,22 @@ def rest_contact_wrench(plant, plant_context, robot_geometries, p_WP):
             wrench[:3] += np.cross(mesh.element_centroid(face) - p_WP, force)
             wrench[3:] += force
     return wrench
+
+
+def _registered_geometries(robot_geometries, inspector, owner):
+    """``robot_geometries`` as a set of GeometryIds, each registered with the SceneGraph of ``inspector``."""
+    allowed = "a non-empty collection of GeometryIds of the plant's SceneGraph (e.g. RobotModel.pad_geometries)"
+    if isinstance(robot_geometries, GeometryId):
+        robot_geometries = [robot_geometries]
+    if (not isinstance(robot_geometries, (list, tuple, set, frozenset)) or not robot_geometries
+            or not all(isinstance(entry, GeometryId) for entry in robot_geometries)):
+        raise ArgumentError(f"{owner}: robot_geometries must be {allowed}, got {describe(robot_geometries)}")
+    known = set(inspector.GetAllGeometryIds())
+    unknown = [entry for entry in robot_geometries if entry not in known]
+    if unknown:
+        raise ArgumentError(f"{owner}: robot_geometries holds {len(unknown)} GeometryId(s) not registered in the "
+                            f"plant's SceneGraph (another SceneGraph's?), e.g. {unknown[0]}: it must be {allowed}")
+    return set(robot_geometries)
 
 
 CENTROID = np.full(3, 1.0 / 3.0)           # a triangle's centroid in barycentric coordinates
@@ -175,13 +193,29 @@ def solve_contact_start(diagram, root_context, systems, start_pose, joint_guess,
                                                    rest_contact_wrench(plant, plant_context, pad, p_WP))
             return float(space.split_wrench(values_at, wrench)[1] @ desired) / magnitude - magnitude
 
+        reached = {}                           # {depth: the pressing force's excess there} as evaluated
+
+        def recorded_force(depth):
+            reached[depth] = pressing_force(depth)
+            return reached[depth]
+
         try:
-            depth = pressing_depth(pressing_force, desired, max_depth, owner)
+            depth = pressing_depth(recorded_force, desired, max_depth, owner)
+        except OffConstraintError as error:
+            if max_depth not in reached:       # the start already penetrates: max_depth had no part in it
+                raise
+            # Nothing touched down to max_depth: a gap, or a max_depth too small to reach the contact.
+            raise OffConstraintError(
+                f"{owner}: the pad touches nothing down to max_depth = {max_depth:g} m beyond the start pose along "
+                "the pressing direction: either max_depth is too small (raise it; the default is 0.01 m) or the "
+                "workpiece's geometry is farther than the surface C = 0 (a gap: move the workpiece or the start so "
+                "that they agree)") from error
         except DrakeHybridError:
             raise
-        except ValueError as error:          # scenario.start.pressing_depth: too soft a contact for F_d
-            raise ArgumentError(f"{str(error).split('; ')[0]} (desired_force, max_depth = {max_depth:g} m): "
-                                "lower desired_force, raise max_depth or stiffen the pad (its hydroelastic "
+        except ValueError:                     # scenario.start.pressing_depth: too soft a contact for F_d
+            raise ArgumentError(f"{owner}: max_depth = {max_depth:g} m of penetration presses with only "
+                                f"{reached[max_depth] + magnitude:.3g} N, less than |desired_force| = {magnitude:.3g} "
+                                "N: lower desired_force, raise max_depth or stiffen the pad (its hydroelastic "
                                 "modulus)") from None
         q0 = positions_at_depth(depth, direction)
     check_robot_clearance(diagram, root_context, systems, q0, owner)

@@ -7,7 +7,7 @@ a built ``Scenario``). Given the context of another diagram, or a subsystem's, D
 two-line RuntimeError deep in the call; ``check_root_context`` says which argument it is first.
 """
 
-from pydrake.systems.framework import Context, Diagram
+from pydrake.systems.framework import Context, Diagram, System
 
 from drake_hybrid.core.arguments import describe, instance
 from drake_hybrid.core.errors import ArgumentError
@@ -22,25 +22,21 @@ def check_root_context(diagram, root_context, systems, owner):
     instance(diagram, "diagram", owner, Diagram, what="a built Diagram (DiagramBuilder.Build())")
     instance(root_context, "root_context", owner, Context, what="the diagram's root Context")
     check_systems(systems, owner)
-    try:
-        diagram.ValidateContext(root_context)
-    except RuntimeError:
-        raise ArgumentError(f"{owner}: root_context must be the root context of diagram "
-                            "(diagram.CreateDefaultContext() or the Simulator's), got the context of another diagram "
-                            "or of a subsystem") from None
-    check_systems_context(root_context, systems, owner)
+    check_system_context(diagram, root_context, owner, "diagram", "root_context", root=True)
+    systems_in_context(root_context, systems, owner)
 
 
-def check_systems(systems, owner):
-    """ArgumentError naming ``owner`` unless ``systems`` is a ``HybridSystems`` (or a built ``Scenario``)."""
-    missing = [name for name in SYSTEMS_FIELDS if not hasattr(systems, name)]
+def check_systems(systems, owner, fields=SYSTEMS_FIELDS, name="systems"):
+    """ArgumentError naming ``owner`` and ``name`` unless ``systems`` is a ``HybridSystems`` (or a built
+    ``Scenario``): it has every one of ``fields``."""
+    missing = [field for field in fields if not hasattr(systems, field)]
     if missing:
-        raise ArgumentError(f"{owner}: systems must be the HybridSystems of scenario.station.add_hybrid_controller "
+        raise ArgumentError(f"{owner}: {name} must be the HybridSystems of scenario.station.add_hybrid_controller "
                             f"(or a built Scenario), got {describe(systems)} (no {', '.join(missing)})")
     return systems
 
 
-def check_systems_context(root_context, systems, owner):
+def systems_in_context(root_context, systems, owner):
     """ArgumentError naming ``owner`` unless ``root_context`` is the root context of the diagram that
     holds ``systems``' plant and controller (not a subsystem's context, e.g. the plant's)."""
     instance(root_context, "root_context", owner, Context, what="the diagram's root Context")
@@ -52,3 +48,38 @@ def check_systems_context(root_context, systems, owner):
             raise ArgumentError(f"{owner}: systems.{name} is not in diagram of root_context: root_context must be "
                                 "the diagram's root context (diagram.CreateDefaultContext() or the Simulator's), not a "
                                 "subsystem's, and systems what add_hybrid_controller returned for its builder") from None
+
+
+def check_system_context(system, context, owner, system_name="diagram", context_name="context", root=False):
+    """ArgumentError naming ``owner`` and the argument unless ``system`` is a Drake System and ``context``
+    its own Context (not another system's, nor a subsystem's: ``ValidateContext``)."""
+    instance(system, system_name, owner, System, what="a Drake System (a built Diagram)")
+    instance(context, context_name, owner, Context, what=f"the {'root ' if root else ''}Context of {system_name}")
+    try:
+        system.ValidateContext(context)
+    except RuntimeError:
+        raise ArgumentError(f"{owner}: {context_name} must be the {'root ' if root else ''}context of {system_name} "
+                            f"({system_name}.CreateDefaultContext() or the Simulator's), got the context of another "
+                            "diagram or of a subsystem") from None
+    return context
+
+
+def subsystem_context(system, root_context, owner, what):
+    """``system``'s context in ``root_context`` (``GetMyContextFromRoot``), where the diagram itself is not
+    at hand (a logger's, ``scenario.station.read_log``); ArgumentError naming ``owner`` and root_context
+    for a Context that is not a root context, or is the root context of a diagram without ``system``
+    (``what`` says which diagram that is)."""
+    instance(root_context, "root_context", owner, Context, what="the diagram's root Context")
+    try:
+        return system.GetMyContextFromRoot(root_context)
+    except RuntimeError:
+        raise ArgumentError(f"{owner}: root_context must be the root context of {what} (diagram.CreateDefaultContext() "
+                            "or the Simulator's), got the context of another diagram or of a subsystem") from None
+
+
+def check_systems_context(systems, root_context, owner):
+    """ArgumentError naming ``owner`` unless ``systems`` is a built Scenario (or the HybridSystems of
+    ``add_hybrid_controller``) and ``root_context`` the root context of the diagram its plant is in
+    (what ``analysis.environment`` and ``analysis.modes`` take as ``scenario`` and ``context``)."""
+    check_systems(systems, owner, SYSTEMS_FIELDS + ("kinematics",), name="scenario")
+    return subsystem_context(systems.plant, root_context, owner, "the scenario's diagram")

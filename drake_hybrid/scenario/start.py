@@ -11,16 +11,15 @@ in your own diagram is ``scenario.contact_start.solve_contact_start``.
 """
 
 import numpy as np
-from scipy.optimize import brentq
-
 from pydrake.systems.framework import DiagramBuilder
+from scipy.optimize import brentq
 
 from drake_hybrid.core.arguments import joint_vector, vector
 from drake_hybrid.core.errors import DimensionError, ForceSignError, OffConstraintError
 from drake_hybrid.core.kinematics import EndEffectorKinematics
 from drake_hybrid.scenario.clearance import check_robot_clearance
 from drake_hybrid.scenario.plant import apply_model_error, build_plant
-from drake_hybrid.scenario.root_context import check_systems, check_systems_context
+from drake_hybrid.scenario.root_context import check_systems, systems_in_context
 from drake_hybrid.systems.sensors import ContactWrenchSensor
 
 
@@ -87,7 +86,7 @@ def prime_start(systems, root_context, held_torque, integrals=None):
     (checked for a sampled controller, the one that holds it), ``integrals`` that are not a vector of
     the controller's finite [xi; e_p] entries."""
     owner = "prime_start"
-    check_systems_context(root_context, systems, owner)
+    systems_in_context(root_context, systems, owner)
     plant, controller = systems.plant, systems.controller
     plant_context = plant.GetMyMutableContextFromRoot(root_context)
     q0 = plant.GetPositions(plant_context, systems.robot.arm)

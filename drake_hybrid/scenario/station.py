@@ -78,7 +78,7 @@ from drake_hybrid.control.controller import HybridController
 from drake_hybrid.control.gains import ControlMode
 from drake_hybrid.control.phases import ContactPhase
 from drake_hybrid.control.supervision import ContactSupervisor, SupervisionConfig
-from drake_hybrid.core.arguments import describe, function, instance, nonnegative, text, vector
+from drake_hybrid.core.arguments import describe, function, instance, nonnegative, positive, text, vector
 from drake_hybrid.core.errors import ArgumentError, ConfigError, DrakeHybridError
 from drake_hybrid.core.kinematics import EndEffectorKinematics
 from drake_hybrid.core.projections import ConstraintSpace
@@ -86,6 +86,7 @@ from drake_hybrid.scenario.config import ContactConfig, ContactSensorConfig, Wri
 from drake_hybrid.scenario.parsing import ConfigureParser
 from drake_hybrid.scenario.plant import (RobotModel, get_frame, only_tool_touches,  # noqa: F401 (a block here too)
                                          set_contact_properties)
+from drake_hybrid.scenario.root_context import subsystem_context
 from drake_hybrid.scenario.tasks.robots import add_pad_tool
 from drake_hybrid.scenario.workpieces import add_rigid_workpiece, default_resolution  # noqa: F401 (blocks here too)
 from drake_hybrid.systems.faults import SensorFaultConfig, SensorFaultInjector
@@ -165,25 +166,43 @@ def urdf_effort_limits(path):
 def add_actuators(plant, model_instance, effort_limits=None):
     """One actuator per single-dof joint of ``model_instance`` that has none (a URDF without
     transmissions), with the effort limit ``effort_limits[joint name]`` (e.g. from
-    ``urdf_effort_limits``; inf where not given). Returns the actuator names."""
+    ``urdf_effort_limits``; inf where not given). Returns the actuator names.
+
+    ArgumentError for a limit that is not a number > 0 (inf: none), and for a name that is not a joint of
+    ``model_instance`` while a joint to actuate has no limit (a misspelling would leave it unlimited; the
+    names of joints ``weld_joints`` removed are otherwise let through, as ``urdf_effort_limits`` gives them)."""
     _unfinalized_plant(plant, "add_actuators")
     _model_instance_of(plant, model_instance, "model_instance", "add_actuators")
-    effort_limits = instance(effort_limits, "effort_limits", "add_actuators", dict,
+    owner = "add_actuators"
+    effort_limits = instance(effort_limits, "effort_limits", owner, dict,
                              what="a dict {joint name: effort limit}", allow_none=True) or {}
+    limits = {}
+    for key, value in effort_limits.items():
+        text(key, "effort_limits: a key", owner)
+        limits[key] = positive(value, f"effort_limits['{key}']", owner, unit="N m or N; inf: none",
+                               allow_infinite=True)
     actuated = {plant.get_joint_actuator(index).joint().index() for index in plant.GetJointActuatorIndices()}
+    every = [plant.get_joint(index) for index in plant.GetJointIndices(model_instance)]
+    joints = [joint for joint in every if joint.num_velocities() == 1 and joint.index() not in actuated]
+    unknown = sorted(set(limits) - {joint.name() for joint in every})
+    unlimited = [joint.name() for joint in joints if joint.name() not in limits]
+    if unknown and unlimited:
+        # A key for a joint the model no longer has (welded by weld_joints) is harmless; beside a joint left
+        # without a limit it is most likely that joint's name misspelt.
+        raise ArgumentError(f"{owner}: effort_limits names {', '.join(repr(name) for name in unknown)}, not a joint "
+                            f"of model_instance, and gives no limit for {', '.join(repr(name) for name in unlimited)} "
+                            "(a misspelt joint name?); its joints to actuate are "
+                            f"{', '.join(repr(joint.name()) for joint in joints)} (give inf for no limit)")
     names = []
-    for index in plant.GetJointIndices(model_instance):
-        joint = plant.get_joint(index)
-        if joint.num_velocities() != 1 or joint.index() in actuated:
-            continue
-        plant.AddJointActuator(f"{joint.name()}_actuator", joint, float(effort_limits.get(joint.name(), np.inf)))
+    for joint in joints:
+        plant.AddJointActuator(f"{joint.name()}_actuator", joint, limits.get(joint.name(), np.inf))
         names.append(f"{joint.name()}_actuator")
     return names
 
 
 GRIPPER_CHOICES = ("weld", "remove")
 _DEFAULT_TOOL = "pad_tool"                  # the first tool's model instance; its end-effector frame "pad_center"
-_TOOL_NAME = re.compile(r"^[A-Za-z_][A-Za-z0-9_.-]*$")
+_TOOL_NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_.-]*")    # the whole name (fullmatch)
 
 
 def _unfinalized_plant(plant, owner):
@@ -289,7 +308,7 @@ def mount_tool(plant, arm, flange_frame, X_flange_tool=None, gripper_joints=(), 
         raise ArgumentError(f"{owner}: gripper_joints must be a joint name or a list of joint names, got "
                             f"{describe(gripper_joints)}")
     text(name, "name", owner)
-    if not _TOOL_NAME.match(name):
+    if not _TOOL_NAME.fullmatch(name):
         raise ArgumentError(f"{owner}: name must be a model name of letters, digits, '_', '.' and '-' (not "
                             f"starting with a digit), got {describe(name)}")
     _unfinalized_plant(plant, owner)
@@ -386,7 +405,7 @@ def apply_contact_defaults(plant, scene_graph, robot, workpiece_geometries, cont
     workpiece = _geometry_ids(workpiece_geometries, "workpiece_geometries", owner,
                              "the GeometryIds of add_rigid_workpiece (a list)")
     contact = instance(contact, "contact", owner, ContactConfig, allow_none=True) or ContactConfig()
-    contact.validate()
+    contact.validate(f"{owner}: contact.")
     inspector, source = scene_graph.model_inspector(), plant.get_source_id()
     if not inspector.SourceIsRegistered(source):
         raise ArgumentError(f"{owner}: scene_graph is not the plant's SceneGraph (AddMultibodyPlant returns the pair)")
@@ -492,11 +511,30 @@ def _port_of(system, name, kind, owner, argument):
 
 def _station_parts(builder, plant, robot, owner):
     instance(builder, "builder", owner, DiagramBuilder)
+    _finalized_robot_plant(plant, robot, owner)
+
+
+def _finalized_robot_plant(plant, robot, owner):
     instance(plant, "plant", owner, MultibodyPlant)
     instance(robot, "robot", owner, RobotModel, what="the RobotModel of mount_tool")
     if not plant.is_finalized():
         raise ConfigError(f"{owner}: finalize the plant first (plant.Finalize())")
     _model_instance_of(plant, robot.arm, "robot.arm", owner)
+
+
+def _sensor_config(sensor, owner):
+    """``sensor`` (a ContactSensorConfig or WristSensorConfig) with its fields checked, naming ``owner``."""
+    instance(sensor, "sensor", owner, (ContactSensorConfig, WristSensorConfig))
+    sensor.validate(f"{owner}: sensor.")
+    return sensor
+
+
+def _controller_model(controller_plant, owner):
+    instance(controller_plant, "controller_plant", owner, MultibodyPlant,
+             what="a finalized MultibodyPlant of the robot alone (robot_plant(add_robot))")
+    if not controller_plant.is_finalized():
+        raise ConfigError(f"{owner}: controller_plant must be finalized (robot_plant(add_robot) does it)")
+    return controller_plant
 
 
 def add_wrench_sensor(builder, plant, robot, sensor=None):
@@ -506,8 +544,7 @@ def add_wrench_sensor(builder, plant, robot, sensor=None):
     (named "wrench_sensor", or "wrench_sensor_<arm>" if the builder has one)."""
     owner = "add_wrench_sensor"
     _station_parts(builder, plant, robot, owner)
-    sensor = sensor if sensor is not None else ContactSensorConfig()
-    instance(sensor, "sensor", owner, (ContactSensorConfig, WristSensorConfig))
+    sensor = _sensor_config(sensor if sensor is not None else ContactSensorConfig(), owner)
     arm = _arm_name(plant, robot)
     if isinstance(sensor, WristSensorConfig):
         if robot.tool_weld is None:
@@ -540,7 +577,7 @@ def add_wrench_path(builder, wrench_output, sensor, period, sequence=None, tare=
     instance(builder, "builder", owner, DiagramBuilder)
     instance(wrench_output, "wrench_output", owner, OutputPort, what="an OutputPort (the wrench sensor's)")
     instance(sequence, "sequence", owner, OutputPort, allow_none=True)
-    instance(sensor, "sensor", owner, (ContactSensorConfig, WristSensorConfig))
+    _sensor_config(sensor, owner)
     conditioner = wrench_filter = None
     if sensor.condition:
         conditioner = _add_named(builder, "wrench_conditioner", WrenchConditioner(
@@ -700,11 +737,14 @@ _MATCH_TOLERANCE = 1e-6      # m and rad: the controller plant's end-effector po
 _MATCH_CONFIGURATIONS = 3    # the default positions and two random ones within the limits
 
 
-def check_controller_plant(plant, robot, controller_plant, owner="add_hybrid_controller"):
+def check_controller_plant(plant, robot, controller_plant, owner="check_controller_plant"):
     """ArgumentError naming ``controller_plant`` if it does not model ``plant``'s arm ``robot.arm``: the
     numbers of positions, velocities and actuators, and the end-effector pose (``robot``'s frame and
     point) at the arm's default positions and two random ones within the joint limits (to
-    1e-6 m and rad)."""
+    1e-6 m and rad). Checked first: ``plant`` a finalized MultibodyPlant, ``robot`` the RobotModel of
+    ``mount_tool`` on it, ``controller_plant`` a finalized MultibodyPlant (ArgumentError, ConfigError)."""
+    _finalized_robot_plant(plant, robot, owner)
+    _controller_model(controller_plant, owner)
     arm, arm_name = robot.arm, plant.GetModelInstanceName(robot.arm)
     counts = {"positions": (plant.num_positions(arm), controller_plant.num_positions()),
               "velocities": (plant.num_velocities(arm), controller_plant.num_velocities()),
@@ -804,10 +844,7 @@ def add_hybrid_controller(builder, plant, robot, constraint_space, controller_pl
     """
     owner = "add_hybrid_controller"
     _station_parts(builder, plant, robot, owner)
-    instance(controller_plant, "controller_plant", owner, MultibodyPlant,
-             what="a finalized MultibodyPlant of the robot alone (robot_plant(add_robot))")
-    if not controller_plant.is_finalized():
-        raise ConfigError(f"{owner}: controller_plant must be finalized (robot_plant(add_robot) does it)")
+    _controller_model(controller_plant, owner)
     instance(constraint_space, "constraint_space", owner, ConstraintSpace,
              what="a ConstraintSpace (a constraint with its velocity projection)")
     unknown = sorted(set(controller_options) - set(CONTROLLER_OPTIONS))
@@ -819,8 +856,7 @@ def add_hybrid_controller(builder, plant, robot, constraint_space, controller_pl
                             f"built here, not your controller: pass them to your controller")
     if sensor is None:
         sensor = ContactSensorConfig(bandwidth_hz=CONTINUOUS_LOOP_BANDWIDTH if control_period is None else 0.0)
-    instance(sensor, "sensor", owner, (ContactSensorConfig, WristSensorConfig))
-    sensor.validate()
+    _sensor_config(sensor, owner)
     if control_period is None and not (sensor.bandwidth_hz > 0):
         raise ConfigError("sensor.bandwidth_hz: a continuous controller (control_period None) needs a wrench "
                           "low-pass (> 0 Hz): its actuation feeds through to the measured wrench")
@@ -925,14 +961,16 @@ def add_loggers(builder, systems, period=None):
     return loggers
 
 
-def logged(loggers, root_context, name):
-    """(times, samples x size) of logger ``name`` of ``loggers`` (``add_loggers``) in ``root_context``."""
-    instance(loggers, "loggers", "logged", dict, what="the dict of add_loggers")
+def logged(loggers, root_context, name, owner="logged"):
+    """(times, samples x size) of logger ``name`` of ``loggers`` (``add_loggers``) in ``root_context`` (the
+    root context of the diagram they were added to: ArgumentError naming ``owner`` otherwise)."""
+    instance(loggers, "loggers", owner, dict, what="the dict of add_loggers")
     if name not in loggers:
-        raise ArgumentError(f"logged: no logger '{name}'; these were logged: {', '.join(loggers)}")
+        raise ArgumentError(f"{owner}: no logger '{name}'; these were logged: {', '.join(loggers)}")
     logger, columns = loggers[name], slice(None)
     if isinstance(logger, tuple):
         logger, columns = logger
+    subsystem_context(logger, root_context, owner, "the diagram the loggers were added to")
     log = logger.FindLog(root_context)
     return log.sample_times(), log.data().T[:, columns]
 
@@ -943,7 +981,7 @@ def read_log(loggers: Dict[str, object], root_context):
     instance(loggers, "loggers", "read_log", dict, what="the dict of add_loggers")
     log = {}
     for name in loggers:
-        times, values = logged(loggers, root_context, name)
+        times, values = logged(loggers, root_context, name, "read_log")
         log.setdefault("t", times)
         log[name] = values
     return log

@@ -6,8 +6,8 @@ how to add its robot and workpiece to a plant, its chart, constraint and
 velocity projection, its default ScenarioConfig and its start configuration.
 """
 
-from drake_hybrid.core.arguments import text
-from drake_hybrid.core.errors import ArgumentError
+from drake_hybrid.core.arguments import describe, text
+from drake_hybrid.core.errors import ArgumentError, DrakeHybridError
 from drake_hybrid.scenario.tasks.crank_turning import CrankTurning
 from drake_hybrid.scenario.tasks.grinding import Grinding
 from drake_hybrid.scenario.tasks.sphere_polishing import SpherePolishing
@@ -25,6 +25,9 @@ def register_task(task):
     """Make ``task`` (e.g. a ``scenario.custom.CustomTask``) known by its name to ``get_task``, and so to
     ``build_scenario``, ``simulate`` and ``linearize_continuous``. A task registered earlier under
     the same name is replaced (re-running a notebook cell); a built-in task cannot be. Returns it."""
+    if not isinstance(getattr(task, "name", None), str):
+        raise ArgumentError(f"register_task: task must be a task object with a name (e.g. scenario.custom.CustomTask), "
+                            f"got {describe(task)}")
     if task.name in BUILT_IN_TASKS:
         raise ArgumentError(f"'{task.name}' is a built-in task; give your task another name")
     TASKS[task.name] = task
@@ -33,7 +36,13 @@ def register_task(task):
 
 def get_task(name, *, where="get_task", error=ArgumentError):
     """The task registered as ``name`` (``TASKS``); ``error`` (one line, prefixed by ``where``: a config's
-    ``task`` field gives its own) naming the known tasks for another name."""
+    ``task`` field gives its own) naming the known tasks for another name. ``where``: a string (the
+    caller's name, or the config field's); ``error``: a DrakeHybridError subclass (ArgumentError,
+    ConfigError, ...)."""
+    text(where, "where", "get_task")
+    if not (isinstance(error, type) and issubclass(error, DrakeHybridError)):
+        raise ArgumentError(f"get_task: error must be a DrakeHybridError subclass (ArgumentError, ConfigError, ...), "
+                            f"got {error.__name__ if isinstance(error, type) else describe(error)}")
     text(name, "name", where, error=error)
     try:
         return TASKS[name]
