@@ -31,8 +31,9 @@ def check_systems(systems, owner, fields=SYSTEMS_FIELDS, name="systems"):
     ``Scenario``): it has every one of ``fields``."""
     missing = [field for field in fields if not hasattr(systems, field)]
     if missing:
-        raise ArgumentError(f"{owner}: {name} must be the HybridSystems of scenario.station.add_hybrid_controller "
-                            f"(or a built Scenario), got {describe(systems)} (no {', '.join(missing)})")
+        what = ("a built Scenario or the HybridSystems of add_hybrid_controller" if name == "scenario" else
+                "the HybridSystems of scenario.station.add_hybrid_controller (or a built Scenario)")
+        raise ArgumentError(f"{owner}: {name} must be {what}, got {describe(systems)} (no {', '.join(missing)})")
     return systems
 
 
