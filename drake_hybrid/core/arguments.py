@@ -166,7 +166,7 @@ def joint_vector(value, name, owner, plant, model_instance=None, *, kind="positi
 
 
 def joint_rows(value, name, owner, plant, model_instance=None, *, kind="positions", unit=None, error=ArgumentError):
-    """``value`` as a 2-D float array whose rows are ``joint_vector``s (a log's q or v, one row a sample)."""
+    """``value`` as a 2-D float array whose rows are each a ``joint_vector`` (a log's q or v, one row a sample)."""
     count, words = _joint_count(plant, model_instance, kind)
     allowed = f"a matrix of rows of {count} finite numbers ({unit or words})"
     array = numeric_array(value, name, owner, what=allowed, error=error)

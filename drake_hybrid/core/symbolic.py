@@ -290,7 +290,7 @@ def check_functions(expression, what="expression"):
     """ExpressionError naming ``what`` and the term if ``expression`` holds a node no generated path
     evaluates: a function outside ``FUNCTIONS`` (after differentiation too: an unevaluated Derivative of a
     user function), or any other sympy node (Sum, Product, Order, AccumBounds, Contains, Integral, ...).
-    Allowed: symbols, numbers, + * **, ``FUNCTIONS`` and, in a Piecewise, comparisons joined by And, Or, Not."""
+    Allowed: symbols, numbers, ``+``, ``*``, ``**``, ``FUNCTIONS`` and, in a Piecewise, comparisons joined by And, Or, Not."""
     for term in sympy.preorder_traversal(expression):
         if isinstance(term, _TERMS) or type(term) in FUNCTIONS or isinstance(term, _CONDITIONS):
             continue
