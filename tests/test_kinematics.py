@@ -104,5 +104,10 @@ def test_bad_frame_and_point(six_dof_arm):
     with pytest.raises(ValueError, match=r"point_in_frame must be a vector of 3 finite numbers \(m\)"):
         EndEffectorKinematics(plant, "link6", [0.0, 0.1], PoseChart())
     other, other_frame = __import__("conftest").make_serial_arm([[0, 0, 1]], [[0, 0, 0]])
-    with pytest.raises(ValueError, match="not in the plant"):
+    # A frame of another plant that has one of that name (e.g. the simulation's plant given for the
+    # controller's): the message says to pass the name.
+    with pytest.raises(ValueError, match="frame 'joint1_parent' is a Frame of another plant, not of this one"):
         EndEffectorKinematics(plant, other.GetFrameByName("joint1_parent"), POINT, PoseChart())
+    with pytest.raises(ValueError, match=r"frame 'world' is a Frame of another plant, not of this one \(the plant "
+                                         "has a frame of that name: pass the name"):
+        EndEffectorKinematics(plant, other.world_frame(), POINT, PoseChart())

@@ -53,7 +53,9 @@ def resolve_frame(plant, frame, what="end_effector_frame"):
     except AttributeError:
         raise ArgumentError(f"{what} must be a Frame of the plant or a frame name, got {describe(frame)}") from None
     if parent is not plant:
-        raise UnknownFrameError(f"{what}: frame '{name}' is not in the plant; its frames are {frame_names(plant)}")
+        same_name = " (the plant has a frame of that name: pass the name, or plant.GetFrameByName)" if \
+            plant.HasFrameNamed(name) else f"; the plant's frames are {frame_names(plant)}"
+        raise UnknownFrameError(f"{what}: frame '{name}' is a Frame of another plant, not of this one{same_name}")
     return frame
 
 
