@@ -26,7 +26,7 @@ def robot_penetrations(diagram, root_context, systems, q, tolerance=PENETRATION_
     shapes have no signed distance in Drake (e.g. two meshes) are skipped.
 
     ArgumentError (before any Drake call) for ``diagram``, ``root_context`` or ``systems`` that do not
-    belong together (``scenario.contact_start.check_root_context``), a ``q`` that is not a vector of the
+    belong together (``scenario.root_context.check_root_context``), a ``q`` that is not a vector of the
     arm's number of finite positions, a ``tolerance`` that is not a finite number >= 0."""
     return _penetrations(diagram, root_context, systems, q, tolerance, "robot_penetrations")
 

@@ -23,7 +23,7 @@ def check_root_context(diagram, root_context, systems, owner):
     instance(root_context, "root_context", owner, Context, what="the diagram's root Context")
     check_systems(systems, owner)
     check_system_context(diagram, root_context, owner, "diagram", "root_context", root=True)
-    systems_in_context(root_context, systems, owner)
+    _systems_in(root_context, systems, owner)
 
 
 def check_systems(systems, owner, fields=SYSTEMS_FIELDS, name="systems"):
@@ -42,6 +42,11 @@ def systems_in_context(root_context, systems, owner):
     holds ``systems``' plant and controller (not a subsystem's context, e.g. the plant's)."""
     instance(root_context, "root_context", owner, Context, what="the diagram's root Context")
     check_systems(systems, owner)
+    _systems_in(root_context, systems, owner)
+
+
+def _systems_in(root_context, systems, owner):
+    """``systems_in_context`` after its type checks: the plant and controller found in ``root_context``."""
     for name in ("plant", "controller"):
         try:
             getattr(systems, name).GetMyContextFromRoot(root_context)
