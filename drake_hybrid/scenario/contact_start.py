@@ -9,7 +9,7 @@ says, the links clear of the scene), then ``scenario.start.prime_start``.
 
 import numpy as np
 
-from pydrake.geometry import GeometryId, HydroelasticContactRepresentation
+from pydrake.geometry import HydroelasticContactRepresentation
 from pydrake.math import RigidTransform
 
 from drake_hybrid.core.arguments import describe, instance, joint_vector, positive, vector
@@ -18,6 +18,7 @@ from drake_hybrid.core.errors import (ArgumentError, ConfigError, DrakeHybridErr
 from drake_hybrid.core.kinematics import inverse_kinematics
 from drake_hybrid.core.preconditions import check_pushing_force
 from drake_hybrid.scenario.clearance import check_robot_clearance
+from drake_hybrid.scenario.plant import geometry_ids
 from drake_hybrid.scenario.root_context import check_root_context
 from drake_hybrid.scenario.start import holding_torque, pressing_depth, prime_start
 from drake_hybrid.systems.sensors import WristForceTorqueSensor
@@ -75,11 +76,8 @@ def rest_contact_wrench(plant, plant_context, robot_geometries, p_WP):
 def _registered_geometries(robot_geometries, inspector, owner):
     """``robot_geometries`` as a set of GeometryIds, each registered with the SceneGraph of ``inspector``."""
     allowed = "a non-empty collection of GeometryIds of the plant's SceneGraph (e.g. RobotModel.pad_geometries)"
-    if isinstance(robot_geometries, GeometryId):
-        robot_geometries = [robot_geometries]
-    if (not isinstance(robot_geometries, (list, tuple, set, frozenset)) or not robot_geometries
-            or not all(isinstance(entry, GeometryId) for entry in robot_geometries)):
-        raise ArgumentError(f"{owner}: robot_geometries must be {allowed}, got {describe(robot_geometries)}")
+    robot_geometries = geometry_ids(robot_geometries, "robot_geometries", owner, allowed,
+                                    collections=(list, tuple, set, frozenset), nonempty=True)
     known = set(inspector.GetAllGeometryIds())
     unknown = [entry for entry in robot_geometries if entry not in known]
     if unknown:

@@ -11,11 +11,13 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from pydrake.geometry import CollisionFilterDeclaration, GeometrySet, ProximityProperties, Role, RoleAssign
+from pydrake.geometry import (CollisionFilterDeclaration, GeometryId, GeometrySet, ProximityProperties, Role,
+                              RoleAssign)
 from pydrake.multibody.plant import AddMultibodyPlant, CoulombFriction, MultibodyPlant
 from pydrake.multibody.tree import SpatialInertia
 
-from drake_hybrid.core.errors import ConfigError, UnknownFrameError
+from drake_hybrid.core.arguments import describe
+from drake_hybrid.core.errors import ArgumentError, ConfigError, UnknownFrameError
 
 
 @dataclass
@@ -43,6 +45,17 @@ def get_frame(plant, name, model_instance, role="frame"):
         return plant.GetFrameByName(name, model_instance)
     raise UnknownFrameError(f"{role} '{name}' is not a frame of model '{plant.GetModelInstanceName(model_instance)}'; "
                             f"its frames: {', '.join(frame_names(plant, model_instance))}")
+
+
+def geometry_ids(value, name, owner, what, *, collections=(list, tuple), nonempty=False):
+    """``value`` (a GeometryId, or one of ``collections`` of them; not empty if ``nonempty``) as a list of
+    GeometryIds; ArgumentError naming ``owner`` and ``name``, ``what`` saying what it must be."""
+    if isinstance(value, GeometryId):
+        return [value]
+    if (not isinstance(value, collections) or (nonempty and not value)
+            or not all(isinstance(entry, GeometryId) for entry in value)):
+        raise ArgumentError(f"{owner}: {name} must be {what}, got {describe(value)}")
+    return list(value)
 
 
 def set_contact_properties(plant, scene_graph, geometry_ids, config, pad):

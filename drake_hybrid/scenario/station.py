@@ -66,7 +66,7 @@ from xml.etree import ElementTree
 
 import numpy as np
 
-from pydrake.geometry import GeometryId, SceneGraph
+from pydrake.geometry import SceneGraph
 from pydrake.math import RigidTransform
 from pydrake.multibody.parsing import Parser
 from pydrake.multibody.plant import MultibodyPlant, MultibodyPlantConfig
@@ -84,8 +84,8 @@ from drake_hybrid.core.kinematics import EndEffectorKinematics
 from drake_hybrid.core.projections import ConstraintSpace
 from drake_hybrid.scenario.config import ContactConfig, ContactSensorConfig, WristSensorConfig
 from drake_hybrid.scenario.parsing import ConfigureParser
-from drake_hybrid.scenario.plant import (RobotModel, get_frame, only_tool_touches,  # noqa: F401 (a block here too)
-                                         set_contact_properties)
+from drake_hybrid.scenario.plant import (RobotModel, geometry_ids, get_frame,  # noqa: F401 (a block here too)
+                                         only_tool_touches, set_contact_properties)
 from drake_hybrid.scenario.root_context import subsystem_context
 from drake_hybrid.scenario.tasks.robots import add_pad_tool
 from drake_hybrid.scenario.workpieces import add_rigid_workpiece, default_resolution  # noqa: F401 (blocks here too)
@@ -376,19 +376,10 @@ def robot_plant(add_robot):
 # The workpiece and the contact
 # ------------------------------------------------------------------------------------------------
 
-def _geometry_ids(value, name, owner, what):
-    """``value`` (a GeometryId or a list of them) as a list of GeometryIds; ArgumentError naming ``name``."""
-    if isinstance(value, GeometryId):
-        return [value]
-    if not isinstance(value, (list, tuple)) or not all(isinstance(entry, GeometryId) for entry in value):
-        raise ArgumentError(f"{owner}: {name} must be {what}, got {describe(value)}")
-    return list(value)
-
-
 def _tool_geometries(robot, owner):
     if isinstance(robot, RobotModel):
         return list(robot.pad_geometries)
-    return _geometry_ids(robot, "robot", owner, "the RobotModel of mount_tool or a list of the pad's GeometryIds")
+    return geometry_ids(robot, "robot", owner, "the RobotModel of mount_tool or a list of the pad's GeometryIds")
 
 
 def apply_contact_defaults(plant, scene_graph, robot, workpiece_geometries, contact=None):
@@ -402,7 +393,7 @@ def apply_contact_defaults(plant, scene_graph, robot, workpiece_geometries, cont
     if not plant.geometry_source_is_registered():
         raise ArgumentError(f"{owner}: the plant has no SceneGraph (make it with AddMultibodyPlant(config, builder))")
     tool = _tool_geometries(robot, owner)
-    workpiece = _geometry_ids(workpiece_geometries, "workpiece_geometries", owner,
+    workpiece = geometry_ids(workpiece_geometries, "workpiece_geometries", owner,
                              "the GeometryIds of add_rigid_workpiece (a list)")
     contact = instance(contact, "contact", owner, ContactConfig, allow_none=True) or ContactConfig()
     contact.validate(f"{owner}: contact.")
