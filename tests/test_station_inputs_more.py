@@ -11,6 +11,7 @@ import airo_models
 import numpy as np
 import pytest
 import sympy
+
 from pydrake.geometry import GeometryId, Sphere
 from pydrake.math import RigidTransform, RotationMatrix
 from pydrake.multibody.parsing import Parser
@@ -18,69 +19,25 @@ from pydrake.multibody.plant import AddMultibodyPlant, MultibodyPlant
 from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import ConstantVectorSource, Integrator
 
-from drake_hybrid import (
-    ConstraintSpace,
-    GivenVelocityProjection,
-    PoseChart,
-    surface_constraint,
-)
-from drake_hybrid.analysis.derivatives import (
-    central_difference_jacobian,
-    checked_state_jacobian,
-    column_errors,
-    state_names,
-)
-from drake_hybrid.analysis.environment import (
-    contact_environment,
-    impedance_loop,
-    impedance_matrix,
-    impedance_response,
-    mass_factor_within,
-    root_pairs,
-    row_forces,
-)
-from drake_hybrid.analysis.linearization import (
-    check_equilibrium,
-    designed_eigenvalues_by_row,
-    equilibrium_config,
-    linearize_continuous,
-    linearize_discrete,
-    linearize_sampled_loop,
-    match_eigenvalues,
-    predicted_eigenvalues,
-    predicted_errors,
-)
-from drake_hybrid.analysis.modes import (
-    diagnose_unstable_modes,
-    drift_eigenvalues,
-    explained_modes,
-)
+from drake_hybrid import ConstraintSpace, GivenVelocityProjection, PoseChart, surface_constraint
+from drake_hybrid.analysis.derivatives import (central_difference_jacobian, checked_state_jacobian, column_errors,
+                                               state_names)
+from drake_hybrid.analysis.environment import (contact_environment, impedance_loop, impedance_matrix,
+                                               impedance_response, mass_factor_within, root_pairs, row_forces)
+from drake_hybrid.analysis.linearization import (check_equilibrium, designed_eigenvalues_by_row, equilibrium_config,
+                                                 linearize_continuous, linearize_discrete, linearize_sampled_loop,
+                                                 match_eigenvalues, predicted_eigenvalues, predicted_errors)
+from drake_hybrid.analysis.modes import diagnose_unstable_modes, drift_eigenvalues, explained_modes
 from drake_hybrid.control.gains import HybridGains
-from drake_hybrid.core.errors import (
-    ArgumentError,
-    ConfigError,
-    OffConstraintError,
-    PathError,
-)
+from drake_hybrid.core.errors import ArgumentError, ConfigError, OffConstraintError, PathError
 from drake_hybrid.core.surfaces import SphereSurface
 from drake_hybrid.experiments.config_paths import config_value
 from drake_hybrid.scenario.config import ContactConfig, ContactSensorConfig
 from drake_hybrid.scenario.contact_start import rest_contact_wrench, solve_contact_start
-from drake_hybrid.scenario.station import (
-    add_actuators,
-    add_hybrid_controller,
-    add_loggers,
-    add_rigid_workpiece,
-    add_wrench_sensor,
-    apply_contact_defaults,
-    check_controller_plant,
-    default_plant_config,
-    logged,
-    mount_tool,
-    only_tool_touches,
-    read_log,
-    robot_plant,
-)
+from drake_hybrid.scenario.station import (add_actuators, add_hybrid_controller, add_loggers, add_rigid_workpiece,
+                                           add_wrench_sensor, apply_contact_defaults, check_controller_plant,
+                                           default_plant_config, logged, mount_tool, only_tool_touches, read_log,
+                                           robot_plant)
 from drake_hybrid.scenario.tasks import get_task
 from drake_hybrid.systems.sources import Profile
 

@@ -49,17 +49,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
-from drake_hybrid.core.arguments import (
-    complex_vector,
-    describe,
-    joint_vector,
-    matrix,
-    number,
-    numeric_array,
-    positive,
-    relative_tolerance,
-    vector,
-)
+from drake_hybrid.core.arguments import (complex_vector, describe, joint_vector, matrix, number, numeric_array,
+                                         positive, relative_tolerance, vector)
 from drake_hybrid.core.errors import ArgumentError
 from drake_hybrid.scenario.root_context import check_systems_context
 from drake_hybrid.scenario.task import EigenvalueShift

@@ -28,39 +28,21 @@ import time
 from dataclasses import dataclass, field
 
 import numpy as np
-from pydrake.systems.analysis import ApplySimulatorConfig, InitializeParams, Simulator
-from pydrake.systems.primitives import Linearize
 from scipy.linalg import expm
 from scipy.optimize import linear_sum_assignment
 
-from drake_hybrid.analysis.derivatives import (
-    JACOBIAN_TOLERANCE,
-    JacobianCheck,
-    checked_state_jacobian,
-)
-from drake_hybrid.analysis.environment import (
-    impedance_environment_shifts,
-    impedance_matrix,
-)
+from pydrake.systems.analysis import ApplySimulatorConfig, InitializeParams, Simulator
+from pydrake.systems.primitives import Linearize
+
+from drake_hybrid.analysis.derivatives import JACOBIAN_TOLERANCE, JacobianCheck, checked_state_jacobian
+from drake_hybrid.analysis.environment import impedance_environment_shifts, impedance_matrix
 from drake_hybrid.analysis.modes import diagnose_unstable_modes, explained_modes
 from drake_hybrid.control.damping import step_task_mobility
 from drake_hybrid.control.gains import ControlMode, ValidatedGains
 from drake_hybrid.control.law import impedance_blocks
 from drake_hybrid.control.sampling import SAMPLE_LEAD
-from drake_hybrid.core.arguments import (
-    boolean,
-    complex_vector,
-    describe,
-    function,
-    instance,
-    joint_rows,
-    nonnegative,
-    number,
-    positive,
-    relative_tolerance,
-    text,
-    vector,
-)
+from drake_hybrid.core.arguments import (boolean, complex_vector, describe, function, instance, joint_rows, nonnegative,
+                                         number, positive, relative_tolerance, text, vector)
 from drake_hybrid.core.errors import ArgumentError, ConfigError, NotAtEquilibriumError
 from drake_hybrid.core.progress import quiet
 from drake_hybrid.scenario.builder import build_scenario

@@ -23,6 +23,7 @@ import dataclasses
 import math
 
 import numpy as np
+
 from pydrake.geometry import Rgba
 from pydrake.math import RigidTransform, RotationMatrix
 from pydrake.systems.primitives import LogVectorOutput
@@ -31,12 +32,7 @@ from drake_hybrid.control.phases import ContactPhase
 from drake_hybrid.core.arguments import instance, vector
 from drake_hybrid.core.errors import ConfigError, PathError
 from drake_hybrid.core.kinematics import inverse_kinematics
-from drake_hybrid.core.paths import (
-    PathLimits,
-    SurfacePath,
-    path_from_strokes,
-    path_from_waypoints,
-)
+from drake_hybrid.core.paths import PathLimits, SurfacePath, path_from_strokes, path_from_waypoints
 from drake_hybrid.core.patterns import raster, spiral
 from drake_hybrid.core.schema import unknown_field
 from drake_hybrid.core.surfaces import Surface, ViewPlane, check_offset

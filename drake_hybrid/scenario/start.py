@@ -11,8 +11,9 @@ in your own diagram is ``scenario.contact_start.solve_contact_start``.
 """
 
 import numpy as np
-from pydrake.systems.framework import DiagramBuilder
 from scipy.optimize import brentq
+
+from pydrake.systems.framework import DiagramBuilder
 
 from drake_hybrid.core.arguments import joint_vector, vector
 from drake_hybrid.core.errors import DimensionError, ForceSignError, OffConstraintError
