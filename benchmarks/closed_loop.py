@@ -1,6 +1,6 @@
 """Per task: simulation speed, accuracy per mode, linearization time, and the task's own controller tick.
 
-Every task in ``drake_hybrid.scenario.tasks.TASKS`` is measured, so tasks added later
+Every task in ``drake_hybrid.tasks.registry.TASKS`` is measured, so tasks added later
 are included without touching this file.
 
 * **Simulation speed.** ``rtf`` is the real-time factor (simulated / wall
@@ -52,9 +52,9 @@ from drake_hybrid.control.controller import HybridController
 from drake_hybrid.control.gains import ControlMode
 from drake_hybrid.experiments.simulation import simulate
 from drake_hybrid.scenario.builder import build_scenario
-from drake_hybrid.scenario.plant import build_plant
 from drake_hybrid.scenario.start import set_initial_conditions, static_torque
-from drake_hybrid.scenario.tasks import TASKS, get_task
+from drake_hybrid.tasks.plant import build_plant
+from drake_hybrid.tasks.registry import TASKS, get_task
 
 MODES = [mode.value for mode in ControlMode]
 

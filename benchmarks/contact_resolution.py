@@ -37,7 +37,7 @@ from closed_loop import _linearization, plant_alone_rtf  # noqa: E402
 from drake_hybrid.control import fast_compile  # noqa: E402
 from drake_hybrid.experiments.simulation import simulate  # noqa: E402
 from drake_hybrid.scenario.builder import build_scenario  # noqa: E402
-from drake_hybrid.scenario.tasks import get_task  # noqa: E402
+from drake_hybrid.tasks.registry import get_task
 
 DOC = HERE.parent / "docs" / "contact_resolution.md"
 MM = 1e-3

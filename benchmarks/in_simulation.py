@@ -36,9 +36,9 @@ from pydrake.systems.analysis import Simulator
 from drake_hybrid.control.controller import HybridController_
 from drake_hybrid.scenario.builder import build_scenario
 from drake_hybrid.scenario.start import set_initial_conditions
-from drake_hybrid.scenario.tasks import TASKS
 from drake_hybrid.systems import sources
 from drake_hybrid.systems.sensors import ContactWrenchSensor_, WristForceTorqueSensor_
+from drake_hybrid.tasks.registry import TASKS
 
 _STACK = []
 

@@ -51,8 +51,8 @@ from pydrake.systems.framework import DiagramBuilder, LeafSystem  # noqa: E402
 from drake_hybrid.control.sampling import SAMPLE_LEAD  # noqa: E402
 from drake_hybrid.experiments.simulation import simulate  # noqa: E402
 from drake_hybrid.scenario.builder import build_scenario  # noqa: E402
-from drake_hybrid.scenario.plant import build_plant  # noqa: E402
-from drake_hybrid.scenario.tasks import get_task  # noqa: E402
+from drake_hybrid.tasks.plant import build_plant
+from drake_hybrid.tasks.registry import get_task
 
 COMMAND_PORTS = ("desired_velocity", "desired_acceleration", "desired_force", "measured_wrench")
 

@@ -44,8 +44,8 @@ from drake_hybrid.control import fast_compile
 from drake_hybrid.control.controller import HybridController
 from drake_hybrid.control.gains import HybridGains
 from drake_hybrid.core.kinematics import EndEffectorKinematics, inverse_kinematics
-from drake_hybrid.scenario.plant import build_controller_plant
-from drake_hybrid.scenario.tasks import get_task
+from drake_hybrid.tasks.plant import build_controller_plant
+from drake_hybrid.tasks.registry import get_task
 
 # The benchmarks time the compiled law: every controller compiles (or loads) it at its first tick, in this
 # process, instead of running the generic law while a background job compiles it (control/fast_compile.py).
@@ -231,7 +231,7 @@ def planar_controller(mode="velocity-force", joints=3, control_period=None):
     space = task.constraint_space(config)
     controller = HybridController(plant, robot.end_effector_frame, robot.end_effector_point, space,
                                   gains=config.gains, mode=mode, control_period=control_period)
-    from drake_hybrid.scenario.tasks.window_washing import PAD_RADIUS
+    from drake_hybrid.station.arm import PAD_RADIUS
 
     x_start, theta_start = config.start.configuration
     q = task.inverse_kinematics(config, x_start, config.task_parameters["window_height"] - PAD_RADIUS, theta_start)

@@ -10,7 +10,7 @@ Measures, in one process (and the fresh processes and venv some parts need), and
    against Drake's C++ InverseDynamicsController on the same plant (tick.py),
    and against the Python floor: a controller that makes only the Drake calls
    the law needs and reads its ports (python_floor.py; part ``floor``);
-2. per task in ``drake_hybrid.scenario.tasks.TASKS``: the 1 kHz closed loop's
+2. per task in ``drake_hybrid.tasks.registry.TASKS``: the 1 kHz closed loop's
    real-time factor against the plant alone (and against the floor's closed loop,
    a Python update that only reads the state and the contact results); accuracy per
    mode; linearization wall time; the task's own controller tick (closed_loop.py);
@@ -57,7 +57,7 @@ import python_floor  # noqa: E402
 import sweep_throughput  # noqa: E402
 import tick  # noqa: E402
 
-from drake_hybrid.scenario.tasks import TASKS  # noqa: E402
+from drake_hybrid.tasks.registry import TASKS
 
 ROBOTS = ("planar-3r", "ur5e", "panda")
 SCALING_JOINTS = ("planar-3r", "planar-4r", "ur5e", "panda")

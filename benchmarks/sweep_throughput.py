@@ -60,7 +60,7 @@ def warm_up(task=TASK):
     started = time.perf_counter()
     import drake_hybrid.experiments.sweep  # noqa: F401
     from drake_hybrid.experiments.simulation import simulate
-    from drake_hybrid.scenario.tasks import get_task
+    from drake_hybrid.tasks.registry import get_task
 
     config = get_task(task).default_config()
     config.duration = 0.01

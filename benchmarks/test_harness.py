@@ -70,7 +70,7 @@ def test_every_timed_idc_tick_sees_a_new_state():
 def window_run():
     """(config, log) of 0.3 s of the window task's default closed loop."""
     from drake_hybrid.experiments.simulation import simulate
-    from drake_hybrid.scenario.tasks import get_task
+    from drake_hybrid.tasks.registry import get_task
 
     config = get_task("window-washing").default_config()
     config.duration = 0.3

@@ -24,13 +24,13 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
+from report_format import significant  # noqa: E402  (docs/: figures rounded, reruns rewrite nothing)
 
 from drake_hybrid.analysis import kinematic_instability as ki  # noqa: E402
 from drake_hybrid.analysis.linearization import linearize_continuous, linearize_discrete  # noqa: E402
 from drake_hybrid.experiments.simulation import simulate  # noqa: E402
-from drake_hybrid.scenario.tasks import get_task  # noqa: E402
+from drake_hybrid.tasks.registry import get_task
 from drake_hybrid.viz.plotting import joint_servo_map_figure  # noqa: E402
-from report_format import significant  # noqa: E402  (docs/: figures rounded, reruns rewrite nothing)
 
 DOCS = Path(__file__).resolve().parent
 EVALUATION_TIME = 1.0         # s: the window errors are the largest after this (five of K_v = 10's time constants)

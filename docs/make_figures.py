@@ -20,7 +20,7 @@ import tempfile
 from pathlib import Path
 
 from drake_hybrid.experiments.simulation import simulate
-from drake_hybrid.scenario.tasks import get_task
+from drake_hybrid.tasks.registry import get_task
 from drake_hybrid.viz.outputs import write_run
 
 FIGURES = Path(__file__).resolve().parent / "figures"

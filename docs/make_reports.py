@@ -17,8 +17,8 @@ import numpy as np
 from drake_hybrid.analysis.linearization import (impedance_realization, linearize_continuous, linearize_discrete,
                                                  predicted_match)
 from drake_hybrid.experiments.simulation import simulate
-from drake_hybrid.scenario.tasks import get_task
-from drake_hybrid.scenario.tasks.robots import worst_condition_number
+from drake_hybrid.tasks.builtin.robots import worst_condition_number
+from drake_hybrid.tasks.registry import get_task
 
 DOCS = Path(__file__).resolve().parent
 

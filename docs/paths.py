@@ -34,9 +34,9 @@ from drake_hybrid.analysis.linearization import linearize_continuous  # noqa: E4
 from drake_hybrid.experiments.simulation import simulate  # noqa: E402
 from drake_hybrid.experiments.sweep import read_results, run_sweep  # noqa: E402
 from drake_hybrid.experiments.sweep_spec import load_spec  # noqa: E402
-from drake_hybrid.scenario.data_task import load_task_file  # noqa: E402
-from drake_hybrid.scenario.path_job import job_duration, with_path  # noqa: E402
-from drake_hybrid.scenario.tasks import get_task  # noqa: E402
+from drake_hybrid.tasks.path import job_duration, with_path
+from drake_hybrid.tasks.registry import get_task
+from drake_hybrid.tasks.task_file import load_task_file
 from drake_hybrid.viz.path_plots import save_path_plots  # noqa: E402
 
 logging.getLogger("drake").setLevel(logging.ERROR)

@@ -64,7 +64,7 @@ supervisor makes no decision. A stale sensor (repeating its last sample) is reco
 sequence number; without the conditioner the force loop integrates the stale error for the whole
 dropout (the reference row).
 
-**Model error** (`scenario.config.ModelErrorConfig`, simulation plant only). Payload and link-inertia
+**Model error** (`tasks.config.ModelErrorConfig`, simulation plant only). Payload and link-inertia
 errors are small for this arm and rejected: the force integral removes the force error, the
 velocity error stays below 1 %. Joint friction is the large one: velocity-force mode has no
 integral on the velocity rows, so friction leaves a steady velocity error that the rigid-contact

@@ -7,7 +7,7 @@ synopsis).
 Each command loads what it uses when it runs, under its first stage line ("drake-hybrid simulate:
 loading Drake, numba and matplotlib ... 2.1 s", ``_loading``): Dask for sweep only, the LCM hardware
 stack for hardware only, Meshcat's recorder only with --html. This module itself imports the standard
-library, numpy and the light ``commands``, ``control.gains`` and ``scenario.task_options`` (the tasks'
+library, numpy and the light ``commands``, ``control.gains`` and ``tasks.task_options`` (the tasks'
 options for a command's --help), so that every --help is answered in a fraction of a second; it is the
 one module whose functions import the package's modules (tests/test_architecture.py).
 
@@ -37,7 +37,7 @@ from drake_hybrid.control.gains import ControlMode
 from drake_hybrid.core.arguments import relative_tolerance
 from drake_hybrid.core.errors import ConfigError
 from drake_hybrid.core.progress import Stages
-from drake_hybrid.scenario.task_options import BUILT_IN_OPTIONS, built_in_option_help, is_task_file
+from drake_hybrid.tasks.task_options import BUILT_IN_OPTIONS, built_in_option_help, is_task_file
 
 
 class UsageError(ValueError):
@@ -115,7 +115,7 @@ def _existing_ancestor(path):
 
 
 def _task_argument(value):
-    """The TASK argument: a task's name, or a task file (FILE.yaml, scenario/data_task.py)."""
+    """The TASK argument: a task's name, or a task file (FILE.yaml, tasks/task_file.py)."""
     if is_task_file(value) or value in BUILT_IN_OPTIONS:
         return value
     raise argparse.ArgumentTypeError(f"invalid choice: '{value}' (choose from {', '.join(sorted(BUILT_IN_OPTIONS))}, "
@@ -123,9 +123,9 @@ def _task_argument(value):
 
 
 def _config(args):
-    from drake_hybrid.scenario.config import load_config
-    from drake_hybrid.scenario.data_task import load_task_file
-    from drake_hybrid.scenario.tasks import get_task
+    from drake_hybrid.tasks.config import load_config
+    from drake_hybrid.tasks.registry import get_task
+    from drake_hybrid.tasks.task_file import load_task_file
 
     _check_output_paths(args)
     options = _options(args)
@@ -159,7 +159,7 @@ def _fmt(values):
 def _eigenvalues_by_row(controller, summary):
     """" by row, velocity: 'x-dot' -10, 'theta-dot' -8; force: 'F' -10": each designed eigenvalue with its
     row, or by loop when a gain couples the rows."""
-    from drake_hybrid.analysis.linearization import designed_eigenvalues_by_row   # (loaded with the command)
+    from drake_hybrid.analysis.linearization import designed_eigenvalues_by_row  # (loaded with the command)
     by_row = designed_eigenvalues_by_row(controller.validated_gains(), controller.mode, controller.kinematic_rows,
                                          controller.num_joints - controller.task_size)
     if by_row is None:
@@ -275,7 +275,7 @@ def command_simulate(args):
     with _loading(args, "Drake, numba and matplotlib"):
         from drake_hybrid.experiments.path_report import path_text
         from drake_hybrid.experiments.simulation import RunStopped, simulate
-        from drake_hybrid.scenario.tasks import get_task
+        from drake_hybrid.tasks.registry import get_task
         from drake_hybrid.viz.outputs import write_run
     config = _config(args)
     out = Path(args.out) if args.out else Path("runs") / config.task
@@ -338,7 +338,7 @@ def command_analyze(args):
         from drake_hybrid.analysis.derivatives import DerivativeMismatchWarning
         from drake_hybrid.analysis.linearization import (linearize_continuous, linearize_discrete, nyquist_split,
                                                          predicted_match, shift_indices)
-        from drake_hybrid.scenario.tasks import get_task
+        from drake_hybrid.tasks.registry import get_task
     config = _config(args)
     task = get_task(config.task)
     stages = Stages(enabled=not args.quiet)
@@ -466,7 +466,7 @@ def command_sweep(args):
     with _loading(args, "Drake, numba and Dask"):
         from drake_hybrid.experiments.sweep import read_results, run_sweep
         from drake_hybrid.experiments.sweep_spec import SweepSpecError, load_spec
-        from drake_hybrid.scenario.data_task import load_task_file
+        from drake_hybrid.tasks.task_file import load_task_file
     _check_output_paths(args)
     if args.workers < 0:
         raise UsageError(f"--workers must be 0 (serial, in this process) or a number of local Dask worker "
@@ -504,10 +504,10 @@ def command_sweep(args):
 
 def command_tasks(args):
     with _loading(args, "Drake"):
-        from drake_hybrid.scenario.data_task import read_task_file
-        from drake_hybrid.scenario.hooks import ENTRY_POINT_GROUP, get_hook, hook_names
-        from drake_hybrid.scenario.parsing import models_directory
-        from drake_hybrid.scenario.tasks import TASKS
+        from drake_hybrid.station.parsing import models_directory
+        from drake_hybrid.tasks.hooks import ENTRY_POINT_GROUP, get_hook, hook_names
+        from drake_hybrid.tasks.registry import TASKS
+        from drake_hybrid.tasks.task_file import read_task_file
     print("tasks (drake-hybrid simulate|analyze NAME):")
     for name, task in TASKS.items():
         print(f"  {name:24s} {task.description}")
@@ -526,7 +526,7 @@ def command_tasks(args):
 
 
 def _task_options_epilog():
-    """The valid --option keys of every built-in task (from its typed Options, ``scenario.task_options``)."""
+    """The valid --option keys of every built-in task (from its typed Options, ``tasks.task_options``)."""
     lines = ["task options (--option KEY=VALUE, repeatable):"]
     for name in BUILT_IN_OPTIONS:
         entries = built_in_option_help(name)

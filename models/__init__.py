@@ -1,1 +1,1 @@
-"""Model files of drake_hybrid (data only); see drake_hybrid.scenario.parsing."""
+"""Model files of drake_hybrid (data only); see drake_hybrid.station.parsing."""

@@ -24,9 +24,10 @@ from drake_hybrid.analysis.environment import impedance_loop, root_pairs
 from drake_hybrid.analysis.linearization import design_time_constant, linearize_continuous
 from drake_hybrid.control.gains import ControlMode
 from drake_hybrid.experiments.simulation import simulate
-from drake_hybrid.scenario.custom import CustomTask, add_rigid_workpiece
-from drake_hybrid.scenario.robots import load_arm
-from drake_hybrid.scenario.tasks import register_task
+from drake_hybrid.station.workpieces import add_rigid_workpiece
+from drake_hybrid.tasks.custom import CustomTask
+from drake_hybrid.tasks.registry import register_task
+from drake_hybrid.tasks.robots import load_arm
 
 SHARE = Path(importlib.metadata.distribution("example-robot-data").locate_file("cmeel.prefix/share/example-robot-data"))
 
@@ -39,7 +40,7 @@ ARMS = {
 SHAPES = ("plane", "cylinder", "sphere")
 MODES = ("velocity-force", "position-force", "impedance-force")
 
-PAD_RADIUS = 0.02            # the pad of attach_pad_tool
+PAD_RADIUS = 0.02            # the pad of mount_tool
 TOP = 0.1                    # m, height of the workpiece's top
 RADIUS = 0.05                # m, of the cylinder and the sphere: the smallest, most tessellated curvature
 START_OFFSET = -0.02         # m along x from the top: the pad slides over it

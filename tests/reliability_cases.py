@@ -27,11 +27,11 @@ from drake_hybrid.control.supervision import ContactSupervisor, SupervisionConfi
 from drake_hybrid.core.errors import ArgumentError, KinematicSingularityWarning
 from drake_hybrid.experiments.metrics import settling_time
 from drake_hybrid.experiments.simulation import effort_limits, simulate
-from drake_hybrid.scenario.config import ModelErrorConfig
-from drake_hybrid.scenario.tasks import get_task
 from drake_hybrid.systems.faults import SensorFaultConfig
 from drake_hybrid.systems.sensors import LowPassFilter, low_pass_coefficient
 from drake_hybrid.systems.sources import Profile
+from drake_hybrid.tasks.config import ModelErrorConfig
+from drake_hybrid.tasks.registry import get_task
 
 # Rows that fail their criterion today, kept visible (the report says FAIL; the test requires them
 # to keep failing until they are fixed, then they leave this list): (fault, magnitude, figure) -> why.
@@ -531,7 +531,7 @@ class BadInput:
 
 
 def _window_parts():
-    from drake_hybrid.scenario.plant import build_controller_plant
+    from drake_hybrid.tasks.plant import build_controller_plant
 
     task = get_task("window-washing")
     config = task.default_config()
@@ -548,7 +548,7 @@ def _controller(**changes):
     return HybridController(**arguments)
 
 
-def _unfinalized_plant():
+def check_unfinalized_plant():
     from pydrake.multibody.plant import MultibodyPlant
 
     return MultibodyPlant(0.0)
@@ -583,8 +583,8 @@ def _singular_start():
     from drake_hybrid.core.projections import ConstraintSpace, GivenVelocityProjection
     from drake_hybrid.scenario.builder import build_scenario
     from drake_hybrid.scenario.start import set_initial_conditions
-    from drake_hybrid.scenario.tasks import TASKS
-    from drake_hybrid.scenario.tasks.window_washing import WindowWashing
+    from drake_hybrid.tasks.builtin.window_washing import WindowWashing
+    from drake_hybrid.tasks.registry import TASKS
 
     class SingularWindow(WindowWashing):
         name = "singular-window"
@@ -630,8 +630,8 @@ def _friction(coulomb):
 def _wrist_sensor_on_a_revolute_joint():
     from pydrake.systems.framework import DiagramBuilder
 
-    from drake_hybrid.scenario.plant import build_plant
     from drake_hybrid.systems.sensors import WristForceTorqueSensor
+    from drake_hybrid.tasks.plant import build_plant
 
     task = get_task("window-washing")
     plant, _, robot = build_plant(task, task.default_config(), DiagramBuilder())
@@ -642,8 +642,8 @@ def _wrist_sensor_on_a_revolute_joint():
 def _contact_sensor(with_bodies, point):
     from pydrake.systems.framework import DiagramBuilder
 
-    from drake_hybrid.scenario.plant import build_plant
     from drake_hybrid.systems.sensors import ContactWrenchSensor
+    from drake_hybrid.tasks.plant import build_plant
 
     task = get_task("window-washing")
     plant, _, robot = build_plant(task, task.default_config(), DiagramBuilder())
@@ -653,7 +653,7 @@ def _contact_sensor(with_bodies, point):
 
 BAD_CONFIGURATIONS = [
     # HybridController
-    BadInput("controller: plant not finalized", lambda: _controller(plant=_unfinalized_plant()), ValueError,
+    BadInput("controller: plant not finalized", lambda: _controller(plant=check_unfinalized_plant()), ValueError,
              "the plant must be finalized"),
     BadInput("controller: not a plant", lambda: _controller(plant="ur5e"), ArgumentError,
              r"plant must be a MultibodyPlant, got 'ur5e' \(a str\)"),

@@ -12,8 +12,8 @@ import pytest
 import drake_hybrid.cli as cli
 from drake_hybrid.analysis.derivatives import DerivativeMismatchWarning, JacobianCheck
 from drake_hybrid.analysis.linearization import linearize_discrete, match_eigenvalues, shifted_design
-from drake_hybrid.scenario.task import EigenvalueShift
-from drake_hybrid.scenario.tasks import get_task
+from drake_hybrid.tasks.registry import get_task
+from drake_hybrid.tasks.task import EigenvalueShift
 
 
 @pytest.fixture(scope="module")

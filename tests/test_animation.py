@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from drake_hybrid.cli import main
-from drake_hybrid.scenario.tasks import get_task
+from drake_hybrid.tasks.registry import get_task
 from drake_hybrid.viz.animation import chromium_executable, image_statistics, render_html, set_task_camera
 
 

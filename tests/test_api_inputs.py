@@ -26,11 +26,11 @@ from drake_hybrid.control.phases import ContactPhase
 from drake_hybrid.control.safety import SafetyConfig
 from drake_hybrid.control.supervision import ContactSupervisor, SupervisionConfig
 from drake_hybrid.core.errors import DrakeHybridError
-from drake_hybrid.scenario.custom import CustomTask
-from drake_hybrid.scenario.plant import build_controller_plant
-from drake_hybrid.scenario.tasks import get_task
 from drake_hybrid.systems.sensors import LowPassFilter, WrenchConditioner
 from drake_hybrid.systems.sources import Profile, ProfileSource
+from drake_hybrid.tasks.custom import CustomTask
+from drake_hybrid.tasks.plant import build_controller_plant
+from drake_hybrid.tasks.registry import get_task
 
 # -- the bad values of each kind of argument ----------------------------------------------------------
 

@@ -17,8 +17,9 @@ from drake_hybrid.control.baselines import (AxisPDOpenLoopForceController, Basel
                                             joint_servo_eigenvalues, make_baseline)
 from drake_hybrid.core.errors import ConfigError, DimensionError
 from drake_hybrid.scenario.builder import build_scenario
-from drake_hybrid.scenario.config import MechanismConfig, WristSensorConfig, load_config
-from drake_hybrid.scenario.tasks import get_task
+from drake_hybrid.station.sensing import WristSensorConfig
+from drake_hybrid.tasks.config import MechanismConfig, load_config
+from drake_hybrid.tasks.registry import get_task
 
 CRANK = get_task("crank-turning")
 DOCS = Path(__file__).resolve().parents[1] / "docs"

@@ -14,8 +14,8 @@ from drake_hybrid.cli import main, make_parser
 from drake_hybrid.core.errors import ConfigError
 from drake_hybrid.core.progress import Stages
 from drake_hybrid.experiments.sweep import SweepRun
-from drake_hybrid.scenario.tasks import BUILT_IN_TASKS, TASKS, get_task
-from drake_hybrid.scenario.tasks.grinding import SPHERE_ONLY
+from drake_hybrid.tasks.registry import BUILT_IN_TASKS, TASKS, get_task
+from drake_hybrid.tasks.task_options import SPHERE_ONLY
 
 README = Path(__file__).resolve().parent.parent / "README.md"
 COMMAND_LINE = README.parent / "docs" / "reference" / "command_line.md"
@@ -104,7 +104,7 @@ def test_every_hardware_option_says_what_goes_there(mode):
 @pytest.mark.parametrize("command", ["simulate", "analyze"])
 def test_option_help_lists_every_tasks_keys(capsys, command):
     """Every built-in task's options (the command line's process knows no other task), from the light
-    scenario.task_options: each task's own option_help, exactly."""
+    tasks.task_options: each task's own option_help, exactly."""
     text = _help(capsys, [command, "--help"])
     for name in BUILT_IN_TASKS:
         task = TASKS[name]

@@ -13,10 +13,11 @@ from drake_hybrid.control.supervision import SupervisionConfig
 from drake_hybrid.core.errors import ArgumentError, ConfigError, DrakeHybridError, PathError
 from drake_hybrid.experiments.simulation import simulate
 from drake_hybrid.scenario.builder import build_scenario, prepare_config
-from drake_hybrid.scenario.config import ContactConfig, ScenarioConfig, StartConfig, load_config
-from drake_hybrid.scenario.path_job import with_path
-from drake_hybrid.scenario.tasks import get_task
+from drake_hybrid.station.contact import ContactConfig
 from drake_hybrid.systems.sources import Profile
+from drake_hybrid.tasks.config import ScenarioConfig, StartConfig, load_config
+from drake_hybrid.tasks.path import with_path
+from drake_hybrid.tasks.registry import get_task
 
 
 @pytest.fixture(scope="module")

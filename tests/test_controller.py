@@ -15,8 +15,8 @@ from drake_hybrid import GainError
 from drake_hybrid.control.controller import HybridController, HybridController_
 from drake_hybrid.control.gains import HybridGains
 from drake_hybrid.core.linalg import value
-from drake_hybrid.scenario.plant import build_controller_plant
-from drake_hybrid.scenario.tasks import get_task
+from drake_hybrid.tasks.plant import build_controller_plant
+from drake_hybrid.tasks.registry import get_task
 
 MODES = ["velocity-force", "position-force", "impedance-force"]
 INPUTS = ["estimated_state", "measured_wrench", "desired_velocity", "desired_acceleration", "desired_force"]
@@ -269,7 +269,7 @@ def test_scalar_conversion_keeps_every_argument_and_contexts_do_not_share_scratc
     """ToAutoDiffXd rebuilds the controller from every argument it was given (none falls back to a
     default), and each context owns its MultibodyForces scratch (a cache entry)."""
     from drake_hybrid.scenario.builder import build_scenario
-    from drake_hybrid.scenario.tasks import get_task
+    from drake_hybrid.tasks.registry import get_task
 
     config = get_task("window-washing").default_config()
     config.safety.max_joint_acceleration = 12.0

@@ -36,10 +36,11 @@ from drake_hybrid.control.gains import HybridGains
 from drake_hybrid.control.law import impedance_blocks, impedance_gain
 from drake_hybrid.experiments.simulation import simulate
 from drake_hybrid.scenario.builder import build_scenario
-from drake_hybrid.scenario.custom import (CustomTask, add_actuators, add_rigid_workpiece, attach_pad_tool,
-                                          urdf_effort_limits)
-from drake_hybrid.scenario.tasks import register_task
-from drake_hybrid.scenario.tasks.window_washing import WindowWashing
+from drake_hybrid.station.arm import add_actuators, mount_tool, urdf_effort_limits
+from drake_hybrid.station.workpieces import add_rigid_workpiece
+from drake_hybrid.tasks.builtin.window_washing import WindowWashing
+from drake_hybrid.tasks.custom import CustomTask
+from drake_hybrid.tasks.registry import register_task
 
 WRIST_DAMPING = 300.0           # N m s/rad
 
@@ -160,7 +161,7 @@ def xarm_table_task(tmp_path_factory):
         parser.package_map().Add("example-robot-data", str(SHARE))
         arm = parser.AddModels(str(urdf))[0]                       # welded to the world by the URDF
         add_actuators(plant, arm, urdf_effort_limits(XARM7))
-        return attach_pad_tool(plant, arm, "link_eef")
+        return mount_tool(plant, arm, "link_eef")
 
     def add_table(plant):
         return add_rigid_workpiece(plant, HalfSpace(), RigidTransform([0.0, 0.0, TABLE]), name="table")

@@ -20,10 +20,11 @@ from drake_hybrid.analysis.derivatives import (JACOBIAN_TOLERANCE, DerivativeMis
 from drake_hybrid.analysis.linearization import equilibrium_config, linearize_continuous
 from drake_hybrid.control.gains import HybridGains
 from drake_hybrid.scenario.builder import build_scenario
-from drake_hybrid.scenario.custom import CustomTask, add_rigid_workpiece
 from drake_hybrid.scenario.start import set_initial_conditions
-from drake_hybrid.scenario.tasks import get_task, register_task
-from drake_hybrid.scenario.tasks.robots import UR5E_SEED, add_ur5e_with_pad
+from drake_hybrid.station.workpieces import add_rigid_workpiece
+from drake_hybrid.tasks.builtin.robots import UR5E_SEED, add_ur5e_with_pad
+from drake_hybrid.tasks.custom import CustomTask
+from drake_hybrid.tasks.registry import get_task, register_task
 
 BLOCK_TOP = np.array([0.45, 0.1, 0.1])        # centre of the block's top face (m)
 BLOCK_TILT = RotationMatrix.MakeYRotation(0.35)  # a tilted plane

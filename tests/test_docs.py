@@ -26,10 +26,10 @@ from docutils.core import publish_doctree
 from drake_hybrid.analysis.linearization import designed_eigenvalues_by_row, predicted_eigenvalues
 from drake_hybrid.control.gains import HybridGains
 from drake_hybrid.experiments.simulation import simulate
-from drake_hybrid.scenario.data_task import TaskFile
-from drake_hybrid.scenario.schema_doc import schema_rows
-from drake_hybrid.scenario.station import LOG_KEYS
-from drake_hybrid.scenario.tasks import get_task
+from drake_hybrid.station.loggers import LOG_KEYS
+from drake_hybrid.tasks.registry import get_task
+from drake_hybrid.tasks.schema_doc import schema_rows
+from drake_hybrid.tasks.task_file import TaskFile
 
 ROOT = Path(__file__).resolve().parents[1]
 DOCS = ROOT / "docs"
@@ -177,7 +177,7 @@ def test_the_outputs_page_documents_every_key_a_run_writes():
 
 
 def test_the_own_diagram_page_documents_every_log_key():
-    """docs/howto/own_diagram.md's table of the log: every key of scenario.station.LOG_KEYS."""
+    """docs/howto/own_diagram.md's table of the log: every key of station.loggers.LOG_KEYS."""
     page = (DOCS / "howto" / "own_diagram.md").read_text()
     documented = set(re.findall(r"`([a-z_]+)`", page.split("## The log", 1)[1].split("\n## ", 1)[0]))
     assert set(LOG_KEYS) - documented == set()

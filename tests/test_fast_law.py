@@ -17,7 +17,7 @@ from drake_hybrid.control.damping import joint_damping
 from drake_hybrid.control.gains import ControlMode
 from drake_hybrid.control.safety import SafetyConfig
 from drake_hybrid.scenario.builder import build_scenario
-from drake_hybrid.scenario.tasks import BUILT_IN_TASKS, TASKS
+from drake_hybrid.tasks.registry import BUILT_IN_TASKS, TASKS
 
 pytestmark = pytest.mark.skipif(fast_kernels.NUMBA_ERROR is not None, reason="numba not available")
 

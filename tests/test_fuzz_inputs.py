@@ -18,9 +18,9 @@ from drake_hybrid.core.errors import DrakeHybridError, ForceSignError
 from drake_hybrid.experiments.sweep import sweep_points
 from drake_hybrid.experiments.sweep_spec import SweepSpecError, load_spec
 from drake_hybrid.scenario.builder import build_scenario
-from drake_hybrid.scenario.config import ALLOWED_INFINITE, load_config
 from drake_hybrid.scenario.start import set_initial_conditions
-from drake_hybrid.scenario.tasks import TASKS, get_task
+from drake_hybrid.tasks.config import ALLOWED_INFINITE, load_config
+from drake_hybrid.tasks.registry import TASKS, get_task
 
 TASK = "window-washing"
 

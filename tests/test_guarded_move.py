@@ -15,7 +15,7 @@ import reliability_cases as reliability
 
 from drake_hybrid.control.phases import ContactPhase
 from drake_hybrid.experiments.simulation import simulate
-from drake_hybrid.scenario.tasks import get_task
+from drake_hybrid.tasks.registry import get_task
 
 
 def lighter_pair(config):

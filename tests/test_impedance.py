@@ -11,8 +11,8 @@ from drake_hybrid.control.gains import HybridGains
 from drake_hybrid.control.law import impedance_blocks, impedance_gain
 from drake_hybrid.experiments.metrics import impedance_check
 from drake_hybrid.experiments.simulation import simulate
-from drake_hybrid.scenario.plant import build_controller_plant
-from drake_hybrid.scenario.tasks import get_task
+from drake_hybrid.tasks.plant import build_controller_plant
+from drake_hybrid.tasks.registry import get_task
 
 GRINDING = get_task("grinding")
 

@@ -23,14 +23,14 @@ from drake_hybrid.core.arguments import joint_rows, joint_vector
 from drake_hybrid.core.errors import ArgumentError, PathError
 from drake_hybrid.core.kinematics import inverse_kinematics
 from drake_hybrid.scenario.builder import build_scenario
-from drake_hybrid.scenario.clearance import robot_penetrations
-from drake_hybrid.scenario.path_job import build_path, with_path
-from drake_hybrid.scenario.robots import load_arm
-from drake_hybrid.scenario.start import (check_start, holding_torque, prime_start, set_initial_conditions,
-                                         static_torque)
-from drake_hybrid.scenario.tasks import get_task
-from drake_hybrid.scenario.tasks.grinding import pad_positions
-from drake_hybrid.scenario.tasks.robots import worst_condition_number
+from drake_hybrid.scenario.start import check_start, set_initial_conditions, static_torque
+from drake_hybrid.station.clearance import robot_penetrations
+from drake_hybrid.station.start import holding_torque, prime_start
+from drake_hybrid.tasks.builtin.grinding import pad_positions
+from drake_hybrid.tasks.builtin.robots import worst_condition_number
+from drake_hybrid.tasks.path import build_path, with_path
+from drake_hybrid.tasks.registry import get_task
+from drake_hybrid.tasks.robots import load_arm
 
 logging.getLogger("drake").setLevel(logging.ERROR)
 

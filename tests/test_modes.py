@@ -34,9 +34,10 @@ from drake_hybrid.analysis.derivatives import DerivativeMismatchWarning
 from drake_hybrid.analysis.linearization import linearize_continuous
 from drake_hybrid.analysis.modes import UNSTABLE_RATE, ModeDiagnosis, drift_eigenvalues, explained_modes
 from drake_hybrid.control.gains import HybridGains
-from drake_hybrid.scenario.custom import (CustomTask, add_actuators, add_rigid_workpiece, attach_pad_tool,
-                                          urdf_effort_limits, weld_joints)
-from drake_hybrid.scenario.tasks import get_task, register_task
+from drake_hybrid.station.arm import add_actuators, mount_tool, urdf_effort_limits, weld_joints
+from drake_hybrid.station.workpieces import add_rigid_workpiece
+from drake_hybrid.tasks.custom import CustomTask
+from drake_hybrid.tasks.registry import get_task, register_task
 
 logging.getLogger("drake").addFilter(lambda record: "safety_controller" not in record.getMessage())
 SHARE = Path(importlib.metadata.distribution("example-robot-data").locate_file("cmeel.prefix/share/example-robot-data"))
@@ -51,7 +52,7 @@ def add_panda(plant):
     plant.WeldFrames(plant.world_frame(), plant.GetFrameByName("panda_link0", panda))
     weld_joints(plant, ["panda_finger_joint1", "panda_finger_joint2"], panda)
     add_actuators(plant, panda, urdf_effort_limits(PANDA))
-    return attach_pad_tool(plant, panda, "panda_hand_tcp")
+    return mount_tool(plant, panda, "panda_hand_tcp")
 
 
 def add_small_drum(plant):
@@ -114,7 +115,7 @@ def test_the_default_law_cancels_the_measured_tangential_force_and_the_drift_wit
 
 def test_a_wrist_sensor_without_tool_inertia_compensation_is_refused_with_the_cancellation():
     from drake_hybrid.core.errors import ConfigError
-    from drake_hybrid.scenario.tasks import get_task
+    from drake_hybrid.tasks.registry import get_task
 
     config = get_task("crank-turning").default_config()
     assert config.compensate_tangential_force is False          # the crank keeps the paper's form

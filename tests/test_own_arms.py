@@ -26,7 +26,7 @@ tessellated contact is stiff along the surface (docs/drake_notes.md):
   (test_a_heavier_impedance_meets_every_figure_on_the_cylinder; docs/own_arms.md, second table).
 Impedance-force on the 5 cm cylinder and sphere used to miss its velocity errors (6.6-6.9 %): SAP
 damped each contact face along its normal with Drake's 0.2 s pair relaxation, which dragged the pad
-0.24 N although mu = 0. The default pair is now 0.03 s (scenario.config.ContactConfig): 0.04 N.
+0.24 N although mu = 0. The default pair is now 0.03 s (station.contact.ContactConfig): 0.04 N.
 Position-force on the sphere (and the xArm7's cylinder) used to miss its pair (-3, -7) by 7.6-12 %:
 the law split the wrench, which the linearization's 200 Hz low-pass delays, with the current E(x).
 It now splits it where it was measured (control.law.measured_forces), within 0.71 %.

@@ -1,6 +1,6 @@
 """A user's own station (issue 30): an arm the package does not ship (Unitree Z1 from
 example-robot-data, its gripper removed), an ellipsoid of the user's, the constraint in sympy, the
-package's blocks (scenario.station) in the user's DiagramBuilder and plant, Drake's Simulator and the
+package's blocks (station.loop) in the user's DiagramBuilder and plant, Drake's Simulator and the
 package's linearization. Public names only; tutorial 8 is the same station."""
 
 import importlib.metadata
@@ -20,19 +20,20 @@ from pydrake.systems.framework import DiagramBuilder
 from drake_hybrid import ConstraintSpace, GivenVelocityProjection, PoseChart, surface_constraint
 from drake_hybrid.analysis.linearization import design_time_constant, linearize_at_contact
 from drake_hybrid.control.gains import ControlMode, HybridGains
-from drake_hybrid.core.errors import (ArgumentError, ConfigError, ForceSignError, OffConstraintError,
-                                      StartCollisionError)
+from drake_hybrid.core.errors import ArgumentError, ConfigError, ForceSignError, OffConstraintError, StartCollisionError
 from drake_hybrid.scenario.builder import build_scenario
-from drake_hybrid.scenario.config import WristSensorConfig
-from drake_hybrid.scenario.robots import prepare_model
-from drake_hybrid.scenario.contact_start import rest_contact_wrench, solve_contact_start
 from drake_hybrid.scenario.start import set_initial_conditions
-from drake_hybrid.scenario.station import (LOG_KEYS, add_hybrid_controller, add_loggers, add_rigid_workpiece,
-                                           apply_contact_defaults, default_plant_config, mount_tool,
-                                           only_tool_touches, read_log, robot_plant)
-from drake_hybrid.scenario.tasks import get_task
+from drake_hybrid.station.arm import mount_tool, robot_plant
+from drake_hybrid.station.contact import apply_contact_defaults, default_plant_config, only_tool_touches
+from drake_hybrid.station.contact_start import rest_contact_wrench, solve_contact_start
+from drake_hybrid.station.loggers import LOG_KEYS, add_loggers, read_log
+from drake_hybrid.station.loop import add_hybrid_controller
+from drake_hybrid.station.sensing import WristSensorConfig
+from drake_hybrid.station.workpieces import add_rigid_workpiece
 from drake_hybrid.systems.sensors import WristForceTorqueSensor
 from drake_hybrid.systems.sources import Profile
+from drake_hybrid.tasks.registry import get_task
+from drake_hybrid.tasks.robots import prepare_model
 
 SHARE = Path(importlib.metadata.distribution("example-robot-data").locate_file("cmeel.prefix/share/example-robot-data"))
 CENTER, AXES, PAD = np.array([0.26, 0.0, 0.253]), np.array([0.12, 0.08, 0.06]), 0.02

@@ -71,7 +71,7 @@ def test_models_are_found_and_resolve():
     from pydrake.multibody.parsing import Parser
     from pydrake.multibody.plant import MultibodyPlant
 
-    from drake_hybrid.scenario.parsing import ConfigureParser, model_url, models_directory
+    from drake_hybrid.station.parsing import ConfigureParser, model_url, models_directory
 
     assert (models_directory() / "package.xml").exists()
     plant = MultibodyPlant(0.0)

@@ -1,4 +1,4 @@
-"""Jobs from the first touch to the last (scenario.path_job) on the UR5e: a raster on the sphere's cap
+"""Jobs from the first touch to the last (station.path_job) on the UR5e: a raster on the sphere's cap
 and on a part given as a height map (from a task file), checked against what the design predicts:
 the guarded approach, contact, the path tracked along the surface within a tenth of a millimetre once
 each segment's five design time constants have passed, the normal force within 2 %, the lift-off,
@@ -18,9 +18,9 @@ from drake_hybrid.analysis.linearization import linearize_continuous
 from drake_hybrid.control.phases import ContactPhase
 from drake_hybrid.experiments.path_report import error_parts
 from drake_hybrid.experiments.simulation import simulate
-from drake_hybrid.scenario.data_task import load_task_file
-from drake_hybrid.scenario.path_job import job_duration, with_path
-from drake_hybrid.scenario.tasks import get_task
+from drake_hybrid.tasks.path import job_duration, with_path
+from drake_hybrid.tasks.registry import get_task
+from drake_hybrid.tasks.task_file import load_task_file
 
 pytestmark = pytest.mark.slow
 ROOT = Path(__file__).resolve().parent.parent

@@ -1,4 +1,4 @@
-"""Bad arguments of the path modules (core.paths, core.patterns, core.surfaces, scenario.path_job),
+"""Bad arguments of the path modules (core.paths, core.patterns, core.surfaces, station.path_job),
 the PathSource and experiments.metrics: each class of bad input (a NaN, an infinity, a bool or a string
 where a number goes, a wrong size, an empty list, a mismatch between arrays that describe the same rows,
 a path too finely sampled) is a one-line typed error naming the argument, raised at the call (before
@@ -17,11 +17,12 @@ from drake_hybrid.core.patterns import MAX_PATH_POINTS, raster, spiral
 from drake_hybrid.core.surfaces import CylinderSurface, PlaneSurface, SphereSurface, ViewPlane
 from drake_hybrid.experiments.metrics import (contact_time, last_valid, max_after, max_row_errors, row_commands,
                                               row_errors, row_scales, run_scale, settling_time)
-from drake_hybrid.scenario.path_job import build_path, heading_of, path_on, path_start_pose, with_path
-from drake_hybrid.scenario.path_config import ForcePointConfig
-from drake_hybrid.scenario.tasks import get_task
-from drake_hybrid.scenario.tasks.robots import add_ur5e_with_pad
+from drake_hybrid.station.path_config import ForcePointConfig
+from drake_hybrid.station.path_job import heading_of, path_on
 from drake_hybrid.systems.path_source import PathSource, reference_frame, reference_rotation
+from drake_hybrid.tasks.builtin.robots import add_ur5e_with_pad
+from drake_hybrid.tasks.path import build_path, path_start_pose, with_path
+from drake_hybrid.tasks.registry import get_task
 
 SPHERE = SphereSurface([0.45, 0.0, 0.1], 0.15)
 TOP = np.array([0.45, 0.0, 0.25])
@@ -182,7 +183,7 @@ def test_bad_surface_arguments(call, name):
 
 
 # ------------------------------------------------------------------------------------------------
-# scenario.path_job
+# station.path_job
 # ------------------------------------------------------------------------------------------------
 
 @pytest.fixture(scope="module")

@@ -1,4 +1,4 @@
-"""A job's figures (experiments.path_report, scenario.path_job.path_events) on a synthetic log whose
+"""A job's figures (experiments.path_report, station.path_job.path_events) on a synthetic log whose
 every number is known: the split of the path error along the surface and the normal, the settled and
 transient windows per segment, the time off the surface, the lift-off."""
 
@@ -7,7 +7,7 @@ import pytest
 
 from drake_hybrid.control.phases import ContactPhase
 from drake_hybrid.experiments.path_report import before_lift_off, path_report, path_text
-from drake_hybrid.scenario.path_job import path_events
+from drake_hybrid.station.path_job import path_events
 
 
 def synthetic_log():

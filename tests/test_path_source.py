@@ -14,10 +14,10 @@ from drake_hybrid.control.gains import HybridGains
 from drake_hybrid.control.phases import ContactPhase
 from drake_hybrid.control.supervision import ContactSupervisor, SupervisionConfig
 from drake_hybrid.core.kinematics import EndEffectorKinematics, inverse_kinematics
-from drake_hybrid.scenario.path_job import build_path
-from drake_hybrid.scenario.tasks import get_task
-from drake_hybrid.scenario.tasks.robots import UR5E_SEED, add_ur5e_with_pad
 from drake_hybrid.systems.path_source import PathSource, reference_frame
+from drake_hybrid.tasks.builtin.robots import UR5E_SEED, add_ur5e_with_pad
+from drake_hybrid.tasks.path import build_path
+from drake_hybrid.tasks.registry import get_task
 
 
 @pytest.fixture(scope="module")

@@ -25,11 +25,11 @@ from drake_hybrid.control.supervision import ContactSupervisor, SupervisionConfi
 from drake_hybrid.core.errors import KinematicSingularityWarning
 from drake_hybrid.core.linalg import value
 from drake_hybrid.scenario.builder import build_scenario
-from drake_hybrid.scenario.plant import build_controller_plant
 from drake_hybrid.scenario.start import set_initial_conditions
-from drake_hybrid.scenario.tasks import get_task
 from drake_hybrid.systems.faults import SensorFaultConfig, SensorFaultInjector
 from drake_hybrid.systems.sensors import WrenchConditioner
+from drake_hybrid.tasks.plant import build_controller_plant
+from drake_hybrid.tasks.registry import get_task
 
 WINDOW = get_task("window-washing")
 

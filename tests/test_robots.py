@@ -1,4 +1,4 @@
-"""The robot loader (scenario/robots.py) on arms from the example-robot-data model package that the
+"""The robot loader (tasks/robots.py) on arms from the example-robot-data model package that the
 package does not use otherwise: the UR10 (6 joints, STL and COLLADA meshes), the xArm7 (7 joints,
 STL, URDF joint damping as shipped), the Kinova Jaco 2 (6 joints, COLLADA, repeated material names,
 a free base) and the Panda's full URDF (STL meshes, gripper fingers); the joint-guess finder; the
@@ -24,12 +24,14 @@ from drake_hybrid.core.errors import (ConfigError, ForceSignError, OffConstraint
                                       UnreachablePoseError)
 from drake_hybrid.experiments.simulation import simulate
 from drake_hybrid.scenario.builder import build_scenario
-from drake_hybrid.scenario.custom import CustomTask, add_rigid_workpiece, attach_pad_tool
-from drake_hybrid.scenario.robots import load_arm
 from drake_hybrid.scenario.start import set_initial_conditions
-from drake_hybrid.scenario.task import pad_kinematic_rows
-from drake_hybrid.scenario.tasks import get_task, register_task
+from drake_hybrid.station.arm import mount_tool
+from drake_hybrid.station.workpieces import add_rigid_workpiece
 from drake_hybrid.systems.sources import Profile
+from drake_hybrid.tasks.custom import CustomTask
+from drake_hybrid.tasks.registry import get_task, register_task
+from drake_hybrid.tasks.robots import load_arm
+from drake_hybrid.tasks.task import pad_kinematic_rows
 
 # Drake notes, once per joint, what it ignores in these URDFs (mechanical reductions, joint friction).
 logging.getLogger("drake").setLevel(logging.ERROR)
@@ -318,11 +320,11 @@ def test_pulling_force_on_a_built_in_task():
         start(config)
 
 
-def test_attach_pad_tool_names_an_unknown_frame(ur10):
+def test_mount_tool_names_an_unknown_frame(ur10):
     plant = MultibodyPlant(0.0)
     instance = Parser(plant).AddModels(ur10.report.model)[0]
     with pytest.raises(UnknownFrameError, match="flange_frame 'flange' is not a frame of model 'ur10'; its frames: "):
-        attach_pad_tool(plant, instance, "flange")
+        mount_tool(plant, instance, "flange")
 
 
 def test_kinematic_rows_padded(ur10):

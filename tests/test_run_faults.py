@@ -9,8 +9,8 @@ import pytest
 from drake_hybrid.cli import main
 from drake_hybrid.experiments.simulation import RunStopped, simulate
 from drake_hybrid.experiments.sweep import evaluate_point
-from drake_hybrid.scenario.config import dump_config
-from drake_hybrid.scenario.tasks import get_task
+from drake_hybrid.tasks.config import dump_config
+from drake_hybrid.tasks.registry import get_task
 
 WINDOW = get_task("window-washing")
 

@@ -12,7 +12,7 @@ from drake_hybrid.cli import _residual_text, _row_text, main
 from drake_hybrid.control.phases import ContactPhase
 from drake_hybrid.experiments.metrics import contact_time, row_errors, row_units, worst
 from drake_hybrid.experiments.simulation import predicted_tracking, simulate
-from drake_hybrid.scenario.tasks import TASKS, get_task
+from drake_hybrid.tasks.registry import TASKS, get_task
 
 
 def test_row_units_split_a_tasks_label_per_row():
@@ -107,7 +107,7 @@ def test_the_grinding_default_says_it_ends_in_the_surge_after_the_rough_patch():
 
 
 def test_the_impedance_step_peak_is_the_designed_impulse_response_at_its_largest():
-    from drake_hybrid.scenario.tasks.grinding import impedance_step_peak
+    from drake_hybrid.tasks.builtin.grinding import impedance_step_peak
 
     # Roots -10 and -30 (K_v = 40, K_p = 300): (e^(-10 t) - e^(-30 t)) / 20, largest at t = ln 3 / 20.
     assert impedance_step_peak(40.0, 300.0) == pytest.approx((3 ** -0.5 - 3 ** -1.5) / 20, rel=1e-6)
@@ -117,7 +117,7 @@ def test_the_impedance_step_peak_is_the_designed_impulse_response_at_its_largest
 def test_impedance_grinding_explains_x_dots_error_at_the_rough_patchs_edges():
     """The default grinding run's x-dot 'settled max' (75 %) is the impedance yielding to the friction step
     at the patch's edges: the note gives that peak as (3.2-6) predicts it and as measured after each edge."""
-    from drake_hybrid.scenario.tasks.grinding import friction_step_notes, impedance_step_peak
+    from drake_hybrid.tasks.builtin.grinding import friction_step_notes, impedance_step_peak
 
     t = np.arange(0.0, 3.0005, 1e-3)
     x = 0.85 + 0.1 * t                                                  # on the patch [1.05, 1.15] from 2 to 3 s
@@ -143,7 +143,7 @@ def _sphere_log(breakaway, end, force_error=0.357):
 
 
 def test_the_sphere_grinding_note_names_the_phase_the_run_ends_in():
-    from drake_hybrid.scenario.tasks.grinding import SPHERE_SETTLED_AFTER_SLIDING, sphere_phase_note
+    from drake_hybrid.tasks.builtin.grinding import SPHERE_SETTLED_AFTER_SLIDING, sphere_phase_note
 
     (note,) = sphere_phase_note(_sphere_log(breakaway=0.562, end=3.0))
     assert "held the pad until t = 0.56 s" in note and "ends 2.44 s into sliding" in note
@@ -240,7 +240,7 @@ def test_a_row_points_only_at_the_notes_that_name_it():
 def test_impedance_grinding_explains_fs_error_at_the_rough_patchs_edges():
     """The default grinding run's force 'settled max' (6.6 %, 0.661 N) is the force loop's answer to the
     friction step at the patch's edges (3.2-11): the note names each edge's peak and the error away from them."""
-    from drake_hybrid.scenario.tasks.grinding import force_step_note, rough_patch_events
+    from drake_hybrid.tasks.builtin.grinding import force_step_note, rough_patch_events
 
     t = np.arange(0.0, 3.0005, 1e-3)
     on_patch = (t >= 1.67) & (t < 2.80)
@@ -259,7 +259,7 @@ def test_impedance_grinding_explains_fs_error_at_the_rough_patchs_edges():
 
 
 def test_the_sphere_grinding_breakaway_is_an_event():
-    from drake_hybrid.scenario.tasks.grinding import sphere_breakaway
+    from drake_hybrid.tasks.builtin.grinding import sphere_breakaway
 
     assert sphere_breakaway(_sphere_log(breakaway=0.562, end=3.0)) == pytest.approx(0.562)
     assert sphere_breakaway(_sphere_log(breakaway=5.0, end=3.0)) is None            # still held at the end
@@ -270,7 +270,7 @@ def test_the_sphere_constraints_piece_switches_are_events():
     piece along the run is an instant the plots mark (its orientation rows change basis there)."""
     from types import SimpleNamespace
 
-    from drake_hybrid.scenario.task import piece_switches
+    from drake_hybrid.tasks.task import piece_switches
 
     class Plant:
         def num_positions(self):                 # piece_switches checks the log's rows against it

@@ -6,18 +6,19 @@ import numpy as np
 import pytest
 from run_checks import assert_rows_settled_within
 
-from drake_hybrid import (BranchError, ChartSingularityError, EulerZXZChart, PoseChart,
-                          sphere_constraint, sphere_paper_projection)
+from drake_hybrid import (BranchError, ChartSingularityError, EulerZXZChart, PoseChart, sphere_constraint,
+                          sphere_paper_projection)
 from drake_hybrid.analysis.linearization import linearize_continuous, linearize_discrete
 from drake_hybrid.core.kinematics import EndEffectorKinematics, inverse_kinematics
 from drake_hybrid.core.projections import ConstraintSpace
 from drake_hybrid.experiments.simulation import RunStopped, simulate
 from drake_hybrid.scenario.builder import build_scenario
-from drake_hybrid.scenario.config import WristSensorConfig
-from drake_hybrid.scenario.plant import build_controller_plant
 from drake_hybrid.scenario.start import check_start, set_initial_conditions
-from drake_hybrid.scenario.tasks import crank_turning, get_task, sphere_polishing
-from drake_hybrid.scenario.tasks.robots import UR5E_SEED, worst_condition_number
+from drake_hybrid.station.sensing import WristSensorConfig
+from drake_hybrid.tasks.builtin import crank_turning, sphere_polishing
+from drake_hybrid.tasks.builtin.robots import UR5E_SEED, worst_condition_number
+from drake_hybrid.tasks.plant import build_controller_plant
+from drake_hybrid.tasks.registry import get_task
 
 CRANK = get_task("crank-turning")
 SPHERE = get_task("sphere-polishing")

@@ -12,11 +12,11 @@ from drake_hybrid import ConstraintSpace, KernelVelocityProjection
 from drake_hybrid.core.errors import DimensionError, UnknownVariableError
 from drake_hybrid.core.linalg import value
 from drake_hybrid.scenario.builder import build_scenario
-from drake_hybrid.scenario.plant import build_controller_plant
 from drake_hybrid.scenario.start import set_initial_conditions
-from drake_hybrid.scenario.tasks import get_task
 from drake_hybrid.systems.sensors import LowPassFilter
 from drake_hybrid.systems.sources import DesiredFieldSource, Profile, ProfileSource
+from drake_hybrid.tasks.plant import build_controller_plant
+from drake_hybrid.tasks.registry import get_task
 
 EPS = 1e-6
 

@@ -12,6 +12,7 @@ import math
 
 import numpy as np
 import pytest
+from test_api_inputs import window
 
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder
@@ -26,12 +27,10 @@ from drake_hybrid.core.errors import ConfigError, ForceSignError
 from drake_hybrid.core.preconditions import check_generic_rank, check_pushing_force
 from drake_hybrid.experiments.metrics import invalid_samples, last_valid, row_errors
 from drake_hybrid.scenario.builder import build_scenario, prepare_config
-from drake_hybrid.scenario.config import load_config
 from drake_hybrid.scenario.start import set_initial_conditions
-from drake_hybrid.scenario.tasks import TASKS, get_task
 from drake_hybrid.systems.sources import Profile
-
-from test_api_inputs import window
+from drake_hybrid.tasks.config import load_config
+from drake_hybrid.tasks.registry import TASKS, get_task
 
 PUSHING_WRENCH = [0.0, 0.0, 0.0, 0.0, 0.0, -10.0]     # the pane pushes the pad down: F = -10 along E_f
 START = np.array([0.3, 0.5, 0.4])                       # the window arm's joints: the pad at C = +0.169 m

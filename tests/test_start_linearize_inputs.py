@@ -15,15 +15,14 @@ from drake_hybrid.analysis.linearization import (Linearization, equilibrium_conf
                                                  linearize_continuous, linearize_discrete, match_eigenvalues,
                                                  predicted_match)
 from drake_hybrid.cli import main
-from drake_hybrid.core.errors import (ArgumentError, NotAtEquilibriumError, OffConstraintError,
-                                      UnreachablePoseError)
+from drake_hybrid.core.errors import ArgumentError, NotAtEquilibriumError, OffConstraintError, UnreachablePoseError
 from drake_hybrid.scenario.builder import build_scenario
-from drake_hybrid.scenario.clearance import check_robot_clearance, robot_penetrations
-from drake_hybrid.scenario.config import WristSensorConfig
-from drake_hybrid.scenario.contact_start import rest_contact_wrench, solve_contact_start
 from drake_hybrid.scenario.start import set_initial_conditions
-from drake_hybrid.scenario.tasks import get_task
+from drake_hybrid.station.clearance import check_robot_clearance, robot_penetrations
+from drake_hybrid.station.contact_start import rest_contact_wrench, solve_contact_start
+from drake_hybrid.station.sensing import WristSensorConfig
 from drake_hybrid.systems.sources import Profile
+from drake_hybrid.tasks.registry import get_task
 
 WINDOW = get_task("window-washing")
 

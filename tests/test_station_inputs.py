@@ -1,4 +1,4 @@
-"""The station blocks (scenario.station) on bad input in a user's own diagram: a one-line typed error
+"""The station blocks (station.loop) on bad input in a user's own diagram: a one-line typed error
 naming the argument (or the port), raised before anything reaches Drake, where Drake would end the
 process (an input wired twice, a duplicate system name at Build) or raise its own untyped error.
 Also: two arms, each with its tool and its controller, in one plant and one builder."""
@@ -19,10 +19,13 @@ from drake_hybrid import ConstraintSpace, GivenVelocityProjection, PoseChart, su
 from drake_hybrid.control.baselines import JointServoHybridController
 from drake_hybrid.control.gains import HybridGains
 from drake_hybrid.core.errors import ArgumentError, ConfigError, DrakeHybridError, UnknownFrameError
-from drake_hybrid.scenario.station import (add_actuators, add_hybrid_controller, add_loggers, add_rigid_workpiece,
-                                           add_wrench_sensor, apply_contact_defaults, carried_bodies, connect_source,
-                                           default_plant_config, logged, mount_tool, only_tool_touches, read_log,
-                                           robot_plant, urdf_effort_limits, weld_joints, wrench_lag)
+from drake_hybrid.station.arm import (add_actuators, carried_bodies, mount_tool, robot_plant, urdf_effort_limits,
+                                      weld_joints)
+from drake_hybrid.station.contact import apply_contact_defaults, default_plant_config, only_tool_touches
+from drake_hybrid.station.loggers import add_loggers, logged, read_log
+from drake_hybrid.station.loop import add_hybrid_controller, connect_source
+from drake_hybrid.station.sensing import add_wrench_sensor, wrench_lag
+from drake_hybrid.station.workpieces import add_rigid_workpiece
 from drake_hybrid.systems.sources import Profile, ProfileSource
 
 CENTER, RADIUS, PAD = np.array([0.45, 0.0, 0.10]), 0.15, 0.02

@@ -32,14 +32,15 @@ from drake_hybrid.control.gains import HybridGains
 from drake_hybrid.core.errors import ArgumentError, ConfigError, OffConstraintError, PathError
 from drake_hybrid.core.surfaces import SphereSurface
 from drake_hybrid.experiments.config_paths import config_value
-from drake_hybrid.scenario.config import ContactConfig, ContactSensorConfig
-from drake_hybrid.scenario.contact_start import rest_contact_wrench, solve_contact_start
-from drake_hybrid.scenario.station import (add_actuators, add_hybrid_controller, add_loggers, add_rigid_workpiece,
-                                           add_wrench_sensor, apply_contact_defaults, check_controller_plant,
-                                           default_plant_config, logged, mount_tool, only_tool_touches, read_log,
-                                           robot_plant)
-from drake_hybrid.scenario.tasks import get_task
+from drake_hybrid.station.arm import add_actuators, mount_tool, robot_plant
+from drake_hybrid.station.contact import ContactConfig, apply_contact_defaults, default_plant_config, only_tool_touches
+from drake_hybrid.station.contact_start import rest_contact_wrench, solve_contact_start
+from drake_hybrid.station.loggers import add_loggers, logged, read_log
+from drake_hybrid.station.loop import add_hybrid_controller, check_controller_plant
+from drake_hybrid.station.sensing import ContactSensorConfig, add_wrench_sensor
+from drake_hybrid.station.workpieces import add_rigid_workpiece
 from drake_hybrid.systems.sources import Profile
+from drake_hybrid.tasks.registry import get_task
 
 CENTER, RADIUS, PAD = np.array([0.45, 0.0, 0.10]), 0.15, 0.02
 GAINS = HybridGains(velocity=[10.0], force_proportional=[0.5], force_integral=[15.0])
@@ -91,7 +92,7 @@ def other_station():
 
 
 # ------------------------------------------------------------------------------------------------
-# scenario.contact_start
+# station.contact_start
 # ------------------------------------------------------------------------------------------------
 
 @pytest.mark.parametrize("geometries", ["pad", [1, 2], None, 5, [], "unregistered"])
@@ -119,7 +120,7 @@ def test_solve_contact_start_names_a_max_depth_too_small_to_reach_the_contact(st
 
 
 # ------------------------------------------------------------------------------------------------
-# scenario.station
+# station.loop
 # ------------------------------------------------------------------------------------------------
 
 BAD_CONTACT = [("friction", "x"), ("relaxation_time", "x"), ("friction", True), ("relaxation_time", math.nan),

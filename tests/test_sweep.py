@@ -13,16 +13,15 @@ import pytest
 
 from drake_hybrid.analysis.linearization import linearize_sampled_loop
 from drake_hybrid.cli import make_parser
+from drake_hybrid.experiments.config_paths import apply_parameters, set_config_value
 from drake_hybrid.experiments.metrics import row_errors
 from drake_hybrid.experiments.sweep import (RESULT_COLUMNS, read_results, rigid_contact_theory_stable, run_sweep,
-                                          simulation_metrics)
-from drake_hybrid.experiments.sweep_spec import StabilityCriteria
-from drake_hybrid.experiments.config_paths import apply_parameters, set_config_value
-from drake_hybrid.experiments.sweep_spec import SweepSpecError, load_spec
+                                            simulation_metrics)
+from drake_hybrid.experiments.sweep_spec import StabilityCriteria, SweepSpecError, load_spec
 from drake_hybrid.scenario.builder import build_scenario
-from drake_hybrid.scenario.config import dump_config, load_config
 from drake_hybrid.scenario.start import set_initial_conditions
-from drake_hybrid.scenario.tasks import get_task
+from drake_hybrid.tasks.config import dump_config, load_config
+from drake_hybrid.tasks.registry import get_task
 
 WINDOW = "window-washing"
 
@@ -436,8 +435,8 @@ def test_an_unstable_looking_one_period_map_is_checked_at_a_larger_step():
     map, not a mode (a kicked simulation decays). The check says so; the sweep then keeps the
     regulated modes' verdict where the kink is on a predicted zero's partner, and gives none where it
     is on a regulated mode (sweep._discrete_verdict)."""
-    from drake_hybrid.scenario.data_task import load_task_file
-    from drake_hybrid.scenario.parsing import models_directory
+    from drake_hybrid.station.parsing import models_directory
+    from drake_hybrid.tasks.task_file import load_task_file
 
     task, _ = load_task_file(models_directory() / "tasks" / "ur10_plate.yaml")
     linear = linearize_sampled_loop(task.default_config())

@@ -1,4 +1,4 @@
-"""The task file's parts for jobs over a surface (scenario/data_surface.py): a height-map workpiece by
+"""The task file's parts for jobs over a surface (tasks/task_file_surface.py): a height-map workpiece by
 file, the path section, the paper's fields Y_d(r), F_d(r) as expressions; each bad section a one-line
 error naming the field."""
 
@@ -11,12 +11,12 @@ import pytest
 from drake_hybrid.core.errors import ConfigError, PathError
 from drake_hybrid.core.height_field import HeightFieldConstraint
 from drake_hybrid.scenario.builder import build_scenario
-from drake_hybrid.scenario.data_task import load_task_file
-from drake_hybrid.scenario.parsing import models_directory
-from drake_hybrid.scenario.path_job import build_path
-from drake_hybrid.scenario.tasks import get_task
+from drake_hybrid.station.parsing import models_directory
 from drake_hybrid.systems.path_source import PathSource
 from drake_hybrid.systems.sources import DesiredFieldSource
+from drake_hybrid.tasks.path import build_path
+from drake_hybrid.tasks.registry import get_task
+from drake_hybrid.tasks.task_file import load_task_file
 
 TASKS = models_directory() / "tasks"
 WINDOW = (TASKS / "window_washing.yaml").read_text()

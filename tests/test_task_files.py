@@ -1,4 +1,4 @@
-"""A whole task in one YAML file (scenario/data_task.py): the window-washing task written as
+"""A whole task in one YAML file (tasks/task_file.py): the window-washing task written as
 models/tasks/window_washing.yaml runs as the built-in one, and a bad file is refused naming its field."""
 
 import contextlib
@@ -22,20 +22,20 @@ from pydrake.math import RigidTransform, RotationMatrix
 from pydrake.multibody.plant import MultibodyPlant
 
 from drake_hybrid import ConstraintSpace, GivenVelocityProjection, PoseChart, surface_constraint
-
 from drake_hybrid.analysis.linearization import linearize_continuous
 from drake_hybrid.cli import main
 from drake_hybrid.core.errors import ConfigError
 from drake_hybrid.experiments.simulation import simulate
 from drake_hybrid.experiments.sweep import read_results, run_sweep
 from drake_hybrid.experiments.sweep_spec import load_spec
-from drake_hybrid.scenario.config import dump_config
-from drake_hybrid.scenario.data_task import load_task_file, read_task_file
-from drake_hybrid.scenario.custom import CustomTask, add_rigid_workpiece
-from drake_hybrid.scenario.parsing import installed_model_packages, models_directory
-from drake_hybrid.scenario.robots import load_arm
-from drake_hybrid.scenario.schema_doc import schema_markdown
-from drake_hybrid.scenario.tasks import get_task, register_task
+from drake_hybrid.station.parsing import installed_model_packages, models_directory
+from drake_hybrid.station.workpieces import add_rigid_workpiece
+from drake_hybrid.tasks.config import dump_config
+from drake_hybrid.tasks.custom import CustomTask
+from drake_hybrid.tasks.registry import get_task, register_task
+from drake_hybrid.tasks.robots import load_arm
+from drake_hybrid.tasks.schema_doc import schema_markdown
+from drake_hybrid.tasks.task_file import load_task_file, read_task_file
 
 WINDOW_FILE = models_directory() / "tasks" / "window_washing.yaml"
 
@@ -171,7 +171,7 @@ def test_cli_tasks_lists_the_task_files(capsys):
 
 
 def test_robot_from_the_arm_loader(tmp_path):
-    """robot.loader (scenario.robots.load_arm) instead of directives: the planar 3R arm with the pad
+    """robot.loader (tasks.robots.load_arm) instead of directives: the planar 3R arm with the pad
     tool at its tip along +x, so the pad centre is 0.05 m beyond the tip (end_effector_point); the
     linearized closed loop has the designed eigenvalues."""
     robot = textwrap.dedent(f"""\
@@ -313,7 +313,7 @@ def test_a_task_that_is_not_built_in_tilted_pane_with_a_redundant_arm():
 
 
 def test_schema_page_is_generated_from_the_types():
-    """docs/task_files.md is the output of scenario.schema_doc (regenerate it after changing a field)."""
+    """docs/task_files.md is the output of tasks.schema_doc (regenerate it after changing a field)."""
     page = (REPOSITORY / "docs" / "task_files.md").read_text()
     assert page == schema_markdown()
     assert "| `constraint.rows` | List[str] | [] | C(x), one expression per row |" in page

@@ -1,4 +1,4 @@
-"""Task-file hooks (scenario/hooks.py): the crank-turning, sphere-polishing and grinding tasks written
+"""Task-file hooks (tasks/hooks.py): the crank-turning, sphere-polishing and grinding tasks written
 as files in models/tasks/ run as the built-in Python tasks (logs agree to 1e-9, same linearized
 eigenvalues), and a file can name only registered hooks, never code."""
 
@@ -13,11 +13,11 @@ from drake_hybrid.analysis.linearization import linearize_continuous, linearize_
 from drake_hybrid.cli import main
 from drake_hybrid.core.errors import ConfigError
 from drake_hybrid.experiments.simulation import simulate
-from drake_hybrid.scenario import hooks
-from drake_hybrid.scenario.data_task import load_task_file
-from drake_hybrid.scenario.hooks import ENTRY_POINT_GROUP, TaskHook, get_hook, register_hook
-from drake_hybrid.scenario.parsing import models_directory
-from drake_hybrid.scenario.tasks import get_task
+from drake_hybrid.tasks import hooks
+from drake_hybrid.station.parsing import models_directory
+from drake_hybrid.tasks.hooks import ENTRY_POINT_GROUP, TaskHook, get_hook, register_hook
+from drake_hybrid.tasks.registry import get_task
+from drake_hybrid.tasks.task_file import load_task_file
 
 TASKS = models_directory() / "tasks"
 LOGS = ("velocity_error", "force_error", "q", "v", "constraint")

@@ -14,11 +14,12 @@ from drake_hybrid.cli import main
 from drake_hybrid.core.kinematics import EndEffectorKinematics
 from drake_hybrid.experiments.simulation import simulate
 from drake_hybrid.scenario.builder import build_scenario
-from drake_hybrid.scenario.config import WristSensorConfig, dump_config, load_config
-from drake_hybrid.scenario.plant import build_plant
 from drake_hybrid.scenario.start import set_initial_conditions
-from drake_hybrid.scenario.tasks import get_task
+from drake_hybrid.station.sensing import WristSensorConfig
 from drake_hybrid.systems.sensors import ContactWrenchSensor, WristForceTorqueSensor
+from drake_hybrid.tasks.config import dump_config, load_config
+from drake_hybrid.tasks.plant import build_plant
+from drake_hybrid.tasks.registry import get_task
 
 TASK = get_task("window-washing")
 

@@ -1,4 +1,4 @@
-"""Your own robot and constraint (drake_hybrid.scenario.custom): a CustomTask is wired exactly like a built-in task."""
+"""Your own robot and constraint (drake_hybrid.tasks.custom): a CustomTask is wired exactly like a built-in task."""
 
 import dataclasses
 import math
@@ -14,8 +14,9 @@ from pydrake.multibody.plant import DiscreteContactApproximation, MultibodyPlant
 from drake_hybrid.experiments.simulation import simulate
 from drake_hybrid.experiments.sweep import read_results, run_sweep
 from drake_hybrid.experiments.sweep_spec import load_spec
-from drake_hybrid.scenario.custom import CustomTask, add_actuators, urdf_effort_limits, weld_joints
-from drake_hybrid.scenario.tasks import TASKS, get_task, register_task
+from drake_hybrid.station.arm import add_actuators, urdf_effort_limits, weld_joints
+from drake_hybrid.tasks.custom import CustomTask
+from drake_hybrid.tasks.registry import TASKS, get_task, register_task
 
 ARM_WITH_GRIPPER = """<?xml version="1.0"?>
 <robot name="arm_with_gripper">

@@ -36,7 +36,7 @@ import numpy as np
 
 from drake_hybrid.core.arguments import describe, number, positive, text
 from drake_hybrid.core.errors import ArgumentError
-from drake_hybrid.scenario.root_context import check_system_context
+from drake_hybrid.station.root_context import check_system_context
 
 JACOBIAN_TOLERANCE = 1e-3          # largest relative column error at which AutoDiffXd is trusted
 COLUMN_FLOOR = 1e-8                # relative column errors are scaled by at least this times max |A|

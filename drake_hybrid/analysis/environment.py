@@ -39,7 +39,7 @@ the command with Drake's 0.2 s pair relaxation (0.24 N), 0.49-0.68 % with the pa
 ``contact_environment`` measures K_e and B_e by central differences of the wrench sensor's reading,
 split by E^-T as the law splits it, with the arm's positions (velocities) moved along each motion
 row; ``impedance_environment_shifts`` turns them into the designed eigenvalues' predicted shifts
-(``scenario.task.EigenvalueShift``) that the linearizations match against. The velocity-force and
+(``tasks.task.EigenvalueShift``) that the linearizations match against. The velocity-force and
 position-force modes cancel the measured F_v (``control.law.tangential_compensation``): for them
 the environment's stiffness is ``analysis.modes.row_force_drift``'s business.
 """
@@ -52,8 +52,8 @@ from scipy.optimize import linear_sum_assignment
 from drake_hybrid.core.arguments import (complex_vector, describe, joint_vector, matrix, number, numeric_array,
                                          positive, relative_tolerance, vector)
 from drake_hybrid.core.errors import ArgumentError
-from drake_hybrid.scenario.root_context import check_systems_context
-from drake_hybrid.scenario.task import EigenvalueShift
+from drake_hybrid.station.root_context import check_systems_context
+from drake_hybrid.tasks.task import EigenvalueShift
 
 # m (rad) along a motion row, and m/s (rad/s) of its velocity: the central differences' steps.
 # The UR10 on the 5 cm drum: K_e agrees to 3 digits at 1e-5 and 1e-6 (facets straddled at 1e-4: 3 %).
@@ -268,9 +268,7 @@ def impedance_response(velocity_gain, position_gain, t, tangential_force, positi
     logged F_v (``tangential_force``, samples at ``t``, linear between them) from e_p(0), e_p'(0): the
     velocity errors a run realizing the impedance has (module docstring; ``inverse_mass`` M_d^-1,
     None: the paper's unit mass)."""
-    from scipy.signal import (
-        lsim,  # about a second to load: only where used (tests/test_architecture.py)
-    )
+    from scipy.signal import lsim  # about a second to load: only where used (tests/test_architecture.py)
 
     owner = "impedance_response"
     velocity_gain, position_gain, inverse_mass = _gain_matrices(owner, velocity_gain, position_gain,

@@ -26,9 +26,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from pydrake.math import RigidTransform
 from pydrake.multibody.parsing import Parser
 from pydrake.multibody.plant import AddMultibodyPlantSceneGraph
-from pydrake.math import RigidTransform
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import ConstantVectorSource, Linearize
@@ -43,7 +43,7 @@ from drake_hybrid.core.charts import PlanarPointChart
 from drake_hybrid.core.constraints import Constraint
 from drake_hybrid.core.kinematics import EndEffectorKinematics
 from drake_hybrid.core.projections import ConstraintSpace, GivenVelocityProjection
-from drake_hybrid.scenario.parsing import ConfigureParser, add_model
+from drake_hybrid.station.parsing import ConfigureParser, add_model
 
 HINTED_CONFIGURATION = np.radians([-160.0, 30.0])   # rad: the hint, where Raibert-Craig is unstable
 JOINT_GAINS = (5.0, 1.0)                            # K_q (1/s): unequal joint gains

@@ -46,13 +46,13 @@ from drake_hybrid.core.arguments import (boolean, complex_vector, describe, func
 from drake_hybrid.core.errors import ArgumentError, ConfigError, NotAtEquilibriumError
 from drake_hybrid.core.progress import quiet
 from drake_hybrid.scenario.builder import build_scenario
-from drake_hybrid.scenario.config import ScenarioConfig
-from drake_hybrid.scenario.root_context import check_root_context
 from drake_hybrid.scenario.start import set_initial_conditions
-from drake_hybrid.scenario.tasks import get_task
+from drake_hybrid.station.root_context import check_root_context
 from drake_hybrid.systems.faults import SensorFaultConfig
 from drake_hybrid.systems.sensors import WristForceTorqueSensor
 from drake_hybrid.systems.sources import Profile
+from drake_hybrid.tasks.config import ScenarioConfig
+from drake_hybrid.tasks.registry import get_task
 
 
 @dataclass
@@ -278,7 +278,7 @@ def match_eigenvalues(designed, measured, tolerance=0.05, marginal=0, marginal_r
 
 
 def shift_indices(designed, shifts):
-    """{index in ``designed``: shift}: each ``scenario.task.EigenvalueShift`` takes one designed
+    """{index in ``designed``: shift}: each ``tasks.task.EigenvalueShift`` takes one designed
     eigenvalue equal to its ``designed``, not yet taken; ValueError if there is none."""
     designed = np.asarray(designed, dtype=complex)
     taken = {}
@@ -303,7 +303,7 @@ def nyquist_split(modes, period):
 
 
 def shifted_design(designed, shifts):
-    """The designed eigenvalues with, for each ``scenario.task.EigenvalueShift``, one equal designed
+    """The designed eigenvalues with, for each ``tasks.task.EigenvalueShift``, one equal designed
     eigenvalue replaced by the shift's prediction (order kept)."""
     corrected = np.array(designed, dtype=complex)
     for index, shift in shift_indices(designed, shifts).items():
@@ -472,7 +472,7 @@ def check_equilibrium(diagram, root_context, systems, what="your diagram", owner
     largest and the likely cause: a desired velocity that is not zero, a wrist force/torque sensor on
     a continuous plant, or else the start not solved (``solve_contact_start`` / ``prime_start`` not
     called, or the state changed after it). ArgumentError (naming ``owner``) for a ``diagram``,
-    ``root_context`` and ``systems`` that do not belong together (``scenario.root_context``)."""
+    ``root_context`` and ``systems`` that do not belong together (``station.root_context``)."""
     where = f"{owner}({text(what, 'what', owner)})"
     check_root_context(diagram, root_context, systems, where)
     derivatives = diagram.EvalTimeDerivatives(root_context).CopyToVector()
@@ -490,7 +490,7 @@ def check_equilibrium(diagram, root_context, systems, what="your diagram", owner
         cause = ("a WristForceTorqueSensor on a continuous plant: its reading is not the contact's at rest; use the "
                  "contact sensor (sensor=None) for the continuous loop")
     else:
-        cause = ("the start is not solved: call scenario.contact_start.solve_contact_start (or prime_start after "
+        cause = ("the start is not solved: call station.contact_start.solve_contact_start (or prime_start after "
                  "setting the arm at rest pressing with F_d) on this context, and change no state after it")
     rate, name = _largest_rates(diagram, root_context)[0]
     raise NotAtEquilibriumError(
@@ -502,9 +502,9 @@ def check_equilibrium(diagram, root_context, systems, what="your diagram", owner
 def linearize_at_contact(diagram, root_context, systems, tolerance=0.05, jacobian_tolerance=JACOBIAN_TOLERANCE,
                          stages=None, task=None, what="your diagram", require_equilibrium=True):
     """Linearize your continuous closed loop at the contact equilibrium ``root_context`` holds (e.g.
-    after ``scenario.contact_start.solve_contact_start``), with what ``drake-hybrid analyze`` reports.
+    after ``station.contact_start.solve_contact_start``), with what ``drake-hybrid analyze`` reports.
 
-    ``systems``: the ``HybridSystems`` of ``scenario.station.add_hybrid_controller`` (or a built
+    ``systems``: the ``HybridSystems`` of ``station.loop.add_hybrid_controller`` (or a built
     ``Scenario``). The diagram must be purely continuous (a plant with ``time_step=0``, a controller
     without ``control_period``, a wrench low-pass). Runs Drake's ``Linearize`` (AutoDiffXd through
     plant, contact, sensor, filter and controller), checks its A against central differences of the
@@ -521,7 +521,7 @@ def linearize_at_contact(diagram, root_context, systems, tolerance=0.05, jacobia
     velocity that is not zero, the start not solved, a wrist sensor on a continuous plant);
     ``require_equilibrium=False`` linearizes anywhere. ArgumentError for a ``tolerance`` outside (0, 1],
     a ``jacobian_tolerance`` that is not > 0 (inf: never replace a column), a ``diagram``,
-    ``root_context`` and ``systems`` that do not belong together (``scenario.root_context``)."""
+    ``root_context`` and ``systems`` that do not belong together (``station.root_context``)."""
     owner = f"linearize_at_contact({text(what, 'what', 'linearize_at_contact')})"
     check_root_context(diagram, root_context, systems, owner)
     tolerance = relative_tolerance(tolerance, "tolerance", owner)

@@ -54,7 +54,7 @@ from drake_hybrid.control.gains import ControlMode
 from drake_hybrid.core.arguments import (complex_vector, describe, matrix, number, numeric_array, positive,
                                          relative_tolerance)
 from drake_hybrid.core.errors import ArgumentError
-from drake_hybrid.scenario.root_context import check_systems_context
+from drake_hybrid.station.root_context import check_systems_context
 
 UNSTABLE_RATE = 0.01                  # 1/s: a mode growing faster than 1 % per second is named
 # m (or rad) along a velocity row: the step of the row forces' central differences in row_force_drift.

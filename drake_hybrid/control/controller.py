@@ -40,9 +40,9 @@ from drake_hybrid.control.safety import SafetyConfig, warn_singularity
 from drake_hybrid.control.sampling import SAMPLE_LEAD
 from drake_hybrid.core.arguments import boolean, describe, instance, matrix, nonnegative, positive, vector
 from drake_hybrid.core.errors import ArgumentError, DimensionError, OffConstraintError
-from drake_hybrid.core.preconditions import check_generic_rank, check_pushing_force
 from drake_hybrid.core.kinematics import declare_task_input, resolve_frame, set_plant_state
 from drake_hybrid.core.linalg import all_finite, value
+from drake_hybrid.core.preconditions import check_generic_rank, check_pushing_force
 from drake_hybrid.core.templates import default_instantiation
 
 # The largest |C| (units of C's rows) at which a controller without a guarded move may start: the
@@ -461,8 +461,8 @@ def HybridController_(T):
             raise OffConstraintError(
                 f"HybridController: the start is off the constraint: C = {np.round(constraint_value, 4).tolist()} "
                 f"(|C| up to {worst:.3g} > {START_CONSTRAINT_LIMIT:g} units of C) with no guarded move to approach the "
-                f"surface{limits}: put the arm at rest pressing with F_d first (scenario.contact_start."
-                "solve_contact_start, or scenario.start.prime_start after setting the state), or add a contact "
+                f"surface{limits}: put the arm at rest pressing with F_d first (station.contact_start."
+                "solve_contact_start, or station.start.prime_start after setting the state), or add a contact "
                 "supervisor (supervision=SupervisionConfig())")
 
         def _check_start_event(self, context):

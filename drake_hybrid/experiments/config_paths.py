@@ -10,7 +10,7 @@ import copy
 import dataclasses
 import re
 
-from drake_hybrid.scenario.config import dump_config, load_config
+from drake_hybrid.tasks.config import dump_config, load_config
 
 _SEGMENT = re.compile(r"([A-Za-z_][A-Za-z0-9_]*)(?:\[(\d+)\])?")     # the whole segment (fullmatch)
 

@@ -1,7 +1,7 @@
 """A job's figures: how closely the pad followed its path over the workpiece, at what force, and how
 long it was off the surface (``summary.json``'s ``path``, the printout, the plots).
 
-From the log of a path job (``scenario.path_job``: ``path_error`` = c - c_d, ``reference_normal``,
+From the log of a path job (``station.path_job``: ``path_error`` = c - c_d, ``reference_normal``,
 ``path_progress`` = [segment, arc length, t_path], the controller's force rows, the supervisor's
 ``contact_phase`` and ``lifting``):
 

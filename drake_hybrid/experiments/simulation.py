@@ -42,12 +42,12 @@ from drake_hybrid.analysis.linearization import controller_prediction, design_ti
 from drake_hybrid.control.gains import ControlMode
 from drake_hybrid.core.progress import quiet
 from drake_hybrid.experiments.metrics import (contact_time, impedance_check, invalid_samples, last_valid, max_after,
-                                           row_errors, row_units, run_scale, worst)
+                                              row_errors, row_units, run_scale, worst)
 from drake_hybrid.experiments.path_report import before_lift_off, path_report
 from drake_hybrid.scenario.builder import build_scenario
-from drake_hybrid.scenario.config import check_scenario_config
-from drake_hybrid.scenario.path_job import PATH_LOGS
 from drake_hybrid.scenario.start import set_initial_conditions
+from drake_hybrid.station.path_job import PATH_LOGS
+from drake_hybrid.tasks.config import check_scenario_config
 
 # The run's note when its controller ran the generic law while numba compiled the fast one (control/fast_compile.py).
 COMPILING_NOTE = ("this run used the generic law (the compiled one gives the same to 1e-12): the compiled law was "
@@ -213,7 +213,7 @@ def collect_log(scenario, context):
     n = state.shape[1] // 2
     log["q"], log["v"] = state[:, :n], state[:, n:]
     for optional in ("true_wrench", "contact_phase", "wrench_valid", "lifting", *PATH_LOGS):  # faults, conditioning; supervision;
-        # a job's path (scenario.path_job)
+        # a job's path (station.path_job)
         if optional in scenario.loggers:
             log[optional] = _logged(scenario, context, optional)[1]
     if getattr(scenario.source, "true_projection", None) is not None:   # the paper's pseudo-velocity: its
@@ -244,7 +244,7 @@ def summarize(scenario, log, wall_time):
     labels = scenario.task.labels(scenario.config)
     start = contact_time(log)
     settle_after = start + 5 * tau
-    # A job's lift-off (scenario.path_job) leaves the surface on purpose: the rows' figures end there.
+    # A job's lift-off (station.path_job) leaves the surface on purpose: the rows' figures end there.
     job = before_lift_off(log)
     # With the paper's pseudo-velocity rows the error is the true rows' (collect_log): as those, against their command.
     velocity_rows = row_errors(job["t"], job["velocity_error"],
@@ -314,7 +314,7 @@ def summarize(scenario, log, wall_time):
         "start_in_contact": bool(config.start.in_contact),
         "start_force_command_step": (np.asarray(gains.force_integral, dtype=float) @ np.asarray(
             config.start.force_integral, dtype=float)).tolist() if config.start.force_integral else [0.0] * m,
-        # A job's path (scenario.path_job): path and force errors per segment, time off the surface.
+        # A job's path (station.path_job): path and force errors per segment, time off the surface.
         "path": path_report(log, tau, scenario.source.path.duration, scenario.source.path.length,
                             scenario.source.force_row) if "path_progress" in log else None,
     }

@@ -88,13 +88,13 @@ from drake_hybrid.control.gains import ControlMode
 from drake_hybrid.core.errors import GainError
 from drake_hybrid.core.locks import process_alive
 from drake_hybrid.core.progress import quiet
+from drake_hybrid.experiments.config_paths import apply_parameters, set_config_value
 from drake_hybrid.experiments.metrics import max_row_errors, row_scales
 from drake_hybrid.experiments.path_report import before_lift_off
 from drake_hybrid.experiments.simulation import RunStopped, simulate
-from drake_hybrid.experiments.config_paths import apply_parameters, set_config_value
 from drake_hybrid.experiments.sweep_spec import StabilityCriteria, SweepSpecError, check_axis_values, parameters_digest
-from drake_hybrid.scenario.config import dump_config, load_config
-from drake_hybrid.scenario.tasks import BUILT_IN_TASKS, TASKS, get_task, register_task
+from drake_hybrid.tasks.config import dump_config, load_config
+from drake_hybrid.tasks.registry import BUILT_IN_TASKS, TASKS, get_task, register_task
 
 VERDICT_COLUMNS = ["stable", "stable_simulation", "stable_continuous", "stable_discrete"]
 METRIC_COLUMNS = [
@@ -432,7 +432,7 @@ class SweepLock:
 
 def _check_scheduler(address, timeout=10.0):
     """SweepSpecError (one line) if no Dask scheduler answers at ``address`` within ``timeout`` s."""
-    from distributed import Client     # Dask only where a sweep runs on it (tests/test_architecture.py)
+    from distributed import Client  # Dask only where a sweep runs on it (tests/test_architecture.py)
 
     try:
         client = Client(address, timeout=timeout)

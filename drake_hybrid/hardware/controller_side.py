@@ -40,9 +40,9 @@ from drake_hybrid.hardware.messages import HardwareConfig
 from drake_hybrid.hardware.watchdog import MessageWatchdog
 from drake_hybrid.hardware.wrench import ExternalTorqueWrench, ForceTorqueConditioning
 from drake_hybrid.scenario.builder import make_controller, prepare_config
-from drake_hybrid.scenario.station import add_wrench_path
-from drake_hybrid.scenario.config import ScenarioConfig
-from drake_hybrid.scenario.plant import build_controller_plant
+from drake_hybrid.station.sensing import add_wrench_path
+from drake_hybrid.tasks.config import ScenarioConfig
+from drake_hybrid.tasks.plant import build_controller_plant
 
 
 @dataclass

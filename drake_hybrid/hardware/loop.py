@@ -40,7 +40,8 @@ from drake_hybrid.hardware.messages import HardwareConfig, HardwareFault
 from drake_hybrid.hardware.robot_side import build_robot_station
 from drake_hybrid.hardware.watchdog import ARRIVAL, LATENCY
 from drake_hybrid.scenario.builder import build_scenario
-from drake_hybrid.scenario.start import PRIMING_STEPS, set_initial_conditions, static_torque
+from drake_hybrid.scenario.start import set_initial_conditions, static_torque
+from drake_hybrid.station.start import PRIMING_STEPS
 
 
 def pump(lcm):

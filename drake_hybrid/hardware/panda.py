@@ -24,10 +24,11 @@ from drake_hybrid.core.charts import PoseChart
 from drake_hybrid.core.constraints import surface_constraint
 from drake_hybrid.core.errors import ConfigError
 from drake_hybrid.core.projections import ConstraintSpace, GivenVelocityProjection
-from drake_hybrid.scenario.config import WristSensorConfig
-from drake_hybrid.scenario.custom import CustomTask, add_rigid_workpiece
-from drake_hybrid.scenario.robots import load_arm
-from drake_hybrid.scenario.tasks import get_task, register_task
+from drake_hybrid.station.sensing import WristSensorConfig
+from drake_hybrid.station.workpieces import add_rigid_workpiece
+from drake_hybrid.tasks.custom import CustomTask
+from drake_hybrid.tasks.registry import get_task, register_task
+from drake_hybrid.tasks.robots import load_arm
 
 PAD_RADIUS = 0.02
 DRUM_AXIS, DRUM_RADIUS = np.array([0.5, 0.0, 0.2]), 0.15
@@ -123,6 +124,6 @@ def panda_config(task, duration=1.0, wrist_sensor=True, speed=0.05):
     else:
         # A driver estimates the external torque from the current state: the simulated one reads the
         # plant's unsampled ports (the current step's contact forces), and so does the directly wired run
-        # it is compared with (scenario.plant.build_plant).
+        # it is compared with (tasks.plant.build_plant).
         config.plant.use_sampled_output_ports = False
     return config

@@ -11,7 +11,7 @@ The publishers send at k h - SAMPLE_LEAD h (``control.sampling.tick_offset``): t
 directly wired controller would read at its tick. ``SimulatedDriver`` is the driver's stand-in: it
 holds ``hold_command`` until the first command arrives and adds g(q) (its own arm model) as the
 Franka driver does. The plant, its environment and its model error are exactly the directly wired
-scenario's (``scenario.plant.build_plant``).
+scenario's (``tasks.plant.build_plant``).
 """
 
 from dataclasses import dataclass, field
@@ -32,9 +32,9 @@ from drake_hybrid.control.sampling import tick_offset
 from drake_hybrid.core.kinematics import declare_plant_context_cache
 from drake_hybrid.hardware.controller_side import prepared
 from drake_hybrid.hardware.messages import HardwareConfig, microseconds
-from drake_hybrid.scenario.plant import build_controller_plant, build_plant
 from drake_hybrid.systems.faults import JointFriction
 from drake_hybrid.systems.sensors import reaction_force_slot
+from drake_hybrid.tasks.plant import build_controller_plant, build_plant
 
 
 @dataclass

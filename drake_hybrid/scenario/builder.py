@@ -33,16 +33,19 @@ from drake_hybrid.control.gains import ControlMode, gain_matrix
 from drake_hybrid.control.phases import ContactPhase
 from drake_hybrid.core.errors import ConfigError
 from drake_hybrid.core.kinematics import EndEffectorKinematics
-from drake_hybrid.scenario.config import ScenarioConfig, check_scenario_config
-from drake_hybrid.scenario.path_job import (add_path_loggers, connect_path, draw_path, lifts_off, make_path_source,
-                                             with_path_commands)
-from drake_hybrid.scenario.plant import RobotModel, build_controller_plant, build_plant
 from drake_hybrid.scenario.start import check_start_sizes
-from drake_hybrid.scenario.station import (HybridSystems, add_contact_supervisor, add_loggers, add_sensing,
-                                           connect_source, wrench_lag)
-from drake_hybrid.scenario.task import pad_kinematic_rows
-from drake_hybrid.scenario.tasks import get_task
+from drake_hybrid.station.loggers import add_loggers
+from drake_hybrid.station.loop import HybridSystems, add_contact_supervisor, connect_source
+from drake_hybrid.station.path_job import add_path_loggers, connect_path, draw_path, lifts_off
+from drake_hybrid.station.robot_model import RobotModel
+from drake_hybrid.station.sensing import add_sensing, wrench_lag
 from drake_hybrid.systems.faults import JointFriction
+from drake_hybrid.tasks.config import ScenarioConfig, check_scenario_config
+from drake_hybrid.tasks.path import make_path_source, with_path_commands
+from drake_hybrid.tasks.plant import build_controller_plant, build_plant
+from drake_hybrid.tasks.registry import get_task
+from drake_hybrid.tasks.task import pad_kinematic_rows
+
 
 @dataclass
 class Scenario:
@@ -134,7 +137,7 @@ def prepare_config(config):
 def build_scenario(config, meshcat=None, with_loggers=True, sampled_plant_outputs=None, controller_sample_lead=True):
     """Build the closed-loop diagram of ``config``. See the module docstring.
 
-    ``sampled_plant_outputs``: see ``scenario.plant.build_plant`` (default: sampled only under a
+    ``sampled_plant_outputs``: see ``tasks.plant.build_plant`` (default: sampled only under a
     continuous controller). ``controller_sample_lead`` exists for ``analysis.linearize_discrete``."""
     task, mode, constraint_space, config = prepare_config(config)
     control_period = config.control_period if config.control_period > 0 else None

@@ -7,7 +7,7 @@
     stale sample), which ``sensors.WrenchConditioner`` uses to reject stale samples.
 ``JointFriction``
     Coulomb friction in the simulated arm's joints, -tau_c tanh(v / v_s) (viscous friction is
-    the joints' damping, set by ``scenario.config.ModelErrorConfig.joint_damping``).
+    the joints' damping, set by ``tasks.config.ModelErrorConfig.joint_damping``).
 
 Both act on the simulation only; the controller's model knows nothing of them. The noise and
 the random dropouts are functions of the seed and the sample index only, so a run is

@@ -308,7 +308,7 @@ def WristForceTorqueSensor_(T):
         (measured on a Kinova Jaco pressing 10 N: the filter primed to 11.94 N,
         the sensor then reading 11.46 N; primed to its own fixed point, 11.54 N,
         max |x-dot| still 12.3; with the fallback model max |x-dot| 565).
-        ``scenario.contact_start.solve_contact_start`` refuses that combination:
+        ``station.contact_start.solve_contact_start`` refuses that combination:
         give a continuous twin (for ``linearize_at_contact``) the contact sensor.
 
         With ``compensate_tool_inertia`` (issue 18) the sensor also removes the tool's inertial

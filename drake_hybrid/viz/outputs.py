@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 
 from drake_hybrid.experiments.simulation import effort_limits, predicted_tracking
-from drake_hybrid.scenario.config import dump_config
+from drake_hybrid.tasks.config import dump_config
 from drake_hybrid.viz.path_plots import save_path_plots
 from drake_hybrid.viz.plotting import save_run_plots, save_tracking_plots
 
@@ -42,7 +42,7 @@ def write_run(result, out_dir, plots=True, html_path=None):
         files += save_run_plots(result.log, effort_limits(result.scenario), out,
                                 constraint_units=labels.get("constraint_units", "units of C"),
                                 constraint_note=labels.get("constraint_note"))
-        if "path_progress" in result.log:                   # a job's path (scenario.path_job)
+        if "path_progress" in result.log:                   # a job's path (station.path_job)
             files += save_path_plots(result.log, result.summary, out)
     if html_path and result.html:
         Path(html_path).write_text(result.html)

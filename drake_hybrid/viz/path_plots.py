@@ -1,4 +1,4 @@
-"""Figures of a job's path (``scenario.path_job``): the path on the workpiece seen from above, and
+"""Figures of a job's path (``station.path_job``): the path on the workpiece seen from above, and
 the path and force errors along it with the contact supervisor's phases.
 
 * ``path_top_view_figure``: the reference path of the pad centre and where the pad centre went, in

@@ -30,7 +30,7 @@ from matplotlib.colors import SymLogNorm
 from drake_hybrid.analysis.linearization import nyquist_split
 from drake_hybrid.experiments.metrics import display_unit, row_units
 from drake_hybrid.experiments.sweep import theory_on_plane
-from drake_hybrid.scenario.config import load_config
+from drake_hybrid.tasks.config import load_config
 
 # Backends that need no display: kept as they are (Jupyter's inline backend reports "inline" or its
 # module name, depending on the matplotlib version).

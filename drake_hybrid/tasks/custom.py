@@ -1,6 +1,6 @@
 """Your own robot and your own constraint in the closed loop, in a handful of lines.
 
-The built-in tasks (``drake_hybrid.scenario.tasks``) are recipes that ``build_scenario``
+The built-in tasks (``drake_hybrid.tasks.registry``) are recipes that ``build_scenario``
 wires into plant -> sensor -> controller -> plant. ``CustomTask`` is the same
 recipe made from pieces you pass in, so every scenario tool works on it
 unchanged once it is registered by name::
@@ -14,7 +14,7 @@ unchanged once it is registered by name::
 The pieces:
 
 * ``add_robot(plant) -> RobotModel``: parse your arm, weld its base, and attach
-  a tool (``attach_pad_tool`` attaches the compliant ball pad of
+  a tool (``mount_tool`` attaches the compliant ball pad of
   ``models/pad_tool.sdf``). It is called twice: on the simulation plant (with a
   SceneGraph) and on the controller's own plant (without). Helpers for arms
   from URDF model packages: ``weld_joints`` (e.g. gripper fingers: the law
@@ -25,11 +25,10 @@ The pieces:
 * ``constraint_space``: a ``ConstraintSpace`` (your chart, C and E_p).
 * ``start_pose``: the end-effector pose with the controlled point on the
   constraint (touching, not pressing). The start that presses with F_d(0) is
-  found as for the built-in tasks (``scenario.start.pressing_positions``): inverse
+  found as for the built-in tasks (``tasks.pressing.pressing_positions``): inverse
   kinematics from ``joint_guess`` at depths along the pressing direction
   -sum_i F_d,i grad_p C_i (the robot pushes the workpiece with -F_d).
 """
-
 
 import numpy as np
 
@@ -39,39 +38,19 @@ from drake_hybrid.control.gains import HybridGains
 from drake_hybrid.core.arguments import describe, function, instance, text, vector
 from drake_hybrid.core.errors import ArgumentError, OffConstraintError
 from drake_hybrid.core.kinematics import inverse_kinematics
-from drake_hybrid.scenario.config import ScenarioConfig, StartConfig
-from drake_hybrid.scenario.plant import RobotModel
-from drake_hybrid.scenario.start import pressing_positions
-from drake_hybrid.scenario.station import (add_actuators, mount_tool, urdf_effort_limits,  # noqa: F401 (public here too)
-                                           weld_joints)
-from drake_hybrid.scenario.task import Task
-from drake_hybrid.scenario.workpieces import add_rigid_workpiece, default_resolution  # noqa: F401 (public here too)
+from drake_hybrid.station.robot_model import RobotModel
 from drake_hybrid.systems.sources import Profile
+from drake_hybrid.tasks.config import ScenarioConfig, StartConfig
+from drake_hybrid.tasks.pressing import pressing_positions
+from drake_hybrid.tasks.task import Task
 
-# ------------------------------------------------------------------------------------------------
-# Robots from model packages
-# ------------------------------------------------------------------------------------------------
-
-def attach_pad_tool(plant, arm, flange_frame, X_flange_tool=None):
-    """Weld the compliant ball pad tool (``models/pad_tool.sdf``: 20 mm ball, its centre 0.05 m
-    along the tool's +z) to ``flange_frame`` of ``arm``; the controlled point is the pad centre.
-    Returns the RobotModel that ``CustomTask``'s ``add_robot`` returns, with ``only_pad_contact``:
-    the arm's own collision shapes touch neither each other nor the workpiece (watch the
-    animation for clearance), so only the pad makes contact. (``scenario.station.mount_tool`` with
-    no gripper.)"""
-    return mount_tool(plant, arm, flange_frame, X_flange_tool)
-
-
-# ------------------------------------------------------------------------------------------------
-# The task
-# ------------------------------------------------------------------------------------------------
 
 class CustomTask(Task):
     """A task from your own robot, workpiece, constraint space and start (see the module docstring).
 
     Args:
         name: the task's name (``ScenarioConfig.task``; ``register_task`` makes it known).
-        add_robot: ``add_robot(plant) -> RobotModel`` (see ``attach_pad_tool``).
+        add_robot: ``add_robot(plant) -> RobotModel`` (see ``mount_tool``).
         add_workpiece: ``add_workpiece(plant) -> list of collision geometry ids``.
         constraint_space: a ConstraintSpace (chart, constraint C, velocity projection E_p).
         start_pose: RigidTransform of the end-effector frame, its controlled point on C = 0
@@ -130,7 +109,7 @@ class CustomTask(Task):
     def add_robot(self, plant, config):
         robot = self._add_robot(plant)
         if not isinstance(robot, RobotModel):
-            raise TypeError(f"task '{self.name}': add_robot must return a RobotModel (see attach_pad_tool), "
+            raise TypeError(f"task '{self.name}': add_robot must return a RobotModel (see mount_tool), "
                             f"got {type(robot).__name__}")
         return robot
 

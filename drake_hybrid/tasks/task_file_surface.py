@@ -37,7 +37,7 @@ from drake_hybrid.core.errors import ConfigError, PathError
 from drake_hybrid.core.expressions import expression_to_sympy
 from drake_hybrid.core.height_map import HeightMap, HeightMapSurface
 from drake_hybrid.core.surfaces import CylinderSurface, PlaneSurface, SphereSurface
-from drake_hybrid.scenario.workpieces import add_rigid_workpiece, mesh_shape
+from drake_hybrid.station.workpieces import add_rigid_workpiece, mesh_shape
 from drake_hybrid.systems.sources import DesiredFieldSource
 
 SURFACE_KINDS = ("plane", "sphere", "cylinder", "height_map")

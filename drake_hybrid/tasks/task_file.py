@@ -2,13 +2,13 @@
 
 ``load_task_file(path)`` reads a task file with Drake's typed YAML (``yaml_load_typed`` on the
 dataclasses below, after the schema pre-check that names the field) and returns a ``DataTask``
-(a ``scenario.custom.CustomTask``, registered by its name) and its ``ScenarioConfig``, so that
+(a ``tasks.custom.CustomTask``, registered by its name) and its ``ScenarioConfig``, so that
 every scenario tool (``simulate``, ``linearize_continuous``, the CLI's ``simulate|analyze
 FILE.yaml``) runs it as a built-in task. The file::
 
     name: window-washing-file              # the task's name (not a built-in one)
     parameters: {window_height: 1.0}       # named numbers the expressions may use
-    hooks: []                              # names of registered Python hooks (scenario/hooks.py)
+    hooks: []                              # names of registered Python hooks (tasks/hooks.py)
     packages: {}                           # {name: folder} for package:// URLs (relative to the file)
     robot:
       directives:                          # Drake model directives (add_model, add_weld, add_frame, ...)
@@ -32,7 +32,7 @@ FILE.yaml``) runs it as a built-in task. The file::
     start:
       configuration: ["0.9", "window_height - 0.02", "pi/2"]   # chart coordinates of the point, on C = 0
       joint_guess: [...]                   # where inverse kinematics starts
-    config: {...}                          # a ScenarioConfig (scenario/config.py): mode, gains, profiles, ...
+    config: {...}                          # a ScenarioConfig (tasks/config.py): mode, gains, profiles, ...
 
 Size: one schema (the dataclasses) and the one function per section that turns it into the
 CustomTask's pieces; splitting them would put the schema and its meaning in different files.
@@ -40,7 +40,7 @@ CustomTask's pieces; splitting them would put the schema and its meaning in diff
 Expressions are parsed by the whitelisted grammar of ``core.expressions`` (never evaluated as
 Python): a file from someone else cannot run code. They are taken by the constraint and E_p rows,
 the start, and the number lists of poses outside ``config`` (``translation``, ``rotation: !Rpy
-{deg}``: ``evaluate_pose_expressions``). Hooks (``scenario.hooks``) are looked up by name in a
+{deg}``: ``evaluate_pose_expressions``). Hooks (``tasks.hooks``) are looked up by name in a
 registry, never imported from the file. Model files: ``package://`` URLs (``model_packages``) or
 paths relative to the file (``resolve_model_file``). The start pose is given in the chart's
 coordinates of the controlled point (``start.configuration``; or ``start.pose`` = [x, y, z, roll,
@@ -69,17 +69,20 @@ from drake_hybrid.core.errors import ConfigError, UnknownFrameError
 from drake_hybrid.core.expressions import check_parameter_names, expression_row_to_sympy, expression_to_sympy
 from drake_hybrid.core.projections import ConstraintSpace, GivenVelocityProjection, KernelVelocityProjection
 from drake_hybrid.core.schema import check_depth, check_yaml_against_schema, read_yaml_file
-from drake_hybrid.scenario.config import ScenarioConfig
 from drake_hybrid.core.surfaces import view_projection
-from drake_hybrid.scenario.custom import CustomTask, add_rigid_workpiece, attach_pad_tool
-from drake_hybrid.scenario.data_surface import (FieldsSpec, SurfaceSpec, add_surface_geometry, field_expressions,
-                                                field_source, surface_of)
-from drake_hybrid.scenario.hooks import make_hooks
-from drake_hybrid.scenario.parsing import ConfigureParser, installed_model_packages, models_directory
-from drake_hybrid.scenario.path_job import path_on, path_start_positions, start_pose_on, view_of
-from drake_hybrid.scenario.robots import TOOL_AXES, load_arm
-from drake_hybrid.scenario.tasks import register_task
+from drake_hybrid.station.arm import mount_tool
+from drake_hybrid.station.parsing import ConfigureParser, installed_model_packages, models_directory
+from drake_hybrid.station.path_job import path_on, start_pose_on, view_of
+from drake_hybrid.station.workpieces import add_rigid_workpiece
 from drake_hybrid.systems.sources import Profile
+from drake_hybrid.tasks.config import ScenarioConfig
+from drake_hybrid.tasks.custom import CustomTask
+from drake_hybrid.tasks.hooks import make_hooks
+from drake_hybrid.tasks.path import path_start_positions
+from drake_hybrid.tasks.registry import register_task
+from drake_hybrid.tasks.robots import TOOL_AXES, load_arm
+from drake_hybrid.tasks.task_file_surface import (FieldsSpec, SurfaceSpec, add_surface_geometry, field_expressions,
+                                                  field_source, surface_of)
 
 MAX_FILE_SIZE = 1_000_000      # characters of a task file
 CHARTS = ("planar", "planar_point", "euler_zxz", "pose")
@@ -98,7 +101,7 @@ class ToolSpec:
 
 @dataclass
 class LoaderSpec:
-    """``scenario.robots.load_arm``'s options: an arm from a URDF/SDF file (relative to the task file)."""
+    """``tasks.robots.load_arm``'s options: an arm from a URDF/SDF file (relative to the task file)."""
 
     path: str = ""                               # URDF/SDF file: package:// URL, absolute or relative to the file
     flange: str = ""                             # the frame (link) that ends the actuated chain
@@ -139,7 +142,7 @@ class WorkpieceSpec:
 
     directives: List[ModelDirective] = field(default_factory=list)   # Drake model directives (e.g. add_weld)
     shapes: List[ShapeSpec] = field(default_factory=list)            # rigid hydroelastic shapes on the world
-    surface: SurfaceSpec = field(default_factory=SurfaceSpec)  # the surface a path lies on (scenario/data_surface.py)
+    surface: SurfaceSpec = field(default_factory=SurfaceSpec)  # the surface a path lies on (tasks/task_file_surface.py)
 
 
 @dataclass
@@ -201,7 +204,7 @@ class TaskFile:
     name: str = ""                               # the task's name (ScenarioConfig.task; not a built-in one)
     description: str = "a task from a scenario file"   # shown by drake-hybrid tasks
     parameters: Dict[str, float] = field(default_factory=dict)   # named numbers the expressions may use
-    hooks: List[str] = field(default_factory=list)     # names of registered Python hooks (scenario/hooks.py)
+    hooks: List[str] = field(default_factory=list)     # names of registered Python hooks (tasks/hooks.py)
     packages: Dict[str, str] = field(default_factory=dict)   # {name: folder (relative to the file)} for package://
     robot: RobotSpec = field(default_factory=RobotSpec)
     workpiece: WorkpieceSpec = field(default_factory=WorkpieceSpec)
@@ -210,7 +213,7 @@ class TaskFile:
     velocity_projection: VelocityProjectionSpec = field(default_factory=VelocityProjectionSpec)
     start: StartSpec = field(default_factory=StartSpec)
     labels: LabelsSpec = field(default_factory=LabelsSpec)
-    fields: FieldsSpec = field(default_factory=FieldsSpec)   # Y_d(r), F_d(r) as expressions (scenario/data_surface.py)
+    fields: FieldsSpec = field(default_factory=FieldsSpec)   # Y_d(r), F_d(r) as expressions (tasks/task_file_surface.py)
     config: ScenarioConfig = field(default_factory=ScenarioConfig)   # the run (task is set to name)
 
 
@@ -358,7 +361,7 @@ class DataTask(CustomTask):
     def __init__(self, spec, path, text, hooks=None, continuous_plant=True, surface=None, fields=None, **pieces):
         super().__init__(**pieces)
         self.spec, self.path, self.text = spec, Path(path), text
-        self.hooks = dict(hooks or {})            # {Task method: the hook's implementation} (scenario/hooks.py)
+        self.hooks = dict(hooks or {})            # {Task method: the hook's implementation} (tasks/hooks.py)
         self.continuous_plant = continuous_plant
         self.surface, self.fields = surface, fields   # (Surface, offset) or None; (Y_d, F_d) or None
         self._config = None
@@ -382,7 +385,7 @@ class DataTask(CustomTask):
         return self.surface
 
     def make_source(self, config, controller_plant, robot, constraint_space):
-        if self.fields is not None:                # the paper's fields Y_d(r), F_d(r) (scenario/data_surface.py)
+        if self.fields is not None:                # the paper's fields Y_d(r), F_d(r) (tasks/task_file_surface.py)
             return field_source(self.fields, controller_plant, robot, constraint_space, f"{self.path}: ")
         hook = self._hook("make_source") or super().make_source
         return hook(config, controller_plant, robot, constraint_space)
@@ -450,7 +453,7 @@ def _robot_adder(spec, path, where, hooks, packages):
             raise ConfigError(f"{where}robot.tool.flange_frame: the frame of '{robot.arm}' the pad tool is welded "
                               "to must be given")
         try:
-            model = attach_pad_tool(plant, arm, robot.tool.flange_frame,
+            model = mount_tool(plant, arm, robot.tool.flange_frame,
                                     robot.tool.X_flange_tool.GetDeterministicValue())
         except UnknownFrameError as error:
             raise ConfigError(f"{where}robot.tool.flange_frame: {error}") from None
@@ -613,7 +616,7 @@ def load_task_file(path, register=True, text=None):
         if surface is None:
             raise ConfigError(f"{where}config.path: a path needs workpiece.surface (the surface it lies on)")
     if job.active and not (spec.start.configuration or spec.start.pose):
-        # A job starts at its path's first point (scenario.path_job).
+        # A job starts at its path's first point (station.path_job).
         start = chart.configuration_of_pose(start_pose_on(surface[0], path_on(*surface, job), job)[0])
     else:
         start = start_configuration_of(spec, chart, where)

@@ -1,6 +1,6 @@
 """A job from the first touch to the last: a path over the workpiece in a scenario.
 
-With ``config.path`` active (``scenario.path_config``) and a task that names its workpiece's
+With ``config.path`` active (``station.path_config``) and a task that names its workpiece's
 surface (``Task.workpiece_surface(config) -> (surface, pad offset)``), the builder
 (``scenario.builder.build_scenario``) makes the closed loop of a job::
 
@@ -19,9 +19,6 @@ The pieces are public for a diagram of your own: ``build_path`` (the SurfacePath
 ``make_path_source``, ``connect_path``, ``path_start_pose``, ``draw_path`` (Meshcat).
 """
 
-import dataclasses
-import math
-
 import numpy as np
 
 from pydrake.geometry import Rgba
@@ -31,31 +28,15 @@ from pydrake.systems.primitives import LogVectorOutput
 from drake_hybrid.control.phases import ContactPhase
 from drake_hybrid.core.arguments import instance, vector
 from drake_hybrid.core.errors import ConfigError, PathError
-from drake_hybrid.core.kinematics import inverse_kinematics
 from drake_hybrid.core.paths import PathLimits, SurfacePath, path_from_strokes, path_from_waypoints
 from drake_hybrid.core.patterns import raster, spiral
-from drake_hybrid.core.schema import unknown_field
 from drake_hybrid.core.surfaces import Surface, ViewPlane, check_offset
-from drake_hybrid.scenario.config import check_scenario_config
-from drake_hybrid.scenario.path_config import PathConfig
-from drake_hybrid.scenario.start import pressing_positions
-from drake_hybrid.systems.path_source import PathSource, reference_rotation
-from drake_hybrid.systems.sources import Profile
+from drake_hybrid.station.path_config import PathConfig
+from drake_hybrid.systems.path_source import reference_rotation
 
 # Logged outputs of the PathSource (log key -> port) and of the supervisor.
 PATH_LOGS = {"reference_position": "reference_position", "reference_normal": "reference_normal",
              "path_error": "path_error", "path_progress": "path_progress", "path_done": "path_done"}
-
-_PATHS = {}
-
-
-def workpiece_surface(task, config):
-    """(surface, pad offset) of the task's workpiece; ConfigError if the task names none."""
-    surface = task.workpiece_surface(config)
-    if surface is None:
-        raise ConfigError(f"path: task '{task.name}' does not name its workpiece's surface (Task.workpiece_surface), "
-                          "so a path cannot be laid on it")
-    return surface
 
 
 def view_of(path_config, surface):
@@ -66,20 +47,6 @@ def view_of(path_config, surface):
     default = surface.default_view()
     return ViewPlane.make(view.origin or default.origin, view.axis_u or default.axis_u, view.axis_v or default.axis_v,
                           what="path.view")
-
-
-def build_path(task, config):
-    """The SurfacePath of ``config.path`` on the task's workpiece (cached per task and config); held at
-    one point when ``path.hold_at`` >= 0. PathError (one line) for a path the job cannot follow."""
-    key = (task.name, repr(config.path), repr(sorted(config.task_parameters.items())),
-           repr(sorted(config.task_options.items())))
-    if key not in _PATHS:
-        surface, offset = workpiece_surface(task, config)
-        path = path_on(surface, offset, config.path)
-        if config.path.heading:
-            check_heading_along(path, heading_of(config.path, surface))
-        _PATHS[key] = path
-    return _PATHS[key]
 
 
 # The normals sampled per segment by check_heading_along: four per knot of its normals' spline, within these bounds.
@@ -180,25 +147,6 @@ def start_pose_on(surface, path, settings):
     return RigidTransform(RotationMatrix(R), centre), np.asarray(normal, dtype=float)
 
 
-def path_start_pose(task, config):
-    """``start_pose_on`` the task's workpiece for ``config.path``."""
-    return start_pose_on(workpiece_surface(task, config)[0], build_path(task, config), config.path)
-
-
-def make_path_source(task, config, controller_plant, robot, constraint_space):
-    """The PathSource of ``config.path`` (it waits for the first contact when the start is off the surface)."""
-    surface, _ = workpiece_surface(task, config)
-    path = build_path(task, config)
-    kinematic = constraint_space.constraint.kinematic_rows
-    force_row = next(i for i in range(constraint_space.force_size) if i not in kinematic)
-    holding = config.path.holding
-    period = config.control_period if config.control_period > 0 else None
-    return PathSource(controller_plant, robot.end_effector_frame, robot.end_effector_point, constraint_space, path,
-                      heading=heading_of(config.path, surface), force_row=force_row,
-                      dwell=0.0 if holding else config.path.dwell,
-                      wait_for_contact=config.supervised and not holding, period=period)
-
-
 def lifts_off(config):
     """True if the job's supervisor gets the lift-off input (a run path with ``lift_off``)."""
     return config.path.active and config.path.lift_off and not config.path.holding and config.supervised
@@ -225,31 +173,6 @@ def add_path_loggers(builder, source, supervisor, loggers, period):
         loggers[key] = LogVectorOutput(source.GetOutputPort(port), builder, period)
     if supervisor is not None:
         loggers["lifting"] = LogVectorOutput(supervisor.GetOutputPort("lifting"), builder, period)
-
-
-def path_start_positions(task, scenario, joint_guess):
-    """The arm's start for a path job: the pad centre at the path's first point in its reference
-    orientation (frame E turned as the reference, its point P there), pressing with F_d(0)
-    (``start.in_contact``) or ``start.gap`` above along the normal (IK from ``joint_guess``)."""
-    config = scenario.config
-    X_WP, normal = path_start_pose(task, config)
-    surface, offset = workpiece_surface(task, config)
-    heading = heading_of(config.path, surface)
-    kinematics = scenario.controller.kinematics
-    context = kinematics.plant.CreateDefaultContext()
-    seed = [np.asarray(joint_guess, dtype=float)]
-
-    def positions_at_depth(depth):
-        # The orientation the constraint's held rows want there (Surface.held_normal), not the surface point's.
-        centre = X_WP.translation() - depth * normal
-        rotation = RotationMatrix(reference_rotation(surface.held_normal(centre, offset), heading))
-        X_target = RigidTransform(rotation, centre)
-        seed[0] = inverse_kinematics(kinematics, context, X_target, seed[0])
-        return seed[0]
-
-    if not config.start.in_contact:
-        return positions_at_depth(-config.start.gap)
-    return pressing_positions(scenario, positions_at_depth)
 
 
 def path_events(log):
@@ -279,41 +202,9 @@ def path_events(log):
     return events
 
 
-def job_duration(task, config):
-    """The simulated time a job needs (s, rounded up to 0.1 s): the guarded approach from ``start.gap``
-    (when the start is off the surface) and 0.2 s, the dwell, the path, the lift-off and 0.3 s."""
-    supervision = config.supervision
-    approach = config.start.gap / supervision.approach_speed + 0.2 if not config.start.in_contact else 0.0
-    lift = supervision.lift_height / supervision.approach_speed + 0.3 if lifts_off(config) else 0.0
-    return math.ceil(10 * (approach + config.path.dwell + build_path(task, config).duration + lift)) / 10
-
-
 def draw_path(meshcat, path, name="path"):
     """Draw ``path`` in ``meshcat`` (the animation): the pad centre's reference as a line, and the
     points on the workpiece it passes over (the contact points), under ``/name``."""
     centres, contacts = instance(path, "path", "draw_path", SurfacePath).centres(), path.contact_points()
     meshcat.SetLine(f"{name}/pad_centre", centres.T, 2.0, Rgba(0.1, 0.6, 0.2, 1.0))
     meshcat.SetLine(f"{name}/on_the_workpiece", contacts.T, 2.0, Rgba(0.9, 0.4, 0.1, 1.0))
-
-
-def with_path_commands(config, constraint_space):
-    """``config`` with desired_velocity zero and desired_force F(0) on the force row, constant: what the
-    start (pressing with F_d(0)), the static torque and the summaries read; the run's commands come
-    from the path."""
-    kinematic = constraint_space.constraint.kinematic_rows
-    force_row = next(i for i in range(constraint_space.force_size) if i not in kinematic)
-    force = [0.0] * constraint_space.force_size
-    force[force_row] = config.path.initial_force()
-    return dataclasses.replace(config, desired_velocity=Profile(kind="constant",
-                                                                value=[0.0] * constraint_space.velocity_size),
-                               desired_force=Profile(kind="constant", value=force))
-
-
-def with_path(config, **changes):
-    """A copy of ``config`` with ``config.path`` fields changed (e.g. ``hold_at=0.5``); ConfigError (one
-    line, as for a YAML file) for a name that is not a PathConfig field or a value not of its type."""
-    check_scenario_config(config, "with_path")
-    unknown = unknown_field(PathConfig, changes, "path")
-    if unknown:
-        raise ConfigError(unknown)
-    return config.replace(path=dataclasses.replace(config.path, **changes))

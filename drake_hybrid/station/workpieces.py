@@ -2,7 +2,7 @@
 
 ``add_rigid_workpiece`` registers a shape (collision and visual), its mesh resolution tied to its
 curvature (``default_resolution``); ``mesh_shape`` makes a height map's closed part
-(``core.height_map.HeightMapSurface.mesh``) a Drake Mesh held in memory. ``scenario.custom`` re-exports
+(``core.height_map.HeightMapSurface.mesh``) a Drake Mesh held in memory. ``tasks.custom`` re-exports
 ``add_rigid_workpiece`` (where the tutorials and your tasks import it from).
 """
 
@@ -10,7 +10,7 @@ import numpy as np
 
 from pydrake.common import MemoryFile
 from pydrake.geometry import (AddRigidHydroelasticProperties, Capsule, Cylinder, Ellipsoid, InMemoryMesh, Mesh,
-                             ProximityProperties, Shape, Sphere)
+                              ProximityProperties, Shape, Sphere)
 from pydrake.math import RigidTransform
 from pydrake.multibody.plant import CoulombFriction, MultibodyPlant
 

@@ -43,13 +43,14 @@ from drake_hybrid.core.charts import EulerZXZChart, PoseChart
 from drake_hybrid.core.constraints import sphere_constraint
 from drake_hybrid.core.kinematics import EndEffectorKinematics, inverse_kinematics
 from drake_hybrid.core.projections import ConstraintSpace, sphere_paper_projection, sphere_true_velocity_projection
-from drake_hybrid.scenario.config import ScenarioConfig, StartConfig
-from drake_hybrid.scenario.parsing import ConfigureParser, add_model
-from drake_hybrid.scenario.start import pressing_positions
-from drake_hybrid.scenario.task import Task
-from drake_hybrid.scenario.task_options import SpherePolishingOptions
-from drake_hybrid.scenario.tasks.robots import PAD_RADIUS, UR5E_SEED, add_ur5e_with_pad
+from drake_hybrid.station.arm import PAD_RADIUS
+from drake_hybrid.station.parsing import ConfigureParser, add_model
 from drake_hybrid.systems.sources import Profile, PseudoVelocitySource
+from drake_hybrid.tasks.builtin.robots import UR5E_SEED, add_ur5e_with_pad
+from drake_hybrid.tasks.config import ScenarioConfig, StartConfig
+from drake_hybrid.tasks.pressing import pressing_positions
+from drake_hybrid.tasks.task import Task
+from drake_hybrid.tasks.task_options import SpherePolishingOptions
 
 SPHERE_RADIUS = 0.15                       # m, models/sphere_workpiece.sdf
 SPHERE_CENTER = np.array([0.45, 0.0, 0.10])

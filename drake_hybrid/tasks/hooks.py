@@ -1,6 +1,6 @@
 """Python hooks for task files, safe by construction: a file names hooks, it never imports code.
 
-A task file (scenario/data_task.py) may list ``hooks: [crank]``: names looked up in a registry of
+A task file (tasks/task_file.py) may list ``hooks: [crank]``: names looked up in a registry of
 ``TaskHook`` objects that the package defines below, that installed packages add through the entry
 point group ``drake_hybrid.task_hooks`` (each entry point an object ``TaskHook``), or that
 ``register_hook`` adds in the running process. A name is a lower-case word (``[a-z][a-z0-9_]*``):
@@ -12,7 +12,7 @@ constraint, a start found by inverse kinematics to a mechanism's pose, a switchi
 the massless-mechanism eigenvalue shifts). ``TaskHook.make(spec)`` builds the hook's
 implementation from the file (``spec``: its TaskFile; numbers from ``spec.parameters``, whose
 names the hook lists in ``parameters`` and the loader checks); the task file's DataTask calls the
-implementation for the Task methods the hook ``provides`` (scenario/task.py), with Task's signatures
+implementation for the Task methods the hook ``provides`` (tasks/task.py), with Task's signatures
 but two:
 
 * ``add_workpiece(plant, config)``: geometries added after the file's own workpiece;
@@ -31,11 +31,11 @@ import numpy as np
 from drake_hybrid.core.constraints import sphere_constraint
 from drake_hybrid.core.errors import ConfigError
 from drake_hybrid.core.projections import crank_true_velocity_projection
-from drake_hybrid.scenario.tasks.crank_turning import CrankTurning
-from drake_hybrid.scenario.tasks.grinding import (add_window_with_rough_patch, pad_positions, rough_patch_events,
-                                                  rough_patch_notes)
-from drake_hybrid.scenario.tasks.robots import add_ur5e_with_pad
 from drake_hybrid.systems.sources import PseudoVelocitySource
+from drake_hybrid.tasks.builtin.crank_turning import CrankTurning
+from drake_hybrid.tasks.builtin.grinding import (add_window_with_rough_patch, pad_positions, rough_patch_events,
+                                                 rough_patch_notes)
+from drake_hybrid.tasks.builtin.robots import add_ur5e_with_pad
 
 ENTRY_POINT_GROUP = "drake_hybrid.task_hooks"
 HOOK_METHODS = ("add_robot", "add_workpiece", "constraint", "make_source", "start_positions",
@@ -125,7 +125,7 @@ CRANK_PARAMETERS = ("crank_center_x", "crank_center_y", "crank_radius", "crank_h
 
 
 class _Crank(CrankTurning):
-    """The crank of Example 2.2 (scenario/tasks/crank_turning.py) with the file's geometry and start
+    """The crank of Example 2.2 (tasks/builtin/crank_turning.py) with the file's geometry and start
     angle: the pad welded to the handle, the start at the handle, the crank's state, its inertia."""
 
     def __init__(self, spec):
@@ -178,7 +178,7 @@ ROUGH_PATCH_PARAMETERS = ("window_height", "rough_start", "rough_end", "rough_fr
 
 
 class _RoughPatch:
-    """The grinding task's pane (scenario/tasks/grinding.py): three boxes, the middle one a rough
+    """The grinding task's pane (tasks/builtin/grinding.py): three boxes, the middle one a rough
     patch whose friction with the pad is rough_friction whatever config.contact.friction is."""
 
     def __init__(self, spec):

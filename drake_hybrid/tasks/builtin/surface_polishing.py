@@ -1,6 +1,6 @@
 """Polishing a surface along a path, from the first touch to the last: a UR5e rasters a workpiece.
 
-The job (``scenario.path_job``): the pad starts 5 mm above the path's first point, the contact
+The job (``station.path_job``): the pad starts 5 mm above the path's first point, the contact
 supervisor's guarded approach brings it down, it presses for ``path.dwell``, follows a raster
 (boustrophedon) over a 10 cm x 10 cm patch seen from above at 5 cm/s and 10 N, stopping at each line
 change, and lifts off at the end. Position-force mode (Remark 3) with the position error measured
@@ -23,6 +23,7 @@ and the pad centre's velocity along the world x and y (m/s), whose position erro
 
 
 import numpy as np
+
 from pydrake.math import RigidTransform
 from pydrake.multibody.parsing import Parser
 
@@ -32,14 +33,15 @@ from drake_hybrid.core.charts import PoseChart
 from drake_hybrid.core.height_map import HeightMap, HeightMapSurface
 from drake_hybrid.core.projections import ConstraintSpace
 from drake_hybrid.core.surfaces import SphereSurface, view_projection
-from drake_hybrid.scenario.config import ScenarioConfig, StartConfig
-from drake_hybrid.scenario.parsing import ConfigureParser, model_url
-from drake_hybrid.scenario.path_config import PathConfig, PatternConfig
-from drake_hybrid.scenario.path_job import job_duration, path_start_positions
-from drake_hybrid.scenario.task import Task
-from drake_hybrid.scenario.task_options import SurfacePolishingOptions
-from drake_hybrid.scenario.tasks.robots import PAD_RADIUS, UR5E_SEED, add_ur5e_with_pad
-from drake_hybrid.scenario.workpieces import add_rigid_workpiece, mesh_shape
+from drake_hybrid.station.arm import PAD_RADIUS
+from drake_hybrid.station.parsing import ConfigureParser, model_url
+from drake_hybrid.station.path_config import PathConfig, PatternConfig
+from drake_hybrid.station.workpieces import add_rigid_workpiece, mesh_shape
+from drake_hybrid.tasks.builtin.robots import UR5E_SEED, add_ur5e_with_pad
+from drake_hybrid.tasks.config import ScenarioConfig, StartConfig
+from drake_hybrid.tasks.path import job_duration, path_start_positions
+from drake_hybrid.tasks.task import Task
+from drake_hybrid.tasks.task_options import SurfacePolishingOptions
 
 SPHERE_CENTER = np.array([0.45, 0.0, 0.10])
 SPHERE_RADIUS = 0.15                                     # m, models/sphere_workpiece.sdf

@@ -42,12 +42,14 @@ from drake_hybrid.core.constraints import crank_constraint
 from drake_hybrid.core.errors import ConfigError
 from drake_hybrid.core.kinematics import EndEffectorKinematics, inverse_kinematics
 from drake_hybrid.core.projections import ConstraintSpace, crank_paper_projection, crank_true_velocity_projection
-from drake_hybrid.scenario.config import ScenarioConfig, StartConfig, WristSensorConfig
-from drake_hybrid.scenario.parsing import ConfigureParser, add_model
-from drake_hybrid.scenario.task import EigenvalueShift, Task
-from drake_hybrid.scenario.task_options import CRANK_START_ANGLE, CrankTurningOptions
-from drake_hybrid.scenario.tasks.robots import PAD_CENTER_IN_TOOL, add_ur5e_with_pad
+from drake_hybrid.station.arm import PAD_CENTER_IN_TOOL
+from drake_hybrid.station.parsing import ConfigureParser, add_model
+from drake_hybrid.station.sensing import WristSensorConfig
 from drake_hybrid.systems.sources import Profile, PseudoVelocitySource
+from drake_hybrid.tasks.builtin.robots import add_ur5e_with_pad
+from drake_hybrid.tasks.config import ScenarioConfig, StartConfig
+from drake_hybrid.tasks.task import EigenvalueShift, Task
+from drake_hybrid.tasks.task_options import CRANK_START_ANGLE, CrankTurningOptions
 
 CRANK_RADIUS = 0.2                       # m, models/crank.sdf
 # Placement and start chosen so that the UR5e stays away from its singularities along the turn: the
@@ -87,7 +89,7 @@ class CrankTurning(Task):
         """The crank's axis at ``center`` (x, y; m), its handle circle of ``radius`` at ``height`` (m);
         ``seed``: the arm's joint positions inverse kinematics starts from. The defaults are the
         built-in task's (the crank task file, models/tasks/crank_turning.yaml, gives its own through
-        the ``crank`` hook, scenario/hooks.py)."""
+        the ``crank`` hook, tasks/hooks.py)."""
         self.center, self.radius, self.height = np.asarray(center, dtype=float), float(radius), float(height)
         self.seed = np.asarray(seed, dtype=float)
 

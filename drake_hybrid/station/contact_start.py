@@ -1,10 +1,10 @@
 """A contact start in your own diagram: the arm at rest pressing with F_d, every state around it set.
 
-``solve_contact_start`` takes the systems of ``scenario.station.add_hybrid_controller`` in your
+``solve_contact_start`` takes the systems of ``station.loop.add_hybrid_controller`` in your
 diagram's context: inverse kinematics to your start pose, the depth where the contact's rest force
 equals F_d (``rest_contact_wrench``: the pressure of SceneGraph's hydroelastic contact surfaces,
 integrated), the typed checks (on the constraint, the branch, a pushing force, the workpiece where C
-says, the links clear of the scene), then ``scenario.start.prime_start``.
+says, the links clear of the scene), then ``station.start.prime_start``.
 """
 
 import numpy as np
@@ -17,10 +17,10 @@ from drake_hybrid.core.errors import (ArgumentError, ConfigError, DrakeHybridErr
                                       UnreachablePoseError)
 from drake_hybrid.core.kinematics import inverse_kinematics
 from drake_hybrid.core.preconditions import check_pushing_force
-from drake_hybrid.scenario.clearance import check_robot_clearance
-from drake_hybrid.scenario.plant import geometry_ids
-from drake_hybrid.scenario.root_context import check_root_context
-from drake_hybrid.scenario.start import holding_torque, pressing_depth, prime_start
+from drake_hybrid.station.clearance import check_robot_clearance
+from drake_hybrid.station.contact import geometry_ids
+from drake_hybrid.station.root_context import check_root_context
+from drake_hybrid.station.start import holding_torque, pressing_depth, prime_start
 from drake_hybrid.systems.sensors import WristForceTorqueSensor
 
 
@@ -56,7 +56,7 @@ def rest_contact_wrench(plant, plant_context, robot_geometries, p_WP):
     except RuntimeError as error:        # a touching pair without a hydroelastic representation
         raise ConfigError(f"rest_contact_wrench: {str(error).splitlines()[0]} -- the start is solved on "
                           "hydroelastic contact: give the workpiece a rigid hydroelastic geometry "
-                          "(scenario.station.add_rigid_workpiece) and let only the tool touch it "
+                          "(station.workpieces.add_rigid_workpiece) and let only the tool touch it "
                           "(only_tool_touches)") from None
     for surface in surfaces:
         if surface.id_M() in robot:
@@ -107,7 +107,7 @@ def solve_contact_start(diagram, root_context, systems, start_pose, joint_guess,
                         max_depth=0.01, tolerance=1e-3):
     """Put your diagram at a start pressing with F_d, at rest, and set every state around the plant.
 
-    ``systems`` is what ``scenario.station.add_hybrid_controller`` returned; ``start_pose`` the
+    ``systems`` is what ``station.loop.add_hybrid_controller`` returned; ``start_pose`` the
     end-effector frame E's pose (RigidTransform, world) with its point P on the surface C = 0;
     ``joint_guess`` the arm's joint positions near it (the inverse kinematics' seed). The pad is
     pushed into the workpiece along the direction a world force must take to give F_d
@@ -123,7 +123,7 @@ def solve_contact_start(diagram, root_context, systems, start_pose, joint_guess,
     ``robot_penetrations``), the inverse kinematics failing (UnreachablePoseError naming start_pose and
     joint_guess), a desired force the contact cannot give within ``max_depth`` (ArgumentError), a
     ``diagram``, ``root_context`` and ``systems`` that do not belong together (ArgumentError,
-    ``scenario.root_context``), and a wrist force/torque sensor on a continuous plant (ArgumentError:
+    ``station.root_context``), and a wrist force/torque sensor on a continuous plant (ArgumentError:
     no primed reading makes that start a rest, see ``systems.sensors.WristForceTorqueSensor``).
     """
     owner = "solve_contact_start"
@@ -210,7 +210,7 @@ def solve_contact_start(diagram, root_context, systems, start_pose, joint_guess,
                 "that they agree)") from error
         except DrakeHybridError:
             raise
-        except ValueError:                     # scenario.start.pressing_depth: too soft a contact for F_d
+        except ValueError:                     # station.start.pressing_depth: too soft a contact for F_d
             raise ArgumentError(f"{owner}: max_depth = {max_depth:g} m of penetration presses with only "
                                 f"{reached[max_depth] + magnitude:.3g} N, less than |desired_force| = {magnitude:.3g} "
                                 "N: lower desired_force, raise max_depth or stiffen the pad (its hydroelastic "

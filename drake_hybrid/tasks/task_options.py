@@ -1,7 +1,7 @@
 """The built-in tasks' typed options (``--option KEY=VALUE``, ``task_options`` in a config), with the
 standard library only.
 
-Each task module (``scenario.tasks``) takes its ``Options`` from here, so that the command line lists
+Each task module (``tasks.registry``) takes its ``Options`` from here, so that the command line lists
 every task's options in ``drake-hybrid simulate --help`` without loading Drake (``option_help``);
 ``Task.options`` reads and checks a config's values against them.
 """
@@ -11,11 +11,11 @@ from dataclasses import dataclass, fields
 
 from drake_hybrid.core.errors import ConfigError
 
-CRANK_START_ANGLE = 4.412                # rad, crank angle alpha at t = 0 (scenario.tasks.crank_turning)
+CRANK_START_ANGLE = 4.412                # rad, crank angle alpha at t = 0 (tasks.builtin.crank_turning)
 
 
 def is_task_file(name):
-    """True if ``name`` (a task argument) names a task file (scenario.data_task) rather than a registered task."""
+    """True if ``name`` (a task argument) names a task file (tasks.task_file) rather than a registered task."""
     return str(name).endswith((".yaml", ".yml"))
 
 

@@ -41,14 +41,14 @@ from drake_hybrid.core.charts import PlanarChart
 from drake_hybrid.core.constraints import window_constraint
 from drake_hybrid.core.errors import ConfigError
 from drake_hybrid.core.projections import ConstraintSpace, GivenVelocityProjection
-from drake_hybrid.scenario.config import ScenarioConfig, StartConfig
-from drake_hybrid.scenario.parsing import ConfigureParser, add_model
-from drake_hybrid.scenario.plant import RobotModel
-from drake_hybrid.scenario.start import pressing_positions
-from drake_hybrid.scenario.task import Task
-from drake_hybrid.scenario.task_options import WindowWashingOptions
-from drake_hybrid.scenario.tasks.robots import PAD_CENTER_IN_TOOL, PAD_RADIUS, add_pad_tool
+from drake_hybrid.station.arm import PAD_CENTER_IN_TOOL, PAD_RADIUS, add_pad_tool
+from drake_hybrid.station.parsing import ConfigureParser, add_model
+from drake_hybrid.station.robot_model import RobotModel
 from drake_hybrid.systems.sources import Profile
+from drake_hybrid.tasks.config import ScenarioConfig, StartConfig
+from drake_hybrid.tasks.pressing import pressing_positions
+from drake_hybrid.tasks.task import Task
+from drake_hybrid.tasks.task_options import WindowWashingOptions
 
 ARMS = {3: ("planar_3r.sdf", (1.0, 0.8, 0.3)), 4: ("planar_4r.sdf", (0.8, 0.7, 0.5, 0.2))}
 # PD gains of the moving pane's actuator (N/m, N s/m): with the pane's 1 kg, a 1 kHz natural frequency

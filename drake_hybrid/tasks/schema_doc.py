@@ -1,13 +1,13 @@
 """The task-file schema as a Markdown page, generated from the types (not written twice).
 
-Every field of the task file (``scenario.data_task.TaskFile``) and of the ``ScenarioConfig`` it
+Every field of the task file (``tasks.task_file.TaskFile``) and of the ``ScenarioConfig`` it
 embeds, by dotted name, with its type, its default and its meaning with units: the comment written
 next to the field in the source, else the field's entry (``name: text``) in its class's docstring.
 Then what a task file's values mean, from the code that reads them: the expression grammar's
 functions, each chart's coordinates and velocity order, each shape's sizes, the order of the arm's
 joints. ``docs/task_files.md`` is this module's output::
 
-    python -m drake_hybrid.scenario.schema_doc > docs/task_files.md
+    python -m drake_hybrid.tasks.schema_doc > docs/task_files.md
 
 (``tests/test_task_files.py`` checks that the file is up to date.)
 """
@@ -18,8 +18,8 @@ import re
 import typing
 
 from drake_hybrid.core.expressions import CONSTANTS, FUNCTIONS, MAX_DEPTH, MAX_LENGTH
-from drake_hybrid.scenario.data_task import CHARTS, SHAPES, ChartSpec, TaskFile, make_chart
-from drake_hybrid.scenario.hooks import ENTRY_POINT_GROUP, HOOK_METHODS, PACKAGE_HOOKS
+from drake_hybrid.tasks.hooks import ENTRY_POINT_GROUP, HOOK_METHODS, PACKAGE_HOOKS
+from drake_hybrid.tasks.task_file import CHARTS, SHAPES, ChartSpec, TaskFile, make_chart
 
 _FIELD_LINE = re.compile(r"^\s+(\w+)\s*:\s*[^#]*?(?:#\s*(.*))?$")
 # A field's entry in its class's docstring: "name: text" (or "name, other: text"; ``name``: text), with
@@ -233,7 +233,7 @@ def reference_sections():
               "`start.joint_guess`, and the columns of `q`, `v` and `torque` in a run's `log.npz`, follow the arm's",
               "joints in the plant's order of its model instance's positions (Drake's `plant.GetPositionNames(arm)`):",
               "from the base to the flange on a serial arm, one entry per joint, in rad (m for a prismatic joint).",
-              "Welded joints have no entry. An arm from `robot.loader` (`scenario.robots.load_arm`) is welded to the",
+              "Welded joints have no entry. An arm from `robot.loader` (`tasks.robots.load_arm`) is welded to the",
               "world at `base_pose`, and every joint off the chain from its base to `flange` (gripper fingers), and",
               "every multi-dof joint on it, is **welded** at its zero position: the joints that remain are the",
               "chain's, listed base to flange in `LoadedArm.report.arm_joints` (`load_arm` prints what it welded).",
@@ -244,7 +244,7 @@ def reference_sections():
 HOOKS_TEXT = [
     "## Hooks",
     "",
-    "`hooks: [name, ...]` names Python hooks from a registry (`drake_hybrid/scenario/hooks.py`): the",
+    "`hooks: [name, ...]` names Python hooks from a registry (`drake_hybrid/tasks/hooks.py`): the",
     "package's (below) and those installed packages declare in the entry point group",
     f"`{ENTRY_POINT_GROUP}` (each entry point a `TaskHook`), e.g. in their `pyproject.toml`:",
     "",
@@ -313,8 +313,8 @@ def schema_markdown(schema=TaskFile):
     """The Markdown page of ``docs/task_files.md``."""
     lines = ["# Task files: every field",
              "",
-             "Generated from the types by `python -m drake_hybrid.scenario.schema_doc` (do not edit by hand).",
-             "A task file is described in `drake_hybrid/scenario/data_task.py`; examples are in `models/tasks/`.",
+             "Generated from the types by `python -m drake_hybrid.tasks.schema_doc` (do not edit by hand).",
+             "A task file is described in `drake_hybrid/tasks/task_file.py`; examples are in `models/tasks/`.",
              "Expressions (constraint rows, E_p rows, the start) follow the grammar of",
              "`drake_hybrid/core/expressions.py`. Drake's own types are documented by Drake:",
              ""]

@@ -57,8 +57,8 @@ from pydrake.systems.framework import DiagramBuilder
 
 from drake_hybrid.core.arguments import function, joint_vector, number, positive
 from drake_hybrid.core.errors import ConfigError, UnreachablePoseError
-from drake_hybrid.scenario.custom import attach_pad_tool
-from drake_hybrid.scenario.plant import get_frame
+from drake_hybrid.station.arm import mount_tool
+from drake_hybrid.station.robot_model import get_frame
 
 # Mesh formats Drake 1.51's SceneGraph takes for collision (convex hulls) and that Meshcat shows.
 DRAKE_MESH_SUFFIXES = (".obj", ".vtk", ".gltf", ".glb")
@@ -474,7 +474,7 @@ class LoadedArm:
         parser.SetAutoRenaming(True)
         arm = parser.AddModels(self.report.model)[0]
         flange, tool = fix_arm(plant, arm, self.flange, self.tool_frame, self.base_pose, self.effort_limits, report)
-        return attach_pad_tool(plant, arm, tool, RigidTransform(TOOL_AXES[self.tool_axis], np.zeros(3)))
+        return mount_tool(plant, arm, tool, RigidTransform(TOOL_AXES[self.tool_axis], np.zeros(3)))
 
     @property
     def plant(self):

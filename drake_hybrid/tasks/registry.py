@@ -1,18 +1,18 @@
 """The paper's tasks as scenario recipes (robot, workpiece, constraint, start).
 
 ``get_task(name)`` returns a task object; ``TASKS`` lists them; ``register_task``
-adds your own (``drake_hybrid.scenario.custom.CustomTask``). A task knows
+adds your own (``drake_hybrid.tasks.custom.CustomTask``). A task knows
 how to add its robot and workpiece to a plant, its chart, constraint and
 velocity projection, its default ScenarioConfig and its start configuration.
 """
 
 from drake_hybrid.core.arguments import describe, text
 from drake_hybrid.core.errors import ArgumentError, DrakeHybridError
-from drake_hybrid.scenario.tasks.crank_turning import CrankTurning
-from drake_hybrid.scenario.tasks.grinding import Grinding
-from drake_hybrid.scenario.tasks.sphere_polishing import SpherePolishing
-from drake_hybrid.scenario.tasks.surface_polishing import SurfacePolishing
-from drake_hybrid.scenario.tasks.window_washing import WindowWashing
+from drake_hybrid.tasks.builtin.crank_turning import CrankTurning
+from drake_hybrid.tasks.builtin.grinding import Grinding
+from drake_hybrid.tasks.builtin.sphere_polishing import SpherePolishing
+from drake_hybrid.tasks.builtin.surface_polishing import SurfacePolishing
+from drake_hybrid.tasks.builtin.window_washing import WindowWashing
 
 TASKS = {task.name: task for task in (WindowWashing(), CrankTurning(), SpherePolishing(), Grinding(),
                                       SurfacePolishing())}
@@ -22,11 +22,11 @@ BUILT_IN_TASKS = frozenset(TASKS)
 
 
 def register_task(task):
-    """Make ``task`` (e.g. a ``scenario.custom.CustomTask``) known by its name to ``get_task``, and so to
+    """Make ``task`` (e.g. a ``tasks.custom.CustomTask``) known by its name to ``get_task``, and so to
     ``build_scenario``, ``simulate`` and ``linearize_continuous``. A task registered earlier under
     the same name is replaced (re-running a notebook cell); a built-in task cannot be. Returns it."""
     if not isinstance(getattr(task, "name", None), str):
-        raise ArgumentError(f"register_task: task must be a task object with a name (e.g. scenario.custom.CustomTask), "
+        raise ArgumentError(f"register_task: task must be a task object with a name (e.g. tasks.custom.CustomTask), "
                             f"got {describe(task)}")
     if task.name in BUILT_IN_TASKS:
         raise ArgumentError(f"'{task.name}' is a built-in task; give your task another name")

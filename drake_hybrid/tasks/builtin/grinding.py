@@ -31,10 +31,10 @@ from pydrake.multibody.plant import CoulombFriction
 from drake_hybrid.control.gains import ControlMode, HybridGains
 from drake_hybrid.core.arguments import joint_rows
 from drake_hybrid.core.errors import ConfigError
-from drake_hybrid.scenario.task import Task
-from drake_hybrid.scenario.task_options import SPHERE_ONLY, GrindingOptions, built_in_option_help
-from drake_hybrid.scenario.tasks.sphere_polishing import SpherePolishing
-from drake_hybrid.scenario.tasks.window_washing import WindowWashing
+from drake_hybrid.tasks.builtin.sphere_polishing import SpherePolishing
+from drake_hybrid.tasks.builtin.window_washing import WindowWashing
+from drake_hybrid.tasks.task import Task
+from drake_hybrid.tasks.task_options import SPHERE_ONLY, GrindingOptions, built_in_option_help
 
 PANE_SIZE = (3.0, 0.5, 0.02)       # models/window.sdf
 PANE_CENTER_X = 1.0

@@ -25,8 +25,7 @@ import copyreg
 import dataclasses
 import math
 from dataclasses import dataclass, field
-from typing import Dict, List, Union
-
+from typing import Dict, List
 
 from pydrake.common.yaml import yaml_dump_typed, yaml_load_typed
 from pydrake.multibody.plant import MultibodyPlantConfig
@@ -39,26 +38,14 @@ from drake_hybrid.control.supervision import SupervisionConfig
 from drake_hybrid.core.arguments import instance
 from drake_hybrid.core.errors import ConfigError, check_fields, check_finite
 from drake_hybrid.core.schema import check_types, check_yaml_against_schema, read_yaml_file, unknown_field
-from drake_hybrid.scenario.path_config import PathConfig
+from drake_hybrid.station.contact import ContactConfig, default_plant_config, validate_plant_config
+from drake_hybrid.station.path_config import PathConfig
+from drake_hybrid.station.sensing import ContactSensorConfig, SensorConfig, WristSensorConfig
 from drake_hybrid.systems.faults import SensorFaultConfig
 from drake_hybrid.systems.sources import Profile
 
-# The values Drake 1.51 accepts for the MultibodyPlantConfig fields checked here.
-CONTACT_MODELS = ("hydroelastic", "hydroelastic_with_fallback", "point")
-DISCRETE_APPROXIMATIONS = ("sap", "tamsi", "similar", "lagged")
-SURFACE_REPRESENTATIONS = ("polygon", "triangle")
 # The laws a scenario can close its loop with (scenario.builder): Li & Sastry's, and the baselines.
 CONTROLLERS = ("li-sastry", "raibert-craig", "fisher-mujtaba", "pd-open-loop-force")
-
-
-def default_plant_config():
-    """The plant of every built-in task: discrete (1 kHz) SAP with compliant hydroelastic contact.
-
-    ``time_step: 0`` makes it continuous (what ``analysis.linearize_continuous`` linearizes).
-    SAP models dissipation with its own linear law (``ContactConfig.relaxation_time``) and ignores
-    the pad's Hunt-Crossley dissipation; "similar" or "lagged" use Hunt-Crossley
-    (``ContactConfig.pad_dissipation``), like the continuous plant (docs/drake_notes.md)."""
-    return MultibodyPlantConfig(time_step=1.0e-3, contact_model="hydroelastic", discrete_contact_approximation="sap")
 
 
 def _load_struct(schema, text):
@@ -73,26 +60,6 @@ def _reduce_struct(struct):
 
 for _struct in (MultibodyPlantConfig, SimulatorConfig):
     copyreg.pickle(_struct, _reduce_struct)
-
-
-def validate_plant_config(plant, prefix="plant."):
-    """ConfigError naming the MultibodyPlantConfig field Drake would reject (or that would break the law)."""
-    if not plant.time_step >= 0:
-        raise ConfigError(f"{prefix}time_step must be >= 0 (0 means continuous), got {plant.time_step}")
-    if plant.contact_model not in CONTACT_MODELS:
-        raise ConfigError(f"{prefix}contact_model must be one of {CONTACT_MODELS}, got '{plant.contact_model}'")
-    if plant.discrete_contact_approximation not in DISCRETE_APPROXIMATIONS + ("",):
-        raise ConfigError(f"{prefix}discrete_contact_approximation must be one of {DISCRETE_APPROXIMATIONS}, "
-                          f"got '{plant.discrete_contact_approximation}'")
-    if plant.contact_surface_representation not in SURFACE_REPRESENTATIONS:
-        raise ConfigError(f"{prefix}contact_surface_representation must be one of {SURFACE_REPRESENTATIONS}, "
-                          f"got '{plant.contact_surface_representation}'")
-    for name in ("penetration_allowance", "stiction_tolerance", "sap_near_rigid_threshold"):
-        number = getattr(plant, name)
-        if not 0 < number < math.inf:
-            raise ConfigError(f"{prefix}{name} must be positive and finite, got {number}")
-    if not plant.time_step < math.inf:
-        raise ConfigError(f"{prefix}time_step must be finite, got {plant.time_step}")
 
 
 def validate_simulator_config(simulator, prefix="simulator."):
@@ -112,75 +79,6 @@ def validate_simulator_config(simulator, prefix="simulator."):
 
 
 @dataclass
-class ContactConfig:
-    """The pad's and the workpiece's contact material (the contact model itself is ``plant``)."""
-
-    pad_modulus: float = 5.0e6                   # Pa, the pad's hydroelastic modulus
-    pad_dissipation: float = 10.0                # s/m, Hunt-Crossley dissipation (continuous, similar, lagged)
-    # SAP's linear dissipation (discrete plants): the pad's and the workpiece's relaxation times,
-    # which SAP adds (< 0: the model's own, Drake's default 0.1 s each). The default pair, 0.03 s,
-    # damps the arm-on-pad mode about critically (zeta ~ 1.5 on the window). Drake's 0.2 s pair damps
-    # it ten times critically and drags a pad sliding over a curved workpiece (0.24 N at 10 N,
-    # 2 cm/s, R 5 cm: 6.6-6.9 % velocity error in impedance-force mode); a lighter pair, 0.01 s,
-    # misses a 50 ms force step by 0.755 N while the arm compresses the pad (docs/drake_notes.md,
-    # "Choosing the pair's dissipation").
-    relaxation_time: float = 0.03                # s, the pad's (SAP); replaces the tool model's own; < 0 keeps it
-    workpiece_relaxation_time: float = 0.0       # s, each workpiece geometry's, directives' too; < 0: the model's own
-    friction: float = 0.0                        # Coulomb mu (static = dynamic) of pad and workpiece
-    pad_resolution: float = 0.003                # m, mesh resolution hint of the pad (see docs: tessellation torque)
-    workpiece_resolution: float = 0.0            # m, the hint of each workpiece geometry that has one; 0: the model's
-    # (docs/contact_resolution.md measures both hints' accuracy against their cost)
-
-    def validate(self, prefix="contact."):
-        """ConfigError naming ``prefix`` and the field: the types first (``core.schema.check_types``: a
-        config built in Python is checked as a file is), NaN and inf, then the values."""
-        check_types(self, ContactConfig, prefix.rstrip("."))
-        check_finite(self, prefix)
-        check_fields(self, prefix, positive=("pad_modulus", "pad_resolution"),
-                     nonnegative=("pad_dissipation", "friction", "workpiece_resolution"))
-
-
-@dataclass
-class WrenchPathConfig:
-    """What every sensor's wrench passes through before the controller."""
-
-    bandwidth_hz: float = 0.0                    # Hz, first-order low-pass; 0 = none (a continuous plant needs one)
-    condition: bool = False                      # a WrenchConditioner (dropout rejection, tare, the low-pass)
-    max_hold_time: float = 0.01                  # s, how long the conditioner bridges a dropout by holding
-    fault_time: float = 0.05                     # s, a wrench invalid (non-finite) this long is a sensor fault:
-                                                 # the run stops there and reports it (inf = never)
-
-    def validate(self, prefix="sensor."):
-        """As ``ContactConfig.validate`` (``fault_time`` may be inf: never)."""
-        check_types(self, type(self), prefix.rstrip("."))
-        check_finite(self, prefix, allow_infinite=("fault_time",))
-        check_fields(self, prefix, nonnegative=("bandwidth_hz", "max_hold_time"), positive=("fault_time",))
-
-
-@dataclass
-class ContactSensorConfig(WrenchPathConfig):
-    """The ideal sensor: Drake's contact results on the robot, shifted to the end-effector point
-    (``systems.sensors.ContactWrenchSensor``). YAML: ``sensor: !ContactSensorConfig {...}`` (the
-    default, so the tag may be left out)."""
-
-
-@dataclass
-class WristSensorConfig(WrenchPathConfig):
-    """A force/torque sensor in the weld between wrist and tool: the weld's reaction force minus the
-    tool's weight (``systems.sensors.WristForceTorqueSensor``). YAML: ``sensor: !WristSensorConfig {...}``.
-
-    ``compensate_tool_inertia``: also remove the tool's inertial wrench (its spatial momentum rate,
-    from the tool's model and the plant's body accelerations), so that the sensor reports the
-    contact wrench during motion too. Off by default: the static compensation of the paper's
-    setting (and of most real sensors' drivers)."""
-
-    compensate_tool_inertia: bool = False
-
-
-SensorConfig = Union[ContactSensorConfig, WristSensorConfig]
-
-
-@dataclass
 class StartConfig:
     """Start of the run: where on the constraint, and the controller's initial integrals."""
 
@@ -193,7 +91,6 @@ class StartConfig:
 
     def validate(self, prefix="start."):
         check_fields(self, prefix, positive=("tolerance", "gap"))
-
 
 
 MECHANISM_SOURCES = ("none", "given", "plant")
@@ -315,8 +212,8 @@ class ScenarioConfig:
     baseline: BaselineGains = field(default_factory=BaselineGains)
     mechanism: MechanismConfig = field(default_factory=MechanismConfig)
     compensate_tangential_force: bool = True     # cancel the measured F_v in velocity/position-force mode
-    # A job's path over the workpiece (scenario.path_config; inactive by default): the desired motion
-    # and force then come from the path (scenario.path_job), not from desired_velocity / desired_force.
+    # A job's path over the workpiece (station.path_config; inactive by default): the desired motion
+    # and force then come from the path (station.path_job), not from desired_velocity / desired_force.
     path: PathConfig = field(default_factory=PathConfig)
 
     def replace(self, **changes):
@@ -441,7 +338,6 @@ def load_config(path=None, data=None, defaults=None):
                                defaults=defaults if defaults is not None else ScenarioConfig())
     except (AssertionError, RuntimeError, ValueError, TypeError) as error:
         raise ConfigError(f"{where}{str(error).splitlines()[0]}") from None
-
 
 
 def dump_config(config):

@@ -20,7 +20,7 @@ first touch to the last::
       hold_at: -1.0                            # >= 0: hold at this fraction of the path's length instead
                                                # (what linearizations at a point of the path use)
 
-The task gives the surface (``Task.workpiece_surface``); ``scenario.path_job`` builds the path,
+The task gives the surface (``Task.workpiece_surface``); ``station.path_job`` builds the path,
 its source and the wiring. ``validate`` checks every field once, naming it (``PathError``); what
 needs the surface (a waypoint off it, a pattern outside the region) is checked when the path is
 built, before the run.

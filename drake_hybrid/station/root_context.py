@@ -1,8 +1,8 @@
 """The diagram, its root context and the hybrid systems in it, checked to belong together.
 
-The functions that take your built diagram (``scenario.contact_start.solve_contact_start``,
-``scenario.clearance.robot_penetrations``, ``analysis.linearization.linearize_at_contact``) take the
-diagram, its root context and the ``HybridSystems`` of ``scenario.station.add_hybrid_controller`` (or
+The functions that take your built diagram (``station.contact_start.solve_contact_start``,
+``station.clearance.robot_penetrations``, ``analysis.linearization.linearize_at_contact``) take the
+diagram, its root context and the ``HybridSystems`` of ``station.loop.add_hybrid_controller`` (or
 a built ``Scenario``). Given the context of another diagram, or a subsystem's, Drake answers with a
 two-line RuntimeError deep in the call; ``check_root_context`` says which argument it is first.
 """
@@ -32,7 +32,7 @@ def check_systems(systems, owner, fields=SYSTEMS_FIELDS, name="systems"):
     missing = [field for field in fields if not hasattr(systems, field)]
     if missing:
         what = ("a built Scenario or the HybridSystems of add_hybrid_controller" if name == "scenario" else
-                "the HybridSystems of scenario.station.add_hybrid_controller (or a built Scenario)")
+                "the HybridSystems of station.loop.add_hybrid_controller (or a built Scenario)")
         raise ArgumentError(f"{owner}: {name} must be {what}, got {describe(systems)} (no {', '.join(missing)})")
     return systems
 
@@ -72,7 +72,7 @@ def check_system_context(system, context, owner, system_name="diagram", context_
 
 def subsystem_context(system, root_context, owner, what):
     """``system``'s context in ``root_context`` (``GetMyContextFromRoot``), where the diagram itself is not
-    at hand (a logger's, ``scenario.station.read_log``); ArgumentError naming ``owner`` and root_context
+    at hand (a logger's, ``station.loggers.read_log``); ArgumentError naming ``owner`` and root_context
     for a Context that is not a root context, or is the root context of a diagram without ``system``
     (``what`` says which diagram that is)."""
     instance(root_context, "root_context", owner, Context, what="the diagram's root Context")

@@ -2,8 +2,8 @@
 
 A task is a recipe for a closed loop: the robot and tool it adds to a plant, the workpiece, the
 constraint space (chart, C, E_p), the desired-value source, the start, its default
-``ScenarioConfig``, and its own options. Every task, built in (``scenario.tasks``) or yours
-(``scenario.custom.CustomTask``), subclasses ``Task``::
+``ScenarioConfig``, and its own options. Every task, built in (``tasks.registry``) or yours
+(``tasks.custom.CustomTask``), subclasses ``Task``::
 
     Task.default_config(options=None, **changes) -> ScenarioConfig
         base_config(options)                       the task's defaults (subclass)
@@ -29,10 +29,10 @@ import numpy as np
 from drake_hybrid.core.arguments import instance, joint_rows
 from drake_hybrid.core.errors import ConfigError
 from drake_hybrid.core.schema import unknown_field
-from drake_hybrid.scenario.config import ScenarioConfig
-from drake_hybrid.scenario.path_job import path_events
-from drake_hybrid.scenario.task_options import option_help
+from drake_hybrid.station.path_job import path_events
 from drake_hybrid.systems.sources import Profile, ProfileSource
+from drake_hybrid.tasks.config import ScenarioConfig
+from drake_hybrid.tasks.task_options import option_help
 
 
 @dataclass
@@ -163,7 +163,7 @@ class Task(abc.ABC):
 
     def option_help(self):
         """One line per option for help texts: ``name=VALUE`` with its type or allowed values and default
-        (``scenario.task_options.option_help``)."""
+        (``tasks.task_options.option_help``)."""
         return option_help(self.Options)
 
     def options(self, config):
@@ -209,7 +209,7 @@ class Task(abc.ABC):
     # -- models ------------------------------------------------------------------------------------
     @abc.abstractmethod
     def add_robot(self, plant, config):
-        """Add the robot and its tool to ``plant``; return a ``scenario.plant.RobotModel``."""
+        """Add the robot and its tool to ``plant``; return a ``station.robot_model.RobotModel``."""
 
     @abc.abstractmethod
     def add_workpiece(self, plant, config):
@@ -232,7 +232,7 @@ class Task(abc.ABC):
     def workpiece_surface(self, config):
         """(surface, pad offset): the workpiece's surface (a ``core.surfaces.Surface``) and how far the
         controlled point is held off it along the normal (a ball pad's radius), for a job's path
-        (``config.path``, ``scenario.path_job``). Default: None (the task has no path over a surface)."""
+        (``config.path``, ``station.path_job``). Default: None (the task has no path over a surface)."""
         return None
 
     def make_source(self, config, controller_plant, robot, constraint_space):

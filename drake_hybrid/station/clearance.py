@@ -1,6 +1,6 @@
 """A robot's clearance at its start: its parts other than the tool must not penetrate the scene.
 
-``scenario.plant.only_tool_touches`` filters every contact of the robot but its tool's, so a link
+``station.contact.only_tool_touches`` filters every contact of the robot but its tool's, so a link
 through the workpiece passes unseen in the simulation; ``robot_penetrations`` asks SceneGraph for
 those pairs' signed distances at a configuration, and ``check_robot_clearance`` refuses a start
 where any is below -``PENETRATION_TOLERANCE`` (StartCollisionError naming the bodies).
@@ -10,7 +10,7 @@ from pydrake.geometry import CollisionFilterDeclaration, GeometrySet, Role, Scen
 
 from drake_hybrid.core.arguments import joint_vector, nonnegative, text
 from drake_hybrid.core.errors import StartCollisionError
-from drake_hybrid.scenario.root_context import check_root_context
+from drake_hybrid.station.root_context import check_root_context
 
 PENETRATION_TOLERANCE = 1e-4      # m: a robot part this far inside another geometry at the start is a collision
 
@@ -26,7 +26,7 @@ def robot_penetrations(diagram, root_context, systems, q, tolerance=PENETRATION_
     shapes have no signed distance in Drake (e.g. two meshes) are skipped.
 
     ArgumentError (before any Drake call) for ``diagram``, ``root_context`` or ``systems`` that do not
-    belong together (``scenario.root_context.check_root_context``), a ``q`` that is not a vector of the
+    belong together (``station.root_context.check_root_context``), a ``q`` that is not a vector of the
     arm's number of finite positions, a ``tolerance`` that is not a finite number >= 0."""
     return _penetrations(diagram, root_context, systems, q, tolerance, "robot_penetrations")
 

@@ -14,33 +14,12 @@ from pydrake.math import RigidTransform
 from pydrake.multibody.parsing import Parser
 
 from drake_hybrid.core.arguments import joint_rows
-from drake_hybrid.scenario.parsing import ConfigureParser, add_model, models_directory
-from drake_hybrid.scenario.plant import RobotModel
-
-PAD_RADIUS = 0.02            # m, the pad sphere of models/pad_tool.sdf
-PAD_CENTER_IN_TOOL = 0.05    # m along the tool's +z axis (frame "pad_center")
+from drake_hybrid.station.arm import add_pad_tool
+from drake_hybrid.station.parsing import ConfigureParser
+from drake_hybrid.station.robot_model import RobotModel
 
 # A comfortable UR5e posture (elbow up, tool pointing forward-down), used as IK seed.
 UR5E_SEED = np.array([0.0, -1.9, 1.9, -1.6, -1.57, 0.0])
-
-
-def add_pad_tool(plant, parser, wrist_frame, X_wrist_flange, name="pad_tool", center_frame="pad_center"):
-    """Parse the pad tool as model ``name`` with its pad centre frame called ``center_frame`` (the
-    model's own names by default; others let a plant hold several tools) and weld its flange to
-    ``wrist_frame``. Returns (instance, weld, pad geometries)."""
-    if (name, center_frame) == ("pad_tool", "pad_center"):
-        tool = add_model(parser, "pad_tool.sdf")[0]
-    else:
-        sdf = (models_directory() / "pad_tool.sdf").read_text()
-        sdf = sdf.replace('<model name="pad_tool">', f'<model name="{name}">')
-        sdf = sdf.replace('<frame name="pad_center"', f'<frame name="{center_frame}"')
-        tool = parser.AddModelsFromString(sdf, "sdf")[0]
-    tool_frame = plant.GetFrameByName("tool", tool)
-    weld = plant.WeldFrames(wrist_frame, tool_frame, X_wrist_flange)
-    geometries = []
-    if plant.geometry_source_is_registered():
-        geometries = list(plant.GetCollisionGeometriesForBody(plant.GetBodyByName("tool", tool)))
-    return tool, weld, geometries
 
 
 def add_ur5e_with_pad(plant, X_WBase=None):

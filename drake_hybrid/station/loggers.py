@@ -1,0 +1,92 @@
+"""Loggers of every signal of a hybrid loop, and the log they give.
+"""
+
+from typing import Dict
+
+from pydrake.systems.framework import DiagramBuilder
+from pydrake.systems.primitives import LogVectorOutput
+
+from drake_hybrid.core.arguments import instance, nonnegative
+from drake_hybrid.core.errors import ArgumentError
+from drake_hybrid.station.loop import HybridSystems
+from drake_hybrid.station.root_context import subsystem_context
+
+# The log's keys (read_log; log.npz names a few otherwise), each (samples x size), with "t" the sample times.
+LOG_KEYS = {
+    "t": "sample times (s)",
+    "velocity_error": "e_p' = E_p r-dot - r-dot_pd (k; each row in its own units)",
+    "force_error": "e_f = F - F_d (m; zero on kinematic rows, NaN while the wrench is invalid)",
+    "wrench_valid": "1 where the measured wrench was finite, 0 where not (then force, force_error and "
+                    "tangential_force read NaN) (1)",
+    "constraint_value": "C(r) (m; in C's units: a contact's compression, a weld's offset)",
+    "projected_velocity": "r-dot_p = E_p r-dot (k)",
+    "force": "F, the force on the robot in E_f's coordinates ([F_v; F] = E^-T w) (m)",
+    "tangential_force": "F_v, the measured force along the velocity rows (k)",
+    "position_error": "e_p, the integral of e_p' (k; zero in velocity-force mode)",
+    "actuation": "the actuators' torques (n_u, N m or N, in the plant's actuator order)",
+    "desired_velocity": "r-dot_pd (k)",
+    "desired_force": "F_d (m)",
+    "state": "[q; v] of the arm (2n, in the plant's joint order for robot.arm)",
+    "wrench": "the wrench the controller reads: [torque; force] on the robot BY the environment at the "
+              "end-effector point, world frame (6; N m, N), after the filter or conditioner",
+    "true_wrench": "the sensor's own wrench, before faults, filter or conditioner (6; only when they differ)",
+    "contact_phase": "the ContactSupervisor's phase (1; control.phases.ContactPhase values; only when supervised)",
+}
+
+
+def add_loggers(builder, systems, period=None):
+    """Loggers for every signal of ``systems`` (a HybridSystems), keyed by ``LOG_KEYS``.
+
+    ``period``: sample period (s); None logs every publish of the simulator's steps. A controller with
+    ``sampled_diagnostics`` is logged from its ``diagnostics`` port (what each tick computed, read
+    once). Returns {key: VectorLogSink or (sink, column slice)}; ``read_log`` turns it into arrays."""
+    instance(builder, "builder", "add_loggers", DiagramBuilder)
+    instance(systems, "systems", "add_loggers", HybridSystems, what="the HybridSystems of add_hybrid_controller")
+    controller = systems.controller
+    loggers = {}
+    period = nonnegative(0.0 if period is None else period, "period", "add_loggers", unit="s")
+    if getattr(controller, "sampled_diagnostics", False):
+        diagnostics = LogVectorOutput(controller.GetOutputPort("diagnostics"), builder, period)
+        for name, columns in controller.diagnostic_slices().items():
+            loggers[name] = (diagnostics, columns)
+    else:
+        for name in controller.diagnostic_slices():
+            loggers[name] = LogVectorOutput(controller.GetOutputPort(name), builder, period)
+    for name in ("position_error", "actuation"):
+        loggers[name] = LogVectorOutput(controller.GetOutputPort(name), builder, period)
+    if systems.source is not None:
+        for name in ("desired_velocity", "desired_force"):
+            loggers[name] = LogVectorOutput(systems.source.GetOutputPort(name), builder, period)
+    loggers["state"] = LogVectorOutput(systems.plant.get_state_output_port(systems.robot.arm), builder, period)
+    loggers["wrench"] = LogVectorOutput(systems.wrench_output, builder, period)
+    if systems.true_wrench is not None and systems.true_wrench is not systems.wrench_output:
+        loggers["true_wrench"] = LogVectorOutput(systems.true_wrench, builder, period)
+    if systems.supervisor is not None:
+        loggers["contact_phase"] = LogVectorOutput(systems.supervisor.GetOutputPort("contact_phase"), builder, period)
+    return loggers
+
+
+def logged(loggers, root_context, name, owner="logged"):
+    """(times, samples x size) of logger ``name`` of ``loggers`` (``add_loggers``) in ``root_context`` (the
+    root context of the diagram they were added to: ArgumentError naming ``owner`` otherwise)."""
+    instance(loggers, "loggers", owner, dict, what="the dict of add_loggers")
+    if name not in loggers:
+        raise ArgumentError(f"{owner}: no logger '{name}'; these were logged: {', '.join(loggers)}")
+    logger, columns = loggers[name], slice(None)
+    if isinstance(logger, tuple):
+        logger, columns = logger
+    subsystem_context(logger, root_context, owner, "the diagram the loggers were added to")
+    log = logger.FindLog(root_context)
+    return log.sample_times(), log.data().T[:, columns]
+
+
+def read_log(loggers: Dict[str, object], root_context):
+    """{key: array} of every logger of ``add_loggers`` in ``root_context``, with "t" (the sample times of
+    the first), keyed by ``LOG_KEYS`` (log.npz calls a few otherwise: velocity, constraint, torque, q and v)."""
+    instance(loggers, "loggers", "read_log", dict, what="the dict of add_loggers")
+    log = {}
+    for name in loggers:
+        times, values = logged(loggers, root_context, name, "read_log")
+        log.setdefault("t", times)
+        log[name] = values
+    return log

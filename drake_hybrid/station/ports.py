@@ -1,0 +1,47 @@
+"""Wiring by name, guarded: Drake ends the process at an input connected twice or a duplicate system name.
+"""
+
+from drake_hybrid.core.errors import ArgumentError
+
+
+def port_label(port):
+    """'system.port' of an input or output port, for a message."""
+    return f"'{port.get_system().get_name()}.{port.get_name()}'"
+
+
+def refuse_wired(builder, input_port, owner, hint=""):
+    """ArgumentError naming ``input_port`` (and ``hint``) if the builder already wires or exports it: Drake
+    ends the process at a second Connect instead of raising."""
+    if builder.IsConnectedOrExported(input_port):
+        raise ArgumentError(f"{owner}: the input port {port_label(input_port)} is already connected in the "
+                            f"builder{hint}; an input takes one source")
+
+
+def guarded_connect(builder, output_port, input_port, owner):
+    """``builder.Connect(output_port, input_port)`` after ``refuse_wired``."""
+    refuse_wired(builder, input_port, owner)
+    builder.Connect(output_port, input_port)
+
+
+def unique_name(builder, name, suffix):
+    """``name``, or ``name_<suffix>`` (then ``_2``, ...) if the builder already has a system of that name:
+    a diagram's systems need names of their own (Drake ends the process at Build otherwise)."""
+    taken = {system.get_name() for system in builder.GetSystems()}
+    candidates = [name, f"{name}_{suffix}"] + [f"{name}_{suffix}_{count}" for count in range(2, 1000)]
+    return next(candidate for candidate in candidates if candidate not in taken)
+
+
+def add_named(builder, name, system, robot_name):
+    """``builder.AddNamedSystem`` with ``unique_name``."""
+    return builder.AddNamedSystem(unique_name(builder, name, robot_name), system)
+
+
+def port_of(system, name, kind, owner, argument):
+    """``system``'s input (``kind`` "input") or output port ``name``; ArgumentError naming ``argument``."""
+    has = system.HasInputPort(name) if kind == "input" else system.HasOutputPort(name)
+    if not has:
+        ports = (system.get_input_port(i) for i in range(system.num_input_ports())) if kind == "input" else (
+            system.get_output_port(i) for i in range(system.num_output_ports()))
+        raise ArgumentError(f"{owner}: {argument} ('{system.get_name()}') has no {kind} port '{name}'; its {kind} "
+                            f"ports: {', '.join(port.get_name() for port in ports) or 'none'}")
+    return system.GetInputPort(name) if kind == "input" else system.GetOutputPort(name)

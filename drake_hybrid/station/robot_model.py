@@ -1,0 +1,81 @@
+"""The plant of a task: robot, tool and workpiece in a MultibodyPlant with the pad's contact material.
+
+``build_plant`` adds the simulation plant (``ScenarioConfig.plant``, a Drake
+``MultibodyPlantConfig``) to a builder; ``build_controller_plant`` builds the controller's own
+model (robot and tool, no workpiece, continuous); ``apply_model_error`` makes the simulated robot
+differ from that model (``ModelErrorConfig``).
+"""
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from pydrake.multibody.plant import MultibodyPlant
+from pydrake.multibody.tree import ModelInstanceIndex
+from pydrake.systems.framework import DiagramBuilder
+
+from drake_hybrid.core.arguments import describe, instance
+from drake_hybrid.core.errors import ArgumentError, ConfigError, UnknownFrameError
+
+
+@dataclass
+class RobotModel:
+    """What a task's ``add_robot`` added to a plant."""
+
+    arm: object                                  # ModelInstanceIndex of the actuated arm
+    model_instances: list                        # arm and tool instances
+    end_effector_frame: str                      # name of frame E
+    end_effector_point: np.ndarray               # p_EP
+    tool_weld: object = None                     # WeldJoint wrist -> tool (for the wrist sensor)
+    pad_geometries: list = field(default_factory=list)
+    passive_geometries: list = field(default_factory=list)   # collision geometries to drop (arm links)
+    only_pad_contact: bool = False               # filter every contact of the robot but the pad's
+
+
+def frame_names(plant, model_instance):
+    """The names of the frames of ``model_instance`` (bodies' frames and the model's own frames)."""
+    return sorted({plant.get_frame(index).name() for index in plant.GetFrameIndices(model_instance)})
+
+
+def get_frame(plant, name, model_instance, role="frame"):
+    """Frame ``name`` of ``model_instance``; UnknownFrameError listing the model's frames otherwise."""
+    if plant.HasFrameNamed(name, model_instance):
+        return plant.GetFrameByName(name, model_instance)
+    raise UnknownFrameError(f"{role} '{name}' is not a frame of model '{plant.GetModelInstanceName(model_instance)}'; "
+                            f"its frames: {', '.join(frame_names(plant, model_instance))}")
+
+
+def check_unfinalized_plant(plant, owner):
+    """``plant`` if it is a MultibodyPlant not yet finalized (what adds to a model); typed errors otherwise."""
+    instance(plant, "plant", owner, MultibodyPlant)
+    if plant.is_finalized():
+        raise ConfigError(f"{owner}: the plant is finalized; call {owner} before plant.Finalize()")
+    return plant
+
+
+def check_model_instance(plant, model_instance, name, owner):
+    """``model_instance`` if it is a ModelInstanceIndex of ``plant``; ArgumentError naming ``name`` otherwise."""
+    if not isinstance(model_instance, ModelInstanceIndex):
+        raise ArgumentError(f"{owner}: {name} must be a ModelInstanceIndex of the plant (e.g. "
+                            f"Parser(plant).AddModels(...)[0]), got {describe(model_instance)}")
+    if not int(model_instance) < plant.num_model_instances():
+        raise ArgumentError(f"{owner}: {name} {int(model_instance)} is not a model instance of the plant (it has "
+                            f"{plant.num_model_instances()})")
+    return model_instance
+
+
+def arm_model_name(plant, robot):
+    return plant.GetModelInstanceName(robot.arm)
+
+
+def check_station_parts(builder, plant, robot, owner):
+    instance(builder, "builder", owner, DiagramBuilder)
+    check_finalized_robot_plant(plant, robot, owner)
+
+
+def check_finalized_robot_plant(plant, robot, owner):
+    instance(plant, "plant", owner, MultibodyPlant)
+    instance(robot, "robot", owner, RobotModel, what="the RobotModel of mount_tool")
+    if not plant.is_finalized():
+        raise ConfigError(f"{owner}: finalize the plant first (plant.Finalize())")
+    check_model_instance(plant, robot.arm, "robot.arm", owner)

@@ -1,0 +1,163 @@
+"""The wrench the controller reads: a sensor on the plant, faults, a filter or a conditioner.
+"""
+
+from dataclasses import dataclass
+from typing import Union
+
+from pydrake.multibody.plant import MultibodyPlant
+from pydrake.systems.framework import DiagramBuilder, OutputPort, System
+
+from drake_hybrid.core.arguments import instance
+from drake_hybrid.core.errors import ConfigError, check_fields, check_finite
+from drake_hybrid.core.schema import check_types
+from drake_hybrid.station.ports import add_named, guarded_connect, port_of, refuse_wired
+from drake_hybrid.station.robot_model import arm_model_name, check_station_parts
+from drake_hybrid.systems.faults import SensorFaultConfig, SensorFaultInjector
+from drake_hybrid.systems.sensors import (ContactWrenchSensor, LowPassFilter, WrenchConditioner, WristForceTorqueSensor,
+                                          low_pass_lag, sampled_reading_age)
+
+
+@dataclass
+class WrenchPathConfig:
+    """What every sensor's wrench passes through before the controller."""
+
+    bandwidth_hz: float = 0.0                    # Hz, first-order low-pass; 0 = none (a continuous plant needs one)
+    condition: bool = False                      # a WrenchConditioner (dropout rejection, tare, the low-pass)
+    max_hold_time: float = 0.01                  # s, how long the conditioner bridges a dropout by holding
+    fault_time: float = 0.05                     # s, a wrench invalid (non-finite) this long is a sensor fault:
+                                                 # the run stops there and reports it (inf = never)
+
+    def validate(self, prefix="sensor."):
+        """As ``ContactConfig.validate`` (``fault_time`` may be inf: never)."""
+        check_types(self, type(self), prefix.rstrip("."))
+        check_finite(self, prefix, allow_infinite=("fault_time",))
+        check_fields(self, prefix, nonnegative=("bandwidth_hz", "max_hold_time"), positive=("fault_time",))
+
+
+@dataclass
+class ContactSensorConfig(WrenchPathConfig):
+    """The ideal sensor: Drake's contact results on the robot, shifted to the end-effector point
+    (``systems.sensors.ContactWrenchSensor``). YAML: ``sensor: !ContactSensorConfig {...}`` (the
+    default, so the tag may be left out)."""
+
+
+@dataclass
+class WristSensorConfig(WrenchPathConfig):
+    """A force/torque sensor in the weld between wrist and tool: the weld's reaction force minus the
+    tool's weight (``systems.sensors.WristForceTorqueSensor``). YAML: ``sensor: !WristSensorConfig {...}``.
+
+    ``compensate_tool_inertia``: also remove the tool's inertial wrench (its spatial momentum rate,
+    from the tool's model and the plant's body accelerations), so that the sensor reports the
+    contact wrench during motion too. Off by default: the static compensation of the paper's
+    setting (and of most real sensors' drivers)."""
+
+    compensate_tool_inertia: bool = False
+
+
+SensorConfig = Union[ContactSensorConfig, WristSensorConfig]
+CONTINUOUS_LOOP_BANDWIDTH = 200.0     # Hz: the wrench low-pass a continuous controller needs (no algebraic loop)
+
+
+def robot_bodies(plant, robot):
+    """The bodies of every model instance of ``robot``: what a contact sensor counts as the robot."""
+    return [plant.get_body(index) for instance in robot.model_instances for index in plant.GetBodyIndices(instance)]
+
+
+def add_wrench_sensor(builder, plant, robot, sensor=None):
+    """The wrench sensor of ``sensor`` (a ContactSensorConfig, default; or a WristSensorConfig) on your
+    plant, its inputs wired: the environment's wrench on the robot at the end-effector point, in
+    world (the contact results of the robot's bodies, or the wrist weld's reaction force). Returns it
+    (named "wrench_sensor", or "wrench_sensor_<arm>" if the builder has one)."""
+    owner = "add_wrench_sensor"
+    check_station_parts(builder, plant, robot, owner)
+    sensor = check_sensor_config(sensor if sensor is not None else ContactSensorConfig(), owner)
+    arm = arm_model_name(plant, robot)
+    if isinstance(sensor, WristSensorConfig):
+        if robot.tool_weld is None:
+            raise ConfigError("sensor: the robot has no wrist weld (mount_tool makes one) for a WristSensorConfig; "
+                              "use ContactSensorConfig")
+        system = add_named(builder, "wrench_sensor", WristForceTorqueSensor(
+            plant, robot.tool_weld, robot.end_effector_frame, robot.end_effector_point,
+            compensate_tool_inertia=sensor.compensate_tool_inertia), arm)
+        guarded_connect(builder, plant.get_reaction_forces_output_port(), system.get_input_port(0), owner)
+        if system.compensate_tool_inertia:
+            guarded_connect(builder, plant.get_body_spatial_velocities_output_port(),
+                    system.GetInputPort("body_spatial_velocities"), owner)
+            guarded_connect(builder, plant.get_body_spatial_accelerations_output_port(),
+                    system.GetInputPort("body_spatial_accelerations"), owner)
+    else:
+        system = add_named(builder, "wrench_sensor", ContactWrenchSensor(
+            plant, robot_bodies(plant, robot), robot.end_effector_frame, robot.end_effector_point), arm)
+        guarded_connect(builder, plant.get_contact_results_output_port(), system.get_input_port(0), owner)
+    guarded_connect(builder, plant.get_body_poses_output_port(), system.get_input_port(1), owner)
+    return system
+
+
+def add_wrench_path(builder, wrench_output, sensor, period, sequence=None, tare=False, suffix="wrench"):
+    """The wrench's way to the controller (``sensor``: a ContactSensorConfig or WristSensorConfig): a
+    WrenchConditioner with ``sensor.condition`` (fed the sample ``sequence`` output when given;
+    ``tare``), else a low-pass filter when ``sensor.bandwidth_hz`` > 0, else nothing (``suffix``: what
+    their names end with when the builder already has a system of that name). Returns (the output
+    port the controller reads, the conditioner or None, the filter or None)."""
+    owner = "add_wrench_path"
+    instance(builder, "builder", owner, DiagramBuilder)
+    instance(wrench_output, "wrench_output", owner, OutputPort, what="an OutputPort (the wrench sensor's)")
+    instance(sequence, "sequence", owner, OutputPort, allow_none=True)
+    check_sensor_config(sensor, owner)
+    conditioner = wrench_filter = None
+    if sensor.condition:
+        conditioner = add_named(builder, "wrench_conditioner", WrenchConditioner(
+            period, sensor.bandwidth_hz, sensor.max_hold_time, use_sequence=sequence is not None, tare=tare), suffix)
+        guarded_connect(builder, wrench_output, conditioner.GetInputPort("raw_wrench"), owner)
+        if sequence is not None:
+            guarded_connect(builder, sequence, conditioner.GetInputPort("sequence"), owner)
+        wrench_output = conditioner.GetOutputPort("wrench")
+    elif sensor.bandwidth_hz > 0:
+        wrench_filter = add_named(builder, "wrench_filter", LowPassFilter(6, sensor.bandwidth_hz, period), suffix)
+        guarded_connect(builder, wrench_output, wrench_filter.get_input_port(0), owner)
+        wrench_output = wrench_filter.get_output_port(0)
+    return wrench_output, conditioner, wrench_filter
+
+
+def wrench_lag(sensor, plant, control_period):
+    """How late the wrench reaches the law (s), which splits it where it was exerted (the controller's
+    ``wrench_lag``): the low-pass of ``sensor`` (``systems.sensors.low_pass_lag``), plus, for the
+    contact sensor on a discrete plant's sampled results, their one step of age
+    (``systems.sensors.sampled_reading_age``; the wrist sensor's reaction force is read as current,
+    as a real sensor's)."""
+    instance(sensor, "sensor", "wrench_lag", (ContactSensorConfig, WristSensorConfig))
+    instance(plant, "plant", "wrench_lag", MultibodyPlant)
+    age = sampled_reading_age(plant) if isinstance(sensor, ContactSensorConfig) else 0.0
+    return low_pass_lag(sensor.bandwidth_hz, control_period) + age
+
+
+def add_sensing(builder, plant, robot, controller, sensor, control_period, sensor_faults=None, tare=False):
+    """The wrench sensor (``add_wrench_sensor``), a SensorFaultInjector when ``sensor_faults`` is active,
+    and the wrench path (``add_wrench_path``), wired into ``controller``'s measured_wrench. Returns
+    (sensor, its own output, the output the controller reads, injector, conditioner, filter)."""
+    owner = "add_sensing"
+    check_station_parts(builder, plant, robot, owner)
+    instance(controller, "controller", owner, System)
+    instance(sensor_faults, "sensor_faults", owner, SensorFaultConfig, allow_none=True)
+    measured = port_of(controller, "measured_wrench", "input", owner, "controller")
+    refuse_wired(builder, measured, owner, " (the controller already reads a wrench)")
+    arm = arm_model_name(plant, robot)
+    wrench_sensor = add_wrench_sensor(builder, plant, robot, sensor)
+    true_wrench = wrench_output = wrench_sensor.get_output_port(0)
+    injector = None
+    if sensor_faults is not None and sensor_faults.active():
+        injector = add_named(builder, "sensor_faults", SensorFaultInjector(sensor_faults, control_period), arm)
+        guarded_connect(builder, wrench_output, injector.GetInputPort("wrench"), owner)
+        wrench_output = injector.GetOutputPort("faulty_wrench")
+    wrench_output, conditioner, wrench_filter = add_wrench_path(
+        builder, wrench_output, sensor if sensor is not None else ContactSensorConfig(), control_period,
+        sequence=injector.GetOutputPort("sequence") if injector is not None else None, tare=tare, suffix=arm)
+    guarded_connect(builder, wrench_output, measured, owner)
+    return wrench_sensor, true_wrench, wrench_output, injector, conditioner, wrench_filter
+
+
+def check_sensor_config(sensor, owner):
+    """``sensor`` (a ContactSensorConfig or WristSensorConfig) with its fields checked, naming ``owner``."""
+    instance(sensor, "sensor", owner, (ContactSensorConfig, WristSensorConfig))
+    sensor.validate(f"{owner}: sensor.")
+    return sensor
