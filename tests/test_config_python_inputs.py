@@ -133,7 +133,7 @@ def test_numpy_numbers_tuples_and_arrays_are_python_forms_of_the_yaml_types(base
                                  task_parameters={"window_height": np.float64(0.3)} if "window_height" in
                                  base.task_parameters else dict(base.task_parameters))
     config.path.heading = (1.0, 0.0, 0.0)
-    assert prepare_config(config)[3].duration == pytest.approx(0.1)
+    assert prepare_config(config).config.duration == pytest.approx(0.1)
 
 
 @pytest.mark.parametrize("call, name", [

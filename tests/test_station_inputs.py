@@ -23,7 +23,7 @@ from drake_hybrid.station.arm import (add_actuators, carried_bodies, mount_tool,
                                       weld_joints)
 from drake_hybrid.station.contact import apply_contact_defaults, default_plant_config, only_tool_touches
 from drake_hybrid.station.loggers import add_loggers, logged, read_log
-from drake_hybrid.station.loop import add_hybrid_controller, connect_source
+from drake_hybrid.station.loop import add_hybrid_controller, connect_hybrid_loop
 from drake_hybrid.station.sensing import add_wrench_sensor, wrench_lag
 from drake_hybrid.station.workpieces import add_rigid_workpiece
 from drake_hybrid.systems.sources import Profile, ProfileSource
@@ -135,15 +135,23 @@ def test_an_actuation_input_the_user_wired_is_refused(space, controller_plant):
         add_hybrid_controller(builder, plant, robot, space, controller_plant, **ARGUMENTS)
 
 
-def test_connect_source_refuses_a_controller_that_has_a_source(space, controller_plant):
+def test_a_second_wiring_of_the_loop_is_refused(space, controller_plant):
+    """connect_hybrid_loop refuses a controller whose loop is already closed, naming the port (Drake would
+    end the process at the second Connect)."""
     builder, plant, _, robot, _ = station()
     hybrid = add_hybrid_controller(builder, plant, robot, space, controller_plant, **ARGUMENTS)
-    with pytest.raises(ArgumentError, match="connect_source: source must be a System"):
-        connect_source(builder, plant, robot, Profile(), hybrid.controller)
-    second = ProfileSource(Profile(value=[0.0] * 5), Profile(value=[10.0]), 5, 1)
-    with pytest.raises(ArgumentError, match="connect_source: the input port 'controller.desired_velocity' is "
-                                            "already connected.*command source"):
-        connect_source(builder, plant, robot, second, hybrid.controller)
+    second = builder.AddSystem(ProfileSource(Profile(value=[0.0] * 5), Profile(value=[10.0]), 5, 1))
+    with pytest.raises(ArgumentError, match="connect_hybrid_loop: the input port 'controller.desired_velocity' is "
+                                            "already connected"):
+        connect_hybrid_loop(builder, hybrid.controller, state=hybrid.state, wrench=hybrid.wrench_output,
+                            actuation=plant.get_actuation_input_port(robot.arm), source=second)
+
+
+def test_a_source_without_the_commands_is_refused(space, controller_plant):
+    builder, plant, _, robot, _ = station()
+    with pytest.raises(ArgumentError, match="add_hybrid_controller: source must be a System"):
+        add_hybrid_controller(builder, plant, robot, space, controller_plant, source=Profile(),
+                              **{k: v for k, v in ARGUMENTS.items() if k not in ("desired_velocity", "desired_force")})
 
 
 @pytest.mark.parametrize("robot_change, words", [

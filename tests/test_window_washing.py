@@ -237,7 +237,7 @@ def test_loggers_read_the_tick_and_do_not_rerun_the_law(monkeypatch):
     (``sampled_diagnostics``): the same numbers as logging the live ports, one law per tick."""
     from pydrake.systems.analysis import Simulator
 
-    import drake_hybrid.scenario.builder as scenarios
+    import drake_hybrid.station.loop as scenarios
 
     config = get_task("window-washing").default_config()
     config.duration = 0.1

@@ -46,7 +46,7 @@ from drake_hybrid.experiments.metrics import (contact_time, impedance_check, inv
 from drake_hybrid.experiments.path_report import before_lift_off, path_report
 from drake_hybrid.scenario.builder import build_scenario
 from drake_hybrid.scenario.start import set_initial_conditions
-from drake_hybrid.station.path_job import PATH_LOGS
+from drake_hybrid.station.loggers import read_log
 from drake_hybrid.tasks.config import check_scenario_config
 
 # The run's note when its controller ran the generic law while numba compiled the fast one (control/fast_compile.py).
@@ -112,15 +112,6 @@ def chain_monitors(first, second):
         return status if status.severity() != EventStatus.Severity.kSucceeded else second(root_context)
 
     return monitor
-
-
-def _logged(scenario, context, name):
-    """(times, samples x size) of logger ``name``; a (logger, columns) entry is a slice of a shared logger."""
-    logger, columns = scenario.loggers[name], slice(None)
-    if isinstance(logger, tuple):
-        logger, columns = logger
-    log = logger.FindLog(context)
-    return log.sample_times(), log.data().T[:, columns]
 
 
 def simulate(config, progress=False, meshcat=None, record_html=False, setup=None, stages=None):
@@ -199,33 +190,29 @@ def simulate(config, progress=False, meshcat=None, record_html=False, setup=None
     return result
 
 
+# log.npz's names for the loggers' keys (station.loggers.LOG_KEYS) that it calls otherwise.
+LOG_NAMES = {"projected_velocity": "velocity", "constraint_value": "constraint", "actuation": "torque"}
+
+
 def collect_log(scenario, context):
-    """The logged signals as arrays (the keys of log.npz)."""
-    t, velocity = _logged(scenario, context, "projected_velocity")
-    log = {"t": t, "velocity": velocity}
-    for key, name in [("desired_velocity", "desired_velocity"), ("force", "force"), ("desired_force", "desired_force"),
-                      ("constraint", "constraint_value"), ("torque", "actuation"),
-                      ("velocity_error", "velocity_error"), ("force_error", "force_error"),
-                      ("position_error", "position_error"), ("tangential_force", "tangential_force"),
-                      ("wrench", "wrench")]:
-        log[key] = _logged(scenario, context, name)[1]
-    state = _logged(scenario, context, "state")[1]
-    n = state.shape[1] // 2
-    log["q"], log["v"] = state[:, :n], state[:, n:]
-    for optional in ("true_wrench", "contact_phase", "wrench_valid", "lifting", *PATH_LOGS):  # faults, conditioning; supervision;
-        # a job's path (station.path_job)
-        if optional in scenario.loggers:
-            log[optional] = _logged(scenario, context, optional)[1]
+    """The logged signals as arrays (the keys of log.npz: ``station.loggers.read_log``'s, a few renamed
+    by ``LOG_NAMES``, the state split into q and v)."""
+    logged = read_log(scenario.loggers, context)
+    log = {LOG_NAMES.get(key, key): values for key, values in logged.items() if key != "state"}
+    n = logged["state"].shape[1] // 2
+    log["q"], log["v"] = logged["state"][:, :n], logged["state"][:, n:]
     if getattr(scenario.source, "true_projection", None) is not None:   # the paper's pseudo-velocity: its
         # velocity_error is E_t r-dot - r-dot_td (PseudoVelocitySource), the true rows'; r-dot_td is their command
-        log["true_desired_velocity"] = np.array([scenario.source.velocity_profile.evaluate(float(s))[0] for s in t])
+        log["true_desired_velocity"] = np.array([scenario.source.velocity_profile.evaluate(float(s))[0]
+                                                 for s in log["t"]])
     return log
 
 
-def effort_limits(scenario):
-    """The effort limits of the arm's actuators (N m for revolute joints), in actuation order."""
-    plant = scenario.plant
-    return np.array([plant.get_joint_actuator(i).effort_limit() for i in plant.GetJointActuatorIndices(scenario.robot.arm)])
+def effort_limits(systems):
+    """The effort limits of the arm's actuators (N m for revolute joints), in actuation order: the
+    controller's own model's (the robot alone, built as the simulated arm)."""
+    plant = systems.controller_plant
+    return np.array([plant.get_joint_actuator(i).effort_limit() for i in plant.GetJointActuatorIndices()])
 
 
 def _percent(error, scale):

@@ -23,13 +23,13 @@ before the first valid status. Loggers carry the same names as the directly wire
 import dataclasses
 import math
 from dataclasses import dataclass, field
-from typing import Dict, List, Optional
+from typing import Any, List, Optional
 
 import numpy as np
 from drake import lcmt_force_torque, lcmt_panda_command, lcmt_panda_status
 
 from pydrake.manipulation import PandaCommandSender, PandaControlMode
-from pydrake.systems.framework import DiagramBuilder, TriggerType
+from pydrake.systems.framework import DiagramBuilder, System, TriggerType
 from pydrake.systems.lcm import LcmPublisherSystem, LcmSubscriberSystem
 from pydrake.systems.primitives import LogVectorOutput
 
@@ -39,35 +39,33 @@ from drake_hybrid.hardware.gain_change import GainSelector, bumpless_integrals
 from drake_hybrid.hardware.messages import HardwareConfig
 from drake_hybrid.hardware.watchdog import MessageWatchdog
 from drake_hybrid.hardware.wrench import ExternalTorqueWrench, ForceTorqueConditioning
-from drake_hybrid.scenario.builder import make_controller, prepare_config
+from drake_hybrid.scenario.builder import controller_options, prepare_config
+from drake_hybrid.station.handles import HybridSystems
+from drake_hybrid.station.loggers import add_loggers
+from drake_hybrid.station.loop import connect_hybrid_loop, make_hybrid_controller
 from drake_hybrid.station.sensing import add_wrench_path
 from drake_hybrid.tasks.config import ScenarioConfig
 from drake_hybrid.tasks.plant import build_controller_plant
+from drake_hybrid.tasks.task import Task
 
 
-@dataclass
-class ControllerStation:
-    """The controller's side and named handles to its parts (``plant`` is the controller's plant:
-    ``summarize`` reads the effort limits from it)."""
+@dataclass(kw_only=True)
+class ControllerStation(HybridSystems):
+    """The controller's side: the loop's ``HybridSystems`` (``state`` is the watchdog's measured state,
+    ``plant`` None: the arm is real) and what a real arm's loop adds: the ``config``, the ``hardware``
+    settings, the ``task``, the ``watchdog``, the command's ``safety`` and ``command_publisher``, the
+    ``lcm``; with gain changes one law per gain set (``controllers``), the ``gain_selector`` and the
+    bumpless ``transfers`` made."""
 
     config: ScenarioConfig
     hardware: HardwareConfig
-    task: object
-    diagram: object
-    plant: object
-    robot: object
-    controller: object
-    watchdog: object
-    safety: object
-    command_publisher: object
-    source: object
-    constraint_space: object
-    wrench_filter: Optional[object] = None
-    conditioner: Optional[object] = None
-    loggers: Dict[str, object] = field(default_factory=dict)
-    lcm: object = None
-    controllers: List[object] = field(default_factory=list)     # one law per gain set (gain_changes)
-    gain_selector: Optional[object] = None
+    task: Task
+    watchdog: System
+    safety: System
+    command_publisher: System
+    lcm: Any = None
+    controllers: List[System] = field(default_factory=list)     # one law per gain set (gain_changes)
+    gain_selector: Optional[System] = None
     transfers: List[dict] = field(default_factory=list)          # the bumpless transfers made
     bumpless: bool = True                                        # False: keep the integrals (for comparison)
 
@@ -92,10 +90,6 @@ class ControllerStation:
         new_context.SetDiscreteState(0, np.concatenate([xi, e_p, state[e_p_slice.stop:]]))
         self.transfers.append({"tick": tick, "time": tick * float(self.config.control_period), "xi": xi.tolist(),
                                "position_error": e_p.tolist()})
-
-    @property
-    def controller_plant(self):
-        return self.plant
 
     def enabled(self, root_context):
         """True once a command may be published (a valid status has arrived)."""
@@ -144,7 +138,7 @@ def check_hardware_config(config):
 
 
 def prepared(config):
-    """(task, mode, constraint space, config with the desired force padded) as build_scenario has them."""
+    """The config validated once (``scenario.builder.prepare_config``) for the hardware loop."""
     check_hardware_config(config)
     return prepare_config(config)
 
@@ -155,7 +149,8 @@ def build_controller_station(config, lcm, hardware=None, initial_positions=None,
     ``gain_changes``: [(time s, HybridGains), ...] in increasing time: a law per gain set, the
     actuation taken from the one active at each tick, switched bumplessly (``gain_change``)."""
     hardware = (hardware or HardwareConfig()).validate()
-    task, mode, constraint_space, config = prepared(config)
+    ready = prepared(config)
+    task, space, config = ready.task, ready.constraint_space, ready.config
     period = float(config.control_period)
     plant, robot = build_controller_plant(task, config)
     n = plant.num_velocities()
@@ -163,11 +158,17 @@ def build_controller_station(config, lcm, hardware=None, initial_positions=None,
     if use_force_torque and robot.tool_weld is None:
         raise ConfigError(f"hardware.wrench_source: task '{task.name}' has no wrist weld for an F/T sensor; use "
                           "'external_torque'")
+    if gain_changes:
+        times = [float(time) for time, _ in gain_changes]
+        if not all(time > 0 and math.isfinite(time) for time in times) or times != sorted(set(times)):
+            raise ConfigError(f"gain_changes: times must be positive, finite and increasing, got {times}")
+    limits = (hardware.torque_limits if hardware.torque_limits is not None else
+              [plant.get_joint_actuator(i).effort_limit() for i in plant.GetJointActuatorIndices()])
+    if len(limits) != n:
+        raise ConfigError(f"hardware.torque_limits must have {n} entries (one per joint), got {len(limits)}")
 
     builder = DiagramBuilder()
-    controller = builder.AddNamedSystem("controller", make_controller(
-        config, task, plant, plant, robot, constraint_space, mode, period, True, False, with_loggers,
-        plant_time_step=hardware.damping_time_step))
+    # The arm's messages: its state and the wrench the law reads.
     status_subscriber = builder.AddNamedSystem("status_subscriber", LcmSubscriberSystem.Make(
         hardware.status_channel, lcmt_panda_status, lcm))
     watchdog = builder.AddNamedSystem("watchdog", MessageWatchdog(
@@ -187,51 +188,25 @@ def build_controller_station(config, lcm, hardware=None, initial_positions=None,
             plant, robot.end_effector_frame, robot.end_effector_point))
         builder.Connect(watchdog.GetOutputPort("torque_external"), wrench.GetInputPort("torque_external"))
     builder.Connect(state, wrench.GetInputPort("estimated_state"))
-    wrench_output = wrench.GetOutputPort("wrench")
-    wrench_output, conditioner, wrench_filter = add_wrench_path(builder, wrench_output, config.sensor, period)
-    builder.Connect(wrench_output, controller.get_measured_wrench_input_port())
-    builder.Connect(state, controller.get_estimated_state_input_port())
+    wrench_output, conditioner, wrench_filter = add_wrench_path(builder, wrench.GetOutputPort("wrench"), config.sensor,
+                                                                period)
+    source = builder.AddNamedSystem("desired", task.make_source(config, plant, robot, space))
 
-    source = builder.AddNamedSystem("desired", task.make_source(config, plant, robot, constraint_space))
-    if source.num_input_ports():
-        builder.Connect(state, source.get_input_port(0))
-    for name in ("desired_velocity", "desired_acceleration", "desired_force"):
-        builder.Connect(source.GetOutputPort(name), controller.GetInputPort(name))
-
-    controllers, selector = [controller], None
-    torque = controller.GetOutputPort("actuation")
-    if gain_changes:
-        times = [float(time) for time, _ in gain_changes]
-        if not all(time > 0 and math.isfinite(time) for time in times) or times != sorted(set(times)):
-            raise ConfigError(f"gain_changes: times must be positive, finite and increasing, got {times}")
-        selector = builder.AddNamedSystem("gain_selector", GainSelector(n, period, [round(t / period) for t in times]))
-        builder.Connect(torque, selector.GetInputPort("actuation_0"))
-        for index, (_, gains) in enumerate(gain_changes, start=1):
-            law = builder.AddNamedSystem(f"controller_{index}", make_controller(
-                dataclasses.replace(config, gains=gains), task, plant, plant, robot, constraint_space, mode, period,
-                True, False, False, plant_time_step=hardware.damping_time_step))
-            builder.Connect(wrench_output, law.get_measured_wrench_input_port())
-            builder.Connect(state, law.get_estimated_state_input_port())
-            for name in ("desired_velocity", "desired_acceleration", "desired_force"):
-                builder.Connect(source.GetOutputPort(name), law.GetInputPort(name))
-            builder.Connect(law.GetOutputPort("actuation"), selector.GetInputPort(f"actuation_{index}"))
-            controllers.append(law)
-        torque = selector.GetOutputPort("actuation")
-    actuation = torque
-    if hardware.driver_compensates_gravity:
-        gravity = builder.AddNamedSystem("driver_gravity", DriverGravityCompensation(plant, -1))
-        builder.Connect(torque, gravity.GetInputPort("torque"))
-        builder.Connect(state, gravity.GetInputPort("estimated_state"))
-        torque = gravity.GetOutputPort("torque")
-    limits = (hardware.torque_limits if hardware.torque_limits is not None else
-              [plant.get_joint_actuator(i).effort_limit() for i in plant.GetJointActuatorIndices()])
-    if len(limits) != n:
-        raise ConfigError(f"hardware.torque_limits must have {n} entries (one per joint), got {len(limits)}")
+    # The command's way to the arm: [gain selector] -> [the driver's gravity] -> limits and stops -> LCM.
     safety = builder.AddNamedSystem("command_safety", TorqueCommandSafety(
         n, period, limits, hardware.torque_rate_limit, hardware.hold_stiffness, hardware.hold_damping))
-    builder.Connect(torque, safety.GetInputPort("torque"))
     builder.Connect(state, safety.GetInputPort("estimated_state"))
     builder.Connect(watchdog.GetOutputPort("watchdog_status"), safety.GetInputPort("watchdog_status"))
+    command = safety.GetInputPort("torque")
+    if hardware.driver_compensates_gravity:
+        gravity = builder.AddNamedSystem("driver_gravity", DriverGravityCompensation(plant, -1))
+        builder.Connect(state, gravity.GetInputPort("estimated_state"))
+        builder.Connect(gravity.GetOutputPort("torque"), command)
+        command = gravity.GetInputPort("torque")
+    selector = None
+    if gain_changes:
+        selector = builder.AddNamedSystem("gain_selector", GainSelector(n, period, [round(t / period) for t in times]))
+        builder.Connect(selector.GetOutputPort("actuation"), command)
     sender = builder.AddNamedSystem("command_sender", PandaCommandSender(n, PandaControlMode.kTorque))
     builder.Connect(safety.GetOutputPort("torque"), sender.get_input_port())
     publisher = builder.AddNamedSystem("command_publisher", LcmPublisherSystem.Make(
@@ -239,25 +214,33 @@ def build_controller_station(config, lcm, hardware=None, initial_positions=None,
         publish_triggers={TriggerType.kForced}))
     builder.Connect(sender.get_output_port(), publisher.get_input_port())
 
-    loggers = {}
+    # The law (one per gain set), each closed by the loop's one wiring.
+    controllers = []
+    for index, gains in enumerate([None] + [gains for _, gains in gain_changes]):
+        options = controller_options(ready if gains is None else dataclasses.replace(
+            ready, config=dataclasses.replace(config, gains=gains)), plant, plant, robot, period,
+            with_loggers and index == 0)
+        law = builder.AddNamedSystem("controller" if index == 0 else f"controller_{index}", make_hybrid_controller(
+            plant, robot, space, sensor=config.sensor, plant=None, control_period=period,
+            plant_time_step=hardware.damping_time_step, **options))
+        connect_hybrid_loop(builder, law, state=state, wrench=wrench_output, source=source,
+                            actuation=selector.GetInputPort(f"actuation_{index}") if selector is not None else command,
+                            owner="build_controller_station")
+        controllers.append(law)
+    station = ControllerStation(
+        config=config, hardware=hardware, task=task, robot=robot, controller_plant=plant, constraint_space=space,
+        controller=controllers[0], state=state, wrench_output=wrench_output,
+        actuation=(selector.GetOutputPort("actuation") if selector is not None
+                   else controllers[0].GetOutputPort("actuation")),
+        source=source, wrench_filter=wrench_filter, conditioner=conditioner, watchdog=watchdog, safety=safety,
+        command_publisher=publisher, lcm=lcm, controllers=controllers, gain_selector=selector)
     if with_loggers:
-        log_period = config.log_period
-        diagnostics = LogVectorOutput(controller.GetOutputPort("diagnostics"), builder, log_period)
-        for name, columns in controller.diagnostic_slices().items():
-            loggers[name] = (diagnostics, columns)
-        loggers["position_error"] = LogVectorOutput(controller.GetOutputPort("position_error"), builder, log_period)
-        loggers["actuation"] = LogVectorOutput(actuation, builder, log_period)
-        for name in ("desired_velocity", "desired_force"):
-            loggers[name] = LogVectorOutput(source.GetOutputPort(name), builder, log_period)
-        loggers["state"] = LogVectorOutput(state, builder, log_period)
-        loggers["wrench"] = LogVectorOutput(wrench_output, builder, log_period)
-        loggers["command"] = LogVectorOutput(safety.GetOutputPort("torque"), builder, log_period)
-        loggers["stop"] = LogVectorOutput(safety.GetOutputPort("stop"), builder, log_period)
-        loggers["watchdog_status"] = LogVectorOutput(watchdog.GetOutputPort("watchdog_status"), builder, log_period)
-    diagram = builder.Build()
-    diagram.set_name(f"hardware_controller_{task.name}")
-    return ControllerStation(config=config, hardware=hardware, task=task, diagram=diagram, plant=plant, robot=robot,
-                             controller=controller, watchdog=watchdog, safety=safety, command_publisher=publisher,
-                             source=source, constraint_space=constraint_space, wrench_filter=wrench_filter,
-                             conditioner=conditioner, loggers=loggers, lcm=lcm, controllers=controllers,
-                             gain_selector=selector)
+        loggers = add_loggers(builder, station, config.log_period)
+        loggers["command"] = LogVectorOutput(safety.GetOutputPort("torque"), builder, config.log_period)
+        loggers["stop"] = LogVectorOutput(safety.GetOutputPort("stop"), builder, config.log_period)
+        loggers["watchdog_status"] = LogVectorOutput(watchdog.GetOutputPort("watchdog_status"), builder,
+                                                     config.log_period)
+        station.loggers.update(loggers)
+    station.diagram = builder.Build()
+    station.diagram.set_name(f"hardware_controller_{task.name}")
+    return station

@@ -214,9 +214,6 @@ def run_hardware_loop(config, hardware=None, duration=None, lcm_url="memq://drak
     elapsed = time.perf_counter() - start
 
     log = collect_log(controller, controller_context)
-    log["command"] = _logged(controller, controller_context, "command")
-    log["stop"] = _logged(controller, controller_context, "stop")
-    log["watchdog_status"] = _logged(controller, controller_context, "watchdog_status")
     summary = summarize(controller, log, elapsed)
     stop_vector = controller.safety.GetOutputPort("stop").Eval(controller.safety.GetMyContextFromRoot(controller_context))
     stop = None
@@ -233,14 +230,10 @@ def run_hardware_loop(config, hardware=None, duration=None, lcm_url="memq://drak
     if record:
         timing["recorded"] = recorded
     log["wire_t"] = np.array([stamp for stamp, _ in wire])
-    log["wire_command"] = np.array([torque for _, torque in wire]) if wire else np.zeros((0, controller.plant.num_actuators()))
+    log["wire_command"] = np.array([torque for _, torque in wire]) if wire else np.zeros((0, controller.controller_plant.num_actuators()))
     return HardwareRun(config=controller.config, log=log, summary=summary, controller=controller, robot=robot,
                        controller_context=controller_context, robot_context=robot_context,
                        commands_published=published, first_command_time=first_command, stop=stop, timing=timing)
-
-
-def _logged(station, context, name):
-    return station.loggers[name].FindLog(context).data().T
 
 
 SCORES = ("max_velocity_error_percent_after_5_time_constants", "max_force_error_percent_after_5_time_constants")

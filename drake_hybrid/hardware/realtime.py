@@ -157,10 +157,10 @@ def start_controller_state(config, start):
     def initial_state(station, context):
         law_context = station.controller.GetMyMutableContextFromRoot(context)
         law_context.SetDiscreteState(0, np.concatenate([integrals, held]))
-        plant_context = station.plant.CreateDefaultContext()
-        q = joint_vector(q0, "start's q0", "start_controller_state", station.plant)
-        station.plant.SetPositions(plant_context, q)
-        gravity = -station.plant.CalcGravityGeneralizedForces(plant_context)
+        plant_context = station.controller_plant.CreateDefaultContext()
+        q = joint_vector(q0, "start's q0", "start_controller_state", station.controller_plant)
+        station.controller_plant.SetPositions(plant_context, q)
+        gravity = -station.controller_plant.CalcGravityGeneralizedForces(plant_context)
         command = held - gravity if station.hardware.driver_compensates_gravity else held
         station.safety.set_initial_command(station.safety.GetMyMutableContextFromRoot(context), command)
         for part in (station.wrench_filter, station.conditioner):

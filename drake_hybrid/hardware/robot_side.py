@@ -138,7 +138,8 @@ def build_robot_station(config, lcm, hardware=None, sensor_bias=None):
     """The simulated robot of ``config`` behind LCM messages on ``lcm``. See the module docstring.
     ``sensor_bias`` ([t; f], sensor frame) is added to every F/T reading (a real sensor's offset)."""
     hardware = (hardware or HardwareConfig()).validate()
-    task, _, _, config = prepared(config)
+    ready = prepared(config)
+    task, config = ready.task, ready.config
     period = float(config.control_period)
     builder = DiagramBuilder()
     plant, scene_graph, robot = build_plant(task, config, builder)

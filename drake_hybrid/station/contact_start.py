@@ -12,6 +12,7 @@ import numpy as np
 from pydrake.geometry import HydroelasticContactRepresentation
 from pydrake.math import RigidTransform
 
+from drake_hybrid.control.phases import ContactPhase
 from drake_hybrid.core.arguments import describe, instance, joint_vector, positive, vector
 from drake_hybrid.core.errors import (ArgumentError, ConfigError, DrakeHybridError, OffConstraintError,
                                       UnreachablePoseError)
@@ -130,12 +131,68 @@ def solve_contact_start(diagram, root_context, systems, start_pose, joint_guess,
     check_root_context(diagram, root_context, systems, owner)
     instance(start_pose, "start_pose", owner, RigidTransform)
     check_start_sensor(systems, owner)
-    plant, robot, space = systems.plant, systems.robot, systems.constraint_space
-    controller = systems.controller
-    kinematics = controller.kinematics
+    space, kinematics = systems.constraint_space, systems.controller.kinematics
     joint_guess = joint_vector(joint_guess, "joint_guess", owner, kinematics.plant)
     max_depth = positive(max_depth, "max_depth", owner, unit="m")
     tolerance = positive(tolerance, "tolerance", owner)
+    desired = _desired_force(systems, root_context, desired_force, owner)
+    controller_context = kinematics.plant.CreateDefaultContext()
+    q_surface = _positions_at(kinematics, controller_context, start_pose, joint_guess, 0.0, owner, "start_pose")
+    kinematics.plant.SetPositions(controller_context, q_surface)
+    task = kinematics.evaluate(controller_context)
+    values = space.evaluate(task.configuration, task.velocity)
+    direction = np.zeros(3)
+    if np.linalg.norm(desired) > 0:
+        # The world force at P that the rows read as F_d (least squares): the pad presses against it.
+        unit_forces = np.array([space.split_wrench(values, space.chart.generalized_force(
+            task.configuration, np.concatenate([np.zeros(3), axis])))[1] for axis in np.eye(3)]).T
+        force_W = np.linalg.lstsq(unit_forces, desired, rcond=None)[0]
+        direction = -force_W / np.linalg.norm(force_W)
+
+    def pose_at_depth(depth):
+        return RigidTransform(start_pose.rotation(), start_pose.translation() + depth * direction)
+
+    return _press_and_prime(diagram, root_context, systems, pose_at_depth, joint_guess, desired, max_depth,
+                            tolerance, owner, "start_pose")
+
+
+def solve_path_start(diagram, root_context, systems, joint_guess, gap=0.005, max_depth=0.01, tolerance=1e-3):
+    """Put your diagram at the start of its path job (``add_hybrid_controller(..., path=job)``), at rest,
+    and set every state around the plant. Returns the arm's joint positions.
+
+    With a contact supervisor that starts in APPROACH or TARE (``initial_phase``), the pad centre is put
+    ``gap`` (m) above the path's first point along the surface's normal, turned as the constraint's
+    held rows want it (``PathJob.pose_at_depth``), holding only gravity: the guarded approach lands
+    it. Otherwise it presses there with the path's first force, pushed along the normal to the depth
+    where the contact's rest force equals it (as ``solve_contact_start``). ``joint_guess``: the arm's
+    joint positions near the start (the inverse kinematics' seed). The typed errors are
+    ``solve_contact_start``'s; ArgumentError for ``systems`` without a path job."""
+    owner = "solve_path_start"
+    check_root_context(diagram, root_context, systems, owner)
+    job = systems.path
+    if job is None:
+        raise ArgumentError(f"{owner}: systems has no path job: build it with add_hybrid_controller(..., "
+                            "path=path_job(surface, offset, settings)), or start with solve_contact_start")
+    check_start_sensor(systems, owner)
+    kinematics = systems.controller.kinematics
+    joint_guess = joint_vector(joint_guess, "joint_guess", owner, kinematics.plant)
+    gap = positive(gap, "gap", owner, unit="m")
+    max_depth = positive(max_depth, "max_depth", owner, unit="m")
+    tolerance = positive(tolerance, "tolerance", owner)
+    desired = _desired_force(systems, root_context, None, owner)
+    supervisor = systems.supervisor
+    if supervisor is None or supervisor.initial_phase == ContactPhase.CONTACT:
+        return _press_and_prime(diagram, root_context, systems, job.pose_at_depth, joint_guess, desired, max_depth,
+                                tolerance, owner, "the path's first point")
+    q0 = _positions_at(kinematics, kinematics.plant.CreateDefaultContext(), job.pose_at_depth(-gap), joint_guess,
+                       0.0, owner, f"the pose {gap:g} m above the path's first point")
+    _rest_at(diagram, root_context, systems, q0, np.zeros_like(desired), owner)
+    return q0
+
+
+def _desired_force(systems, root_context, desired_force, owner):
+    """F_d for the start (m entries, the kinematic rows zeroed): ``desired_force`` or the command source's at t = 0."""
+    space = systems.constraint_space
     if desired_force is None:
         if systems.source is None:
             raise ArgumentError(f"{owner}: desired_force is needed when the controller has no command source")
@@ -143,47 +200,67 @@ def solve_contact_start(diagram, root_context, systems, start_pose, joint_guess,
         desired_force = systems.source.GetOutputPort("desired_force").Eval(source_context)
     desired = vector(desired_force, "desired_force", owner, space.force_size)
     mask = np.array([0.0 if i in space.constraint.kinematic_rows else 1.0 for i in range(space.force_size)])
-    desired = desired * mask
+    return desired * mask
+
+
+def _positions_at(kinematics, controller_context, X_target, joint_guess, depth, owner, what):
+    """The inverse kinematics to ``X_target`` from ``joint_guess``; UnreachablePoseError naming ``what``."""
+    try:
+        return inverse_kinematics(kinematics, controller_context, X_target, joint_guess)
+    except DrakeHybridError:
+        raise
+    except ValueError as error:          # core.kinematics: no convergence, or outside the joint limits
+        where = what if depth == 0 else f"{what} pushed {depth * 1000:.3g} mm into the workpiece"
+        raise UnreachablePoseError(f"{owner}: {where} is not reached from joint_guess: {error} Give a "
+                                   f"reachable {what} or a joint_guess nearer to it") from None
+
+
+def _rest_at(diagram, root_context, systems, q0, desired, owner):
+    """The arm at rest at ``q0`` (its links clear of the scene), every state around it primed to hold it
+    there pressing with ``desired``."""
+    plant, robot = systems.plant, systems.robot
+    check_robot_clearance(diagram, root_context, systems, q0, owner)
+    plant_context = plant.GetMyMutableContextFromRoot(root_context)
+    plant.SetPositions(plant_context, robot.arm, q0)
+    plant.SetVelocities(plant_context, robot.arm, np.zeros(len(q0)))
+    prime_start(systems, root_context, holding_torque(systems, q0, desired))
+
+
+def _press_and_prime(diagram, root_context, systems, pose_at_depth, joint_guess, desired, max_depth, tolerance,
+                     owner, what):
+    """The start pressing with ``desired``: the pose ``pose_at_depth(0)`` checked on C = 0, the depth where
+    the contact's rest force along F_d equals |F_d| (``pose_at_depth(depth)`` the pose there), the arm
+    put at rest there (``_rest_at``). Returns the joint positions."""
+    plant, robot, space = systems.plant, systems.robot, systems.constraint_space
+    kinematics = systems.controller.kinematics
     controller_context = kinematics.plant.CreateDefaultContext()
 
-    def positions_at_depth(depth, direction):
-        X_target = RigidTransform(start_pose.rotation(), start_pose.translation() + depth * direction)
-        try:
-            return inverse_kinematics(kinematics, controller_context, X_target, joint_guess)
-        except DrakeHybridError:
-            raise
-        except ValueError as error:          # core.kinematics: no convergence, or outside the joint limits
-            where = "start_pose" if depth == 0 else f"start_pose pushed {depth * 1000:.3g} mm into the workpiece"
-            raise UnreachablePoseError(f"{owner}: {where} is not reached from joint_guess: {error} Give a "
-                                       "reachable start_pose or a joint_guess nearer to it") from None
+    def positions_at_depth(depth):
+        return _positions_at(kinematics, controller_context, pose_at_depth(depth), joint_guess, depth, owner, what)
 
     def configuration(q):
         kinematics.plant.SetPositions(controller_context, q)
         task = kinematics.evaluate(controller_context)
         return task, space.evaluate(task.configuration, task.velocity)
 
-    q_surface = positions_at_depth(0.0, np.zeros(3))
+    q_surface = positions_at_depth(0.0)
     task, values = configuration(q_surface)
     try:
         space.constraint.check_satisfied(task.configuration, tolerance)
     except OffConstraintError as error:
-        raise OffConstraintError(f"{owner}: start_pose: {error}") from None
+        raise OffConstraintError(f"{owner}: {what}: {error}") from None
     space.constraint.check_branch(task.configuration)
+    mask = np.array([0.0 if i in space.constraint.kinematic_rows else 1.0 for i in range(space.force_size)])
     check_pushing_force(desired, force_controlled=mask, where=f"{owner} (desired_force)")
     magnitude = float(np.linalg.norm(desired))
     q0 = q_surface
     if magnitude > 0:
-        # The world force at P that the rows read as F_d (least squares): the pad presses against it.
-        unit_forces = np.array([space.split_wrench(values, space.chart.generalized_force(
-            task.configuration, np.concatenate([np.zeros(3), axis])))[1] for axis in np.eye(3)]).T
-        force_W = np.linalg.lstsq(unit_forces, desired, rcond=None)[0]
-        direction = -force_W / np.linalg.norm(force_W)
         plant_context = plant.GetMyMutableContextFromRoot(root_context)
         frame = plant.GetFrameByName(robot.end_effector_frame)
         pad = list(robot.pad_geometries)
 
         def pressing_force(depth):
-            q = positions_at_depth(depth, direction)
+            q = positions_at_depth(depth)
             plant.SetPositions(plant_context, robot.arm, q)
             p_WP = frame.CalcPoseInWorld(plant_context).multiply(np.asarray(robot.end_effector_point, dtype=float))
             task_at, values_at = configuration(q)
@@ -215,10 +292,6 @@ def solve_contact_start(diagram, root_context, systems, start_pose, joint_guess,
                                 f"{reached[max_depth] + magnitude:.3g} N, less than |desired_force| = {magnitude:.3g} "
                                 "N: lower desired_force, raise max_depth or stiffen the pad (its hydroelastic "
                                 "modulus)") from None
-        q0 = positions_at_depth(depth, direction)
-    check_robot_clearance(diagram, root_context, systems, q0, owner)
-    plant_context = plant.GetMyMutableContextFromRoot(root_context)
-    plant.SetPositions(plant_context, robot.arm, q0)
-    plant.SetVelocities(plant_context, robot.arm, np.zeros(len(q0)))
-    prime_start(systems, root_context, holding_torque(systems, q0, desired))
+        q0 = positions_at_depth(depth)
+    _rest_at(diagram, root_context, systems, q0, desired, owner)
     return q0

@@ -1,7 +1,7 @@
 """Loggers of every signal of a hybrid loop, and the log they give.
 """
 
-from typing import Dict
+from typing import Any, Dict, Optional
 
 from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import LogVectorOutput
@@ -31,15 +31,27 @@ LOG_KEYS = {
               "end-effector point, world frame (6; N m, N), after the filter or conditioner",
     "true_wrench": "the sensor's own wrench, before faults, filter or conditioner (6; only when they differ)",
     "contact_phase": "the ContactSupervisor's phase (1; control.phases.ContactPhase values; only when supervised)",
+    # A path job's (add_hybrid_controller(..., path=job)): the PathSource's outputs and the supervisor's lift-off.
+    "reference_position": "the path's reference point, the pad centre's (3, m, world)",
+    "reference_normal": "the surface's outward unit normal at the reference (3)",
+    "path_error": "the pad centre's error against the reference: [along the path, across it on the surface, "
+                  "along the normal] (3, m)",
+    "path_progress": "[segment, arc length (m), path time (s; < 0 before the path starts)] (3)",
+    "path_done": "1 once the path has ended (1)",
+    "lifting": "1 while the supervisor lifts the pad off at the path's end (1)",
 }
+PATH_LOGS = ("reference_position", "reference_normal", "path_error", "path_progress", "path_done")
 
 
-def add_loggers(builder, systems, period=None):
-    """Loggers for every signal of ``systems`` (a HybridSystems), keyed by ``LOG_KEYS``.
+def add_loggers(builder: DiagramBuilder, systems: HybridSystems,
+                period: Optional[float] = None) -> Dict[str, Any]:
+    """Loggers for every signal of ``systems`` (a HybridSystems), keyed by ``LOG_KEYS``; a path job's
+    reference, error and progress (and the supervisor's lift-off) too.
 
     ``period``: sample period (s); None logs every publish of the simulator's steps. A controller with
     ``sampled_diagnostics`` is logged from its ``diagnostics`` port (what each tick computed, read
-    once). Returns {key: VectorLogSink or (sink, column slice)}; ``read_log`` turns it into arrays."""
+    once). Returns {key: VectorLogSink or (sink, column slice)}, also kept as ``systems.loggers``;
+    ``read_log`` turns it into arrays."""
     instance(builder, "builder", "add_loggers", DiagramBuilder)
     instance(systems, "systems", "add_loggers", HybridSystems, what="the HybridSystems of add_hybrid_controller")
     controller = systems.controller
@@ -52,17 +64,23 @@ def add_loggers(builder, systems, period=None):
     else:
         for name in controller.diagnostic_slices():
             loggers[name] = LogVectorOutput(controller.GetOutputPort(name), builder, period)
-    for name in ("position_error", "actuation"):
-        loggers[name] = LogVectorOutput(controller.GetOutputPort(name), builder, period)
+    loggers["position_error"] = LogVectorOutput(controller.GetOutputPort("position_error"), builder, period)
+    loggers["actuation"] = LogVectorOutput(systems.actuation, builder, period)
     if systems.source is not None:
         for name in ("desired_velocity", "desired_force"):
             loggers[name] = LogVectorOutput(systems.source.GetOutputPort(name), builder, period)
-    loggers["state"] = LogVectorOutput(systems.plant.get_state_output_port(systems.robot.arm), builder, period)
+    loggers["state"] = LogVectorOutput(systems.state, builder, period)
     loggers["wrench"] = LogVectorOutput(systems.wrench_output, builder, period)
     if systems.true_wrench is not None and systems.true_wrench is not systems.wrench_output:
         loggers["true_wrench"] = LogVectorOutput(systems.true_wrench, builder, period)
     if systems.supervisor is not None:
         loggers["contact_phase"] = LogVectorOutput(systems.supervisor.GetOutputPort("contact_phase"), builder, period)
+    if systems.path is not None and systems.source is not None:
+        for name in PATH_LOGS:
+            loggers[name] = LogVectorOutput(systems.source.GetOutputPort(name), builder, period)
+        if systems.supervisor is not None:
+            loggers["lifting"] = LogVectorOutput(systems.supervisor.GetOutputPort("lifting"), builder, period)
+    systems.loggers.update(loggers)
     return loggers
 
 

@@ -1,27 +1,33 @@
-"""Building blocks for your own Drake diagram: the hybrid controller as a part of your station.
+"""The hybrid controller in your station: the closed loop, connected in one place.
 
-Each block takes YOUR ``MultibodyPlant`` or ``DiagramBuilder`` and adds one part, returning what it
-added, as the manipulation course's station helpers (``AddIiwa``, ``AddWsg``) and Drake's
-``ApplyMultibodyPlantConfig`` do. ``scenario.builder.build_scenario`` is one composition of them
-(the package's own tasks); yours can be any other::
+``add_hybrid_controller(builder, plant, robot, space, controller_plant, ...)`` adds the controller and
+everything that feeds it to YOUR builder and plant, wired, and returns the loop's handle
+(``station.handles.HybridSystems``)::
+
+    plant ─contact_results / reaction_forces, body_poses─► wrench_sensor ─► [faults] ─► [filter or conditioner] ─┐
+    plant ─state (robot.arm)────────────────────────────────────────────────────────────────────────────────────┼─► controller ─actuation─► plant
+    source (ProfileSource, PathSource of ``path=``, or yours) ─desired_velocity, desired_acceleration, desired_force┘
+    [supervisor: controller ─force, constraint_value─► supervisor ─contact_phase, approach_reference─► controller]
+    [path: source ─path_position_error─► controller; supervisor ─contact_phase─► source ─path_done─► supervisor]
+
+It is the one composition of the loop: the package's own runs (``scenario.builder.build_scenario``)
+and a real arm's controller side (``hardware.controller_side``) are made of the same pieces, and every
+connection to or from the controller's ports is made by ``connect_hybrid_loop``, whatever feeds the
+loop (a simulated plant's ports, or a real arm's messages). ``make_hybrid_controller`` is the one
+place a HybridController is made for a loop (the wrench's lag, the plant's step, the guarded move, the
+path's position error).
+
+A whole station, from your own arm to the log (``docs/howto/own_diagram.md``)::
 
     builder = DiagramBuilder()
     plant, scene_graph = AddMultibodyPlant(default_plant_config(), builder)
-
-    def add_robot(plant):                       # your arm and its tool: called for both plants
-        arm = Parser(plant).AddModels(my_arm_urdf)[0]
-        plant.WeldFrames(plant.world_frame(), plant.GetFrameByName("base_link", arm))
-        return mount_tool(plant, arm, "tool0", X_flange_tool=RigidTransform([0, 0, 0.02]),
-                          gripper_joints=["finger_joint"])
-
-    robot = add_robot(plant)
+    robot = add_robot(plant)                                   # your arm, mount_tool(plant, arm, "tool0")
     workpiece = add_rigid_workpiece(plant, Ellipsoid(0.3, 0.2, 0.1), X_WG)
     apply_contact_defaults(plant, scene_graph, robot, workpiece)
     plant.Finalize()
     only_tool_touches(plant, scene_graph, robot, workpiece)
     hybrid = add_hybrid_controller(builder, plant, robot, space, robot_plant(add_robot), gains=gains,
-                                   control_period=1e-3, desired_velocity=Profile(value=[0.05, 0, 0, 0, 0]),
-                                   desired_force=Profile(value=[8.0]))   # on the robot, along grad C
+                                   control_period=1e-3, desired_velocity=[0.05, 0, 0, 0, 0], desired_force=[8.0])
     loggers = add_loggers(builder, hybrid)
     diagram = builder.Build()
     context = diagram.CreateDefaultContext()
@@ -29,92 +35,289 @@ added, as the manipulation course's station helpers (``AddIiwa``, ``AddWsg``) an
     Simulator(diagram, context).AdvanceTo(5.0)
     log = read_log(loggers, context)
 
-and ``analysis.linearization.linearize_at_contact(diagram, context, hybrid)`` checks the closed
-loop's eigenvalues against the design on the same station built with ``time_step=0`` and no
-``control_period`` (Drake's ``Linearize`` needs a continuous loop).
-
-The blocks:
-
-``default_plant_config``     the package's MultibodyPlantConfig: 1 ms SAP steps, hydroelastic contact
-``mount_tool``               the compliant pad on a frame of any arm, at an offset; a gripper's joints
-                             welded (its geometry kept, or removed); ``name=`` for a further tool in the
-                             plant; returns a ``RobotModel``
-``add_rigid_workpiece``      a rigid hydroelastic shape at a pose, its mesh as fine as its curvature needs
-``apply_contact_defaults``   the pad's modulus, dissipation and mesh, SAP's relaxation times, friction
-``only_tool_touches``        collision filters: the robot touches the workpiece with its tool only
-``robot_plant``              the controller's own model: your robot alone, in a continuous plant
-``add_hybrid_controller``    controller, wrench sensor, wrench filter, command source (and contact
-                             supervisor) in one call, wired (one per arm); returns a ``HybridSystems``
-``add_loggers``, ``read_log``  every signal of the run, keyed by ``LOG_KEYS`` (the ports' names)
-
-and ``station.contact_start.solve_contact_start`` (pressing with F_d, in your context).
-
-Every block checks each input port it wires before ``Connect`` (``builder.IsConnectedOrExported``):
-Drake ends the process at an input connected twice, the blocks raise an ArgumentError naming the port.
-
-Size: the blocks share one vocabulary (the RobotModel of the mounted tool, the HybridSystems of the
-controller) and each is a few lines; apart they would import each other.
+Every connection checks the input port first (``builder.IsConnectedOrExported``): Drake ends the
+process at an input connected twice, these raise an ArgumentError naming the port.
 """
 
 import inspect
 import numbers
-from dataclasses import dataclass
-from typing import Optional
+from typing import Any, Optional, Sequence, Union
 
 import numpy as np
 
 from pydrake.multibody.plant import MultibodyPlant
-from pydrake.systems.framework import DiagramBuilder, OutputPort, System
+from pydrake.systems.framework import DiagramBuilder, InputPort, OutputPort, System
 
 from drake_hybrid.control.controller import HybridController
-from drake_hybrid.control.gains import ControlMode
+from drake_hybrid.control.gains import ControlMode, HybridGains
 from drake_hybrid.control.phases import ContactPhase
 from drake_hybrid.control.supervision import ContactSupervisor, SupervisionConfig
 from drake_hybrid.core.arguments import describe, instance, vector
 from drake_hybrid.core.errors import ArgumentError, ConfigError
 from drake_hybrid.core.kinematics import EndEffectorKinematics
 from drake_hybrid.core.projections import ConstraintSpace
-from drake_hybrid.station.ports import add_named, guarded_connect, port_label, port_of, refuse_wired
+from drake_hybrid.station.handles import HybridSystems
+from drake_hybrid.station.path_job import PathJob
+from drake_hybrid.station.ports import add_named, guarded_connect, port_label, port_of
 from drake_hybrid.station.robot_model import (RobotModel, arm_model_name, check_finalized_robot_plant,
                                               check_station_parts)
-from drake_hybrid.station.sensing import (CONTINUOUS_LOOP_BANDWIDTH, ContactSensorConfig, add_sensing,
-                                          check_sensor_config, wrench_lag)
+from drake_hybrid.station.sensing import (CONTINUOUS_LOOP_BANDWIDTH, ContactSensorConfig, WristSensorConfig,
+                                          add_sensing, check_sensor_config, wrench_lag)
 from drake_hybrid.systems.faults import SensorFaultConfig
+from drake_hybrid.systems.path_source import PathSource
 from drake_hybrid.systems.sources import Profile, ProfileSource
 
+SOURCE_OUTPUTS = ("desired_velocity", "desired_acceleration", "desired_force")
+CONTROLLER_INPUTS = ("estimated_state", "measured_wrench") + SOURCE_OUTPUTS
+SUPERVISED_INPUTS = ("contact_phase", "approach_reference")
+SUPERVISED_OUTPUTS = ("force", "constraint_value")
+# The HybridController arguments add_hybrid_controller passes on as given (the others it sets itself).
+CONTROLLER_OPTIONS = tuple(name for name in inspect.signature(HybridController._construct).parameters
+                           if name not in ("self", "plant", "end_effector_frame", "end_effector_point",
+                                           "constraint_space", "gains", "mode", "control_period", "guarded_move",
+                                           "path_position_error", "converter"))
 
-@dataclass
-class HybridSystems:
-    """What ``add_hybrid_controller`` added to your builder, with what analysis needs to read it.
 
-    ``controller`` (HybridController), ``sensor`` (ContactWrenchSensor or WristForceTorqueSensor),
-    ``wrench_filter`` (LowPassFilter or None), ``conditioner`` (WrenchConditioner or None),
-    ``fault_injector`` (SensorFaultInjector or None), ``source`` (the command source or None: you wire
-    the controller's desired_* ports), ``supervisor`` (ContactSupervisor or None), ``wrench_output``
-    (the port the controller reads the wrench from), ``true_wrench`` (the sensor's own output); the
-    ``plant``, ``robot`` (RobotModel), ``controller_plant``, ``constraint_space`` and ``kinematics``
-    (EndEffectorKinematics on the simulation plant) they were built for; ``diagram``: set by the
-    functions that take the built diagram.
+def connect_hybrid_loop(builder: DiagramBuilder, controller: System, *, state: OutputPort, wrench: OutputPort,
+                        actuation: InputPort, source: Optional[System] = None,
+                        supervisor: Optional[System] = None, conditioner: Optional[System] = None,
+                        owner: str = "connect_hybrid_loop") -> None:
+    """Every connection of the hybrid loop to and from ``controller``'s ports, in one place::
+
+        state ─► controller.estimated_state (and the source's first input, if it has one: the arm's state)
+        wrench ─► controller.measured_wrench (and supervisor.measured_wrench)
+        controller.actuation ─► actuation
+        source ─desired_velocity, desired_acceleration, desired_force─► controller (desired_force ─► supervisor)
+        controller ─force, constraint_value─► supervisor ─contact_phase, approach_reference─► controller
+        supervisor ─contact_phase─► conditioner (a taring WrenchConditioner)
+        source ─path_position_error─► controller;  supervisor ─contact_phase─► source;  source ─path_done─► supervisor.lift_off
+
+    ``state`` is the arm's [q; v] (a plant's state output, or a real arm's watchdog), ``wrench`` the
+    port the controller reads the wrench from, ``actuation`` the input port its torque drives (the
+    plant's actuation, or a real arm's command path). The path's connections are made when the source
+    has them (a ``PathSource``): the controller must then take the path's position error, and a source
+    that waits for the first contact needs a supervisor. Every input is checked unwired first
+    (ArgumentError naming it and ``owner``)."""
+    if source is not None:
+        if source.num_input_ports():          # its first input is the arm's state (DesiredFieldSource, PathSource)
+            _connect_shared(builder, state, source.get_input_port(0), owner)
+        for name in SOURCE_OUTPUTS:
+            guarded_connect(builder, source.GetOutputPort(name), controller.GetInputPort(name), owner)
+    guarded_connect(builder, state, controller.GetInputPort("estimated_state"), owner)
+    guarded_connect(builder, wrench, controller.GetInputPort("measured_wrench"), owner)
+    guarded_connect(builder, controller.GetOutputPort("actuation"), actuation, owner)
+    if supervisor is not None:
+        for name in SUPERVISED_OUTPUTS:
+            guarded_connect(builder, controller.GetOutputPort(name), supervisor.GetInputPort(name), owner)
+        for name in SUPERVISED_INPUTS:
+            guarded_connect(builder, supervisor.GetOutputPort(name), controller.GetInputPort(name), owner)
+        guarded_connect(builder, wrench, supervisor.GetInputPort("measured_wrench"), owner)
+        if source is not None:
+            guarded_connect(builder, source.GetOutputPort("desired_force"), supervisor.GetInputPort("desired_force"),
+                            owner)
+        if conditioner is not None:
+            guarded_connect(builder, supervisor.GetOutputPort("contact_phase"), conditioner.GetInputPort("contact_phase"),
+                            owner)
+    if isinstance(source, PathSource):
+        if not controller.HasInputPort("path_position_error"):
+            raise ArgumentError(f"{owner}: the source runs a path, but controller '{controller.get_name()}' has no "
+                                "path_position_error input (build it with path_position_error=True)")
+        guarded_connect(builder, source.GetOutputPort("path_position_error"),
+                        controller.GetInputPort("path_position_error"), owner)
+        if source.get_contact_phase_input_port() is not None:
+            if supervisor is None:
+                raise ConfigError(f"{owner}: the path's source waits for the first contact, but the loop has no "
+                                  "contact supervisor (give supervision=SupervisionConfig(...))")
+            guarded_connect(builder, supervisor.GetOutputPort("contact_phase"), source.get_contact_phase_input_port(),
+                            owner)
+        if supervisor is not None and supervisor.lift_off:
+            guarded_connect(builder, source.GetOutputPort("path_done"), supervisor.GetInputPort("lift_off"), owner)
+
+
+def _connect_shared(builder, output_port, input_port, owner):
+    """``guarded_connect``, except that an input already fed by ``output_port`` is left as it is: a source
+    shared by several laws (a real arm's gain sets) reads the state once."""
+    connection = builder.connection_map().get((input_port.get_system(), input_port.get_index()))
+    if connection == (output_port.get_system(), output_port.get_index()):
+        return
+    guarded_connect(builder, output_port, input_port, owner)
+
+
+def make_hybrid_controller(controller_plant: MultibodyPlant, robot: RobotModel, constraint_space: ConstraintSpace, *,
+                           sensor: Union[ContactSensorConfig, WristSensorConfig], plant: Optional[MultibodyPlant],
+                           gains: Optional[HybridGains] = None, mode: Union[ControlMode, str] = ControlMode.VELOCITY_FORCE,
+                           control_period: Optional[float] = None, supervision: Optional[SupervisionConfig] = None,
+                           path: bool = False, **options: Any) -> HybridController:
+    """The HybridController of a loop (the one place a loop's controller is made): on ``controller_plant``
+    at ``robot``'s end-effector frame and point, reading the wrench of ``sensor`` measured on ``plant``
+    (the simulated plant, whose step the law's joint damping compensates and whose sampled contact results
+    are one step old; None: a real arm's, read as current, its ``plant_time_step`` given in ``options``),
+    with the guarded move of ``supervision`` and the path's position error input when ``path``.
+    ``options``: further HybridController arguments (``CONTROLLER_OPTIONS``); ``sampled_diagnostics``
+    defaults to a sampled controller's."""
+    defaults = dict(sampled_diagnostics=control_period is not None,
+                    plant_time_step=plant.time_step() if plant is not None else 0.0,
+                    wrench_lag=wrench_lag(sensor, plant if plant is not None else controller_plant, control_period))
+    defaults.update(options)
+    return HybridController(controller_plant, robot.end_effector_frame, robot.end_effector_point, constraint_space,
+                            gains=gains, mode=mode, control_period=control_period, guarded_move=supervision,
+                            path_position_error=path, **defaults)
+
+
+def path_source(job: PathJob, controller_plant: MultibodyPlant, robot: RobotModel, constraint_space: ConstraintSpace,
+                control_period: Optional[float], supervised: bool) -> PathSource:
+    """The PathSource that runs ``job`` for a controller on ``controller_plant`` (it waits for the first
+    contact when ``supervised``, unless the job holds one point)."""
+    kinematic = constraint_space.constraint.kinematic_rows
+    force_row = next(i for i in range(constraint_space.force_size) if i not in kinematic)
+    return PathSource(controller_plant, robot.end_effector_frame, robot.end_effector_point, constraint_space,
+                      job.path, heading=job.heading, force_row=force_row,
+                      dwell=0.0 if job.holding else job.settings.dwell,
+                      wait_for_contact=supervised and not job.holding, period=control_period)
+
+
+def add_hybrid_controller(builder: DiagramBuilder, plant: MultibodyPlant, robot: RobotModel,
+                          constraint_space: ConstraintSpace, controller_plant: MultibodyPlant,
+                          gains: Optional[HybridGains] = None,
+                          mode: Union[ControlMode, str] = ControlMode.VELOCITY_FORCE,
+                          control_period: Optional[float] = None,
+                          desired_velocity: Union[Profile, Sequence[float], None] = None,
+                          desired_force: Union[Profile, Sequence[float], None] = None,
+                          source: Union[System, bool, None] = None,
+                          sensor: Union[ContactSensorConfig, WristSensorConfig, None] = None,
+                          supervision: Optional[SupervisionConfig] = None,
+                          initial_phase: Union[ContactPhase, int, str, None] = None,
+                          sensor_faults: Optional[SensorFaultConfig] = None, controller: Optional[System] = None,
+                          path: Optional[PathJob] = None, **controller_options: Any) -> HybridSystems:
+    """Add the hybrid controller and what feeds it to your builder, wired to your plant (the module
+    docstring draws the loop; ``connect_hybrid_loop`` makes its connections).
+
+    One controller per arm: the arm's actuation input must not be wired yet (ArgumentError naming the
+    port otherwise). The systems are named controller, wrench_sensor, desired, ... ; a second arm's
+    (a second call with another ``robot``) get its model instance name appended.
+
+    Args:
+        builder: your DiagramBuilder; ``plant``: your finalized MultibodyPlant in it (with its SceneGraph).
+        robot: the RobotModel of ``mount_tool``.
+        constraint_space: a ConstraintSpace (chart, C, E_p).
+        controller_plant: the controller's own model of the robot (``robot_plant(add_robot)``): checked
+            against the plant's arm (positions, velocities, actuators, the end-effector pose at three
+            configurations).
+        gains, mode, control_period: of the HybridController (None: continuous, for linearization).
+        desired_velocity, desired_force: Profiles (time profiles, k and m entries; a list of numbers is a
+            constant one, ``[10.0]`` for one force row; default zero) for a ProfileSource; or ``source``: a
+            system of your own with the output ports desired_velocity, desired_acceleration and
+            desired_force (wired here), or False: you wire the controller's desired_* input ports yourself.
+        path: a PathJob (``station.path_job.path_job``): a job over a surface instead of profiles. Its
+            PathSource gives the commands and the position error against the path (the controller
+            takes it); with ``supervision`` it waits for the first contact to start the path, and lifts
+            off at its end (``settings.lift_off``).
+        sensor: a ContactSensorConfig (default) or WristSensorConfig: which wrench, and its path (a
+            low-pass of ``bandwidth_hz``, a conditioner). A continuous controller needs a low-pass
+            (default then ``CONTINUOUS_LOOP_BANDWIDTH``): its actuation feeds through to the wrench.
+        supervision: a SupervisionConfig: a ContactSupervisor (guarded approach, contact loss, a job's
+            lift-off) starting in ``initial_phase`` (a ContactPhase; default CONTACT; APPROACH for a
+            start above the surface, ``station.start.solve_path_start``).
+        sensor_faults: a SensorFaultConfig: its injector between the sensor and the wrench path.
+        controller: a controller system of your own with the HybridController's ports (e.g. a baseline
+            of ``control.baselines``) instead of building one.
+        controller_options: further HybridController arguments (``CONTROLLER_OPTIONS``: safety,
+            velocity_row_inertia, compensate_tangential_force, sample_lead, sampled_diagnostics,
+            plant_time_step, fast_law, ...); only when ``controller`` is None.
+
+    Returns the HybridSystems of the loop. Every port stays reachable by name for wiring by hand.
     """
+    owner = "add_hybrid_controller"
+    check_station_parts(builder, plant, robot, owner)
+    _controller_model(controller_plant, owner)
+    instance(constraint_space, "constraint_space", owner, ConstraintSpace,
+             what="a ConstraintSpace (a constraint with its velocity projection)")
+    unknown = sorted(set(controller_options) - set(CONTROLLER_OPTIONS))
+    if unknown:
+        raise ArgumentError(f"{owner}: unknown argument(s) {', '.join(unknown)}; the HybridController options are "
+                            f"{', '.join(CONTROLLER_OPTIONS)}")
+    if controller is not None and controller_options:
+        raise ArgumentError(f"{owner}: {', '.join(sorted(controller_options))} configure the HybridController "
+                            f"built here, not your controller: pass them to your controller")
+    if sensor is None:
+        sensor = ContactSensorConfig(bandwidth_hz=CONTINUOUS_LOOP_BANDWIDTH if control_period is None else 0.0)
+    check_sensor_config(sensor, owner)
+    if control_period is None and not (sensor.bandwidth_hz > 0):
+        raise ConfigError("sensor.bandwidth_hz: a continuous controller (control_period None) needs a wrench "
+                          "low-pass (> 0 Hz): its actuation feeds through to the measured wrench")
+    instance(supervision, "supervision", owner, SupervisionConfig, allow_none=True)
+    if supervision is not None and control_period is None:
+        raise ArgumentError(f"{owner}: a contact supervisor (supervision) runs at the control period: give "
+                            "control_period (s)")
+    instance(sensor_faults, "sensor_faults", owner, SensorFaultConfig, allow_none=True)
+    instance(path, "path", owner, PathJob, allow_none=True, what="a PathJob (station.path_job.path_job) or None")
+    phase = _contact_phase(initial_phase, owner)
+    k, m = constraint_space.velocity_size, constraint_space.force_size
+    if path is not None:
+        given = [name for name, value in (("source", source), ("desired_velocity", desired_velocity),
+                                          ("desired_force", desired_force)) if value is not None]
+        if given:
+            raise ArgumentError(f"{owner}: path gives the commands; do not give {', '.join(given)} too")
+        source = path_source(path, controller_plant, robot, constraint_space, control_period, supervision is not None)
+    elif source is None:
+        source = ProfileSource(as_profile(desired_velocity, k, "desired_velocity"),
+                               as_profile(desired_force, m, "desired_force"), k, m)
+    elif source is not False:
+        _check_source(source, owner)
+    if controller is not None:
+        instance(controller, "controller", owner, System, what="a controller System with the HybridController's "
+                 "ports (e.g. a baseline of control.baselines) or None")
+        for name in CONTROLLER_INPUTS + (SUPERVISED_INPUTS if supervision is not None else ()):
+            port_of(controller, name, "input", owner, "controller")
+        for name in ("actuation",) + (SUPERVISED_OUTPUTS if supervision is not None else ()):
+            port_of(controller, name, "output", owner, "controller")
+    check_controller_plant(plant, robot, controller_plant, owner)
+    _check_actuation_free(builder, plant, robot, owner)
+    if controller is None:
+        controller = make_hybrid_controller(controller_plant, robot, constraint_space, sensor=sensor, plant=plant,
+                                            gains=gains, mode=mode, control_period=control_period,
+                                            supervision=supervision, path=path is not None, **controller_options)
+    arm = arm_model_name(plant, robot)
+    controller = add_named(builder, "controller", controller, arm)
+    tare = supervision is not None and supervision.tare_time > 0 and phase == ContactPhase.TARE
+    wrench_sensor, true_wrench, wrench_output, injector, conditioner, wrench_filter = add_sensing(
+        builder, plant, robot, sensor, control_period, sensor_faults, tare)
+    if source is not False:
+        source = add_named(builder, "desired", source, arm)
+    supervisor = None
+    if supervision is not None:
+        supervisor = add_named(builder, "contact_supervisor", ContactSupervisor(
+            supervision, controller.force_size, controller.kinematic_rows, control_period, phase,
+            lift_off=path is not None and path.lifts_off(supervised=True)), arm)
+    connect_hybrid_loop(builder, controller, state=plant.get_state_output_port(robot.arm), wrench=wrench_output,
+                        actuation=plant.get_actuation_input_port(robot.arm), source=source or None,
+                        supervisor=supervisor, conditioner=conditioner if tare else None, owner=owner)
+    kinematics = EndEffectorKinematics(plant, robot.end_effector_frame, robot.end_effector_point,
+                                       constraint_space.chart)
+    return HybridSystems(plant=plant, robot=robot, controller_plant=controller_plant,
+                         constraint_space=constraint_space, controller=controller, sensor=wrench_sensor,
+                         kinematics=kinematics, state=plant.get_state_output_port(robot.arm),
+                         wrench_output=wrench_output, actuation=controller.GetOutputPort("actuation"),
+                         true_wrench=true_wrench, source=source or None, wrench_filter=wrench_filter,
+                         conditioner=conditioner, fault_injector=injector, supervisor=supervisor, path=path)
 
-    plant: object
-    robot: RobotModel
-    controller_plant: object
-    constraint_space: object
-    controller: object
-    sensor: object
-    kinematics: EndEffectorKinematics
-    wrench_output: object = None
-    true_wrench: object = None
-    source: Optional[object] = None
-    wrench_filter: Optional[object] = None
-    conditioner: Optional[object] = None
-    fault_injector: Optional[object] = None
-    supervisor: Optional[object] = None
-    diagram: Optional[object] = None
 
-    def plant_context(self, root_context):
-        return self.plant.GetMyMutableContextFromRoot(root_context)
+def _check_source(source, owner):
+    instance(source, "source", owner, System, what="a System with the output ports " + ", ".join(SOURCE_OUTPUTS)
+             + " (or None: a ProfileSource of desired_velocity and desired_force; False: you wire them)")
+    for name in SOURCE_OUTPUTS:
+        port_of(source, name, "output", owner, "source")
+
+
+def as_profile(command, size, name="command", owner="add_hybrid_controller"):
+    """``command`` as a Profile of ``size`` entries: a Profile as it is (checked), a sequence of ``size``
+    numbers as a constant one, None as zeros. Typed errors name ``name``."""
+    if command is None:
+        return Profile(value=[0.0] * size)
+    if isinstance(command, Profile):
+        command.validate(size, f"{owner}: {name}")
+        return command
+    return Profile(value=vector(command, name, owner, size).tolist())
 
 
 def _controller_model(controller_plant, owner):
@@ -123,81 +326,6 @@ def _controller_model(controller_plant, owner):
     if not controller_plant.is_finalized():
         raise ConfigError(f"{owner}: controller_plant must be finalized (robot_plant(add_robot) does it)")
     return controller_plant
-
-
-_SOURCE_OUTPUTS = ("desired_velocity", "desired_acceleration", "desired_force")
-_CONTROLLER_INPUTS = ("estimated_state", "measured_wrench") + _SOURCE_OUTPUTS
-_SUPERVISED_INPUTS = ("contact_phase", "approach_reference")
-_SUPERVISED_OUTPUTS = ("force", "constraint_value")
-
-
-def _check_source(source, owner):
-    instance(source, "source", owner, System, what="a System with the output ports " + ", ".join(_SOURCE_OUTPUTS)
-             + " (or None: a ProfileSource of desired_velocity and desired_force; False: you wire them)")
-    for name in _SOURCE_OUTPUTS:
-        port_of(source, name, "output", owner, "source")
-
-
-def connect_source(builder, plant, robot, source, controller):
-    """Add the command source ``source`` (a system with the output ports desired_velocity,
-    desired_acceleration and desired_force; if it has inputs, its first is the arm's state, as
-    ``DesiredFieldSource``'s and ``PathSource``'s) to ``builder`` as "desired" (or "desired_<arm>" if the
-    builder has one) and wire it to ``controller``. Returns it."""
-    owner = "connect_source"
-    check_station_parts(builder, plant, robot, owner)
-    _check_source(source, owner)
-    instance(controller, "controller", owner, System)
-    inputs = [port_of(controller, name, "input", owner, "controller") for name in _SOURCE_OUTPUTS]
-    for port in inputs:
-        refuse_wired(builder, port, owner, " (the controller already has a command source)")
-    source = add_named(builder, "desired", source, arm_model_name(plant, robot))
-    if source.num_input_ports():
-        guarded_connect(builder, plant.get_state_output_port(robot.arm), source.get_input_port(0), owner)
-    for name, port in zip(_SOURCE_OUTPUTS, inputs):
-        guarded_connect(builder, source.GetOutputPort(name), port, owner)
-    return source
-
-
-def add_contact_supervisor(builder, controller, wrench_output, supervision, control_period, initial_phase,
-                           source=None, conditioner=None, lift_off=False, suffix="supervisor"):
-    """Add a ContactSupervisor (``supervision``: a SupervisionConfig; starting in ``initial_phase``)
-    between ``controller`` (a HybridController built with ``guarded_move=supervision``) and the
-    wrench it reads (``wrench_output``), wired both ways::
-
-        controller ─force, constraint_value─► supervisor ─contact_phase, approach_reference─► controller
-        wrench_output ─► supervisor;  source ─desired_force─► supervisor;  supervisor ─contact_phase─► conditioner
-
-    (``source``: the command source; ``conditioner``: a taring WrenchConditioner; ``lift_off``: the
-    supervisor takes a ``path_done`` input and lifts off). Returns it."""
-    owner = "add_contact_supervisor"
-    instance(builder, "builder", owner, DiagramBuilder)
-    instance(supervision, "supervision", owner, SupervisionConfig)
-    instance(wrench_output, "wrench_output", owner, OutputPort, what="an OutputPort (the wrench the controller reads)")
-    instance(controller, "controller", owner, System)
-    phase = _contact_phase(initial_phase, owner)
-    inputs = [port_of(controller, name, "input", owner, "controller") for name in _SUPERVISED_INPUTS]
-    outputs = [port_of(controller, name, "output", owner, "controller") for name in _SUPERVISED_OUTPUTS]
-    for port in inputs:
-        refuse_wired(builder, port, owner, " (the controller already has a contact supervisor)")
-    for name in ("force_size", "kinematic_rows"):
-        if not hasattr(controller, name):
-            raise ArgumentError(f"{owner}: controller must be a HybridController (or have its {name}), got "
-                                f"{describe(controller)}")
-    supervisor = add_named(builder, "contact_supervisor", ContactSupervisor(
-        supervision, controller.force_size, controller.kinematic_rows, control_period, phase,
-        lift_off=lift_off), suffix)
-    for name, port in zip(_SUPERVISED_OUTPUTS, outputs):
-        guarded_connect(builder, port, supervisor.GetInputPort(name), owner)
-    if source is not None:
-        guarded_connect(builder, port_of(source, "desired_force", "output", owner, "source"),
-                supervisor.GetInputPort("desired_force"), owner)
-    guarded_connect(builder, wrench_output, supervisor.GetInputPort("measured_wrench"), owner)
-    for name, port in zip(("contact_phase", "approach_reference"), inputs):
-        guarded_connect(builder, supervisor.GetOutputPort(name), port, owner)
-    if conditioner is not None:
-        guarded_connect(builder, supervisor.GetOutputPort("contact_phase"),
-                port_of(conditioner, "contact_phase", "input", owner, "conditioner"), owner)
-    return supervisor
 
 
 def _contact_phase(initial_phase, owner):
@@ -213,21 +341,6 @@ def _contact_phase(initial_phase, owner):
     return ContactPhase(initial_phase)
 
 
-def as_profile(command, size, name="command", owner="add_hybrid_controller"):
-    """``command`` as a Profile of ``size`` entries: a Profile as it is (checked), a sequence of ``size``
-    numbers as a constant one, None as zeros. Typed errors name ``name``."""
-    if command is None:
-        return Profile(value=[0.0] * size)
-    if isinstance(command, Profile):
-        command.validate(size, f"{owner}: {name}")
-        return command
-    return Profile(value=vector(command, name, owner, size).tolist())
-
-
-CONTROLLER_OPTIONS = tuple(name for name in inspect.signature(HybridController._construct).parameters
-                           if name not in ("self", "plant", "end_effector_frame", "end_effector_point",
-                                           "constraint_space", "gains", "mode", "control_period", "guarded_move",
-                                           "converter"))
 _MATCH_TOLERANCE = 1e-6      # m and rad: the controller plant's end-effector pose against the plant's
 _MATCH_CONFIGURATIONS = 3    # the default positions and two random ones within the limits
 
@@ -291,111 +404,3 @@ def _check_actuation_free(builder, plant, robot, owner):
     else:
         hint = " (exported): leave the arm's actuation input to the hybrid controller"
     raise ArgumentError(f"{owner}: the input port {port_label(port)} is already connected in the builder{hint}")
-
-
-def add_hybrid_controller(builder, plant, robot, constraint_space, controller_plant, gains=None,
-                          mode=ControlMode.VELOCITY_FORCE, control_period=None, desired_velocity=None,
-                          desired_force=None, source=None, sensor=None, supervision=None, initial_phase=None,
-                          sensor_faults=None, controller=None, **controller_options):
-    """Add the hybrid controller and what feeds it to your builder, wired to your plant.
-
-    ::
-
-        plant ─contact_results / reaction_forces, body_poses─► wrench_sensor ─► [filter or conditioner] ─┐
-        plant ─state (robot.arm)──────────────────────────────────────────────────────────────────────┼─► controller
-        source ─desired_velocity, desired_acceleration, desired_force─────────────────────────────────┘      │
-        controller ─actuation─► plant (robot.arm)  ◄───────────────────────────────────────────────────────────┘
-        [supervisor: controller ─force, constraint_value─► supervisor ─contact_phase, approach_reference─► controller]
-
-    One controller per arm: the arm's actuation input must not be wired yet (ArgumentError naming the
-    port otherwise). The systems are named controller, wrench_sensor, desired, ... ; a second arm's
-    (a second call with another ``robot``) get its model instance name appended.
-
-    Args:
-        builder: your DiagramBuilder; ``plant``: your finalized MultibodyPlant in it (with its SceneGraph).
-        robot: the RobotModel of ``mount_tool``.
-        constraint_space: a ConstraintSpace (chart, C, E_p).
-        controller_plant: the controller's own model of the robot (``robot_plant(add_robot)``): checked
-            against the plant's arm (positions, velocities, actuators, the end-effector pose at three
-            configurations).
-        gains, mode, control_period: of the HybridController (None: continuous, for linearization).
-        desired_velocity, desired_force: Profiles (time profiles, k and m entries; a list of numbers is a
-            constant one, ``[10.0]`` for one force row; default zero) for a ProfileSource; or ``source``: a
-            system of your own with the output ports desired_velocity, desired_acceleration and
-            desired_force (wired here), or False: you wire the controller's desired_* input ports yourself.
-        sensor: a ContactSensorConfig (default) or WristSensorConfig: which wrench, and its path (a
-            low-pass of ``bandwidth_hz``, a conditioner). A continuous controller needs a low-pass
-            (default then ``CONTINUOUS_LOOP_BANDWIDTH``): its actuation feeds through to the wrench.
-        supervision: a SupervisionConfig: a ContactSupervisor (guarded approach, contact loss) starting
-            in ``initial_phase`` (a ContactPhase; default CONTACT).
-        sensor_faults: a SensorFaultConfig: its injector between the sensor and the wrench path.
-        controller: a controller system of your own with the HybridController's ports (e.g. a baseline
-            of ``control.baselines``) instead of building one.
-        controller_options: further HybridController arguments (``CONTROLLER_OPTIONS``: safety,
-            velocity_row_inertia, compensate_tangential_force, sample_lead, sampled_diagnostics,
-            plant_time_step, fast_law, ...); only when ``controller`` is None.
-
-    Returns a HybridSystems. Every port stays reachable by name for wiring by hand.
-    """
-    owner = "add_hybrid_controller"
-    check_station_parts(builder, plant, robot, owner)
-    _controller_model(controller_plant, owner)
-    instance(constraint_space, "constraint_space", owner, ConstraintSpace,
-             what="a ConstraintSpace (a constraint with its velocity projection)")
-    unknown = sorted(set(controller_options) - set(CONTROLLER_OPTIONS))
-    if unknown:
-        raise ArgumentError(f"{owner}: unknown argument(s) {', '.join(unknown)}; the HybridController options are "
-                            f"{', '.join(CONTROLLER_OPTIONS)}")
-    if controller is not None and controller_options:
-        raise ArgumentError(f"{owner}: {', '.join(sorted(controller_options))} configure the HybridController "
-                            f"built here, not your controller: pass them to your controller")
-    if sensor is None:
-        sensor = ContactSensorConfig(bandwidth_hz=CONTINUOUS_LOOP_BANDWIDTH if control_period is None else 0.0)
-    check_sensor_config(sensor, owner)
-    if control_period is None and not (sensor.bandwidth_hz > 0):
-        raise ConfigError("sensor.bandwidth_hz: a continuous controller (control_period None) needs a wrench "
-                          "low-pass (> 0 Hz): its actuation feeds through to the measured wrench")
-    instance(supervision, "supervision", owner, SupervisionConfig, allow_none=True)
-    instance(sensor_faults, "sensor_faults", owner, SensorFaultConfig, allow_none=True)
-    phase = _contact_phase(initial_phase, owner)
-    k, m = constraint_space.velocity_size, constraint_space.force_size
-    if source is None:
-        source = ProfileSource(as_profile(desired_velocity, k, "desired_velocity"),
-                               as_profile(desired_force, m, "desired_force"), k, m)
-    elif source is not False:
-        _check_source(source, owner)
-    if controller is not None:
-        instance(controller, "controller", owner, System, what="a controller System with the HybridController's "
-                 "ports (e.g. a baseline of control.baselines) or None")
-        for name in _CONTROLLER_INPUTS + (_SUPERVISED_INPUTS if supervision is not None else ()):
-            port_of(controller, name, "input", owner, "controller")
-        for name in ("actuation",) + (_SUPERVISED_OUTPUTS if supervision is not None else ()):
-            port_of(controller, name, "output", owner, "controller")
-    check_controller_plant(plant, robot, controller_plant, owner)
-    _check_actuation_free(builder, plant, robot, owner)
-    if controller is None:
-        options = dict(sampled_diagnostics=control_period is not None, plant_time_step=plant.time_step(),
-                       wrench_lag=wrench_lag(sensor, plant, control_period))
-        options.update(controller_options)
-        controller = HybridController(controller_plant, robot.end_effector_frame, robot.end_effector_point,
-                                      constraint_space, gains=gains, mode=mode, control_period=control_period,
-                                      guarded_move=supervision, **options)
-    arm = arm_model_name(plant, robot)
-    controller = add_named(builder, "controller", controller, arm)
-    tare = supervision is not None and supervision.tare_time > 0 and phase == ContactPhase.TARE
-    wrench_sensor, true_wrench, wrench_output, injector, conditioner, wrench_filter = add_sensing(
-        builder, plant, robot, controller, sensor, control_period, sensor_faults, tare)
-    guarded_connect(builder, plant.get_state_output_port(robot.arm), controller.GetInputPort("estimated_state"), owner)
-    guarded_connect(builder, controller.GetOutputPort("actuation"), plant.get_actuation_input_port(robot.arm), owner)
-    source = connect_source(builder, plant, robot, source, controller) if source is not False else None
-    supervisor = None
-    if supervision is not None:
-        supervisor = add_contact_supervisor(builder, controller, wrench_output, supervision, control_period, phase,
-                                            source=source, conditioner=conditioner if tare else None, suffix=arm)
-    kinematics = EndEffectorKinematics(plant, robot.end_effector_frame, robot.end_effector_point,
-                                       constraint_space.chart)
-    return HybridSystems(plant=plant, robot=robot, controller_plant=controller_plant,
-                         constraint_space=constraint_space, controller=controller, sensor=wrench_sensor,
-                         kinematics=kinematics, wrench_output=wrench_output, true_wrench=true_wrench, source=source,
-                         wrench_filter=wrench_filter, conditioner=conditioner, fault_injector=injector,
-                         supervisor=supervisor)

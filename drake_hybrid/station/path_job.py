@@ -1,42 +1,102 @@
-"""A job from the first touch to the last: a path over the workpiece in a scenario.
+"""A job over a surface, from the first touch to the last: the path, its start and its phases.
 
-With ``config.path`` active (``station.path_config``) and a task that names its workpiece's
-surface (``Task.workpiece_surface(config) -> (surface, pad offset)``), the builder
-(``scenario.builder.build_scenario``) makes the closed loop of a job::
+``path_job(surface, offset, settings)`` lays the path of ``settings`` (a ``PathConfig``: waypoints, a
+raster or a spiral, speed, force, dwell, lift-off) on ``surface`` (a ``core.surfaces.Surface``) for a
+pad centre held ``offset`` off it, checks it (``PathError`` naming the field) and returns a
+``PathJob``. Give it to ``station.loop.add_hybrid_controller(..., path=job)``: the loop of a job is
+then wired in one call (``station.loop.connect_hybrid_loop``)::
 
     PathSource ─desired_velocity, desired_acceleration, desired_force─► HybridController
     PathSource ─path_position_error──────────────────────────────────► HybridController (e_p against the path)
     ContactSupervisor ─contact_phase─► PathSource     (the path's clock starts at the first contact)
-    PathSource ─path_done─► ContactSupervisor (lift_off: leave the surface at the end)
+    PathSource ─path_done─► ContactSupervisor         (lift-off: leave the surface at the end)
 
-and logs the path's reference, error and progress and the supervisor's lift-off. A job starts
-off the surface (``start.in_contact: false``): the guarded approach goes to the path's first
-point, the pad presses there for ``path.dwell`` s, follows the path, and lifts off
-``supervision.lift_height`` at its end. A start in contact (``start.in_contact: true``) presses at
-the first point at t = 0 and starts the path after the dwell.
-
-The pieces are public for a diagram of your own: ``build_path`` (the SurfacePath of a config),
-``make_path_source``, ``connect_path``, ``path_start_pose``, ``draw_path`` (Meshcat).
+and ``station.loggers.add_loggers`` logs the path's reference, error and progress and the
+supervisor's lift-off. A job with a supervisor that starts in APPROACH (``station.start.solve_path_start``
+puts the pad ``gap`` above the first point) lands on the path's first point, presses there for
+``settings.dwell`` s, follows the path and lifts off ``supervision.lift_height`` at its end; a job that
+starts in contact presses at the first point at t = 0 and starts the path after the dwell.
 """
+
+import math
+from dataclasses import dataclass
 
 import numpy as np
 
 from pydrake.geometry import Rgba
 from pydrake.math import RigidTransform, RotationMatrix
-from pydrake.systems.primitives import LogVectorOutput
 
 from drake_hybrid.control.phases import ContactPhase
+from drake_hybrid.control.supervision import SupervisionConfig
 from drake_hybrid.core.arguments import instance, vector
-from drake_hybrid.core.errors import ConfigError, PathError
+from drake_hybrid.core.errors import PathError
 from drake_hybrid.core.paths import PathLimits, SurfacePath, path_from_strokes, path_from_waypoints
 from drake_hybrid.core.patterns import raster, spiral
 from drake_hybrid.core.surfaces import Surface, ViewPlane, check_offset
 from drake_hybrid.station.path_config import PathConfig
 from drake_hybrid.systems.path_source import reference_rotation
 
-# Logged outputs of the PathSource (log key -> port) and of the supervisor.
-PATH_LOGS = {"reference_position": "reference_position", "reference_normal": "reference_normal",
-             "path_error": "path_error", "path_progress": "path_progress", "path_done": "path_done"}
+
+@dataclass(frozen=True)
+class PathJob:
+    """A path laid on a surface and checked (``path_job`` makes it): what ``add_hybrid_controller(...,
+    path=job)`` runs.
+
+    ``surface`` (a ``core.surfaces.Surface``), ``offset`` (m: the pad centre off the surface, a ball
+    pad's radius), ``settings`` (the ``PathConfig``), ``path`` (the ``core.paths.SurfacePath`` of the pad
+    centre, timed) and ``heading`` (the world direction the tool's x axis keeps, turned into the tangent
+    plane)."""
+
+    surface: Surface
+    offset: float
+    settings: PathConfig
+    path: SurfacePath
+    heading: np.ndarray
+
+    @property
+    def holding(self):
+        """True if the job holds one point of the path (``settings.hold_at`` >= 0) instead of running it."""
+        return self.settings.holding
+
+    def lifts_off(self, supervised):
+        """True if the job leaves the surface at its end: ``settings.lift_off``, a path that is run, and a
+        contact supervisor (``supervised``) to lift."""
+        return bool(supervised) and self.settings.lift_off and not self.holding
+
+    def start_pose(self):
+        """(X_WP, normal): the pad centre's pose at the path's first point (the reference orientation)
+        and the surface's outward normal there."""
+        return start_pose_on(self.surface, self.path, self.settings)
+
+    def pose_at_depth(self, depth):
+        """The pad centre's pose ``depth`` (m) beyond the path's first point along its inward normal
+        (negative: above it), turned as the constraint's held rows want it there
+        (``Surface.held_normal``), not as the surface point's normal."""
+        X_WP, normal = self.start_pose()
+        centre = X_WP.translation() - float(depth) * normal
+        rotation = RotationMatrix(reference_rotation(self.surface.held_normal(centre, self.offset), self.heading))
+        return RigidTransform(rotation, centre)
+
+    def duration(self, supervision=None, gap=None):
+        """The simulated time the job needs (s, rounded up to 0.1 s): the guarded approach from ``gap``
+        (m above the first point; None: a start in contact) at ``supervision.approach_speed`` and 0.2 s,
+        the dwell, the path, and with a supervisor the lift-off and 0.3 s."""
+        instance(supervision, "supervision", "PathJob.duration", SupervisionConfig, allow_none=True)
+        approach = gap / supervision.approach_speed + 0.2 if supervision is not None and gap is not None else 0.0
+        lift = (supervision.lift_height / supervision.approach_speed + 0.3
+                if self.lifts_off(supervision is not None) else 0.0)
+        return math.ceil(10 * (approach + self.settings.dwell + self.path.duration + lift)) / 10
+
+
+def path_job(surface, offset, settings):
+    """The PathJob of ``settings`` (a PathConfig) on ``surface`` for a pad centre ``offset`` off it (m,
+    >= 0): the path laid, timed and checked (PathError, one line naming the field, for a path the job
+    cannot follow; a ``settings.heading`` the path's normals reach)."""
+    path = path_on(surface, offset, settings)
+    heading = heading_of(settings, surface)
+    if settings.heading:
+        check_heading_along(path, heading)
+    return PathJob(surface=surface, offset=float(offset), settings=settings, path=path, heading=heading)
 
 
 def view_of(path_config, surface):
@@ -145,34 +205,6 @@ def start_pose_on(surface, path, settings):
     centre, normal = instance(path, "path", "start_pose_on", SurfacePath, error=PathError).first_point()
     R = reference_rotation(normal, heading_of(settings, surface), "path.heading at the path's first point")
     return RigidTransform(RotationMatrix(R), centre), np.asarray(normal, dtype=float)
-
-
-def lifts_off(config):
-    """True if the job's supervisor gets the lift-off input (a run path with ``lift_off``)."""
-    return config.path.active and config.path.lift_off and not config.path.holding and config.supervised
-
-
-def connect_path(builder, source, controller, supervisor=None):
-    """Wire a PathSource beyond its desired_* outputs: its position error into the controller (when it
-    has the input), the supervisor's phase into it (when it waits for contact), its path_done into
-    the supervisor's lift_off (when it has that input)."""
-    port = getattr(controller, "get_path_position_error_input_port", lambda: None)()
-    if port is not None:
-        builder.Connect(source.GetOutputPort("path_position_error"), port)
-    if source.get_contact_phase_input_port() is not None:
-        if supervisor is None:
-            raise ConfigError("path: the PathSource waits for contact but there is no contact supervisor")
-        builder.Connect(supervisor.GetOutputPort("contact_phase"), source.get_contact_phase_input_port())
-    if supervisor is not None and supervisor.lift_off:
-        builder.Connect(source.GetOutputPort("path_done"), supervisor.GetInputPort("lift_off"))
-
-
-def add_path_loggers(builder, source, supervisor, loggers, period):
-    """Loggers of the path's reference, error and progress (and of the supervisor's lift-off)."""
-    for key, port in PATH_LOGS.items():
-        loggers[key] = LogVectorOutput(source.GetOutputPort(port), builder, period)
-    if supervisor is not None:
-        loggers["lifting"] = LogVectorOutput(supervisor.GetOutputPort("lifting"), builder, period)
 
 
 def path_events(log):

@@ -5,12 +5,12 @@ from dataclasses import dataclass
 from typing import Union
 
 from pydrake.multibody.plant import MultibodyPlant
-from pydrake.systems.framework import DiagramBuilder, OutputPort, System
+from pydrake.systems.framework import DiagramBuilder, OutputPort
 
 from drake_hybrid.core.arguments import instance
 from drake_hybrid.core.errors import ConfigError, check_fields, check_finite
 from drake_hybrid.core.schema import check_types
-from drake_hybrid.station.ports import add_named, guarded_connect, port_of, refuse_wired
+from drake_hybrid.station.ports import add_named, guarded_connect
 from drake_hybrid.station.robot_model import arm_model_name, check_station_parts
 from drake_hybrid.systems.faults import SensorFaultConfig, SensorFaultInjector
 from drake_hybrid.systems.sensors import (ContactWrenchSensor, LowPassFilter, WrenchConditioner, WristForceTorqueSensor,
@@ -131,16 +131,13 @@ def wrench_lag(sensor, plant, control_period):
     return low_pass_lag(sensor.bandwidth_hz, control_period) + age
 
 
-def add_sensing(builder, plant, robot, controller, sensor, control_period, sensor_faults=None, tare=False):
+def add_sensing(builder, plant, robot, sensor, control_period, sensor_faults=None, tare=False):
     """The wrench sensor (``add_wrench_sensor``), a SensorFaultInjector when ``sensor_faults`` is active,
-    and the wrench path (``add_wrench_path``), wired into ``controller``'s measured_wrench. Returns
-    (sensor, its own output, the output the controller reads, injector, conditioner, filter)."""
+    and the wrench path (``add_wrench_path``): the wrench a controller reads (``station.loop`` connects
+    it). Returns (sensor, its own output, the output the controller reads, injector, conditioner, filter)."""
     owner = "add_sensing"
     check_station_parts(builder, plant, robot, owner)
-    instance(controller, "controller", owner, System)
     instance(sensor_faults, "sensor_faults", owner, SensorFaultConfig, allow_none=True)
-    measured = port_of(controller, "measured_wrench", "input", owner, "controller")
-    refuse_wired(builder, measured, owner, " (the controller already reads a wrench)")
     arm = arm_model_name(plant, robot)
     wrench_sensor = add_wrench_sensor(builder, plant, robot, sensor)
     true_wrench = wrench_output = wrench_sensor.get_output_port(0)
@@ -152,7 +149,6 @@ def add_sensing(builder, plant, robot, controller, sensor, control_period, senso
     wrench_output, conditioner, wrench_filter = add_wrench_path(
         builder, wrench_output, sensor if sensor is not None else ContactSensorConfig(), control_period,
         sequence=injector.GetOutputPort("sequence") if injector is not None else None, tare=tare, suffix=arm)
-    guarded_connect(builder, wrench_output, measured, owner)
     return wrench_sensor, true_wrench, wrench_output, injector, conditioner, wrench_filter
 
 

@@ -2,23 +2,19 @@
 """
 
 import dataclasses
-import math
 
 import numpy as np
-
-from pydrake.math import RigidTransform, RotationMatrix
 
 from drake_hybrid.core.errors import ConfigError
 from drake_hybrid.core.kinematics import inverse_kinematics
 from drake_hybrid.core.schema import unknown_field
 from drake_hybrid.station.path_config import PathConfig
-from drake_hybrid.station.path_job import check_heading_along, heading_of, lifts_off, path_on, start_pose_on
-from drake_hybrid.systems.path_source import PathSource, reference_rotation
+from drake_hybrid.station.path_job import path_job
 from drake_hybrid.systems.sources import Profile
 from drake_hybrid.tasks.config import check_scenario_config
 from drake_hybrid.tasks.pressing import pressing_positions
 
-_PATHS = {}
+_JOBS = {}
 
 
 def workpiece_surface(task, config):
@@ -30,37 +26,26 @@ def workpiece_surface(task, config):
     return surface
 
 
-def build_path(task, config):
-    """The SurfacePath of ``config.path`` on the task's workpiece (cached per task and config); held at
-    one point when ``path.hold_at`` >= 0. PathError (one line) for a path the job cannot follow."""
+def task_path_job(task, config):
+    """The PathJob of ``config.path`` on the task's workpiece (``station.path_job.path_job``; cached per
+    task and config): what ``build_scenario`` runs. PathError (one line) for a path the job cannot follow."""
     key = (task.name, repr(config.path), repr(sorted(config.task_parameters.items())),
            repr(sorted(config.task_options.items())))
-    if key not in _PATHS:
+    if key not in _JOBS:
         surface, offset = workpiece_surface(task, config)
-        path = path_on(surface, offset, config.path)
-        if config.path.heading:
-            check_heading_along(path, heading_of(config.path, surface))
-        _PATHS[key] = path
-    return _PATHS[key]
+        _JOBS[key] = path_job(surface, offset, config.path)
+    return _JOBS[key]
+
+
+def build_path(task, config):
+    """The SurfacePath of ``config.path`` on the task's workpiece (``task_path_job``'s); held at one point
+    when ``path.hold_at`` >= 0."""
+    return task_path_job(task, config).path
 
 
 def path_start_pose(task, config):
-    """``start_pose_on`` the task's workpiece for ``config.path``."""
-    return start_pose_on(workpiece_surface(task, config)[0], build_path(task, config), config.path)
-
-
-def make_path_source(task, config, controller_plant, robot, constraint_space):
-    """The PathSource of ``config.path`` (it waits for the first contact when the start is off the surface)."""
-    surface, _ = workpiece_surface(task, config)
-    path = build_path(task, config)
-    kinematic = constraint_space.constraint.kinematic_rows
-    force_row = next(i for i in range(constraint_space.force_size) if i not in kinematic)
-    holding = config.path.holding
-    period = config.control_period if config.control_period > 0 else None
-    return PathSource(controller_plant, robot.end_effector_frame, robot.end_effector_point, constraint_space, path,
-                      heading=heading_of(config.path, surface), force_row=force_row,
-                      dwell=0.0 if holding else config.path.dwell,
-                      wait_for_contact=config.supervised and not holding, period=period)
+    """(X_WP, normal): the pad centre's pose at the first point of the task's path and the normal there."""
+    return task_path_job(task, config).start_pose()
 
 
 def path_start_positions(task, scenario, joint_guess):
@@ -68,19 +53,13 @@ def path_start_positions(task, scenario, joint_guess):
     orientation (frame E turned as the reference, its point P there), pressing with F_d(0)
     (``start.in_contact``) or ``start.gap`` above along the normal (IK from ``joint_guess``)."""
     config = scenario.config
-    X_WP, normal = path_start_pose(task, config)
-    surface, offset = workpiece_surface(task, config)
-    heading = heading_of(config.path, surface)
+    job = task_path_job(task, config)
     kinematics = scenario.controller.kinematics
     context = kinematics.plant.CreateDefaultContext()
     seed = [np.asarray(joint_guess, dtype=float)]
 
     def positions_at_depth(depth):
-        # The orientation the constraint's held rows want there (Surface.held_normal), not the surface point's.
-        centre = X_WP.translation() - depth * normal
-        rotation = RotationMatrix(reference_rotation(surface.held_normal(centre, offset), heading))
-        X_target = RigidTransform(rotation, centre)
-        seed[0] = inverse_kinematics(kinematics, context, X_target, seed[0])
+        seed[0] = inverse_kinematics(kinematics, context, job.pose_at_depth(depth), seed[0])
         return seed[0]
 
     if not config.start.in_contact:
@@ -89,12 +68,10 @@ def path_start_positions(task, scenario, joint_guess):
 
 
 def job_duration(task, config):
-    """The simulated time a job needs (s, rounded up to 0.1 s): the guarded approach from ``start.gap``
-    (when the start is off the surface) and 0.2 s, the dwell, the path, the lift-off and 0.3 s."""
-    supervision = config.supervision
-    approach = config.start.gap / supervision.approach_speed + 0.2 if not config.start.in_contact else 0.0
-    lift = supervision.lift_height / supervision.approach_speed + 0.3 if lifts_off(config) else 0.0
-    return math.ceil(10 * (approach + config.path.dwell + build_path(task, config).duration + lift)) / 10
+    """The simulated time a job needs (s, rounded up to 0.1 s; ``PathJob.duration``): the guarded approach
+    from ``start.gap`` (when the start is off the surface), the dwell, the path and the lift-off."""
+    supervision = config.supervision if config.supervised else None
+    return task_path_job(task, config).duration(supervision, None if config.start.in_contact else config.start.gap)
 
 
 def with_path_commands(config, constraint_space):

@@ -23,12 +23,16 @@ they get their types, once, for ``ScenarioConfig.validate``-time checking
 import abc
 import dataclasses
 from dataclasses import dataclass
+from typing import Optional
 
 import numpy as np
+
+from pydrake.geometry import Meshcat, SceneGraph
 
 from drake_hybrid.core.arguments import instance, joint_rows
 from drake_hybrid.core.errors import ConfigError
 from drake_hybrid.core.schema import unknown_field
+from drake_hybrid.station.handles import HybridSystems
 from drake_hybrid.station.path_job import path_events
 from drake_hybrid.systems.sources import Profile, ProfileSource
 from drake_hybrid.tasks.config import ScenarioConfig
@@ -248,6 +252,19 @@ class Task(abc.ABC):
 
     def set_environment_state(self, scenario, plant_context):
         """Set the environment's own state at the start (e.g. the crank's angle). Default: none."""
+
+
+@dataclass(kw_only=True)
+class Scenario(HybridSystems):
+    """The closed loop a task's config builds (``scenario.builder.build_scenario`` returns it): the loop's
+    ``HybridSystems`` (plant, controller, sensor, source, supervisor, path, loggers, ...) and the
+    ``config`` (validated, with its commands as the run uses them), the ``task``, the built ``diagram``,
+    the plant's ``scene_graph`` and the ``meshcat`` it draws in (or None)."""
+
+    config: ScenarioConfig
+    task: Task
+    scene_graph: Optional[SceneGraph] = None
+    meshcat: Optional[Meshcat] = None
 
 
 def piece_switches(scenario, log):
