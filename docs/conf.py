@@ -51,6 +51,7 @@ source_suffix = {".rst": "restructuredtext", ".md": "myst-nb", ".ipynb": "myst-n
 root_doc = "index"
 templates_path = ["_templates"]
 html_static_path = ["_static"]
+html_css_files = ["site.css"]          # docs/_static/site.css: the pictures side by side (.figure-row)
 exclude_patterns = ["_build", "_ext", "_templates", "**/.ipynb_checkpoints", "sweeps", "*.py", "*.json"]
 
 html_theme = "furo"
