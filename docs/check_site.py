@@ -57,6 +57,8 @@ BOOKKEEPING = (
     ("issue number", re.compile(r"\b[Ii]ssues?\s+#?\d+(?:(?:,\s*|\s+and\s+)#?\d+)*")),
     ("maintainers' note", re.compile(r"^[ \t]*Size:.*", re.M)),
 )
+# A maintainers' note the docstrings' field lines made a definition list of (docs/_ext/plain_docstrings.py).
+NOTE_TERMS = re.compile(r"Size:?")
 # (kind, page glob, why): findings of that kind on those pages are printed, not failed (--strict fails them).
 PENDING = (
     ("issue number", "reference/generated/*",
@@ -99,7 +101,8 @@ _PROBE = r"""
     const box = (e) => { if (!e) return null; const r = e.getBoundingClientRect(); return [r.left, r.top, r.width, r.height]; };
     return {image: box(img), caption: caption && shown(caption) ? caption.innerText.trim() : '', captionBox: box(caption)};
   }));
-  return {title: document.title, text: parts.join('').replace(/[ \t\u00a0]+/g, ' '), images, rows};
+  const terms = [...document.querySelectorAll('dt, th.field-name')].map((e) => e.innerText.trim());
+  return {title: document.title, text: parts.join('').replace(/[ \t\u00a0]+/g, ' '), images, rows, terms};
 }
 """
 _LOAD_IMAGES = r"""
@@ -167,14 +170,25 @@ def _excerpt(text, match, context=40):
     return " ".join(("..." + text[start:end] + "...").split())
 
 
-def text_findings(page, text, strict=False):
-    """Findings of raw markup and bookkeeping in a page's rendered text (``page`` names it)."""
+def _pending(kind, page, strict):
+    """Why a finding of ``kind`` on ``page`` does not fail (its entry of PENDING), "" when it does."""
+    if strict:
+        return ""
+    return next((why for pending_kind, glob, why in PENDING if pending_kind == kind and fnmatch.fnmatch(page, glob)), "")
+
+
+def text_findings(page, text, strict=False, terms=()):
+    """Findings of raw markup and bookkeeping in a page's rendered text (``page`` names it);
+    ``terms``: the page's definition-list terms and field names."""
     findings = []
     for kind, pattern in RAW_MARKUP + BOOKKEEPING:
         for match in pattern.finditer(text):
-            pending = "" if strict else next((why for pending_kind, glob, why in PENDING
-                                              if pending_kind == kind and fnmatch.fnmatch(page, glob)), "")
-            findings.append(Finding(page, kind, f"{match.group(0).strip()!r} in {_excerpt(text, match)!r}", pending))
+            findings.append(Finding(page, kind, f"{match.group(0).strip()!r} in {_excerpt(text, match)!r}",
+                                    _pending(kind, page, strict)))
+    for term in terms:
+        if NOTE_TERMS.fullmatch(term):
+            findings.append(Finding(page, "maintainers' note", f"a definition list's term {term!r}",
+                                    _pending("maintainers' note", page, strict)))
     return findings
 
 
@@ -260,7 +274,7 @@ def check_site(html_dir, screenshots=None, strict=False, executable=None, pages=
                 except Exception as error:           # a page that does not load is a finding, not a crash
                     report.findings.append(Finding(name, "page did not load", str(error).splitlines()[0]))
                     continue
-                report.findings += text_findings(name, f"{probe['title']}\n{probe['text']}", strict)
+                report.findings += text_findings(name, f"{probe['title']}\n{probe['text']}", strict, probe["terms"])
                 report.findings += image_findings(name, probe["images"])
                 report.findings += [Finding(name, "page error", error) for error in state["errors"]]
                 if probe["rows"]:

@@ -69,6 +69,13 @@ def test_ordinary_text_is_not_markup(text):
     assert check_site.text_findings("guide.html", text) == []
 
 
+def test_a_note_made_a_definition_list_is_found_by_its_term():
+    """docs/_ext/plain_docstrings.py reads 'Size: ...' followed by another 'word: ...' line as a field list."""
+    findings = check_site.text_findings("guide.html", "Size\none idea\nincluded\nthe rest", terms=["Size", "included"])
+    assert [finding.kind for finding in findings] == ["maintainers' note"]
+    assert check_site.text_findings("guide.html", "size\nthe pad's", terms=["size", "Sizes", "mode"]) == []
+
+
 def test_the_pending_checks_are_pending_only_on_their_pages():
     text = "Baselines (issue 18).\nSize: one module for every figure."
     api = check_site.text_findings("reference/generated/drake_hybrid.viz.plotting.html", text)
@@ -133,6 +140,8 @@ PAGES = {
                              "<figure><img src='_images/b.png'></figure></div>", ROW_CSS),
     "script_error.html": ("<p>Fine text.</p><script>undefined_function_of_the_page();</script>", ""),
     "issue.html": ("<h1>The controller on a real arm (issue 19)</h1>", ""),
+    "field_note.html": ("<dl class='simple'><dt>Size</dt><dd><p>one idea, the run's configuration (units</p></dd>"
+                        "<dt>included</dt><dd><p>and its validation.</p></dd></dl>", ""),
     "reference/generated/drake_hybrid.notes.html": ("<h1>notes</h1><p>Baselines (issue 18).</p>"
                                                     "<p>Size: over half of the module is its docstring.</p>", ""),
 }
@@ -149,6 +158,7 @@ EXPECTED = {
     "uncaptioned_row.html": {"figure row"},
     "script_error.html": {"page error"},
     "issue.html": {"issue number"},
+    "field_note.html": {"maintainers' note"},
 }
 
 
