@@ -262,17 +262,13 @@ def test_a_myst_page_with_the_old_attribute_syntax_fails_and_the_figure_row_pass
 
 
 @pytest.mark.browser
-def test_the_command_line(tmp_path, capsys):
-    executable = _chromium_or_skip()
+def test_the_command_line(tmp_path, capsys, monkeypatch):
+    monkeypatch.setenv("DRAKE_HYBRID_CHROMIUM", _chromium_or_skip())
     good = _write_site(tmp_path / "good", {name: PAGES[name] for name in CLEAN})
     bad = _write_site(tmp_path / "bad", {name: PAGES[name] for name in ("index.html", "braces.html")})
-    os.environ["DRAKE_HYBRID_CHROMIUM"] = executable
-    try:
-        assert check_site.main([str(good), "--screenshots", str(tmp_path / "shots")]) == 0
-        assert (tmp_path / "shots" / "front_page_wide.png").is_file()
-        assert check_site.main([str(bad), "--screenshots", str(tmp_path / "shots")]) == 1
-    finally:
-        del os.environ["DRAKE_HYBRID_CHROMIUM"]
+    assert check_site.main([str(good), "--screenshots", str(tmp_path / "shots")]) == 0
+    assert (tmp_path / "shots" / "front_page_wide.png").is_file()
+    assert check_site.main([str(bad), "--screenshots", str(tmp_path / "shots")]) == 1
     out = capsys.readouterr().out
     assert "braces.html: attribute braces: '{w=49%}'" in out and "0 failures" in out and "2 failures" in out
 
