@@ -51,6 +51,7 @@ source_suffix = {".rst": "restructuredtext", ".md": "myst-nb", ".ipynb": "myst-n
 root_doc = "index"
 templates_path = ["_templates"]
 html_static_path = ["_static"]
+html_css_files = ["site.css"]          # docs/_static/site.css: the pictures side by side (.figure-row)
 exclude_patterns = ["_build", "_ext", "_templates", "**/.ipynb_checkpoints", "sweeps", "*.py", "*.json"]
 
 html_theme = "furo"
@@ -73,6 +74,12 @@ nb_execution_mode = "off"         # the tutorials' outputs come from tests/test_
 nb_merge_streams = True
 nb_output_stderr = "remove"        # progress bars and Drake's log lines: not part of the lesson
 
+# autosummary writes a page per module into docs/reference/generated/ (git-ignored; Sphinx reads
+# sources only from docs/). Every build writes them again from clean: a page kept from an earlier
+# build (a module since moved or removed, or a build that imported another copy of the package)
+# would otherwise be read, and fail to import, under -W.
+GENERATED_REFERENCE = DOCS / "reference" / "generated"
+shutil.rmtree(GENERATED_REFERENCE, ignore_errors=True)
 autosummary_generate = True
 autosummary_imported_members = False
 autodoc_default_options = {"members": True, "undoc-members": True, "show-inheritance": True,

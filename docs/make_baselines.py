@@ -1,4 +1,4 @@
-"""Regenerate docs/baselines.md's numbers, table and figures (issue 18).
+"""Regenerate docs/baselines.md's numbers, table and figures.
 
     python docs/make_baselines.py [--quick]
 
