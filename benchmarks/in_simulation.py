@@ -37,7 +37,8 @@ from drake_hybrid.control.controller import HybridController_
 from drake_hybrid.scenario.builder import build_scenario
 from drake_hybrid.scenario.start import set_initial_conditions
 from drake_hybrid.systems import sources
-from drake_hybrid.systems.sensors import ContactWrenchSensor_, WristForceTorqueSensor_
+from drake_hybrid.systems.contact_wrench_sensor import ContactWrenchSensor_
+from drake_hybrid.systems.wrist_force_torque_sensor import WristForceTorqueSensor_
 from drake_hybrid.tasks.registry import TASKS
 
 _STACK = []

@@ -50,7 +50,7 @@ the loss dwell, the lift at the approach speed, and three time constants 1/K_a o
 The impact grows with the approach speed (the speed sweep rows): with this pad (5 MPa, 20 mm ball)
 the 3 |F_d| limit holds up to about 0.05 m/s; the default is 0.02 m/s.
 
-**Sensor faults** (`faults.SensorFaultInjector` simulates them; `sensors.WrenchConditioner`
+**Sensor faults** (`faults.SensorFaultInjector` simulates them; `wrench_conditioner.WrenchConditioner`
 protects the controller). Noise is attenuated by the force loop itself, by K_fp / (1 + K_fp) at
 high frequency (the predicted figure, times sqrt(alpha / (2 - alpha)) for the conditioner's
 first-order low-pass with alpha = 1 - exp(-2 pi f_c h)); the measured figure is a little above the

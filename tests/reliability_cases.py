@@ -28,7 +28,7 @@ from drake_hybrid.core.errors import ArgumentError, KinematicSingularityWarning
 from drake_hybrid.experiments.metrics import settling_time
 from drake_hybrid.experiments.simulation import effort_limits, simulate
 from drake_hybrid.systems.faults import SensorFaultConfig
-from drake_hybrid.systems.sensors import LowPassFilter, low_pass_coefficient
+from drake_hybrid.systems.low_pass_filter import LowPassFilter, low_pass_coefficient
 from drake_hybrid.systems.sources import Profile
 from drake_hybrid.tasks.config import ModelErrorConfig
 from drake_hybrid.tasks.registry import get_task
@@ -605,7 +605,7 @@ def _singular_start():
 
 
 def _conditioner(**arguments):
-    from drake_hybrid.systems.sensors import WrenchConditioner
+    from drake_hybrid.systems.wrench_conditioner import WrenchConditioner
 
     return WrenchConditioner(**arguments)
 
@@ -630,7 +630,7 @@ def _friction(coulomb):
 def _wrist_sensor_on_a_revolute_joint():
     from pydrake.systems.framework import DiagramBuilder
 
-    from drake_hybrid.systems.sensors import WristForceTorqueSensor
+    from drake_hybrid.systems.wrist_force_torque_sensor import WristForceTorqueSensor
     from drake_hybrid.tasks.plant import build_plant
 
     task = get_task("window-washing")
@@ -642,7 +642,7 @@ def _wrist_sensor_on_a_revolute_joint():
 def _contact_sensor(with_bodies, point):
     from pydrake.systems.framework import DiagramBuilder
 
-    from drake_hybrid.systems.sensors import ContactWrenchSensor
+    from drake_hybrid.systems.contact_wrench_sensor import ContactWrenchSensor
     from drake_hybrid.tasks.plant import build_plant
 
     task = get_task("window-washing")

@@ -26,8 +26,9 @@ from drake_hybrid.control.phases import ContactPhase
 from drake_hybrid.control.safety import SafetyConfig
 from drake_hybrid.control.supervision import ContactSupervisor, SupervisionConfig
 from drake_hybrid.core.errors import DrakeHybridError
-from drake_hybrid.systems.sensors import LowPassFilter, WrenchConditioner
+from drake_hybrid.systems.low_pass_filter import LowPassFilter
 from drake_hybrid.systems.sources import Profile, ProfileSource
+from drake_hybrid.systems.wrench_conditioner import WrenchConditioner
 from drake_hybrid.tasks.custom import CustomTask
 from drake_hybrid.tasks.plant import build_controller_plant
 from drake_hybrid.tasks.registry import get_task

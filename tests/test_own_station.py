@@ -30,8 +30,8 @@ from drake_hybrid.station.loggers import LOG_KEYS, add_loggers, read_log
 from drake_hybrid.station.loop import add_hybrid_controller
 from drake_hybrid.station.sensing import WristSensorConfig
 from drake_hybrid.station.workpieces import add_rigid_workpiece
-from drake_hybrid.systems.sensors import WristForceTorqueSensor
 from drake_hybrid.systems.sources import Profile
+from drake_hybrid.systems.wrist_force_torque_sensor import WristForceTorqueSensor
 from drake_hybrid.tasks.registry import get_task
 from drake_hybrid.tasks.robots import prepare_model
 

@@ -27,7 +27,7 @@ from drake_hybrid.core.linalg import value
 from drake_hybrid.scenario.builder import build_scenario
 from drake_hybrid.scenario.start import set_initial_conditions
 from drake_hybrid.systems.faults import SensorFaultConfig, SensorFaultInjector
-from drake_hybrid.systems.sensors import WrenchConditioner
+from drake_hybrid.systems.wrench_conditioner import WrenchConditioner
 from drake_hybrid.tasks.plant import build_controller_plant
 from drake_hybrid.tasks.registry import get_task
 

@@ -13,7 +13,7 @@ from drake_hybrid.core.errors import DimensionError, UnknownVariableError
 from drake_hybrid.core.linalg import value
 from drake_hybrid.scenario.builder import build_scenario
 from drake_hybrid.scenario.start import set_initial_conditions
-from drake_hybrid.systems.sensors import LowPassFilter
+from drake_hybrid.systems.low_pass_filter import LowPassFilter
 from drake_hybrid.systems.sources import DesiredFieldSource, Profile, ProfileSource
 from drake_hybrid.tasks.plant import build_controller_plant
 from drake_hybrid.tasks.registry import get_task

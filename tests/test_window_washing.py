@@ -16,7 +16,8 @@ from drake_hybrid.experiments.simulation import simulate
 from drake_hybrid.scenario.builder import build_scenario
 from drake_hybrid.scenario.start import set_initial_conditions
 from drake_hybrid.station.sensing import WristSensorConfig
-from drake_hybrid.systems.sensors import ContactWrenchSensor, WristForceTorqueSensor
+from drake_hybrid.systems.contact_wrench_sensor import ContactWrenchSensor
+from drake_hybrid.systems.wrist_force_torque_sensor import WristForceTorqueSensor
 from drake_hybrid.tasks.config import dump_config, load_config
 from drake_hybrid.tasks.plant import build_plant
 from drake_hybrid.tasks.registry import get_task

@@ -49,8 +49,8 @@ from drake_hybrid.scenario.builder import build_scenario
 from drake_hybrid.scenario.start import set_initial_conditions
 from drake_hybrid.station.root_context import check_root_context
 from drake_hybrid.systems.faults import SensorFaultConfig
-from drake_hybrid.systems.sensors import WristForceTorqueSensor
 from drake_hybrid.systems.sources import Profile
+from drake_hybrid.systems.wrist_force_torque_sensor import WristForceTorqueSensor
 from drake_hybrid.tasks.config import ScenarioConfig
 from drake_hybrid.tasks.registry import get_task
 

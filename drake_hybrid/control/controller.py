@@ -251,7 +251,7 @@ def HybridController_(T):
                 (friction, a tessellated or curved workpiece); see ``law.tangential_compensation``.
                 Default True; False is the paper's form (the crank and grinding tasks keep it). Impedance mode uses F_v as (3.2-6) says.
             wrench_lag: T (s), how late the measured wrench arrives (the wrench path's low-pass,
-                ``systems.sensors.low_pass_lag``): the law splits it at the configuration T earlier,
+                ``systems.low_pass_filter.low_pass_lag``): the law splits it at the configuration T earlier,
                 to first order (``law.measured_forces``). Default 0.
             path_position_error: declare the ``path_position_error`` input: in position-force and
                 impedance-force mode the law's e_p is that input (a position error measured against a

@@ -33,7 +33,7 @@ from drake_hybrid.core.kinematics import declare_plant_context_cache
 from drake_hybrid.hardware.controller_side import prepared
 from drake_hybrid.hardware.messages import HardwareConfig, microseconds
 from drake_hybrid.systems.faults import JointFriction
-from drake_hybrid.systems.sensors import reaction_force_slot
+from drake_hybrid.systems.wrist_force_torque_sensor import reaction_force_slot
 from drake_hybrid.tasks.plant import build_controller_plant, build_plant
 
 

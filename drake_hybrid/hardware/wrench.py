@@ -1,5 +1,5 @@
 """The controller's ``measured_wrench`` from what a real arm reports: the wrench [n; f] on the robot
-from the environment, at the end-effector point P, in world (the convention of systems.sensors).
+from the environment, at the end-effector point P, in world (the convention of systems.wrench_frames).
 
 ``ForceTorqueConditioning``
     from an F/T sensor in the weld between wrist and tool (``lcmt_force_torque``, sensor frame S):

@@ -22,7 +22,7 @@ from drake_hybrid.station.clearance import check_robot_clearance
 from drake_hybrid.station.contact import geometry_ids
 from drake_hybrid.station.root_context import check_root_context
 from drake_hybrid.station.start import holding_torque, pressing_depth, prime_start
-from drake_hybrid.systems.sensors import WristForceTorqueSensor
+from drake_hybrid.systems.wrist_force_torque_sensor import WristForceTorqueSensor
 
 
 def rest_contact_wrench(plant, plant_context, robot_geometries, p_WP):
@@ -125,7 +125,7 @@ def solve_contact_start(diagram, root_context, systems, start_pose, joint_guess,
     joint_guess), a desired force the contact cannot give within ``max_depth`` (ArgumentError), a
     ``diagram``, ``root_context`` and ``systems`` that do not belong together (ArgumentError,
     ``station.root_context``), and a wrist force/torque sensor on a continuous plant (ArgumentError:
-    no primed reading makes that start a rest, see ``systems.sensors.WristForceTorqueSensor``).
+    no primed reading makes that start a rest, see ``systems.wrist_force_torque_sensor.WristForceTorqueSensor``).
     """
     owner = "solve_contact_start"
     check_root_context(diagram, root_context, systems, owner)

@@ -12,9 +12,11 @@ from drake_hybrid.core.errors import ConfigError, check_fields, check_finite
 from drake_hybrid.core.schema import check_types
 from drake_hybrid.station.ports import add_named, guarded_connect
 from drake_hybrid.station.robot_model import arm_model_name, check_station_parts
+from drake_hybrid.systems.contact_wrench_sensor import ContactWrenchSensor, sampled_reading_age
 from drake_hybrid.systems.faults import SensorFaultConfig, SensorFaultInjector
-from drake_hybrid.systems.sensors import (ContactWrenchSensor, LowPassFilter, WrenchConditioner, WristForceTorqueSensor,
-                                          low_pass_lag, sampled_reading_age)
+from drake_hybrid.systems.low_pass_filter import LowPassFilter, low_pass_lag
+from drake_hybrid.systems.wrench_conditioner import WrenchConditioner
+from drake_hybrid.systems.wrist_force_torque_sensor import WristForceTorqueSensor
 
 
 @dataclass
@@ -37,14 +39,15 @@ class WrenchPathConfig:
 @dataclass
 class ContactSensorConfig(WrenchPathConfig):
     """The ideal sensor: Drake's contact results on the robot, shifted to the end-effector point
-    (``systems.sensors.ContactWrenchSensor``). YAML: ``sensor: !ContactSensorConfig {...}`` (the
+    (``systems.contact_wrench_sensor.ContactWrenchSensor``). YAML: ``sensor: !ContactSensorConfig {...}`` (the
     default, so the tag may be left out)."""
 
 
 @dataclass
 class WristSensorConfig(WrenchPathConfig):
     """A force/torque sensor in the weld between wrist and tool: the weld's reaction force minus the
-    tool's weight (``systems.sensors.WristForceTorqueSensor``). YAML: ``sensor: !WristSensorConfig {...}``.
+    tool's weight (``systems.wrist_force_torque_sensor.WristForceTorqueSensor``). YAML:
+    ``sensor: !WristSensorConfig {...}``.
 
     ``compensate_tool_inertia``: also remove the tool's inertial wrench (its spatial momentum rate,
     from the tool's model and the plant's body accelerations), so that the sensor reports the
@@ -121,9 +124,9 @@ def add_wrench_path(builder, wrench_output, sensor, period, sequence=None, tare=
 
 def wrench_lag(sensor, plant, control_period):
     """How late the wrench reaches the law (s), which splits it where it was exerted (the controller's
-    ``wrench_lag``): the low-pass of ``sensor`` (``systems.sensors.low_pass_lag``), plus, for the
+    ``wrench_lag``): the low-pass of ``sensor`` (``systems.low_pass_filter.low_pass_lag``), plus, for the
     contact sensor on a discrete plant's sampled results, their one step of age
-    (``systems.sensors.sampled_reading_age``; the wrist sensor's reaction force is read as current,
+    (``systems.contact_wrench_sensor.sampled_reading_age``; the wrist sensor's reaction force is read as current,
     as a real sensor's)."""
     instance(sensor, "sensor", "wrench_lag", (ContactSensorConfig, WristSensorConfig))
     instance(plant, "plant", "wrench_lag", MultibodyPlant)

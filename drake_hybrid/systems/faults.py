@@ -4,7 +4,7 @@
     between the wrench sensor and what reads it: white noise, a constant bias, and dropouts
     (NaN samples, or stale ones: the sensor repeats its last sample), random or at given times.
     It also outputs the sensor's sequence number (a packet counter that does not advance on a
-    stale sample), which ``sensors.WrenchConditioner`` uses to reject stale samples.
+    stale sample), which ``wrench_conditioner.WrenchConditioner`` uses to reject stale samples.
 ``JointFriction``
     Coulomb friction in the simulated arm's joints, -tau_c tanh(v / v_s) (viscous friction is
     the joints' damping, set by ``tasks.config.ModelErrorConfig.joint_damping``).

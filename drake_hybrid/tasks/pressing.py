@@ -7,7 +7,7 @@ from pydrake.systems.framework import DiagramBuilder
 
 from drake_hybrid.core.kinematics import EndEffectorKinematics
 from drake_hybrid.station.start import pressing_depth
-from drake_hybrid.systems.sensors import ContactWrenchSensor
+from drake_hybrid.systems.contact_wrench_sensor import ContactWrenchSensor
 from drake_hybrid.tasks.plant import build_plant
 
 
