@@ -244,7 +244,7 @@ def measure(duration=0.5, out=None, log=print):
 
 
 def _plot(results, path):
-    from drake_hybrid.viz.plotting import _pyplot
+    from drake_hybrid.viz.figure_base import _pyplot
 
     plt = _pyplot()
     fig, ax = plt.subplots(figsize=(6, 3.2))

@@ -30,7 +30,7 @@ from drake_hybrid.analysis import kinematic_instability as ki  # noqa: E402
 from drake_hybrid.analysis.linearization import linearize_continuous, linearize_discrete  # noqa: E402
 from drake_hybrid.experiments.simulation import simulate  # noqa: E402
 from drake_hybrid.tasks.registry import get_task
-from drake_hybrid.viz.plotting import joint_servo_map_figure  # noqa: E402
+from drake_hybrid.viz.eigenvalue_plots import joint_servo_map_figure  # noqa: E402
 
 DOCS = Path(__file__).resolve().parent
 EVALUATION_TIME = 1.0         # s: the window errors are the largest after this (five of K_v = 10's time constants)

@@ -48,11 +48,11 @@ def eigenvalues():
 
     from drake_hybrid.analysis.linearization import linearize_continuous
     from drake_hybrid.control.gains import HybridGains
-    from drake_hybrid.viz import plotting
+    from drake_hybrid.viz import eigenvalue_plots
 
     base = get_task("window-washing").default_config()
     linearization = linearize_continuous(base)
-    fig = plotting.eigenvalue_figure(linearization.match, title="window washing, velocity-force")
+    fig = eigenvalue_plots.eigenvalue_figure(linearization.match, title="window washing, velocity-force")
     fig.savefig(FIGURES / "window_washing_eigenvalues.png", dpi=110)
     plt.close(fig)
     match = linearization.match
@@ -68,9 +68,9 @@ def eigenvalues():
         extra = sweep[-1].match.extra
         mode = extra[extra.imag.argmax()]
         print(f"  K_fi = {K_fi:5.1f}: contact mode {mode.real:+.2f} {mode.imag:+.2f}j 1/s")
-    fig = plotting.eigenvalue_sweep_figure(gains, sweep, "force integral gain K_fi", units="1/s",
-                                           zoom=((-130, 25), (-170, 170)),
-                                           title="window washing: closed-loop eigenvalues against K_fi")
+    fig = eigenvalue_plots.eigenvalue_sweep_figure(gains, sweep, "force integral gain K_fi", units="1/s",
+                                                   zoom=((-130, 25), (-170, 170)),
+                                                   title="window washing: closed-loop eigenvalues against K_fi")
     fig.savefig(FIGURES / "force_gain_sweep.png", dpi=110)
     plt.close(fig)
 

@@ -17,7 +17,7 @@ import numpy as np
 from drake_hybrid.experiments.sweep import column, read_results, run_sweep, theory_on_plane
 from drake_hybrid.experiments.sweep_spec import load_spec
 from drake_hybrid.tasks.config import load_config
-from drake_hybrid.viz.plotting import monte_carlo_figure, stability_map_figure
+from drake_hybrid.viz.sweep_plots import monte_carlo_figure, stability_map_figure
 
 DOCS = Path(__file__).resolve().parent
 FIGURES = DOCS / "figures"

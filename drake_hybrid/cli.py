@@ -423,7 +423,7 @@ def command_analyze(args):
     if args.plot:
         import matplotlib.pyplot as plt
 
-        from drake_hybrid.viz.plotting import eigenvalue_figure
+        from drake_hybrid.viz.eigenvalue_plots import eigenvalue_figure
 
         figure = eigenvalue_figure(match, title=f"{config.task}, {controller_mode.value}", period=period,
                                    shifts=result.shifts)
@@ -495,7 +495,7 @@ def command_sweep(args):
     print(f"{task_name}: {done}; {len(rows)} in the table, {stable} stable, {run.failures} with errors")
     print(f"  wrote {run.results_path}")
     if args.plot:
-        from drake_hybrid.viz.plotting import save_sweep_plots
+        from drake_hybrid.viz.sweep_plots import save_sweep_plots
 
         for path in save_sweep_plots(rows, spec, out):
             print(f"  wrote {path}")

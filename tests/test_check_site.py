@@ -78,7 +78,7 @@ def test_a_note_made_a_definition_list_is_found_by_its_term():
 
 def test_the_pending_checks_are_pending_only_on_their_pages():
     text = "Baselines (issue 18).\nSize: one module for every figure."
-    api = check_site.text_findings("reference/generated/drake_hybrid.viz.plotting.html", text)
+    api = check_site.text_findings("reference/generated/drake_hybrid.viz.run_plots.html", text)
     assert _kinds(api, pending=True) == {"issue number", "maintainers' note"} and not _kinds(api, pending=False)
     assert _kinds(check_site.text_findings("reference/generated/x.html", text, strict=True), pending=False) == \
         {"issue number", "maintainers' note"}

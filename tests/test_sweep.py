@@ -257,7 +257,7 @@ def test_resume_runs_only_the_missing_points(serial_sweep, tmp_path):
 
 @pytest.mark.slow                # the serial sweep fixture (15 s): not in the fast loop
 def test_results_table_has_every_column_and_the_map_plots(serial_sweep, tmp_path):
-    from drake_hybrid.viz.plotting import save_sweep_plots
+    from drake_hybrid.viz.sweep_plots import save_sweep_plots
 
     serial_run, rows = serial_sweep
     assert set(RESULT_COLUMNS) <= set(rows[0])

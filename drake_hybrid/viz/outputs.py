@@ -9,7 +9,7 @@ import numpy as np
 from drake_hybrid.experiments.simulation import effort_limits, predicted_tracking
 from drake_hybrid.tasks.config import dump_config
 from drake_hybrid.viz.path_plots import save_path_plots
-from drake_hybrid.viz.plotting import save_run_plots, save_tracking_plots
+from drake_hybrid.viz.run_plots import save_run_plots, save_tracking_plots
 
 
 def json_safe(value):

@@ -17,7 +17,7 @@ import numpy as np
 
 from drake_hybrid.control.phases import ContactPhase
 from drake_hybrid.experiments.path_report import error_parts, lift_off_time
-from drake_hybrid.viz.plotting import _pyplot
+from drake_hybrid.viz.figure_base import _pyplot
 
 
 def _phases(log):
