@@ -4,7 +4,7 @@ scheduler on 127.0.0.1; where a point's time goes; what a fresh worker pays befo
     python benchmarks/sweep_throughput.py [--duration S] [--out DIR]
 
 The same sweep (window washing, pad modulus x K_fp x control period: each point a simulation plus
-the continuous and the sampled-loop linearizations, ``experiments.sweep.evaluate_point``) runs
+the continuous and the sampled-loop linearizations, ``experiments.sweep_point.evaluate_point``) runs
 serially in this process (no Dask), on a LocalCluster of 1, 2 and 4 single-threaded worker
 processes, and on a ``dask scheduler`` with ``dask worker --nworkers 2`` started here on
 127.0.0.1. Each cluster is started and its workers import drake_hybrid and load the compiled law
@@ -37,7 +37,9 @@ from pathlib import Path
 import cloudpickle
 
 from drake_hybrid.core.progress import Stages
-from drake_hybrid.experiments.sweep import evaluate_point, read_results, run_sweep, sweep_points
+from drake_hybrid.experiments.sweep import run_sweep, sweep_points
+from drake_hybrid.experiments.sweep_point import evaluate_point
+from drake_hybrid.experiments.sweep_results import read_results
 from drake_hybrid.experiments.sweep_spec import load_spec
 
 TASK = "window-washing"
@@ -173,7 +175,8 @@ def point_breakdown(spec, count=4):
 FRESH_WORKER = """
 import json, sys, time
 start = time.perf_counter()
-from drake_hybrid.experiments.sweep import evaluate_point, sweep_points
+from drake_hybrid.experiments.sweep import sweep_points
+from drake_hybrid.experiments.sweep_point import evaluate_point
 from drake_hybrid.experiments.sweep_spec import load_spec
 imported = time.perf_counter() - start
 _, points = sweep_points({task!r}, load_spec(text={spec!r}))

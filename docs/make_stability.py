@@ -14,8 +14,10 @@ from pathlib import Path
 
 import numpy as np
 
-from drake_hybrid.experiments.sweep import column, read_results, run_sweep, theory_on_plane
+from drake_hybrid.experiments.sweep import run_sweep
+from drake_hybrid.experiments.sweep_results import column, read_results
 from drake_hybrid.experiments.sweep_spec import load_spec
+from drake_hybrid.experiments.theory_verdict import theory_on_plane
 from drake_hybrid.tasks.config import load_config
 from drake_hybrid.viz.sweep_plots import monte_carlo_figure, stability_map_figure
 

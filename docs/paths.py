@@ -32,7 +32,8 @@ from report_format import significant  # noqa: E402
 
 from drake_hybrid.analysis.linearization import linearize_continuous  # noqa: E402
 from drake_hybrid.experiments.simulation import simulate  # noqa: E402
-from drake_hybrid.experiments.sweep import read_results, run_sweep  # noqa: E402
+from drake_hybrid.experiments.sweep import run_sweep  # noqa: E402
+from drake_hybrid.experiments.sweep_results import read_results  # noqa: E402
 from drake_hybrid.experiments.sweep_spec import load_spec  # noqa: E402
 from drake_hybrid.tasks.path import job_duration, with_path
 from drake_hybrid.tasks.registry import get_task

@@ -464,7 +464,8 @@ def _where(workers):
 
 def command_sweep(args):
     with _loading(args, "Drake, numba and Dask"):
-        from drake_hybrid.experiments.sweep import read_results, run_sweep
+        from drake_hybrid.experiments.sweep import run_sweep
+        from drake_hybrid.experiments.sweep_results import read_results
         from drake_hybrid.experiments.sweep_spec import SweepSpecError, load_spec
         from drake_hybrid.tasks.task_file import load_task_file
     _check_output_paths(args)

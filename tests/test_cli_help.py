@@ -169,7 +169,7 @@ def test_a_resumed_sweep_with_nothing_left_says_so(tmp_path, monkeypatch, capsys
                     wall_time=0.0, workers="serial")
     monkeypatch.setattr("drake_hybrid.experiments.sweep_spec.load_spec", lambda path: object())
     monkeypatch.setattr("drake_hybrid.experiments.sweep.run_sweep", lambda *args, **kwargs: done)
-    monkeypatch.setattr("drake_hybrid.experiments.sweep.read_results", lambda path: [{"stable": True}] * 12)
+    monkeypatch.setattr("drake_hybrid.experiments.sweep_results.read_results", lambda path: [{"stable": True}] * 12)
     assert main(["sweep", "window-washing", "--grid", "spec.yaml", "--resume", "--out", str(tmp_path)]) == 0
     out = capsys.readouterr().out
     assert "nothing to run: all 12 points already in the table" in out and "0.0 s" not in out
@@ -178,7 +178,7 @@ def test_a_resumed_sweep_with_nothing_left_says_so(tmp_path, monkeypatch, capsys
 def test_a_sweep_says_where_it_ran_in_the_command_lines_terms(tmp_path, monkeypatch, capsys):
     """Not "(local:2)": the flag that chose it, and what it is."""
     monkeypatch.setattr("drake_hybrid.experiments.sweep_spec.load_spec", lambda path: object())
-    monkeypatch.setattr("drake_hybrid.experiments.sweep.read_results", lambda path: [{"stable": True}] * 4)
+    monkeypatch.setattr("drake_hybrid.experiments.sweep_results.read_results", lambda path: [{"stable": True}] * 4)
     for workers, where in (("local:2", "on 2 local Dask worker processes (--workers)"),
                            ("serial", "serially in this process (--workers 0)"),
                            ("tcp://127.0.0.1:8786", "on the Dask scheduler at tcp://127.0.0.1:8786 (--scheduler)")):

@@ -8,7 +8,7 @@ import pytest
 
 from drake_hybrid.cli import main
 from drake_hybrid.experiments.simulation import RunStopped, simulate
-from drake_hybrid.experiments.sweep import evaluate_point
+from drake_hybrid.experiments.sweep_point import evaluate_point
 from drake_hybrid.tasks.config import dump_config
 from drake_hybrid.tasks.registry import get_task
 

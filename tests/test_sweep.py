@@ -12,12 +12,15 @@ import numpy as np
 import pytest
 
 from drake_hybrid.analysis.linearization import linearize_sampled_loop
-from drake_hybrid.cli import make_parser
+from drake_hybrid.cli import main, make_parser
+from drake_hybrid.core.errors import MissingExtraError
 from drake_hybrid.experiments.config_paths import apply_parameters, set_config_value
 from drake_hybrid.experiments.metrics import row_errors
-from drake_hybrid.experiments.sweep import (RESULT_COLUMNS, read_results, rigid_contact_theory_stable, run_sweep,
-                                            simulation_metrics)
+from drake_hybrid.experiments.sweep import run_sweep
+from drake_hybrid.experiments.sweep_point import RESULT_COLUMNS, simulation_metrics
+from drake_hybrid.experiments.sweep_results import read_results
 from drake_hybrid.experiments.sweep_spec import StabilityCriteria, SweepSpecError, load_spec
+from drake_hybrid.experiments.theory_verdict import rigid_contact_theory_stable
 from drake_hybrid.scenario.builder import build_scenario
 from drake_hybrid.scenario.start import set_initial_conditions
 from drake_hybrid.tasks.config import dump_config, load_config
@@ -365,6 +368,36 @@ def test_an_unreachable_scheduler_leaves_nothing_behind(tmp_path):
     assert not (tmp_path / "out").exists()
 
 
+# -- without the cluster extra: Dask not installed -------------------------------------------------
+
+@pytest.fixture
+def without_dask(monkeypatch):
+    """Dask and distributed as if not installed (a plain ``pip install .``): importing either raises ImportError."""
+    for name in ("dask", "distributed"):
+        monkeypatch.setitem(sys.modules, name, None)
+
+
+def test_without_dask_a_cluster_sweep_names_the_extra_and_writes_nothing(without_dask, tmp_path, capsys):
+    message = ("sweeps on a Dask cluster need the cluster extra: pip install 'drake-hybrid[cluster]' "
+               "(or run serially: workers=0, --workers 0)")
+    for where in ({"workers": 2}, {"scheduler": "tcp://127.0.0.1:8786"}):
+        with pytest.raises(MissingExtraError) as raised:
+            run_sweep(WINDOW, load_spec(text=FAST_SWEEP), tmp_path / "out", progress=False, **where)
+        assert str(raised.value) == message and isinstance(raised.value, ImportError)
+        assert not (tmp_path / "out").exists()
+    (tmp_path / "spec.yaml").write_text(FAST_SWEEP)
+    assert main(["sweep", WINDOW, "--grid", str(tmp_path / "spec.yaml"), "--out", str(tmp_path / "out")]) == 2
+    assert capsys.readouterr().err == f"drake-hybrid sweep: {message}\n"      # one line, no traceback
+    assert not (tmp_path / "out").exists()
+
+
+def test_without_dask_a_serial_sweep_runs(without_dask, tmp_path):
+    one_point = load_spec(text=FAST_SWEEP.replace("[0.5, 1.0, 1.5, 2.0, 2.5, 3.0]", "[0.5]"))
+    run = run_sweep(WINDOW, one_point, tmp_path, workers=0, progress=False)
+    (row,) = read_results(tmp_path)
+    assert run.workers == "serial" and run.evaluated == 1 and row["error"] is None
+
+
 def _window_result(x_dot_error, theta_dot_error):
     """A settled window-washing result: x-dot commanded 0.1 m/s, theta-dot 0 rad/s, 10 N; constant errors."""
     from types import SimpleNamespace
@@ -434,7 +467,7 @@ def test_an_unstable_looking_one_period_map_is_checked_at_a_larger_step():
     (multiplier 1.0039), at 1e-4 nothing above 1e-4 1/s (docs/drake_notes.md): a kink of the SAP
     map, not a mode (a kicked simulation decays). The check says so; the sweep then keeps the
     regulated modes' verdict where the kink is on a predicted zero's partner, and gives none where it
-    is on a regulated mode (sweep._discrete_verdict)."""
+    is on a regulated mode (sweep_point._discrete_verdict)."""
     from drake_hybrid.station.parsing import models_directory
     from drake_hybrid.tasks.task_file import load_task_file
 
@@ -457,10 +490,10 @@ def test_an_unstable_looking_one_period_map_is_checked_at_a_larger_step():
     (3.0, (3.0, 2.9), 0.0, False),                 # a regulated instability, confirmed
 ])
 def test_the_discrete_verdict_weighs_the_step_check(worst, check, margin, verdict):
-    """experiments.sweep._discrete_verdict: the sampled loop's verdict from the regulated modes'
+    """experiments.sweep_point._discrete_verdict: the sampled loop's verdict from the regulated modes'
     worst rate and the step check at a ten times larger step (figures from docs/stability.md)."""
     from drake_hybrid.analysis.linearization import StepCheck
-    from drake_hybrid.experiments.sweep import _discrete_verdict
+    from drake_hybrid.experiments.sweep_point import _discrete_verdict
 
     step_check = None if check is None else StepCheck(1e-5, check[0], 1e-4, check[1])
     assert _discrete_verdict(worst, step_check, margin) is verdict

@@ -26,7 +26,8 @@ from drake_hybrid.analysis.linearization import linearize_continuous
 from drake_hybrid.cli import main
 from drake_hybrid.core.errors import ConfigError
 from drake_hybrid.experiments.simulation import simulate
-from drake_hybrid.experiments.sweep import read_results, run_sweep
+from drake_hybrid.experiments.sweep import run_sweep
+from drake_hybrid.experiments.sweep_results import read_results
 from drake_hybrid.experiments.sweep_spec import load_spec
 from drake_hybrid.station.parsing import installed_model_packages, models_directory
 from drake_hybrid.station.workpieces import add_rigid_workpiece
@@ -244,7 +245,7 @@ def _assert_same_rows(ours, theirs, marginal_noise=0.0):
             if name in TIMING_COLUMNS:
                 continue
             if marginal_noise and name.startswith("marginal_"):
-                for row in (a, b):   # or the SAP map's kink, which the step check finds (sweep._discrete_verdict)
+                for row in (a, b):   # or the SAP map's kink, which the step check finds (sweep_point._discrete_verdict)
                     kink = name == "marginal_discrete_real" and "NOT confirmed" in (row["discrete_step_check"] or "")
                     assert abs(row[name]) < marginal_noise or kink, (row["point"], name)
                 continue

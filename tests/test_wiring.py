@@ -12,7 +12,8 @@ from pydrake.multibody.parsing import Parser
 from pydrake.multibody.plant import DiscreteContactApproximation, MultibodyPlant
 
 from drake_hybrid.experiments.simulation import simulate
-from drake_hybrid.experiments.sweep import read_results, run_sweep
+from drake_hybrid.experiments.sweep import run_sweep
+from drake_hybrid.experiments.sweep_results import read_results
 from drake_hybrid.experiments.sweep_spec import load_spec
 from drake_hybrid.station.arm import add_actuators, urdf_effort_limits, weld_joints
 from drake_hybrid.tasks.custom import CustomTask

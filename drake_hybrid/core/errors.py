@@ -64,6 +64,12 @@ class BranchError(DrakeHybridError):
     pointing away from the workpiece instead of toward it)."""
 
 
+class MissingExtraError(DrakeHybridError, ImportError):
+    """An optional dependency is not installed: the message names the extra that installs it (e.g.
+    sweeps on a Dask cluster need ``pip install 'drake-hybrid[cluster]'``). Also an ImportError, so
+    that code catching a failed import catches it."""
+
+
 class KinematicSingularityWarning(UserWarning):
     """The arm is near a kinematic singularity: the controller bounds the joint acceleration with a
     damped inverse of J there, so the commanded task acceleration is only approximately produced."""

@@ -95,7 +95,7 @@ class Axis:
 
 @dataclass
 class StabilityCriteria:
-    """How a point's verdicts are decided (see drake_hybrid.experiments.sweep)."""
+    """How a point's verdicts are decided (see drake_hybrid.experiments.sweep_point)."""
 
     steady_window: float = 0.2       # last fraction of the horizon where the steady errors are measured
     steady_tolerance: float = 0.05   # settled: max error there <= this fraction of the command

@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 from matplotlib.colors import SymLogNorm
 
-from drake_hybrid.experiments.sweep import theory_on_plane
+from drake_hybrid.experiments.theory_verdict import theory_on_plane
 from drake_hybrid.tasks.config import load_config
 from drake_hybrid.viz.figure_base import _pyplot
 
