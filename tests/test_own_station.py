@@ -32,8 +32,8 @@ from drake_hybrid.station.sensing import WristSensorConfig
 from drake_hybrid.station.workpieces import add_rigid_workpiece
 from drake_hybrid.systems.sources import Profile
 from drake_hybrid.systems.wrist_force_torque_sensor import WristForceTorqueSensor
+from drake_hybrid.tasks.model_files import prepare_model
 from drake_hybrid.tasks.registry import get_task
-from drake_hybrid.tasks.robots import prepare_model
 
 SHARE = Path(importlib.metadata.distribution("example-robot-data").locate_file("cmeel.prefix/share/example-robot-data"))
 CENTER, AXES, PAD = np.array([0.26, 0.0, 0.253]), np.array([0.12, 0.08, 0.06]), 0.02
