@@ -508,7 +508,7 @@ def command_tasks(args):
         from drake_hybrid.station.parsing import models_directory
         from drake_hybrid.tasks.hooks import ENTRY_POINT_GROUP, get_hook, hook_names
         from drake_hybrid.tasks.registry import TASKS
-        from drake_hybrid.tasks.task_file import read_task_file
+        from drake_hybrid.tasks.task_file_schema import read_task_file
     print("tasks (drake-hybrid simulate|analyze NAME):")
     for name, task in TASKS.items():
         print(f"  {name:24s} {task.description}")

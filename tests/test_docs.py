@@ -29,7 +29,7 @@ from drake_hybrid.experiments.simulation import simulate
 from drake_hybrid.station.loggers import LOG_KEYS
 from drake_hybrid.tasks.registry import get_task
 from drake_hybrid.tasks.schema_doc import schema_rows
-from drake_hybrid.tasks.task_file import TaskFile
+from drake_hybrid.tasks.task_file_schema import TaskFile
 
 ROOT = Path(__file__).resolve().parents[1]
 DOCS = ROOT / "docs"

@@ -36,7 +36,8 @@ from drake_hybrid.tasks.custom import CustomTask
 from drake_hybrid.tasks.registry import get_task, register_task
 from drake_hybrid.tasks.robots import load_arm
 from drake_hybrid.tasks.schema_doc import schema_markdown
-from drake_hybrid.tasks.task_file import load_task_file, read_task_file
+from drake_hybrid.tasks.task_file import load_task_file
+from drake_hybrid.tasks.task_file_schema import read_task_file
 
 WINDOW_FILE = models_directory() / "tasks" / "window_washing.yaml"
 

@@ -1,6 +1,6 @@
 """The task-file schema as a Markdown page, generated from the types (not written twice).
 
-Every field of the task file (``tasks.task_file.TaskFile``) and of the ``ScenarioConfig`` it
+Every field of the task file (``tasks.task_file_schema.TaskFile``) and of the ``ScenarioConfig`` it
 embeds, by dotted name, with its type, its default and its meaning with units: the comment written
 next to the field in the source, else the field's entry (``name: text``) in its class's docstring.
 Then what a task file's values mean, from the code that reads them: the expression grammar's
@@ -19,7 +19,8 @@ import typing
 
 from drake_hybrid.core.expressions import CONSTANTS, FUNCTIONS, MAX_DEPTH, MAX_LENGTH
 from drake_hybrid.tasks.hooks import ENTRY_POINT_GROUP, HOOK_METHODS, PACKAGE_HOOKS
-from drake_hybrid.tasks.task_file import CHARTS, SHAPES, ChartSpec, TaskFile, make_chart
+from drake_hybrid.tasks.task_file import make_chart
+from drake_hybrid.tasks.task_file_schema import CHARTS, SHAPES, ChartSpec, TaskFile
 
 _FIELD_LINE = re.compile(r"^\s+(\w+)\s*:\s*[^#]*?(?:#\s*(.*))?$")
 # A field's entry in its class's docstring: "name: text" (or "name, other: text"; ``name``: text), with
@@ -314,7 +315,7 @@ def schema_markdown(schema=TaskFile):
     lines = ["# Task files: every field",
              "",
              "Generated from the types by `python -m drake_hybrid.tasks.schema_doc` (do not edit by hand).",
-             "A task file is described in `drake_hybrid/tasks/task_file.py`; examples are in `models/tasks/`.",
+             "A task file is described in `drake_hybrid/tasks/task_file_schema.py`; examples are in `models/tasks/`.",
              "Expressions (constraint rows, E_p rows, the start) follow the grammar of",
              "`drake_hybrid/core/expressions.py`. Drake's own types are documented by Drake:",
              ""]
