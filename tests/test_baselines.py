@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from drake_hybrid.analysis import kinematic_instability as ki
-from drake_hybrid.analysis.linearization import linearize_discrete
+from drake_hybrid.analysis.discrete_linearization import linearize_discrete
 from drake_hybrid.control.baselines import (AxisPDOpenLoopForceController, BaselineGains, JointServoHybridController,
                                             joint_servo_eigenvalues, make_baseline)
 from drake_hybrid.core.errors import ConfigError, DimensionError

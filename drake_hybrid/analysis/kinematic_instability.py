@@ -1,4 +1,4 @@
-"""The kinematic instability of the Raibert-Craig hybrid controller, reproduced (issue 18).
+"""The kinematic instability of the Raibert-Craig hybrid controller, reproduced.
 
 Setting (An & Hollerbach 1989; Fisher & Mujtaba 1992): a planar two-link arm
 (``models/planar_2r.sdf``, 1.0 and 0.8 m) whose tip is position-controlled along one Cartesian axis
@@ -33,7 +33,7 @@ from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import ConstantVectorSource, Linearize
 
-from drake_hybrid.analysis.linearization import predicted_eigenvalues
+from drake_hybrid.analysis.design import predicted_eigenvalues
 from drake_hybrid.control.baselines import (AxisPDOpenLoopForceController, JointServoHybridController,
                                             joint_servo_eigenvalues)
 from drake_hybrid.control.controller import HybridController
@@ -47,7 +47,7 @@ from drake_hybrid.station.loop import connect_hybrid_loop
 from drake_hybrid.station.parsing import ConfigureParser, add_model
 from drake_hybrid.systems.sources import Profile, ProfileSource
 
-HINTED_CONFIGURATION = np.radians([-160.0, 30.0])   # rad: the issue's hint, where Raibert-Craig is unstable
+HINTED_CONFIGURATION = np.radians([-160.0, 30.0])   # rad: a configuration where Raibert-Craig (JOINT_GAINS) is unstable
 JOINT_GAINS = (5.0, 1.0)                            # K_q (1/s): unequal joint gains
 SERVO_RATE = 200.0                                  # K_s (1/s): the joint velocity servo
 # Li & Sastry in position-force mode with the same bandwidth: s^2 + 6 s + 5 = (s + 1)(s + 5), the

@@ -27,7 +27,7 @@ import numpy as np
 from matplotlib import cm, colors
 from matplotlib.colors import SymLogNorm
 
-from drake_hybrid.analysis.linearization import nyquist_split
+from drake_hybrid.analysis.matching import nyquist_split
 from drake_hybrid.experiments.metrics import display_unit, row_units
 from drake_hybrid.experiments.sweep import theory_on_plane
 from drake_hybrid.tasks.config import load_config
