@@ -21,7 +21,7 @@ import numpy as np
 from pydrake.systems.analysis import ApplySimulatorConfig, InitializeParams, Simulator
 
 from drake_hybrid.analysis.design import PredictedEigenvalues, controller_prediction
-from drake_hybrid.analysis.linearization import _scenario_config, _stages, _task_shifts, at_rest_config
+from drake_hybrid.analysis.linearization import at_rest_config, checked_scenario_config, checked_stages, task_shifts
 from drake_hybrid.analysis.matching import EigenvalueMatch, match_eigenvalues
 from drake_hybrid.control.sampling import SAMPLE_LEAD
 from drake_hybrid.core.arguments import nonnegative, number, positive, relative_tolerance
@@ -127,11 +127,11 @@ def linearize_discrete(config, tolerance=0.05, epsilon=1e-6, settle_time=0.0, st
     one line per stage with its time.
     """
     owner = "linearize_discrete"
-    _scenario_config(config, owner)
+    checked_scenario_config(config, owner)
     relative_tolerance(tolerance, "tolerance", owner)
     positive(epsilon, "epsilon", owner)
     settle_time = nonnegative(settle_time, "settle_time", owner, unit="s")
-    stages = _stages(stages, owner)
+    stages = checked_stages(stages, owner)
     c = at_rest_config(config, owner)
     if not c.plant.time_step > 0:
         raise ConfigError(f"{owner}: config.plant.time_step must be > 0 (a discrete plant), got {c.plant.time_step:g}")
@@ -183,7 +183,7 @@ def linearize_discrete(config, tolerance=0.05, epsilon=1e-6, settle_time=0.0, st
     eigenvalues = np.log(multipliers[keep].astype(complex)) / h
     predicted = controller_prediction(scenario.controller)
     match = match_eigenvalues(predicted.designed, eigenvalues, tolerance=tolerance, marginal=predicted.marginal)
-    shifts, shifted_match = _task_shifts(get_task(c.task), scenario, context, predicted, eigenvalues, tolerance)
+    shifts, shifted_match = task_shifts(get_task(c.task), scenario, context, predicted, eigenvalues, tolerance)
     return DiscreteLinearization(A=A, multipliers=multipliers, eigenvalues=eigenvalues, period=h,
                                  equilibrium_residual=residual, predicted=predicted, match=match, wall_time=wall,
                                  shifts=shifts, shifted_match=shifted_match, step_check=step_check)
@@ -229,7 +229,7 @@ def linearize_sampled_loop(config, epsilon=1e-5, tolerance=0.05, periods=1):
     without the loop above.
     """
     owner = "linearize_sampled_loop"
-    _scenario_config(config, owner)
+    checked_scenario_config(config, owner)
     positive(epsilon, "epsilon", owner)
     relative_tolerance(tolerance, "tolerance", owner)
     periods = number(periods, "periods", owner, low=1, integer=True, unit="control periods")

@@ -41,7 +41,7 @@ from drake_hybrid.tasks.config import ScenarioConfig
 from drake_hybrid.tasks.registry import get_task
 
 
-def _task_shifts(task, scenario, root_context, predicted, measured, tolerance):
+def task_shifts(task, scenario, root_context, predicted, measured, tolerance):
     """The predicted shifts and the match against the shifted design (no shifts, no match): the
     task's own (physics the paper's model leaves out, e.g. the crank's handle inertia; ``task`` None:
     none), or else, in impedance-force mode, those of the impedance meeting its contact's stiffness
@@ -63,7 +63,7 @@ def at_rest_config(config, owner="at_rest_config"):
     (sampled systems outside the law, with their own timing); the model error is kept; a job's path
     held at a point (``path.hold_at``, its first point unless set). Its start is an equilibrium of
     the closed loop. ArgumentError (naming ``owner``) for a ``config`` that is not a ScenarioConfig."""
-    c = copy.deepcopy(_scenario_config(config, owner))
+    c = copy.deepcopy(checked_scenario_config(config, owner))
     size = get_task(c.task).constraint_space(c).velocity_size
     c.desired_velocity = Profile(kind="constant", value=[0.0] * size)
     c.desired_force = Profile(kind="constant", value=list(c.desired_force.evaluate(0.0)[0]))
@@ -86,7 +86,7 @@ def equilibrium_config(config, bandwidth_hz=200.0, owner="equilibrium_config"):
     by the contact, not by the designed loop, whose modes become marginal (DRAKE_NOTES); the
     designed loop is the paper's frictionless one (section 3.1). ArgumentError (naming ``owner``) for a
     ``config`` that is not a ScenarioConfig, a ``bandwidth_hz`` that is not a finite number > 0."""
-    _scenario_config(config, owner)
+    checked_scenario_config(config, owner)
     bandwidth_hz = positive(bandwidth_hz, "bandwidth_hz", owner, unit="Hz")
     c = at_rest_config(config, owner)
     c.plant.time_step = 0.0
@@ -111,13 +111,13 @@ class Linearization:
     unstable_modes: list = field(default_factory=list)   # analysis.modes.ModeDiagnosis, real part > 0.01 1/s
 
 
-def _stages(stages, owner):
+def checked_stages(stages, owner):
     """``stages`` (a ``core.progress.Stages``, or None: silent) checked, naming ``owner``."""
     function(stages, "stages", owner, "stages(label) -> a context manager (core.progress.Stages)", allow_none=True)
     return stages or quiet()
 
 
-def _scenario_config(config, owner):
+def checked_scenario_config(config, owner):
     """``config`` if it is a ScenarioConfig; ArgumentError naming ``owner`` otherwise."""
     return instance(config, "config", owner, ScenarioConfig,
                     what="a ScenarioConfig (e.g. get_task(name).default_config())")
@@ -140,9 +140,9 @@ def linearize_continuous(config, tolerance=0.05, bandwidth_hz=200.0, stages=None
     (0, 1]), ``jacobian_tolerance`` and ``require_equilibrium`` as for ``linearize_at_contact``.
     """
     owner = "linearize_continuous"
-    _scenario_config(config, owner)
+    checked_scenario_config(config, owner)
     relative_tolerance(tolerance, "tolerance", owner)
-    stages = _stages(stages, owner)
+    stages = checked_stages(stages, owner)
     c = equilibrium_config(config, bandwidth_hz, owner)
     with stages(f"{c.task}: building the continuous closed loop"):
         scenario = build_scenario(c, with_loggers=False)
@@ -237,7 +237,7 @@ def linearize_at_contact(diagram, root_context, systems, tolerance=0.05, jacobia
     tolerance = relative_tolerance(tolerance, "tolerance", owner)
     jacobian_tolerance = positive(jacobian_tolerance, "jacobian_tolerance", owner, allow_infinite=True,
                                   unit="relative column error")
-    stages = _stages(stages, owner)
+    stages = checked_stages(stages, owner)
     require_equilibrium = boolean(require_equilibrium, "require_equilibrium", owner)
     if task is not None and not hasattr(task, "eigenvalue_shifts"):
         raise ArgumentError(f"{owner}: task must be a Task (scenario.task) or None, got {type(task).__name__}")
@@ -259,7 +259,7 @@ def linearize_at_contact(diagram, root_context, systems, tolerance=0.05, jacobia
     eigenvalues = np.linalg.eigvals(A)
     predicted = controller_prediction(systems.controller)
     match = match_eigenvalues(predicted.designed, eigenvalues, tolerance=tolerance, marginal=predicted.marginal)
-    shifts, shifted_match = _task_shifts(task, systems, root_context, predicted, eigenvalues, tolerance)
+    shifts, shifted_match = task_shifts(task, systems, root_context, predicted, eigenvalues, tolerance)
     view = systems if getattr(systems, "diagram", None) is not None else dataclasses.replace(systems, diagram=diagram)
     modes = diagnose_unstable_modes(view, root_context, A, systems.controller.mode, predicted.designed)
     return Linearization(A=A, eigenvalues=eigenvalues, equilibrium_residual=residual, predicted=predicted,
