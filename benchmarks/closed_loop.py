@@ -47,7 +47,8 @@ from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import TrajectorySource
 from pydrake.trajectories import PiecewisePolynomial
 
-from drake_hybrid.analysis.linearization import linearize_continuous, linearize_discrete
+from drake_hybrid.analysis.discrete_linearization import linearize_discrete
+from drake_hybrid.analysis.linearization import linearize_continuous
 from drake_hybrid.control.controller import HybridController
 from drake_hybrid.control.gains import ControlMode
 from drake_hybrid.experiments.simulation import simulate

@@ -27,7 +27,8 @@ import numpy as np  # noqa: E402
 from report_format import significant  # noqa: E402  (docs/: figures rounded, reruns rewrite nothing)
 
 from drake_hybrid.analysis import kinematic_instability as ki  # noqa: E402
-from drake_hybrid.analysis.linearization import linearize_continuous, linearize_discrete  # noqa: E402
+from drake_hybrid.analysis.discrete_linearization import linearize_discrete  # noqa: E402
+from drake_hybrid.analysis.linearization import linearize_continuous  # noqa: E402
 from drake_hybrid.experiments.simulation import simulate  # noqa: E402
 from drake_hybrid.tasks.registry import get_task
 from drake_hybrid.viz.eigenvalue_plots import joint_servo_map_figure  # noqa: E402

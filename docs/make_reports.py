@@ -14,8 +14,10 @@ from pathlib import Path
 
 import numpy as np
 
-from drake_hybrid.analysis.linearization import (impedance_realization, linearize_continuous, linearize_discrete,
-                                                 predicted_match)
+from drake_hybrid.analysis.design import impedance_realization
+from drake_hybrid.analysis.discrete_linearization import linearize_discrete
+from drake_hybrid.analysis.linearization import linearize_continuous
+from drake_hybrid.analysis.matching import predicted_match
 from drake_hybrid.experiments.simulation import simulate
 from drake_hybrid.tasks.builtin.robots import worst_condition_number
 from drake_hybrid.tasks.registry import get_task

@@ -159,7 +159,7 @@ def _fmt(values):
 def _eigenvalues_by_row(controller, summary):
     """" by row, velocity: 'x-dot' -10, 'theta-dot' -8; force: 'F' -10": each designed eigenvalue with its
     row, or by loop when a gain couples the rows."""
-    from drake_hybrid.analysis.linearization import designed_eigenvalues_by_row  # (loaded with the command)
+    from drake_hybrid.analysis.design import designed_eigenvalues_by_row  # (loaded with the command)
     by_row = designed_eigenvalues_by_row(controller.validated_gains(), controller.mode, controller.kinematic_rows,
                                          controller.num_joints - controller.task_size)
     if by_row is None:
@@ -336,8 +336,9 @@ def command_analyze(args):
     relative_tolerance(args.tolerance, "--tolerance", "the command line", error=UsageError)
     with _loading(args, "Drake"):
         from drake_hybrid.analysis.derivatives import DerivativeMismatchWarning
-        from drake_hybrid.analysis.linearization import (linearize_continuous, linearize_discrete, nyquist_split,
-                                                         predicted_match, shift_indices)
+        from drake_hybrid.analysis.discrete_linearization import linearize_discrete
+        from drake_hybrid.analysis.linearization import linearize_continuous
+        from drake_hybrid.analysis.matching import nyquist_split, predicted_match, shift_indices
         from drake_hybrid.tasks.registry import get_task
     config = _config(args)
     task = get_task(config.task)

@@ -20,8 +20,9 @@ from pydrake.geometry import Box, Cylinder, Sphere
 from pydrake.math import RigidTransform, RotationMatrix
 
 from drake_hybrid import ConstraintSpace, GivenVelocityProjection, PoseChart, surface_constraint
+from drake_hybrid.analysis.design import design_time_constant
 from drake_hybrid.analysis.environment import impedance_loop, root_pairs
-from drake_hybrid.analysis.linearization import design_time_constant, linearize_continuous
+from drake_hybrid.analysis.linearization import linearize_continuous
 from drake_hybrid.control.gains import ControlMode
 from drake_hybrid.experiments.simulation import simulate
 from drake_hybrid.station.workpieces import add_rigid_workpiece

@@ -18,7 +18,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from drake_hybrid.analysis.linearization import design_time_constant
+from drake_hybrid.analysis.design import design_time_constant
 from drake_hybrid.control.gains import HybridGains
 from drake_hybrid.control.law import tangential_compensation
 from drake_hybrid.control.phases import ContactPhase

@@ -11,7 +11,8 @@ import pytest
 
 import drake_hybrid.cli as cli
 from drake_hybrid.analysis.derivatives import DerivativeMismatchWarning, JacobianCheck
-from drake_hybrid.analysis.linearization import linearize_discrete, match_eigenvalues, shifted_design
+from drake_hybrid.analysis.discrete_linearization import linearize_discrete
+from drake_hybrid.analysis.matching import match_eigenvalues, shifted_design
 from drake_hybrid.tasks.registry import get_task
 from drake_hybrid.tasks.task import EigenvalueShift
 
@@ -27,7 +28,8 @@ def test_the_crank_misses_only_what_the_handles_inertia_predicts(crank_lineariza
     (shift,) = result.shifts
     assert shift.designed == -10.0 and -9.5 < shift.predicted.real < -9.3 and "inertia" in shift.reason
     assert result.shifted_match.matched
-    monkeypatch.setattr("drake_hybrid.analysis.linearization.linearize_discrete", lambda *args, **kwargs: result)
+    monkeypatch.setattr("drake_hybrid.analysis.discrete_linearization.linearize_discrete",
+                        lambda *args, **kwargs: result)
     assert cli.main(["analyze", "crank-turning", "--quiet"]) == 0
     printed = capsys.readouterr().out
     assert "missed; predicted -9.4" in printed and "handle's spin inertia" in printed
@@ -39,7 +41,8 @@ def test_the_crank_misses_only_what_the_handles_inertia_predicts(crank_lineariza
 
 def test_a_miss_without_a_prediction_exits_1(crank_linearization, monkeypatch, capsys):
     unexplained = dataclasses.replace(crank_linearization, shifts=[], shifted_match=None)
-    monkeypatch.setattr("drake_hybrid.analysis.linearization.linearize_discrete", lambda *args, **kwargs: unexplained)
+    monkeypatch.setattr("drake_hybrid.analysis.discrete_linearization.linearize_discrete",
+                        lambda *args, **kwargs: unexplained)
     assert cli.main(["analyze", "crank-turning", "--quiet"]) == 1
     assert "not matched" in capsys.readouterr().out
 
@@ -72,7 +75,8 @@ def test_analyze_says_which_deviation_figure_is_which(monkeypatch, capsys, tmp_p
     """The table pairs -8 with the -10.49 mode the prediction identifies (31.1 %); plain nearest pairing
     gives -8 a force mode near -10 (25.6 %), the figure docs/baselines.md quotes. Both printed, each named."""
     result = _impedance_crank_result()
-    monkeypatch.setattr("drake_hybrid.analysis.linearization.linearize_discrete", lambda *args, **kwargs: result)
+    monkeypatch.setattr("drake_hybrid.analysis.discrete_linearization.linearize_discrete",
+                        lambda *args, **kwargs: result)
     out = tmp_path / "eigenvalues.json"
     assert cli.main(["analyze", "crank-turning", "--mode", "impedance-force", "--quiet", "--json", str(out)]) == 0
     printed = capsys.readouterr().out
@@ -87,7 +91,7 @@ def test_analyze_says_which_deviation_figure_is_which(monkeypatch, capsys, tmp_p
 
 
 def test_modes_at_the_steps_nyquist_frequency_are_named_as_such(monkeypatch, capsys):
-    monkeypatch.setattr("drake_hybrid.analysis.linearization.linearize_discrete",
+    monkeypatch.setattr("drake_hybrid.analysis.discrete_linearization.linearize_discrete",
                         lambda *args, **kwargs: _impedance_crank_result())
     assert cli.main(["analyze", "crank-turning", "--mode", "impedance-force", "--quiet"]) == 0
     printed = capsys.readouterr().out
@@ -130,7 +134,7 @@ def test_analyze_prints_the_jacobian_checks_line_instead_of_a_python_warning(mon
 def test_analyze_says_which_sampled_loop_it_linearized(monkeypatch, capsys):
     """The crank's linearization runs the controller at the plant's 0.5 ms step without a low-pass; simulate
     ticks it every 1 ms: the output says both."""
-    monkeypatch.setattr("drake_hybrid.analysis.linearization.linearize_discrete",
+    monkeypatch.setattr("drake_hybrid.analysis.discrete_linearization.linearize_discrete",
                         lambda *args, **kwargs: _impedance_crank_result())
     assert cli.main(["analyze", "crank-turning", "--mode", "impedance-force", "--quiet"]) == 0
     (line,) = [line for line in capsys.readouterr().out.splitlines() if "sampled loop linearized" in line]

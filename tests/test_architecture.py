@@ -21,7 +21,7 @@ LOADED_WHERE_USED = {"dask", "distributed", "scipy.signal"}
 # ... and the command line, whose commands each import the package's modules they use when they run
 # (drake_hybrid/cli.py's docstring), so that every --help answers at once.
 IMPORTS_PER_COMMAND = {"cli.py"}
-MAX_LINES = 400
+MAX_LINES = 500
 THEORY = ROOT / "docs" / "theory.md"
 # Files that may cite the theory: source, docs, notebooks, configuration.
 CITING_SUFFIXES = {".py", ".md", ".ipynb", ".yaml", ".yml", ".toml"}
@@ -84,12 +84,24 @@ def test_heavy_modules_load_only_where_used():
 
 
 @pytest.mark.parametrize("path", modules(), ids=lambda p: str(p.relative_to(PACKAGE)))
-def test_long_modules_say_why(path):
-    """A module over MAX_LINES lines states the reason at its top (a 'Size:' paragraph)."""
+def test_a_module_over_the_limit_says_why_in_one_sentence(path):
+    """A module is as long as its one concern needs; one over MAX_LINES says why in one sentence, in a comment
+    under its docstring (``# Longer than 500 lines because ...``; a comment: the API reference renders
+    docstrings, and a maintainers' note is not for its readers)."""
     text = path.read_text()
-    if text.count("\n") > MAX_LINES:
-        docstring = ast.get_docstring(ast.parse(text)) or ""
-        assert "Size:" in docstring, f"{path.name} has {text.count(chr(10))} lines and no 'Size:' reason"
+    if text.count("\n") <= MAX_LINES:
+        return
+    comment = re.search(r"^# Longer than %d lines because (.+?)(?=^[^#]|\Z)" % MAX_LINES, text, re.M | re.S)
+    assert comment, f"{path.name} has {text.count(chr(10))} lines and no '# Longer than {MAX_LINES} lines because' comment"
+    sentence = " ".join(line.lstrip("# ").strip() for line in comment.group(1).splitlines())
+    assert sentence.endswith(".") and sentence.count(". ") == 0, f"{path.name}: say why in one sentence: {sentence}"
+
+
+def test_no_module_docstring_holds_a_maintainers_size_note():
+    """The old waiver ('Size: ...' in a module's docstring) rendered in the API reference: it is gone."""
+    offenders = [str(path.relative_to(PACKAGE)) for path in modules()
+                 if "Size:" in (ast.get_docstring(ast.parse(path.read_text())) or "")]
+    assert not offenders, offenders
 
 
 def repository_files():

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from drake_hybrid.analysis import kinematic_instability as ki
-from drake_hybrid.analysis.linearization import linearize_discrete
+from drake_hybrid.analysis.discrete_linearization import linearize_discrete
 from drake_hybrid.control.baselines import (AxisPDOpenLoopForceController, BaselineGains, JointServoHybridController,
                                             joint_servo_eigenvalues, make_baseline)
 from drake_hybrid.core.errors import ConfigError, DimensionError
@@ -192,7 +192,8 @@ def test_tool_inertia_compensation_alone_fixes_the_impedance_mode():
 
 
 @pytest.mark.slow
-def test_window_comparison_table_regenerates():
+def test_window_comparison_table_regenerates(monkeypatch):
+    monkeypatch.syspath_prepend(str(DOCS))           # the script's own helpers (docs/report_format.py)
     spec = importlib.util.spec_from_file_location("make_baselines", DOCS / "make_baselines.py")
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)

@@ -11,7 +11,7 @@ import pytest
 from pydrake.autodiffutils import AutoDiffXd
 from pydrake.systems.framework import InputPortIndex, OutputPortIndex
 
-from drake_hybrid import GainError
+from drake_hybrid import ArgumentError, GainError
 from drake_hybrid.control.controller import HybridController, HybridController_
 from drake_hybrid.control.gains import HybridGains
 from drake_hybrid.core.linalg import value
@@ -286,3 +286,21 @@ def test_scalar_conversion_keeps_every_argument_and_contexts_do_not_share_scratc
         return controller._solution_cache.get_mutable_cache_entry_value(context).GetMutableValueOrThrow().forces
 
     assert forces(first) is not forces(second)
+
+
+def test_gains_validated_once_are_taken_as_given_and_checked_for_the_sizes():
+    """scenario.builder.prepare_config validates the gains once into matrices; the controller takes those as
+    they are (the same law as from the HybridGains) and refuses matrices of other sizes by name."""
+    _, _, plant, robot, space = window_parts()
+    gains = HybridGains(velocity=[10.0, 12.0], force_proportional=[0.5], force_integral=[15.0])
+    validated = gains.matrices(space.velocity_size, space.force_size, "velocity-force", 1e-3)
+    dut = HybridController(plant, robot.end_effector_frame, robot.end_effector_point, space, gains=validated,
+                           control_period=1e-3)
+    twin = HybridController(plant, robot.end_effector_frame, robot.end_effector_point, space, gains=gains,
+                            control_period=1e-3)
+    for name in ("velocity", "position", "force_proportional", "force_integral", "impedance_mass"):
+        assert np.array_equal(getattr(dut.validated_gains(), name), getattr(twin.validated_gains(), name))
+    other = HybridGains(velocity=[10.0], force_integral=[15.0]).matrices(1, 1, "velocity-force")
+    with pytest.raises(ArgumentError, match="HybridController: gains are matrices for k = 1 velocity and m = 1 force "
+                                            "rows; the constraint space has k = 2, m = 1"):
+        HybridController(plant, robot.end_effector_frame, robot.end_effector_point, space, gains=other)

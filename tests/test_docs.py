@@ -23,7 +23,7 @@ import numpy as np
 import pytest
 from docutils.core import publish_doctree
 
-from drake_hybrid.analysis.linearization import designed_eigenvalues_by_row, predicted_eigenvalues
+from drake_hybrid.analysis.design import designed_eigenvalues_by_row, predicted_eigenvalues
 from drake_hybrid.control.gains import HybridGains
 from drake_hybrid.experiments.simulation import simulate
 from drake_hybrid.station.loggers import LOG_KEYS

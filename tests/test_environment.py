@@ -17,7 +17,8 @@ import own_arm_cases as cases
 import pytest
 
 from drake_hybrid.analysis.environment import impedance_loop, impedance_response, mass_factor_within
-from drake_hybrid.analysis.linearization import linearize_continuous, predicted_match
+from drake_hybrid.analysis.linearization import linearize_continuous
+from drake_hybrid.analysis.matching import predicted_match
 
 logging.getLogger("drake").setLevel(logging.ERROR)
 

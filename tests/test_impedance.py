@@ -3,8 +3,9 @@
 import numpy as np
 import pytest
 
+from drake_hybrid.analysis.design import impedance_realization
 from drake_hybrid.analysis.environment import impedance_response
-from drake_hybrid.analysis.linearization import impedance_realization, linearize_continuous
+from drake_hybrid.analysis.linearization import linearize_continuous
 from drake_hybrid.cli import _impedance_text
 from drake_hybrid.control.controller import HybridController
 from drake_hybrid.control.gains import HybridGains

@@ -18,7 +18,8 @@ from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder
 
 from drake_hybrid import ConstraintSpace, GivenVelocityProjection, PoseChart, surface_constraint
-from drake_hybrid.analysis.linearization import design_time_constant, linearize_at_contact
+from drake_hybrid.analysis.design import design_time_constant
+from drake_hybrid.analysis.linearization import linearize_at_contact
 from drake_hybrid.control.gains import ControlMode, HybridGains
 from drake_hybrid.core.errors import ArgumentError, ConfigError, ForceSignError, OffConstraintError, StartCollisionError
 from drake_hybrid.scenario.builder import build_scenario

@@ -5,7 +5,9 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from drake_hybrid.analysis.linearization import Linearization, PredictedEigenvalues, match_eigenvalues
+from drake_hybrid.analysis.design import PredictedEigenvalues
+from drake_hybrid.analysis.linearization import Linearization
+from drake_hybrid.analysis.matching import match_eigenvalues
 from drake_hybrid.viz import eigenvalue_plots, run_plots, sweep_plots
 
 

@@ -8,7 +8,8 @@ from run_checks import assert_rows_settled_within
 
 from drake_hybrid import (BranchError, ChartSingularityError, EulerZXZChart, PoseChart, sphere_constraint,
                           sphere_paper_projection)
-from drake_hybrid.analysis.linearization import linearize_continuous, linearize_discrete
+from drake_hybrid.analysis.discrete_linearization import linearize_discrete
+from drake_hybrid.analysis.linearization import linearize_continuous
 from drake_hybrid.core.kinematics import EndEffectorKinematics, inverse_kinematics
 from drake_hybrid.core.projections import ConstraintSpace
 from drake_hybrid.experiments.simulation import RunStopped, simulate

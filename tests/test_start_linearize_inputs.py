@@ -11,9 +11,10 @@ import pytest
 from pydrake.math import RigidTransform
 from pydrake.systems.analysis import Simulator
 
+from drake_hybrid.analysis.discrete_linearization import linearize_discrete
 from drake_hybrid.analysis.linearization import (Linearization, equilibrium_config, linearize_at_contact,
-                                                 linearize_continuous, linearize_discrete, match_eigenvalues,
-                                                 predicted_match)
+                                                 linearize_continuous)
+from drake_hybrid.analysis.matching import match_eigenvalues, predicted_match
 from drake_hybrid.cli import main
 from drake_hybrid.core.errors import ArgumentError, NotAtEquilibriumError, OffConstraintError, UnreachablePoseError
 from drake_hybrid.scenario.builder import build_scenario

@@ -1,8 +1,9 @@
 """More bad input to the station blocks and the analysis functions, called directly in a user's own
 diagram: contact geometries, a ContactConfig or sensor config built in Python, effort limits, a log read
 with the wrong context, the checks other functions use (check_controller_plant, check_equilibrium,
-get_task), every public function of analysis.linearization, derivatives, environment and modes, and
-names with a trailing newline. Each gives a one-line typed error naming the callee and the argument."""
+get_task), every public function of analysis.design, matching, linearization, discrete_linearization,
+derivatives, environment and modes, and names with a trailing newline. Each gives a one-line typed error
+naming the callee and the argument."""
 
 import dataclasses
 import math
@@ -22,11 +23,12 @@ from pydrake.systems.primitives import ConstantVectorSource, Integrator
 from drake_hybrid import ConstraintSpace, GivenVelocityProjection, PoseChart, surface_constraint
 from drake_hybrid.analysis.derivatives import (central_difference_jacobian, checked_state_jacobian, column_errors,
                                                state_names)
+from drake_hybrid.analysis.design import designed_eigenvalues_by_row, predicted_eigenvalues, predicted_errors
+from drake_hybrid.analysis.discrete_linearization import linearize_discrete, linearize_sampled_loop
 from drake_hybrid.analysis.environment import (contact_environment, impedance_loop, impedance_matrix,
                                                impedance_response, mass_factor_within, root_pairs, row_forces)
-from drake_hybrid.analysis.linearization import (check_equilibrium, designed_eigenvalues_by_row, equilibrium_config,
-                                                 linearize_continuous, linearize_discrete, linearize_sampled_loop,
-                                                 match_eigenvalues, predicted_eigenvalues, predicted_errors)
+from drake_hybrid.analysis.linearization import check_equilibrium, equilibrium_config, linearize_continuous
+from drake_hybrid.analysis.matching import match_eigenvalues
 from drake_hybrid.analysis.modes import diagnose_unstable_modes, drift_eigenvalues, explained_modes
 from drake_hybrid.control.gains import HybridGains
 from drake_hybrid.core.errors import ArgumentError, ConfigError, OffConstraintError, PathError

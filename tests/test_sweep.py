@@ -11,7 +11,7 @@ import time
 import numpy as np
 import pytest
 
-from drake_hybrid.analysis.linearization import linearize_sampled_loop
+from drake_hybrid.analysis.discrete_linearization import linearize_sampled_loop
 from drake_hybrid.cli import main, make_parser
 from drake_hybrid.core.errors import MissingExtraError
 from drake_hybrid.experiments.config_paths import apply_parameters, set_config_value
@@ -492,7 +492,7 @@ def test_an_unstable_looking_one_period_map_is_checked_at_a_larger_step():
 def test_the_discrete_verdict_weighs_the_step_check(worst, check, margin, verdict):
     """experiments.sweep_point._discrete_verdict: the sampled loop's verdict from the regulated modes'
     worst rate and the step check at a ten times larger step (figures from docs/stability.md)."""
-    from drake_hybrid.analysis.linearization import StepCheck
+    from drake_hybrid.analysis.discrete_linearization import StepCheck
     from drake_hybrid.experiments.sweep_point import _discrete_verdict
 
     step_check = None if check is None else StepCheck(1e-5, check[0], 1e-4, check[1])

@@ -9,12 +9,13 @@ import cloudpickle
 import numpy as np
 import pytest
 
-from drake_hybrid.analysis.linearization import linearize_continuous, linearize_discrete
+from drake_hybrid.analysis.discrete_linearization import linearize_discrete
+from drake_hybrid.analysis.linearization import linearize_continuous
 from drake_hybrid.cli import main
 from drake_hybrid.core.errors import ConfigError
 from drake_hybrid.experiments.simulation import simulate
-from drake_hybrid.tasks import hooks
 from drake_hybrid.station.parsing import models_directory
+from drake_hybrid.tasks import hooks
 from drake_hybrid.tasks.hooks import ENTRY_POINT_GROUP, TaskHook, get_hook, register_hook
 from drake_hybrid.tasks.registry import get_task
 from drake_hybrid.tasks.task_file import load_task_file

@@ -9,7 +9,8 @@ from run_checks import assert_rows_settled_within
 from pydrake.geometry import Role
 from pydrake.systems.framework import DiagramBuilder
 
-from drake_hybrid.analysis.linearization import design_time_constant, linearize_continuous, predicted_eigenvalues
+from drake_hybrid.analysis.design import design_time_constant, predicted_eigenvalues
+from drake_hybrid.analysis.linearization import linearize_continuous
 from drake_hybrid.cli import main
 from drake_hybrid.core.kinematics import EndEffectorKinematics
 from drake_hybrid.experiments.simulation import simulate

@@ -1,4 +1,4 @@
-"""The kinematic instability of the Raibert-Craig hybrid controller, reproduced (issue 18).
+"""The kinematic instability of the Raibert-Craig hybrid controller, reproduced.
 
 Setting (An & Hollerbach 1989; Fisher & Mujtaba 1992): a planar two-link arm
 (``models/planar_2r.sdf``, 1.0 and 0.8 m) whose tip is position-controlled along one Cartesian axis
@@ -33,7 +33,7 @@ from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import ConstantVectorSource, Linearize
 
-from drake_hybrid.analysis.linearization import predicted_eigenvalues
+from drake_hybrid.analysis.design import predicted_eigenvalues
 from drake_hybrid.control.baselines import (AxisPDOpenLoopForceController, JointServoHybridController,
                                             joint_servo_eigenvalues)
 from drake_hybrid.control.controller import HybridController
@@ -43,9 +43,11 @@ from drake_hybrid.core.charts import PlanarPointChart
 from drake_hybrid.core.constraints import Constraint
 from drake_hybrid.core.kinematics import EndEffectorKinematics
 from drake_hybrid.core.projections import ConstraintSpace, GivenVelocityProjection
+from drake_hybrid.station.loop import connect_hybrid_loop
 from drake_hybrid.station.parsing import ConfigureParser, add_model
+from drake_hybrid.systems.sources import Profile, ProfileSource
 
-HINTED_CONFIGURATION = np.radians([-160.0, 30.0])   # rad: the issue's hint, where Raibert-Craig is unstable
+HINTED_CONFIGURATION = np.radians([-160.0, 30.0])   # rad: a configuration where Raibert-Craig (JOINT_GAINS) is unstable
 JOINT_GAINS = (5.0, 1.0)                            # K_q (1/s): unequal joint gains
 SERVO_RATE = 200.0                                  # K_s (1/s): the joint velocity servo
 # Li & Sastry in position-force mode with the same bandwidth: s^2 + 6 s + 5 = (s + 1)(s + 5), the
@@ -116,12 +118,10 @@ def build_two_link_loop(controller, q0=HINTED_CONFIGURATION, joint_gains=JOINT_G
     else:
         raise ValueError(f"controller must be one of {list(CONTROLLERS)}, got '{controller}'")
     system = builder.AddNamedSystem("controller", system)
-    for name, size in (("desired_velocity", 1), ("desired_acceleration", 1), ("desired_force", 1),
-                       ("measured_wrench", 6)):
-        source = builder.AddNamedSystem(name, ConstantVectorSource(np.zeros(size)))
-        builder.Connect(source.get_output_port(), system.GetInputPort(name))
-    builder.Connect(plant.get_state_output_port(), system.GetInputPort("estimated_state"))
-    builder.Connect(system.GetOutputPort("actuation"), plant.get_actuation_input_port())
+    source = builder.AddNamedSystem("desired", ProfileSource(Profile(value=[0.0]), Profile(value=[0.0]), 1, 1))
+    wrench = builder.AddNamedSystem("measured_wrench", ConstantVectorSource(np.zeros(6)))
+    connect_hybrid_loop(builder, system, state=plant.get_state_output_port(), wrench=wrench.get_output_port(),
+                        actuation=plant.get_actuation_input_port(), source=source, owner="build_two_link_loop")
     diagram = builder.Build()
     context = diagram.CreateDefaultContext()
     plant.SetPositions(plant.GetMyMutableContextFromRoot(context), q0)

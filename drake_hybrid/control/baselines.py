@@ -1,4 +1,4 @@
-"""Baseline hybrid controllers with the ports of ``HybridController`` (issue 18).
+"""Baseline hybrid controllers with the ports of ``HybridController`` (compared in docs/baselines.md).
 
 What a user would write instead of Li & Sastry's law, as Drake LeafSystems (float and AutoDiffXd,
 continuous or sampled) that drop into the same closed loop (``ScenarioConfig.controller``):
@@ -31,9 +31,6 @@ Fisher & Mujtaba 1992)
 
 Both integrate e_p (the position error along the motion rows), so they report ``mode`` as
 position-force; the force rows' e_f and the other diagnostics are those of HybridController.
-
-Size: two LeafSystems with the ports, state and caches of HybridController (shared in
-``_declare_common`` and ``_BaselineMixin``), each a docstring and a short law.
 """
 
 import sys

@@ -16,9 +16,10 @@ law and closed loop.
 
 The law itself, line by line, is in ``law``; this module keeps the system: ports, cache
 entries, state and events.
-
-Size: over half of the module is the system's docstring (ports, closed loop, protections, arguments).
 """
+
+# Longer than 500 lines because over half of it is the system's docstring (its ports, closed loop, protections
+# and arguments), which the API reference renders.
 
 import sys
 
@@ -32,7 +33,7 @@ from pydrake.systems.scalar_conversion import TemplateSystem
 
 from drake_hybrid.control.damping import joint_damping, warn_damped_joints
 from drake_hybrid.control.fast_law import FastLaw
-from drake_hybrid.control.gains import ControlMode, HybridGains, check_poles
+from drake_hybrid.control.gains import ControlMode, HybridGains, ValidatedGains, check_poles
 from drake_hybrid.control.law import LawConstants, evaluate_law
 from drake_hybrid.control.law_system import LawSystemParts, declare_diagnostic_outputs, reported_diagnostics_vector
 from drake_hybrid.control.phases import ContactPhase
@@ -286,7 +287,8 @@ def HybridController_(T):
             self._float_frame = resolve_frame(plant, end_effector_frame)
             self._end_effector_point = vector(end_effector_point, "end_effector_point", owner, 3, unit="m")
             self.constraint_space = constraint_space
-            self.gains = instance(gains, "gains", owner, HybridGains, allow_none=True,
+            # A HybridGains is validated here; ValidatedGains come validated (scenario.builder.prepare_config).
+            self.gains = instance(gains, "gains", owner, (HybridGains, ValidatedGains), allow_none=True,
                                   what="a HybridGains (e.g. HybridGains(velocity=[10.0]))") or HybridGains()
             self.mode = ControlMode.parse(mode)
             self.control_period = positive(control_period, "control_period", owner, unit="s", allow_none=True)
@@ -310,7 +312,10 @@ def HybridController_(T):
                 raise ArgumentError(f"{owner}: sampled_diagnostics needs a control_period (a sampled controller)")
             compensate_tangential_force = boolean(compensate_tangential_force, "compensate_tangential_force", owner)
             fast_law = boolean(fast_law, "fast_law", owner)
-            self._gains = self.gains.matrices(k, m, self.mode, self.control_period)
+            if isinstance(self.gains, ValidatedGains):
+                self._gains = self.gains.check_sizes(k, m, owner)
+            else:
+                self._gains = self.gains.matrices(k, m, self.mode, self.control_period)
             self.kinematic_rows = tuple(constraint_space.constraint.kinematic_rows)
             check_generic_rank(constraint_space)
             actuation_matrix = plant.MakeActuationMatrix()

@@ -19,9 +19,10 @@ controller then runs the generic law, which raises the error with its message.
 Constants travel in two arrays built by ``fast_law.pack_constants``: ``reals`` (scalars at the
 ``R_*`` indices, then blocks) and ``ints`` (sizes and flags at the ``I_*`` indices, then the blocks'
 offsets in ``reals``). Nothing here compiles at import (numba compiles on first call; cache=True).
-
-Size: one compiled kernel per line of the law and its helpers (LU, Cholesky, bisection, charts).
 """
+
+# Longer than 500 lines because it is one numba cache unit: one compiled kernel per line of the law and the
+# helpers they call (LU, Cholesky, bisection, charts), cached together.
 
 import math
 

@@ -25,10 +25,6 @@ are checked against sympy's own 30-digit evaluation of the expressions they came
 point (``verify_generated``, core/oracle.py); a disagreement raises ``CodeGenerationError`` naming the
 term.
 
-Size: code generation, its check, the constants' packing, the first tick's compile-or-wait and the
-per-tick call of the compiled kernels are one idea (the float law compiled), and each needs the
-others' layout of the terms (the numerics are in fast_kernels, the background compile in fast_compile).
-
 AutoDiffXd controllers keep the generic path. Without numba (not installed, or it fails to import)
 ``build`` warns once and returns None; so does a constraint the compiler does not handle (e.g. a
 ``SelectingConstraint`` without a symbolic ``selector``): the generic path then runs.

@@ -207,10 +207,7 @@ class HybridGains:
 
     def as_lists(self, velocity_size, force_size, mode):
         """The gains as nested lists (for summary.json), keyed as in the CLI's summary."""
-        g = self.matrices(velocity_size, force_size, mode)
-        return {"velocity": g.velocity.tolist(), "position": g.position.tolist(),
-                "force_proportional": g.force_proportional.tolist(), "force_integral": g.force_integral.tolist(),
-                "impedance_mass": g.impedance_mass.tolist()}
+        return self.matrices(velocity_size, force_size, mode).as_lists()
 
 
 @dataclass
@@ -232,6 +229,21 @@ class ValidatedGains:
         # G = (I + K_fp)^-1 K_fi: the force loop's rate matrix (3.1-14).
         m = self.force_proportional.shape[0]
         self.force_rate = np.linalg.solve(np.eye(m) + self.force_proportional, self.force_integral)
+
+    def as_lists(self):
+        """The matrices as nested lists (summary.json's ``gains``)."""
+        return {"velocity": self.velocity.tolist(), "position": self.position.tolist(),
+                "force_proportional": self.force_proportional.tolist(), "force_integral": self.force_integral.tolist(),
+                "impedance_mass": self.impedance_mass.tolist()}
+
+    def check_sizes(self, velocity_size, force_size, owner):
+        """ArgumentError naming ``owner`` unless K_v is k x k and K_fi m x m (matrices validated for other sizes)."""
+        if self.velocity.shape != (velocity_size, velocity_size) or \
+                self.force_integral.shape != (force_size, force_size):
+            raise ArgumentError(f"{owner}: gains are matrices for k = {self.velocity.shape[0]} velocity and m = "
+                                f"{self.force_integral.shape[0]} force rows; the constraint space has k = "
+                                f"{velocity_size}, m = {force_size}")
+        return self
 
     def designed_poles(self, mode):
         """{gain: the poles s (1/s) of the loops it designs}: the velocity rows' -eig(K_v) (or the roots of

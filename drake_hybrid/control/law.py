@@ -37,9 +37,6 @@ Every function is pure except that ``joint_torque`` asks the plant for M and inv
 Float controllers run the same lines compiled (``fast_law``, ``fast_kernels``: numba, one call per
 tick); this module stays the law's definition and its AutoDiffXd path, and tests/test_fast_law.py
 holds the compiled path to it (every output port equal to 1e-12). A change here goes there too.
-
-Size: the law's single home, one small function per line, each with the derivation of its line
-(why it is there, what it assumes) in its docstring.
 """
 
 import numpy as np

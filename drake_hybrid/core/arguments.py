@@ -226,8 +226,8 @@ def instance(value, name, owner, kinds, *, what=None, allow_none=False, error=Ar
 
 def relative_tolerance(value, name, owner, *, error=ArgumentError):
     """``number`` in (0, 1]: a relative tolerance (0.05: within 5 %), as ``drake-hybrid analyze --tolerance``
-    and ``analysis.linearization`` take it (0, NaN, a negative one or one above 1 would give a verdict that
-    means nothing)."""
+    and ``analysis.matching`` and the linearizations take it (0, NaN, a negative one or one above 1 would give a
+    verdict that means nothing)."""
     return number(value, name, owner, low=0.0, low_inclusive=False, high=1.0, unit="relative: 0.05 is within 5 %",
                   error=error)
 

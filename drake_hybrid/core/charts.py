@@ -24,7 +24,7 @@ Charts provided:
 ``PlanarChart``
     r = (x, y, theta) in a plane (Example 2.1). No singularity.
 ``PlanarPointChart``
-    r = (x, y), a point in a plane without orientation (the 2R arm of issue 18).
+    r = (x, y), a point in a plane without orientation (the 2R arm of ``analysis.kinematic_instability``).
 ``EulerZXZChart``
     r = (x, y, z, phi, theta, psi) with R = Rz(phi) Rx(theta) Rz(psi)
     exactly as (2.1-2). Singular where sin(theta) = 0 (approach vector along
@@ -37,9 +37,6 @@ Charts provided:
     rather than in angles, and the rotational velocity rows are not
     integrable, so an integrated rotational "position" error is path
     dependent (docs/theory.md §6, position errors).
-
-Size: four charts (planar, planar point, z-x-z Euler, pose) with their symbolic and numeric maps;
-they share the base class and helpers of this module.
 """
 
 import math
@@ -227,7 +224,7 @@ class PlanarChart(Chart):
 class PlanarPointChart(PlanarChart):
     """r = (x, y): the position of a point in a plane of the world, without its orientation (d = 2).
 
-    The chart of a planar two-link arm (issue 18: the kinematic instability of the Raibert-Craig
+    The chart of a planar two-link arm (``analysis.kinematic_instability``: the kinematic instability of the Raibert-Craig
     controller). The plane and its axes as in PlanarChart; ``pose`` keeps the reference rotation.
     """
 

@@ -27,10 +27,6 @@ rest, after the end the last. ``SurfacePath.hold(centre, normal, force)`` is the
 
 Every argument is checked at the call, before any Drake call: a bad one is a one-line ``PathError``
 naming it (``evaluate``'s t finite, ``offset`` >= 0, at most ``core.patterns.MAX_PATH_POINTS`` samples).
-
-Size: one idea, a path from its points to its time-parameterized reference (sampling, offset, splines,
-Toppra with the check of its limits, evaluation), with the checks of the builders' arguments; split, the
-builders and the segments they make would share their private helpers across modules.
 """
 
 import math

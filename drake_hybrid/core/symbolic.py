@@ -22,10 +22,6 @@ from at 30 significant digits (``expr.evalf(30, subs=...)``, which shares none o
 AutoDiffXd path's derivatives are compared with central differences of the float path, and with
 sympy's derivative where those differ (``check_gradients``): a disagreement raises
 ``CodeGenerationError`` naming the term (``core.oracle``).
-
-Size: what may be compiled (the whitelist of nodes, the rewrites), the namespaces of each path (float,
-AutoDiffXd, numba's header) and the printer change together: a function added to one must be added to
-all three, and refused by none.
 """
 
 import itertools

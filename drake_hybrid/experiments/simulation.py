@@ -38,7 +38,7 @@ from tqdm import tqdm
 from pydrake.systems.analysis import ApplySimulatorConfig, Simulator
 from pydrake.systems.framework import EventStatus
 
-from drake_hybrid.analysis.linearization import controller_prediction, design_time_constant, predicted_errors
+from drake_hybrid.analysis.design import controller_prediction, design_time_constant, predicted_errors
 from drake_hybrid.control.gains import ControlMode
 from drake_hybrid.core.progress import quiet
 from drake_hybrid.experiments.metrics import (contact_time, impedance_check, invalid_samples, last_valid, max_after,

@@ -59,7 +59,8 @@ import traceback
 
 import numpy as np
 
-from drake_hybrid.analysis.linearization import STEP_CHECK_RATE, linearize_continuous, linearize_sampled_loop
+from drake_hybrid.analysis.discrete_linearization import STEP_CHECK_RATE, linearize_sampled_loop
+from drake_hybrid.analysis.linearization import linearize_continuous
 from drake_hybrid.control import fast_compile
 from drake_hybrid.core.progress import quiet
 from drake_hybrid.experiments.metrics import max_row_errors, row_scales
@@ -98,7 +99,7 @@ def _worst_real(match):
 
 def _discrete_verdict(worst_real, step_check, margin):
     """The sampled loop's verdict from the regulated modes' worst rate ``worst_real`` (stable below
-    ``margin``) and the step check (``analysis.linearization.StepCheck``, made whenever any rate,
+    ``margin``) and the step check (``analysis.discrete_linearization.StepCheck``, made whenever any rate,
     marginal ones included, rose above STEP_CHECK_RATE at the step 1e-5):
 
     * a growth the check confirms, at or above ``margin`` at both steps, is an instability whichever

@@ -7,7 +7,7 @@ import copy
 
 import numpy as np
 
-from drake_hybrid.analysis.linearization import predicted_eigenvalues
+from drake_hybrid.analysis.design import predicted_eigenvalues
 from drake_hybrid.control.gains import ControlMode
 from drake_hybrid.core.errors import GainError
 from drake_hybrid.experiments.config_paths import set_config_value

@@ -158,10 +158,14 @@ def build_controller_station(config, lcm, hardware=None, initial_positions=None,
     if use_force_torque and robot.tool_weld is None:
         raise ConfigError(f"hardware.wrench_source: task '{task.name}' has no wrist weld for an F/T sensor; use "
                           "'external_torque'")
+    # Each gain set validated here, once, against the task's sizes and the rate (as prepare_config the first).
+    gain_sets = [ready]
     if gain_changes:
         times = [float(time) for time, _ in gain_changes]
         if not all(time > 0 and math.isfinite(time) for time in times) or times != sorted(set(times)):
             raise ConfigError(f"gain_changes: times must be positive, finite and increasing, got {times}")
+        gain_sets += [dataclasses.replace(ready, config=dataclasses.replace(config, gains=gains), gains=gains.matrices(
+            space.velocity_size, space.force_size, ready.mode, period)) for _, gains in gain_changes]
     limits = (hardware.torque_limits if hardware.torque_limits is not None else
               [plant.get_joint_actuator(i).effort_limit() for i in plant.GetJointActuatorIndices()])
     if len(limits) != n:
@@ -216,10 +220,8 @@ def build_controller_station(config, lcm, hardware=None, initial_positions=None,
 
     # The law (one per gain set), each closed by the loop's one wiring.
     controllers = []
-    for index, gains in enumerate([None] + [gains for _, gains in gain_changes]):
-        options = controller_options(ready if gains is None else dataclasses.replace(
-            ready, config=dataclasses.replace(config, gains=gains)), plant, plant, robot, period,
-            with_loggers and index == 0)
+    for index, gain_set in enumerate(gain_sets):
+        options = controller_options(gain_set, plant, plant, robot, period, with_loggers and index == 0)
         law = builder.AddNamedSystem("controller" if index == 0 else f"controller_{index}", make_hybrid_controller(
             plant, robot, space, sensor=config.sensor, plant=None, control_period=period,
             plant_time_step=hardware.damping_time_step, **options))

@@ -240,7 +240,7 @@ SCORES = ("max_velocity_error_percent_after_5_time_constants", "max_force_error_
 
 
 def compare_with_direct(config, hardware=None):
-    """Run ``config`` directly wired and through the hardware loop; the figures of issue 19: both
+    """Run ``config`` directly wired and through the hardware loop; the figures docs/hardware.md reports: both
     runs' errors after five time constants (%), their differences (percentage points), the largest
     joint and force differences over the run, the measured message delay and the stop (None)."""
     direct = simulate(config)

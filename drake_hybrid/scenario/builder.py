@@ -25,7 +25,7 @@ from pydrake.geometry import Meshcat, MeshcatVisualizer
 from pydrake.systems.framework import DiagramBuilder
 
 from drake_hybrid.control.baselines import make_baseline
-from drake_hybrid.control.gains import ControlMode, gain_matrix
+from drake_hybrid.control.gains import ControlMode, ValidatedGains, gain_matrix
 from drake_hybrid.control.phases import ContactPhase
 from drake_hybrid.core.errors import ConfigError
 from drake_hybrid.core.projections import ConstraintSpace
@@ -44,13 +44,15 @@ from drake_hybrid.tasks.task import Scenario, Task, pad_kinematic_rows
 @dataclasses.dataclass(frozen=True)
 class PreparedConfig:
     """A config validated once, with what every diagram built from it starts from: the ``task``, the
-    law's ``mode``, the ``constraint_space``, and the ``config`` with its desired force padded with zeros
-    on the kinematic rows (and a path job's commands at its first point)."""
+    law's ``mode``, the ``constraint_space``, the ``config`` with its desired force padded with zeros on the
+    kinematic rows (and a path job's commands at its first point), and the law's ``gains`` validated
+    against the task's sizes and the control rate (None for a baseline law, which checks its own)."""
 
     task: Task
     mode: ControlMode
     constraint_space: ConstraintSpace
     config: ScenarioConfig
+    gains: Optional[ValidatedGains] = None
 
 
 def prepare_config(config: ScenarioConfig) -> PreparedConfig:
@@ -69,10 +71,11 @@ def prepare_config(config: ScenarioConfig) -> PreparedConfig:
     config.desired_force.validate(constraint_space.force_size, "desired_force")   # (a task may fill desired_velocity)
     if config.supervised:          # a guarded approach to a surface, which only pushes: over the whole course
         config.desired_force.check_keeps_sign("desired_force")
+    gains = None
     if config.controller == "li-sastry":     # the gains against the task's sizes and the control rate
-        config.gains.matrices(constraint_space.velocity_size, constraint_space.force_size, mode,
-                              config.control_period if config.control_period > 0 else None)
-    return PreparedConfig(task=task, mode=mode, constraint_space=constraint_space, config=config)
+        gains = config.gains.matrices(constraint_space.velocity_size, constraint_space.force_size, mode,
+                                      config.control_period if config.control_period > 0 else None)
+    return PreparedConfig(task=task, mode=mode, constraint_space=constraint_space, config=config, gains=gains)
 
 
 def controller_options(prepared: PreparedConfig, plant, controller_plant, robot, control_period: Optional[float],
@@ -87,7 +90,7 @@ def controller_options(prepared: PreparedConfig, plant, controller_plant, robot,
                                              robot.end_effector_point, space, gains=config.gains,
                                              baseline=config.baseline, control_period=control_period,
                                              sample_lead=sample_lead))
-    return dict(gains=config.gains, mode=prepared.mode, safety=config.safety, sample_lead=sample_lead,
+    return dict(gains=prepared.gains, mode=prepared.mode, safety=config.safety, sample_lead=sample_lead,
                 sampled_diagnostics=with_loggers and control_period is not None,
                 velocity_row_inertia=velocity_row_inertia(config, task, plant, space),
                 compensate_tangential_force=config.compensate_tangential_force)

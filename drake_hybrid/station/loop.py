@@ -62,7 +62,7 @@ from drake_hybrid.station.ports import add_named, guarded_connect, port_label, p
 from drake_hybrid.station.robot_model import (RobotModel, arm_model_name, check_finalized_robot_plant,
                                               check_station_parts)
 from drake_hybrid.station.sensing import (CONTINUOUS_LOOP_BANDWIDTH, ContactSensorConfig, WristSensorConfig,
-                                          add_sensing, check_sensor_config, wrench_lag)
+                                          check_sensor_config, sensing_of_checked, wrench_lag)
 from drake_hybrid.systems.faults import SensorFaultConfig
 from drake_hybrid.systems.path_source import PathSource
 from drake_hybrid.systems.sources import Profile, ProfileSource
@@ -280,8 +280,8 @@ def add_hybrid_controller(builder: DiagramBuilder, plant: MultibodyPlant, robot:
     arm = arm_model_name(plant, robot)
     controller = add_named(builder, "controller", controller, arm)
     tare = supervision is not None and supervision.tare_time > 0 and phase == ContactPhase.TARE
-    wrench_sensor, true_wrench, wrench_output, injector, conditioner, wrench_filter = add_sensing(
-        builder, plant, robot, sensor, control_period, sensor_faults, tare)
+    wrench_sensor, true_wrench, wrench_output, injector, conditioner, wrench_filter = sensing_of_checked(
+        builder, plant, robot, sensor, control_period, sensor_faults, tare, owner)
     if source is not False:
         source = add_named(builder, "desired", source, arm)
     supervisor = None

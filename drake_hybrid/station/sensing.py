@@ -74,6 +74,11 @@ def add_wrench_sensor(builder, plant, robot, sensor=None):
     owner = "add_wrench_sensor"
     check_station_parts(builder, plant, robot, owner)
     sensor = check_sensor_config(sensor if sensor is not None else ContactSensorConfig(), owner)
+    return _add_wrench_sensor(builder, plant, robot, sensor, owner)
+
+
+def _add_wrench_sensor(builder, plant, robot, sensor, owner):
+    """``add_wrench_sensor`` of arguments already checked."""
     arm = arm_model_name(plant, robot)
     if isinstance(sensor, WristSensorConfig):
         if robot.tool_weld is None:
@@ -107,6 +112,11 @@ def add_wrench_path(builder, wrench_output, sensor, period, sequence=None, tare=
     instance(wrench_output, "wrench_output", owner, OutputPort, what="an OutputPort (the wrench sensor's)")
     instance(sequence, "sequence", owner, OutputPort, allow_none=True)
     check_sensor_config(sensor, owner)
+    return _add_wrench_path(builder, wrench_output, sensor, period, sequence, tare, suffix, owner)
+
+
+def _add_wrench_path(builder, wrench_output, sensor, period, sequence, tare, suffix, owner):
+    """``add_wrench_path`` of arguments already checked."""
     conditioner = wrench_filter = None
     if sensor.condition:
         conditioner = add_named(builder, "wrench_conditioner", WrenchConditioner(
@@ -140,18 +150,25 @@ def add_sensing(builder, plant, robot, sensor, control_period, sensor_faults=Non
     it). Returns (sensor, its own output, the output the controller reads, injector, conditioner, filter)."""
     owner = "add_sensing"
     check_station_parts(builder, plant, robot, owner)
+    sensor = check_sensor_config(sensor if sensor is not None else ContactSensorConfig(), owner)
     instance(sensor_faults, "sensor_faults", owner, SensorFaultConfig, allow_none=True)
+    return sensing_of_checked(builder, plant, robot, sensor, control_period, sensor_faults, tare, owner)
+
+
+def sensing_of_checked(builder, plant, robot, sensor, control_period, sensor_faults, tare, owner):
+    """``add_sensing`` of arguments already checked (by ``add_sensing`` or ``station.loop.add_hybrid_controller``,
+    naming ``owner``)."""
     arm = arm_model_name(plant, robot)
-    wrench_sensor = add_wrench_sensor(builder, plant, robot, sensor)
+    wrench_sensor = _add_wrench_sensor(builder, plant, robot, sensor, owner)
     true_wrench = wrench_output = wrench_sensor.get_output_port(0)
     injector = None
     if sensor_faults is not None and sensor_faults.active():
         injector = add_named(builder, "sensor_faults", SensorFaultInjector(sensor_faults, control_period), arm)
         guarded_connect(builder, wrench_output, injector.GetInputPort("wrench"), owner)
         wrench_output = injector.GetOutputPort("faulty_wrench")
-    wrench_output, conditioner, wrench_filter = add_wrench_path(
-        builder, wrench_output, sensor if sensor is not None else ContactSensorConfig(), control_period,
-        sequence=injector.GetOutputPort("sequence") if injector is not None else None, tare=tare, suffix=arm)
+    wrench_output, conditioner, wrench_filter = _add_wrench_path(
+        builder, wrench_output, sensor, control_period, injector.GetOutputPort("sequence") if injector is not None
+        else None, tare, arm, owner)
     return wrench_sensor, true_wrench, wrench_output, injector, conditioner, wrench_filter
 
 

@@ -16,9 +16,6 @@ The walk from a file to a diagram::
 
 Every config dataclass validates itself with ``validate(prefix)``, raising ``ConfigError`` with
 the dotted field name; ``ScenarioConfig.validate`` calls them all.
-
-Size: one idea, the run's configuration: each section's dataclass with its fields documented (units
-included: ``schema_doc`` prints them for docs/task_files.md) and its validation.
 """
 
 import copyreg
@@ -207,7 +204,7 @@ class ScenarioConfig:
     supervision: SupervisionConfig = field(default_factory=SupervisionConfig)
     safety: SafetyConfig = field(default_factory=SafetyConfig)
     # The law: "li-sastry" (HybridController, default) or a baseline of control.baselines
-    # (issue 18: "raibert-craig", "fisher-mujtaba", "pd-open-loop-force"), with the same ports.
+    # (control.baselines: "raibert-craig", "fisher-mujtaba", "pd-open-loop-force"), with the same ports.
     controller: str = "li-sastry"
     baseline: BaselineGains = field(default_factory=BaselineGains)
     mechanism: MechanismConfig = field(default_factory=MechanismConfig)

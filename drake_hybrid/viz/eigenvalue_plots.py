@@ -11,7 +11,7 @@
 import numpy as np
 from matplotlib import cm, colors
 
-from drake_hybrid.analysis.linearization import nyquist_split
+from drake_hybrid.analysis.matching import nyquist_split
 from drake_hybrid.viz.figure_base import _pyplot
 
 

@@ -211,7 +211,7 @@ class CrankTurning(Task):
 
     def velocity_row_inertia(self, plant, config, constraint_space):
         """I_v = G^T M_c G: the crank's (arm and spinning handle) inertia along the velocity rows at
-        the start, for ``mechanism.source: plant`` (issue 18).
+        the start, for ``mechanism.source: plant`` (docs/baselines.md compares the laws on it).
 
         M_c is the crank's joint-space mass matrix (alpha, spin) in the simulation ``plant``; H maps
         its joint rates to the velocity rows, E_p nu of the handle frame (= the pad centre, with the

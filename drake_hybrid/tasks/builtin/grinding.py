@@ -15,9 +15,6 @@ arrays plus ``position_error`` (e_p) and ``tangential_force`` (F_v).
 Friction of two geometries combines as 2 mu_1 mu_2 / (mu_1 + mu_2) in Drake;
 the patch's own coefficient is chosen so that the pad on the patch sees
 ``rough_friction``.
-
-Size: the task and what explains its runs (the notes on the rough patch's edges and the sphere's
-breakaway, the phases the plots mark), which read the task's own geometry and log.
 """
 
 import math
