@@ -31,6 +31,7 @@ def add_ur5e_with_pad(plant, X_WBase=None):
     tasks keep the links away from it; see docs).
     """
 
+
     parser = Parser(plant)
     ConfigureParser(parser)
     parser.SetAutoRenaming(True)

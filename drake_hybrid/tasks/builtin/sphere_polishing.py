@@ -210,3 +210,4 @@ class SpherePolishing(Task):
         if not config.start.in_contact:
             return positions_at_depth(-config.start.gap)
         return pressing_positions(scenario, positions_at_depth)
+
