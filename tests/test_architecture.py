@@ -2,6 +2,7 @@
 of a readable size; and the theory it cites lives in the repository (docs/theory.md)."""
 
 import ast
+import json
 import re
 import shutil
 import subprocess
@@ -145,3 +146,58 @@ def test_theory_citations_name_existing_sections():
                     dangling.append(f"{path.relative_to(ROOT)}:{number}: §{match.group(1)}")
     assert cited > 0, "no file cites docs/theory.md"
     assert not dangling, f"citations of sections docs/theory.md does not have: {dangling}"
+
+
+def _defined_names():
+    """{module: the names its top level defines (functions, classes, assignments)} over the package."""
+    defined = {}
+    for path in modules():
+        parts = list(path.relative_to(ROOT).with_suffix("").parts)
+        parts = parts[:-1] if parts[-1] == "__init__" else parts
+        names = set()
+        for node in ast.parse(path.read_text()).body:
+            if isinstance(node, (ast.FunctionDef, ast.ClassDef)):
+                names.add(node.name)
+            elif isinstance(node, (ast.Assign, ast.AnnAssign)):
+                targets = node.targets if isinstance(node, ast.Assign) else [node.target]
+                names |= {name.id for target in targets for name in ast.walk(target) if isinstance(name, ast.Name)}
+        defined[".".join(parts)] = names
+    return defined
+
+
+def _python_sources():
+    """(file, a piece of Python) of the package, the tests, the benchmarks, the docs' scripts and examples
+    and the tutorials' code cells."""
+    for folder, pattern in (("drake_hybrid", "**/*.py"), ("tests", "*.py"), ("benchmarks", "*.py"), ("docs", "*.py")):
+        for path in sorted((ROOT / folder).glob(pattern)):
+            yield path, path.read_text()
+    for path in [ROOT / "README.md", *sorted((ROOT / "docs").rglob("*.md"))]:
+        if "_build" not in path.parts:
+            for block in re.findall(r"^```python\n(.*?)^```", path.read_text(), re.S | re.M):
+                yield path, block
+    for path in sorted((ROOT / "tutorials").glob("*.ipynb")):
+        for cell in json.loads(path.read_text())["cells"]:
+            if cell["cell_type"] == "code":
+                yield path, "\n".join(line for line in "".join(cell["source"]).splitlines()
+                                      if not line.lstrip().startswith(("%", "!")))
+
+
+def test_every_name_is_imported_from_its_one_home():
+    """One home per name: ``from drake_hybrid.M import name`` names a module M that defines ``name`` (or a
+    submodule of it), everywhere a user or the package imports it; the front door ``drake_hybrid`` itself
+    maps each of its names to its home (tests/test_one_composition.py)."""
+    defined = _defined_names()
+    elsewhere = []
+    for path, source in _python_sources():
+        try:
+            tree = ast.parse(source)
+        except SyntaxError:
+            continue
+        for node in ast.walk(tree):
+            if not (isinstance(node, ast.ImportFrom) and node.level == 0 and node.module
+                    and node.module.startswith("drake_hybrid.")):
+                continue
+            for alias in node.names:
+                if f"{node.module}.{alias.name}" not in defined and alias.name not in defined.get(node.module, ()):
+                    elsewhere.append(f"{path.relative_to(ROOT)}: from {node.module} import {alias.name}")
+    assert not elsewhere, "\n".join(sorted(set(elsewhere)))

@@ -8,7 +8,7 @@ from pydrake.systems.primitives import LogVectorOutput
 
 from drake_hybrid.core.arguments import instance, nonnegative
 from drake_hybrid.core.errors import ArgumentError
-from drake_hybrid.station.loop import HybridSystems
+from drake_hybrid.station.handles import HybridSystems
 from drake_hybrid.station.root_context import subsystem_context
 
 # The log's keys (read_log; log.npz names a few otherwise), each (samples x size), with "t" the sample times.
