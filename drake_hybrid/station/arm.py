@@ -3,13 +3,16 @@
 
 import os
 import re
+from typing import Callable, Dict, List, Mapping, Optional, Sequence, Tuple, Union
 from xml.etree import ElementTree
 
 import numpy as np
 
+from pydrake.geometry import GeometryId
 from pydrake.math import RigidTransform
 from pydrake.multibody.parsing import Parser
 from pydrake.multibody.plant import MultibodyPlant
+from pydrake.multibody.tree import Frame, ModelInstanceIndex, RigidBody, WeldJoint
 
 from drake_hybrid.core.arguments import describe, function, instance, positive, text
 from drake_hybrid.core.errors import ArgumentError, ConfigError, DrakeHybridError
@@ -17,7 +20,8 @@ from drake_hybrid.station.parsing import ConfigureParser, add_model, models_dire
 from drake_hybrid.station.robot_model import RobotModel, check_model_instance, check_unfinalized_plant, get_frame
 
 
-def weld_joints(plant, joint_names, model_instance=None):
+def weld_joints(plant: MultibodyPlant, joint_names: Union[str, Sequence[str]],
+                model_instance: Optional[ModelInstanceIndex] = None) -> List[WeldJoint]:
     """Replace each named joint by a weld at its zero position (before ``Finalize``).
 
     For parts the task does not move, such as gripper fingers: the hybrid law
@@ -56,7 +60,7 @@ def weld_joints(plant, joint_names, model_instance=None):
     return welds
 
 
-def urdf_effort_limits(path):
+def urdf_effort_limits(path: Union[str, os.PathLike]) -> Dict[str, float]:
     """{joint name: effort limit (N m or N)} from the ``<limit effort=...>`` tags of a URDF file.
     (Drake keeps a URDF's effort limits only on the actuators of its transmissions.)"""
     if not isinstance(path, (str, os.PathLike)):
@@ -71,7 +75,8 @@ def urdf_effort_limits(path):
             for joint in root.iter("joint") if joint.find("limit") is not None and joint.find("limit").get("effort")}
 
 
-def add_actuators(plant, model_instance, effort_limits=None):
+def add_actuators(plant: MultibodyPlant, model_instance: ModelInstanceIndex,
+                  effort_limits: Optional[Mapping[str, float]] = None) -> List[str]:
     """One actuator per single-dof joint of ``model_instance`` that has none (a URDF without
     transmissions), with the effort limit ``effort_limits[joint name]`` (e.g. from
     ``urdf_effort_limits``; inf where not given). Returns the actuator names.
@@ -159,7 +164,9 @@ def _flange(plant, arm, flange_frame, owner):
     return flange_frame
 
 
-def mount_tool(plant, arm, flange_frame, X_flange_tool=None, gripper_joints=(), gripper="weld", name="pad_tool"):
+def mount_tool(plant: MultibodyPlant, arm: ModelInstanceIndex, flange_frame: Union[str, Frame],
+               X_flange_tool: Optional[RigidTransform] = None, gripper_joints: Union[str, Sequence[str]] = (),
+               gripper: str = "weld", name: str = "pad_tool") -> RobotModel:
     """Mount the compliant ball pad (``models/pad_tool.sdf``: a ball of radius 20 mm, its centre 0.05 m
     along the tool's +z, the controlled point) on ``flange_frame`` of ``arm`` at ``X_flange_tool`` (default: the
     identity), before ``Finalize``.
@@ -221,7 +228,7 @@ def mount_tool(plant, arm, flange_frame, X_flange_tool=None, gripper_joints=(), 
                       passive_geometries=removed, only_pad_contact=True)
 
 
-def carried_bodies(plant, model_instance, body):
+def carried_bodies(plant: MultibodyPlant, model_instance: ModelInstanceIndex, body: RigidBody) -> List[RigidBody]:
     """The bodies of ``model_instance`` that ``body`` carries: outboard of it in the joint tree (before or
     after ``Finalize``), ``body`` itself excluded."""
     instance(plant, "plant", "carried_bodies", MultibodyPlant)
@@ -242,7 +249,7 @@ def carried_bodies(plant, model_instance, body):
     return carried
 
 
-def robot_plant(add_robot):
+def robot_plant(add_robot: Callable[[MultibodyPlant], RobotModel]) -> MultibodyPlant:
     """The controller's own model of your robot: ``add_robot(plant) -> RobotModel`` called on a new
     continuous MultibodyPlant (no SceneGraph, no workpiece), finalized. Returns the plant."""
     function(add_robot, "add_robot", "robot_plant", "add_robot(plant) -> RobotModel")
@@ -265,7 +272,9 @@ PAD_RADIUS = 0.02            # m, the pad sphere of models/pad_tool.sdf
 PAD_CENTER_IN_TOOL = 0.05    # m along the tool's +z axis (frame "pad_center")
 
 
-def add_pad_tool(plant, parser, wrist_frame, X_wrist_flange, name="pad_tool", center_frame="pad_center"):
+def add_pad_tool(plant: MultibodyPlant, parser: Parser, wrist_frame: Frame, X_wrist_flange: RigidTransform,
+                 name: str = "pad_tool",
+                 center_frame: str = "pad_center") -> Tuple[ModelInstanceIndex, WeldJoint, List[GeometryId]]:
     """Parse the pad tool as model ``name`` with its pad centre frame called ``center_frame`` (the
     model's own names by default; others let a plant hold several tools) and weld its flange to
     ``wrist_frame``. Returns (instance, weld, pad geometries)."""

@@ -6,16 +6,23 @@ those pairs' signed distances at a configuration, and ``check_robot_clearance`` 
 where any is below -``PENETRATION_TOLERANCE`` (StartCollisionError naming the bodies).
 """
 
+from typing import List, Tuple
+
+from numpy.typing import ArrayLike
+
 from pydrake.geometry import CollisionFilterDeclaration, GeometrySet, Role, SceneGraph
+from pydrake.systems.framework import Context, Diagram
 
 from drake_hybrid.core.arguments import joint_vector, nonnegative, text
 from drake_hybrid.core.errors import StartCollisionError
+from drake_hybrid.station.handles import HybridSystems
 from drake_hybrid.station.root_context import check_root_context
 
 PENETRATION_TOLERANCE = 1e-4      # m: a robot part this far inside another geometry at the start is a collision
 
 
-def robot_penetrations(diagram, root_context, systems, q, tolerance=PENETRATION_TOLERANCE):
+def robot_penetrations(diagram: Diagram, root_context: Context, systems: HybridSystems, q: ArrayLike,
+                       tolerance: float = PENETRATION_TOLERANCE) -> List[Tuple[str, str, float]]:
     """The robot's parts other than its tool (``systems.robot.pad_geometries``) that penetrate another
     geometry of the scene (the workpiece, a table) by more than ``tolerance`` (m) with the arm at ``q``:
     a list of (robot body, its geometry, the other geometry, depth in m), deepest first.
@@ -70,7 +77,8 @@ def _penetrations(diagram, root_context, systems, q, tolerance, owner):
     return sorted(found, key=lambda item: -item[3])
 
 
-def check_robot_clearance(diagram, root_context, systems, q, who):
+def check_robot_clearance(diagram: Diagram, root_context: Context, systems: HybridSystems, q: ArrayLike,
+                          who: str) -> None:
     """StartCollisionError naming the bodies if ``robot_penetrations`` finds any at ``q`` (``who``: the
     caller, which begins every message; its arguments are checked as ``robot_penetrations``'s)."""
     who = text(who, "who", "check_robot_clearance")

@@ -3,10 +3,11 @@
 
 import math
 from dataclasses import dataclass
+from typing import Any, List, Optional, Sequence, Tuple, Union
 
 from pydrake.geometry import (CollisionFilterDeclaration, GeometryId, GeometrySet, ProximityProperties, Role,
                               RoleAssign, SceneGraph)
-from pydrake.multibody.plant import CoulombFriction, MultibodyPlantConfig
+from pydrake.multibody.plant import CoulombFriction, MultibodyPlant, MultibodyPlantConfig
 
 from drake_hybrid.core.arguments import describe, instance, nonnegative
 from drake_hybrid.core.errors import ArgumentError, ConfigError, check_fields, check_finite
@@ -19,7 +20,7 @@ DISCRETE_APPROXIMATIONS = ("sap", "tamsi", "similar", "lagged")
 SURFACE_REPRESENTATIONS = ("polygon", "triangle")
 
 
-def validate_plant_config(plant, prefix="plant."):
+def validate_plant_config(plant: MultibodyPlantConfig, prefix: str = "plant.") -> None:
     """ConfigError naming the MultibodyPlantConfig field Drake would reject (or that would break the law)."""
     if not plant.time_step >= 0:
         raise ConfigError(f"{prefix}time_step must be >= 0 (0 means continuous), got {plant.time_step}")
@@ -68,7 +69,7 @@ class ContactConfig:
                      nonnegative=("pad_dissipation", "friction", "workpiece_resolution"))
 
 
-def default_plant_config(time_step=1.0e-3):
+def default_plant_config(time_step: float = 1.0e-3) -> MultibodyPlantConfig:
     """The package's MultibodyPlantConfig: SAP steps of ``time_step`` (0: continuous) with hydroelastic
     contact; a Drake struct, so ``ApplyMultibodyPlantConfig`` / ``AddMultibodyPlant`` take it and your
     own settings can replace any field."""
@@ -82,7 +83,9 @@ def _tool_geometries(robot, owner):
     return geometry_ids(robot, "robot", owner, "the RobotModel of mount_tool or a list of the pad's GeometryIds")
 
 
-def apply_contact_defaults(plant, scene_graph, robot, workpiece_geometries, contact=None):
+def apply_contact_defaults(plant: MultibodyPlant, scene_graph: SceneGraph,
+                           robot: Union[RobotModel, Sequence[GeometryId]], workpiece_geometries: Sequence[GeometryId],
+                           contact: Optional[ContactConfig] = None) -> None:
     """The package's contact material (``contact``: a ContactConfig, default its defaults) on your
     tool (``robot``: the RobotModel of ``mount_tool``, or the pad's geometry ids) and workpiece
     geometries: the pad's hydroelastic modulus, mesh and dissipation, SAP's relaxation times (0.03 s
@@ -110,7 +113,8 @@ def apply_contact_defaults(plant, scene_graph, robot, workpiece_geometries, cont
     set_contact_properties(plant, scene_graph, workpiece, contact, pad=False)
 
 
-def geometry_ids(value, name, owner, what, *, collections=(list, tuple), nonempty=False):
+def geometry_ids(value: Any, name: str, owner: str, what: str, *, collections: Tuple[type, ...] = (list, tuple),
+                 nonempty: bool = False) -> List[GeometryId]:
     """``value`` (a GeometryId, or one of ``collections`` of them; not empty if ``nonempty``) as a list of
     GeometryIds; ArgumentError naming ``owner`` and ``name``, ``what`` saying what it must be."""
     if isinstance(value, GeometryId):
@@ -121,7 +125,8 @@ def geometry_ids(value, name, owner, what, *, collections=(list, tuple), nonempt
     return list(value)
 
 
-def set_contact_properties(plant, scene_graph, geometry_ids, config, pad):
+def set_contact_properties(plant: MultibodyPlant, scene_graph: SceneGraph, geometry_ids: Sequence[GeometryId],
+                           config: ContactConfig, pad: bool) -> None:
     """The contact material of ``config`` (a ContactConfig) on ``geometry_ids``, before ``Finalize``: a
     pad's (``pad``: hydroelastic modulus, mesh, Hunt-Crossley dissipation, SAP relaxation time) or a
     workpiece's (relaxation time, mesh); friction on both."""
@@ -146,7 +151,8 @@ def set_contact_properties(plant, scene_graph, geometry_ids, config, pad):
         scene_graph.AssignRole(plant.get_source_id(), geometry_id, properties, RoleAssign.kReplace)
 
 
-def only_tool_touches(plant, scene_graph, robot, workpiece_geometries):
+def only_tool_touches(plant: MultibodyPlant, scene_graph: SceneGraph, robot: RobotModel,
+                      workpiece_geometries: Sequence[GeometryId]) -> List[GeometryId]:
     """Collision filters after ``plant.Finalize()``: the robot (every body of ``robot.model_instances``)
     touches the workpiece with its tool's pad (``robot.pad_geometries``) only, and its links do not
     touch each other; ``robot.passive_geometries`` lose their proximity role. Returns the filtered

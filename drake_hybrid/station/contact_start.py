@@ -7,10 +7,15 @@ integrated), the typed checks (on the constraint, the branch, a pushing force, t
 says, the links clear of the scene), then ``station.start.prime_start``.
 """
 
-import numpy as np
+from typing import Iterable, Optional
 
-from pydrake.geometry import HydroelasticContactRepresentation
+import numpy as np
+from numpy.typing import ArrayLike
+
+from pydrake.geometry import GeometryId, HydroelasticContactRepresentation
 from pydrake.math import RigidTransform
+from pydrake.multibody.plant import MultibodyPlant
+from pydrake.systems.framework import Context, Diagram
 
 from drake_hybrid.control.phases import ContactPhase
 from drake_hybrid.core.arguments import describe, instance, joint_vector, positive, vector
@@ -20,12 +25,14 @@ from drake_hybrid.core.kinematics import inverse_kinematics
 from drake_hybrid.core.preconditions import check_pushing_force
 from drake_hybrid.station.clearance import check_robot_clearance
 from drake_hybrid.station.contact import geometry_ids
+from drake_hybrid.station.handles import HybridSystems
 from drake_hybrid.station.root_context import check_root_context
 from drake_hybrid.station.start import holding_torque, pressing_depth, prime_start
 from drake_hybrid.systems.wrist_force_torque_sensor import WristForceTorqueSensor
 
 
-def rest_contact_wrench(plant, plant_context, robot_geometries, p_WP):
+def rest_contact_wrench(plant: MultibodyPlant, plant_context: Context, robot_geometries: Iterable[GeometryId],
+                        p_WP: ArrayLike) -> np.ndarray:
     """The wrench on the robot at rest from its hydroelastic contacts, at the point ``p_WP`` (world),
     as a Drake SpatialForce vector [torque; force] (N m, N): the pressure of every contact surface
     touching ``robot_geometries`` integrated over its faces (a rest state has no dissipation and no
@@ -90,7 +97,7 @@ def _registered_geometries(robot_geometries, inspector, owner):
 CENTROID = np.full(3, 1.0 / 3.0)           # a triangle's centroid in barycentric coordinates
 
 
-def check_start_sensor(systems, owner):
+def check_start_sensor(systems: HybridSystems, owner: str) -> None:
     """ArgumentError for a ``WristForceTorqueSensor`` on a continuous plant: its reading is the weld's
     reaction, which on a continuous plant depends on the accelerations the controller's torque causes
     (and leaves out the tool's weight with strict hydroelastic contact), so neither the reading nor
@@ -104,8 +111,9 @@ def check_start_sensor(systems, owner):
             "put at rest; use the contact sensor (sensor=None) for the continuous loop, or a discrete plant")
 
 
-def solve_contact_start(diagram, root_context, systems, start_pose, joint_guess, desired_force=None,
-                        max_depth=0.01, tolerance=1e-3):
+def solve_contact_start(diagram: Diagram, root_context: Context, systems: HybridSystems, start_pose: RigidTransform,
+                        joint_guess: ArrayLike, desired_force: Optional[ArrayLike] = None, max_depth: float = 0.01,
+                        tolerance: float = 1e-3) -> np.ndarray:
     """Put your diagram at a start pressing with F_d, at rest, and set every state around the plant.
 
     ``systems`` is what ``station.loop.add_hybrid_controller`` returned; ``start_pose`` the
@@ -156,7 +164,8 @@ def solve_contact_start(diagram, root_context, systems, start_pose, joint_guess,
                             tolerance, owner, "start_pose")
 
 
-def solve_path_start(diagram, root_context, systems, joint_guess, gap=0.005, max_depth=0.01, tolerance=1e-3):
+def solve_path_start(diagram: Diagram, root_context: Context, systems: HybridSystems, joint_guess: ArrayLike,
+                     gap: float = 0.005, max_depth: float = 0.01, tolerance: float = 1e-3) -> np.ndarray:
     """Put your diagram at the start of its path job (``add_hybrid_controller(..., path=job)``), at rest,
     and set every state around the plant. Returns the arm's joint positions.
 

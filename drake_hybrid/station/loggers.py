@@ -1,9 +1,11 @@
 """Loggers of every signal of a hybrid loop, and the log they give.
 """
 
-from typing import Any, Dict, Optional
+from typing import Any, Dict, Optional, Tuple
 
-from pydrake.systems.framework import DiagramBuilder
+import numpy as np
+
+from pydrake.systems.framework import Context, DiagramBuilder
 from pydrake.systems.primitives import LogVectorOutput
 
 from drake_hybrid.core.arguments import instance, nonnegative
@@ -84,7 +86,8 @@ def add_loggers(builder: DiagramBuilder, systems: HybridSystems,
     return loggers
 
 
-def logged(loggers, root_context, name, owner="logged"):
+def logged(loggers: Dict[str, Any], root_context: Context, name: str,
+           owner: str = "logged") -> Tuple[np.ndarray, np.ndarray]:
     """(times, samples x size) of logger ``name`` of ``loggers`` (``add_loggers``) in ``root_context`` (the
     root context of the diagram they were added to: ArgumentError naming ``owner`` otherwise)."""
     instance(loggers, "loggers", owner, dict, what="the dict of add_loggers")
@@ -98,7 +101,7 @@ def logged(loggers, root_context, name, owner="logged"):
     return log.sample_times(), log.data().T[:, columns]
 
 
-def read_log(loggers: Dict[str, object], root_context):
+def read_log(loggers: Dict[str, Any], root_context: Context) -> Dict[str, np.ndarray]:
     """{key: array} of every logger of ``add_loggers`` in ``root_context``, with "t" (the sample times of
     the first), keyed by ``LOG_KEYS`` (log.npz calls a few otherwise: velocity, constraint, torque, q and v)."""
     instance(loggers, "loggers", "read_log", dict, what="the dict of add_loggers")

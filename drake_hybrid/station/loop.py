@@ -5,8 +5,9 @@ everything that feeds it to YOUR builder and plant, wired, and returns the loop'
 (``station.handles.HybridSystems``)::
 
     plant ─contact_results / reaction_forces, body_poses─► wrench_sensor ─► [faults] ─► [filter or conditioner] ─┐
-    plant ─state (robot.arm)────────────────────────────────────────────────────────────────────────────────────┼─► controller ─actuation─► plant
-    source (ProfileSource, PathSource of ``path=``, or yours) ─desired_velocity, desired_acceleration, desired_force┘
+    plant ─state (robot.arm)───────────────────────────────────────────────────────────────────────────┼─► controller
+    source (a ProfileSource, the PathSource of ``path=``, or yours) ─desired_*────────────────────────────┘    │
+    plant (robot.arm) ◄─actuation─────────────────────────────────────────────────────────────────────────────────┘
     [supervisor: controller ─force, constraint_value─► supervisor ─contact_phase, approach_reference─► controller]
     [path: source ─path_position_error─► controller; supervisor ─contact_phase─► source ─path_done─► supervisor]
 
@@ -49,7 +50,7 @@ from pydrake.multibody.plant import MultibodyPlant
 from pydrake.systems.framework import DiagramBuilder, InputPort, OutputPort, System
 
 from drake_hybrid.control.controller import HybridController
-from drake_hybrid.control.gains import ControlMode, HybridGains
+from drake_hybrid.control.gains import ControlMode, HybridGains, ValidatedGains
 from drake_hybrid.control.phases import ContactPhase
 from drake_hybrid.control.supervision import ContactSupervisor, SupervisionConfig
 from drake_hybrid.core.arguments import describe, instance, vector
@@ -90,7 +91,8 @@ def connect_hybrid_loop(builder: DiagramBuilder, controller: System, *, state: O
         source ─desired_velocity, desired_acceleration, desired_force─► controller (desired_force ─► supervisor)
         controller ─force, constraint_value─► supervisor ─contact_phase, approach_reference─► controller
         supervisor ─contact_phase─► conditioner (a taring WrenchConditioner)
-        source ─path_position_error─► controller;  supervisor ─contact_phase─► source;  source ─path_done─► supervisor.lift_off
+        source ─path_position_error─► controller;  supervisor ─contact_phase─► source
+        source ─path_done─► supervisor.lift_off
 
     ``state`` is the arm's [q; v] (a plant's state output, or a real arm's watchdog), ``wrench`` the
     port the controller reads the wrench from, ``actuation`` the input port its torque drives (the
@@ -116,8 +118,8 @@ def connect_hybrid_loop(builder: DiagramBuilder, controller: System, *, state: O
             guarded_connect(builder, source.GetOutputPort("desired_force"), supervisor.GetInputPort("desired_force"),
                             owner)
         if conditioner is not None:
-            guarded_connect(builder, supervisor.GetOutputPort("contact_phase"), conditioner.GetInputPort("contact_phase"),
-                            owner)
+            guarded_connect(builder, supervisor.GetOutputPort("contact_phase"),
+                            conditioner.GetInputPort("contact_phase"), owner)
     if isinstance(source, PathSource):
         if not controller.HasInputPort("path_position_error"):
             raise ArgumentError(f"{owner}: the source runs a path, but controller '{controller.get_name()}' has no "
@@ -145,7 +147,8 @@ def _connect_shared(builder, output_port, input_port, owner):
 
 def make_hybrid_controller(controller_plant: MultibodyPlant, robot: RobotModel, constraint_space: ConstraintSpace, *,
                            sensor: Union[ContactSensorConfig, WristSensorConfig], plant: Optional[MultibodyPlant],
-                           gains: Optional[HybridGains] = None, mode: Union[ControlMode, str] = ControlMode.VELOCITY_FORCE,
+                           gains: Union[HybridGains, ValidatedGains, None] = None,
+                           mode: Union[ControlMode, str] = ControlMode.VELOCITY_FORCE,
                            control_period: Optional[float] = None, supervision: Optional[SupervisionConfig] = None,
                            path: bool = False, **options: Any) -> HybridController:
     """The HybridController of a loop (the one place a loop's controller is made): on ``controller_plant``

@@ -18,11 +18,15 @@ a task file may write ``package://example-robot-data/robots/...``.
 import functools
 import sys
 from pathlib import Path
+from typing import Dict, List, Mapping, Optional
+
+from pydrake.multibody.parsing import Parser
+from pydrake.multibody.tree import ModelInstanceIndex
 
 _PACKAGE = Path(__file__).resolve().parent.parent          # drake_hybrid/
 
 
-def models_directory():
+def models_directory() -> Path:
     """The folder holding package.xml and the model files."""
     for candidate in (_PACKAGE / "models", _PACKAGE.parent / "models"):
         if (candidate / "package.xml").exists():
@@ -30,7 +34,7 @@ def models_directory():
     raise FileNotFoundError(f"drake_hybrid's models folder (with package.xml) is missing next to {_PACKAGE}")
 
 
-def installed_model_packages():
+def installed_model_packages() -> Dict[str, Path]:
     """{package name: folder} of the model packages pip installed in the cmeel layout: every
     ``<sys.path entry>/cmeel.prefix/share/<folder>/package.xml`` (named by the folder, as
     example-robot-data's URDFs name themselves). Read from the disk, nothing is downloaded."""
@@ -43,7 +47,7 @@ def installed_model_packages():
     return packages
 
 
-def ConfigureParser(parser, packages=None):
+def ConfigureParser(parser: Parser, packages: Optional[Mapping[str, Path]] = None) -> Parser:
     """Make ``package://drake_hybrid/...`` resolve to the models folder and ``package://<name>/...``
     to ``packages`` {name: folder} (e.g. a task file's, with ``installed_model_packages``). Returns
     the parser."""
@@ -57,7 +61,7 @@ def ConfigureParser(parser, packages=None):
     return parser
 
 
-def model_url(file_name):
+def model_url(file_name: str) -> str:
     """The package URL of a model file; FileNotFoundError naming the available ones."""
     folder = models_directory()
     if not (folder / file_name).exists():
@@ -71,7 +75,7 @@ def _model_text(file_name):
     return (models_directory() / file_name).read_text()
 
 
-def add_model(parser, file_name):
+def add_model(parser: Parser, file_name: str) -> List[ModelInstanceIndex]:
     """``parser.AddModelsFromUrl(model_url(file_name))`` for a model of this package: the same models,
     parsed from the file's text, which is read once per process. libsdformat reloads its whole
     specification for every file it opens (about 0.1 s a model, most of a diagram's build), not for

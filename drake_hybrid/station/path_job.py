@@ -20,10 +20,12 @@ starts in contact presses at the first point at t = 0 and starts the path after 
 
 import math
 from dataclasses import dataclass
+from typing import Any, Dict, List, Mapping, Optional, Tuple
 
 import numpy as np
+from numpy.typing import ArrayLike
 
-from pydrake.geometry import Rgba
+from pydrake.geometry import Meshcat, Rgba
 from pydrake.math import RigidTransform, RotationMatrix
 
 from drake_hybrid.control.phases import ContactPhase
@@ -54,21 +56,21 @@ class PathJob:
     heading: np.ndarray
 
     @property
-    def holding(self):
+    def holding(self) -> bool:
         """True if the job holds one point of the path (``settings.hold_at`` >= 0) instead of running it."""
         return self.settings.holding
 
-    def lifts_off(self, supervised):
+    def lifts_off(self, supervised: bool) -> bool:
         """True if the job leaves the surface at its end: ``settings.lift_off``, a path that is run, and a
         contact supervisor (``supervised``) to lift."""
         return bool(supervised) and self.settings.lift_off and not self.holding
 
-    def start_pose(self):
+    def start_pose(self) -> Tuple[RigidTransform, np.ndarray]:
         """(X_WP, normal): the pad centre's pose at the path's first point (the reference orientation)
         and the surface's outward normal there."""
         return start_pose_on(self.surface, self.path, self.settings)
 
-    def pose_at_depth(self, depth):
+    def pose_at_depth(self, depth: float) -> RigidTransform:
         """The pad centre's pose ``depth`` (m) beyond the path's first point along its inward normal
         (negative: above it), turned as the constraint's held rows want it there
         (``Surface.held_normal``), not as the surface point's normal."""
@@ -77,7 +79,7 @@ class PathJob:
         rotation = RotationMatrix(reference_rotation(self.surface.held_normal(centre, self.offset), self.heading))
         return RigidTransform(rotation, centre)
 
-    def duration(self, supervision=None, gap=None):
+    def duration(self, supervision: Optional[SupervisionConfig] = None, gap: Optional[float] = None) -> float:
         """The simulated time the job needs (s, rounded up to 0.1 s): the guarded approach from ``gap``
         (m above the first point; None: a start in contact) at ``supervision.approach_speed`` and 0.2 s,
         the dwell, the path, and with a supervisor the lift-off and 0.3 s."""
@@ -88,7 +90,7 @@ class PathJob:
         return math.ceil(10 * (approach + self.settings.dwell + self.path.duration + lift)) / 10
 
 
-def path_job(surface, offset, settings):
+def path_job(surface: Surface, offset: float, settings: PathConfig) -> PathJob:
     """The PathJob of ``settings`` (a PathConfig) on ``surface`` for a pad centre ``offset`` off it (m,
     >= 0): the path laid, timed and checked (PathError, one line naming the field, for a path the job
     cannot follow; a ``settings.heading`` the path's normals reach)."""
@@ -99,7 +101,7 @@ def path_job(surface, offset, settings):
     return PathJob(surface=surface, offset=float(offset), settings=settings, path=path, heading=heading)
 
 
-def view_of(path_config, surface):
+def view_of(path_config: PathConfig, surface: Surface) -> ViewPlane:
     """The pattern's ViewPlane: ``path.view`` or the surface's default."""
     view = path_config.view
     if not (view.origin or view.axis_u or view.axis_v):
@@ -113,7 +115,7 @@ def view_of(path_config, surface):
 _HEADING_SAMPLES = (64, 512)
 
 
-def check_heading_along(path, heading):
+def check_heading_along(path: SurfacePath, heading: ArrayLike) -> None:
     """PathError naming path.heading, the arc length and the path time where ``heading`` lies along the
     path's surface normal: the reference frame keeps the tool's x axis on the heading turned into the
     tangent plane (``systems.path_source.reference_frame``), which has no direction there. The normals'
@@ -148,7 +150,7 @@ def _force_field(settings):
     return "waypoints[].force" if settings.waypoints and any(w.force > 0 for w in settings.waypoints) else "force"
 
 
-def path_on(surface, offset, settings):
+def path_on(surface: Surface, offset: float, settings: PathConfig) -> SurfacePath:
     """The SurfacePath of the PathConfig ``settings`` on ``surface`` (a core.surfaces.Surface) for a pad
     centre ``offset`` off it (m, >= 0)."""
     instance(surface, "surface", "path_on", Surface, what="a core.surfaces.Surface", error=PathError)
@@ -187,7 +189,7 @@ def _time_at_arc(path, arc):
     return float(np.interp(arc, arcs, times))
 
 
-def heading_of(settings, surface):
+def heading_of(settings: PathConfig, surface: Surface) -> np.ndarray:
     """The world direction the tool's x axis keeps: ``settings.heading`` (a PathConfig; 3 finite numbers,
     not zero) or the view's u axis."""
     if not settings.heading:
@@ -199,7 +201,7 @@ def heading_of(settings, surface):
     return heading
 
 
-def start_pose_on(surface, path, settings):
+def start_pose_on(surface: Surface, path: SurfacePath, settings: PathConfig) -> Tuple[RigidTransform, np.ndarray]:
     """(X_WP, normal): the pad centre's pose at the first point of ``path`` (its reference orientation,
     ``settings`` a PathConfig) and the surface's outward normal there."""
     centre, normal = instance(path, "path", "start_pose_on", SurfacePath, error=PathError).first_point()
@@ -207,7 +209,7 @@ def start_pose_on(surface, path, settings):
     return RigidTransform(RotationMatrix(R), centre), np.asarray(normal, dtype=float)
 
 
-def path_events(log):
+def path_events(log: Mapping[str, np.ndarray]) -> List[Dict[str, Any]]:
     """A job's phases for the plots and the summary (``Task.run_events``' format): the guarded approach,
     the dwell at the first point, each line change (an instant: a segment's start) and the lift-off."""
     if "path_progress" not in log:
@@ -234,7 +236,7 @@ def path_events(log):
     return events
 
 
-def draw_path(meshcat, path, name="path"):
+def draw_path(meshcat: Meshcat, path: SurfacePath, name: str = "path") -> None:
     """Draw ``path`` in ``meshcat`` (the animation): the pad centre's reference as a line, and the
     points on the workpiece it passes over (the contact points), under ``/name``."""
     centres, contacts = instance(path, "path", "draw_path", SurfacePath).centres(), path.contact_points()

@@ -1,15 +1,21 @@
 """Wiring by name, guarded: Drake ends the process at an input connected twice or a duplicate system name.
 """
 
+from typing import TypeVar, Union
+
+from pydrake.systems.framework import DiagramBuilder, InputPort, OutputPort, System
+
 from drake_hybrid.core.errors import ArgumentError
 
+SystemType = TypeVar("SystemType", bound=System)
 
-def port_label(port):
+
+def port_label(port: Union[InputPort, OutputPort]) -> str:
     """'system.port' of an input or output port, for a message."""
     return f"'{port.get_system().get_name()}.{port.get_name()}'"
 
 
-def refuse_wired(builder, input_port, owner, hint=""):
+def refuse_wired(builder: DiagramBuilder, input_port: InputPort, owner: str, hint: str = "") -> None:
     """ArgumentError naming ``input_port`` (and ``hint``) if the builder already wires or exports it: Drake
     ends the process at a second Connect instead of raising."""
     if builder.IsConnectedOrExported(input_port):
@@ -17,13 +23,13 @@ def refuse_wired(builder, input_port, owner, hint=""):
                             f"builder{hint}; an input takes one source")
 
 
-def guarded_connect(builder, output_port, input_port, owner):
+def guarded_connect(builder: DiagramBuilder, output_port: OutputPort, input_port: InputPort, owner: str) -> None:
     """``builder.Connect(output_port, input_port)`` after ``refuse_wired``."""
     refuse_wired(builder, input_port, owner)
     builder.Connect(output_port, input_port)
 
 
-def unique_name(builder, name, suffix):
+def unique_name(builder: DiagramBuilder, name: str, suffix: str) -> str:
     """``name``, or ``name_<suffix>`` (then ``_2``, ...) if the builder already has a system of that name:
     a diagram's systems need names of their own (Drake ends the process at Build otherwise)."""
     taken = {system.get_name() for system in builder.GetSystems()}
@@ -31,12 +37,12 @@ def unique_name(builder, name, suffix):
     return next(candidate for candidate in candidates if candidate not in taken)
 
 
-def add_named(builder, name, system, robot_name):
+def add_named(builder: DiagramBuilder, name: str, system: SystemType, robot_name: str) -> SystemType:
     """``builder.AddNamedSystem`` with ``unique_name``."""
     return builder.AddNamedSystem(unique_name(builder, name, robot_name), system)
 
 
-def port_of(system, name, kind, owner, argument):
+def port_of(system: System, name: str, kind: str, owner: str, argument: str) -> Union[InputPort, OutputPort]:
     """``system``'s input (``kind`` "input") or output port ``name``; ArgumentError naming ``argument``."""
     has = system.HasInputPort(name) if kind == "input" else system.HasOutputPort(name)
     if not has:

@@ -7,11 +7,12 @@ differ from that model (``ModelErrorConfig``).
 """
 
 from dataclasses import dataclass, field
+from typing import List
 
 import numpy as np
 
 from pydrake.multibody.plant import MultibodyPlant
-from pydrake.multibody.tree import ModelInstanceIndex
+from pydrake.multibody.tree import Frame, ModelInstanceIndex
 from pydrake.systems.framework import DiagramBuilder
 
 from drake_hybrid.core.arguments import describe, instance
@@ -32,12 +33,12 @@ class RobotModel:
     only_pad_contact: bool = False               # filter every contact of the robot but the pad's
 
 
-def frame_names(plant, model_instance):
+def frame_names(plant: MultibodyPlant, model_instance: ModelInstanceIndex) -> List[str]:
     """The names of the frames of ``model_instance`` (bodies' frames and the model's own frames)."""
     return sorted({plant.get_frame(index).name() for index in plant.GetFrameIndices(model_instance)})
 
 
-def get_frame(plant, name, model_instance, role="frame"):
+def get_frame(plant: MultibodyPlant, name: str, model_instance: ModelInstanceIndex, role: str = "frame") -> Frame:
     """Frame ``name`` of ``model_instance``; UnknownFrameError listing the model's frames otherwise."""
     if plant.HasFrameNamed(name, model_instance):
         return plant.GetFrameByName(name, model_instance)
@@ -45,7 +46,7 @@ def get_frame(plant, name, model_instance, role="frame"):
                             f"its frames: {', '.join(frame_names(plant, model_instance))}")
 
 
-def check_unfinalized_plant(plant, owner):
+def check_unfinalized_plant(plant: MultibodyPlant, owner: str) -> MultibodyPlant:
     """``plant`` if it is a MultibodyPlant not yet finalized (what adds to a model); typed errors otherwise."""
     instance(plant, "plant", owner, MultibodyPlant)
     if plant.is_finalized():
@@ -53,7 +54,8 @@ def check_unfinalized_plant(plant, owner):
     return plant
 
 
-def check_model_instance(plant, model_instance, name, owner):
+def check_model_instance(plant: MultibodyPlant, model_instance: ModelInstanceIndex, name: str,
+                         owner: str) -> ModelInstanceIndex:
     """``model_instance`` if it is a ModelInstanceIndex of ``plant``; ArgumentError naming ``name`` otherwise."""
     if not isinstance(model_instance, ModelInstanceIndex):
         raise ArgumentError(f"{owner}: {name} must be a ModelInstanceIndex of the plant (e.g. "
@@ -64,16 +66,16 @@ def check_model_instance(plant, model_instance, name, owner):
     return model_instance
 
 
-def arm_model_name(plant, robot):
+def arm_model_name(plant: MultibodyPlant, robot: RobotModel) -> str:
     return plant.GetModelInstanceName(robot.arm)
 
 
-def check_station_parts(builder, plant, robot, owner):
+def check_station_parts(builder: DiagramBuilder, plant: MultibodyPlant, robot: RobotModel, owner: str) -> None:
     instance(builder, "builder", owner, DiagramBuilder)
     check_finalized_robot_plant(plant, robot, owner)
 
 
-def check_finalized_robot_plant(plant, robot, owner):
+def check_finalized_robot_plant(plant: MultibodyPlant, robot: RobotModel, owner: str) -> None:
     instance(plant, "plant", owner, MultibodyPlant)
     instance(robot, "robot", owner, RobotModel, what="the RobotModel of mount_tool")
     if not plant.is_finalized():

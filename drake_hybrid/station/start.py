@@ -1,11 +1,17 @@
 """A start in any diagram: the states around the plant primed for the arm where it is.
 """
 
+from typing import Callable, Optional
+
 import numpy as np
+from numpy.typing import ArrayLike
 from scipy.optimize import brentq
+
+from pydrake.systems.framework import Context
 
 from drake_hybrid.core.arguments import joint_vector, vector
 from drake_hybrid.core.errors import ForceSignError, OffConstraintError
+from drake_hybrid.station.handles import HybridSystems
 from drake_hybrid.station.root_context import check_systems, systems_in_context
 
 # Plant steps taken (and undone) at the start so that a discrete plant's sampled outputs hold the
@@ -13,7 +19,8 @@ from drake_hybrid.station.root_context import check_systems, systems_in_context
 PRIMING_STEPS = 20
 
 
-def prime_start(systems, root_context, held_torque, integrals=None):
+def prime_start(systems: HybridSystems, root_context: Context, held_torque: ArrayLike,
+                integrals: Optional[ArrayLike] = None) -> None:
     """Set the states of the systems around the plant for a start at the plant's present state (set it
     first: the arm at rest where it presses, or a gap away): the controller's integrals (``integrals``,
     default zero: [xi; e_p]) and, for a sampled controller, its held torque ``held_torque``
@@ -78,7 +85,7 @@ def prime_start(systems, root_context, held_torque, integrals=None):
                                      systems.constraint_space.constraint.value(start))
 
 
-def holding_torque(systems, q, desired_force):
+def holding_torque(systems: HybridSystems, q: ArrayLike, desired_force: ArrayLike) -> np.ndarray:
     """tau = g(q) - J^T E_f^T F_d (2.3-4 at rest): the actuation that holds the robot at rest at ``q``
     pressing with ``desired_force`` (m, in E_f's coordinates; zeros: gravity only), mapped to the
     actuators, on the controller's own model (``systems.controller_plant``).
@@ -99,7 +106,7 @@ def holding_torque(systems, q, desired_force):
     return np.linalg.solve(plant.MakeActuationMatrix(), torque)
 
 
-def pressing_depth(pressing_force, desired, max_depth, who):
+def pressing_depth(pressing_force: Callable[[float], float], desired: ArrayLike, max_depth: float, who: str) -> float:
     """The depth s in [0, max_depth] (m) at which ``pressing_force(s)`` (F . F_d / |F_d| - |F_d|, the
     pressing force's excess over the desired one) is zero, by Brent's method; the starts root
     finding cannot fix are named with typed errors (``who`` begins each message): the surface's

@@ -6,22 +6,25 @@ curvature (``default_resolution``); ``mesh_shape`` makes a height map's closed p
 ``add_rigid_workpiece`` (where the tutorials and your tasks import it from).
 """
 
+from typing import List, Optional, Sequence
+
 import numpy as np
 
 from pydrake.common import MemoryFile
-from pydrake.geometry import (AddRigidHydroelasticProperties, Capsule, Cylinder, Ellipsoid, InMemoryMesh, Mesh,
-                              ProximityProperties, Shape, Sphere)
+from pydrake.geometry import (AddRigidHydroelasticProperties, Capsule, Cylinder, Ellipsoid, GeometryId, InMemoryMesh,
+                              Mesh, ProximityProperties, Shape, Sphere)
 from pydrake.math import RigidTransform
 from pydrake.multibody.plant import CoulombFriction, MultibodyPlant
 
 from drake_hybrid.core.arguments import instance, positive, text, vector
 from drake_hybrid.core.errors import ArgumentError
+from drake_hybrid.core.surfaces import Surface
 
 MAX_RESOLUTION = 0.005            # m, the coarsest workpiece mesh
 FACETS_PER_RADIUS = 20            # a curved shape's mesh: radius / 20 (2.5 mm at R = 5 cm)
 
 
-def default_resolution(shape):
+def default_resolution(shape: Shape) -> Optional[float]:
     """The workpiece mesh's resolution hint (m): MAX_RESOLUTION, finer on a curved shape of small
     radius (its smallest, for an ellipsoid). A facet's normal is off the surface's by up to half a
     facet angle, resolution / (2 R), and the pad reads that as a tangential force that comes and
@@ -35,8 +38,9 @@ def default_resolution(shape):
     return MAX_RESOLUTION
 
 
-def add_rigid_workpiece(plant, shape, X_WG, name="workpiece", resolution_hint=None,
-                        color=(0.55, 0.6, 0.7, 1.0)):
+def add_rigid_workpiece(plant: MultibodyPlant, shape: Shape, X_WG: RigidTransform, name: str = "workpiece",
+                        resolution_hint: Optional[float] = None,
+                        color: Sequence[float] = (0.55, 0.6, 0.7, 1.0)) -> List[GeometryId]:
     """Register ``shape`` (a pydrake.geometry Shape) on the world body at X_WG as a rigid
     hydroelastic collision geometry (mesh resolution ``resolution_hint``, m; default
     ``default_resolution``: tied to the curvature) and a visual one. Returns the collision
@@ -68,7 +72,7 @@ def add_rigid_workpiece(plant, shape, X_WG, name="workpiece", resolution_hint=No
     return [geometry]
 
 
-def mesh_shape(surface, name):
+def mesh_shape(surface: Surface, name: str) -> Shape:
     """A Drake Mesh (in memory, OBJ) of a HeightMapSurface's closed part (``HeightMapSurface.mesh``), for
     a rigid hydroelastic geometry at ``surface.X_WM``."""
     vertices, triangles = surface.mesh()
