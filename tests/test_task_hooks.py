@@ -13,8 +13,8 @@ from drake_hybrid.analysis.linearization import linearize_continuous, linearize_
 from drake_hybrid.cli import main
 from drake_hybrid.core.errors import ConfigError
 from drake_hybrid.experiments.simulation import simulate
-from drake_hybrid.tasks import hooks
 from drake_hybrid.station.parsing import models_directory
+from drake_hybrid.tasks import hooks
 from drake_hybrid.tasks.hooks import ENTRY_POINT_GROUP, TaskHook, get_hook, register_hook
 from drake_hybrid.tasks.registry import get_task
 from drake_hybrid.tasks.task_file import load_task_file
@@ -30,8 +30,8 @@ def _assert_same_run(file_config, built_in_config, duration):
     for name in LOGS:
         assert ours.log[name].shape == theirs.log[name].shape, name
         np.testing.assert_allclose(ours.log[name], theirs.log[name], rtol=0, atol=1e-9, err_msg=name)
-    assert ours.summary["notes"] == theirs.summary["notes"]
-    assert ours.summary["events"] == theirs.summary["events"]
+    assert ours.summary.notes == theirs.summary.notes
+    assert ours.summary.events == theirs.summary.events
     return ours
 
 

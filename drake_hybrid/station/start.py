@@ -5,7 +5,7 @@ import numpy as np
 from scipy.optimize import brentq
 
 from drake_hybrid.core.arguments import joint_vector, vector
-from drake_hybrid.core.errors import ForceSignError, OffConstraintError
+from drake_hybrid.core.errors import ConfigError, ForceSignError, OffConstraintError
 from drake_hybrid.station.root_context import check_systems, systems_in_context
 
 # Plant steps taken (and undone) at the start so that a discrete plant's sampled outputs hold the
@@ -126,7 +126,7 @@ def pressing_depth(pressing_force, desired, max_depth, who):
                 f"{who}: the pad touches nothing even {max_depth * 1000:.0f} mm beyond the start pose "
                 "along the pressing direction: the workpiece's geometry is farther than the surface C = 0 (a gap); "
                 "move the workpiece or the start so that they agree")
-        raise ValueError(
+        raise ConfigError(
             f"{who}: even {max_depth * 1000:.0f} mm of penetration presses with only {deepest:.3g} N, "
             f"less than the desired {magnitude:.3g} N; raise contact.pad_modulus or lower the desired force")
     return brentq(pressing_force, 0.0, max_depth, xtol=1e-10)
