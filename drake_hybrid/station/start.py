@@ -104,7 +104,7 @@ def pressing_depth(pressing_force, desired, max_depth, who):
     pressing force's excess over the desired one) is zero, by Brent's method; the starts root
     finding cannot fix are named with typed errors (``who`` begins each message): the surface's
     geometry beyond C = 0 (OffConstraintError), a pulling F_d (ForceSignError), nothing touched
-    (OffConstraintError), too soft a contact (ValueError)."""
+    (OffConstraintError), too soft a contact (ConfigError: the pad's modulus or the desired force)."""
     magnitude = float(np.linalg.norm(desired))
     at_surface = pressing_force(0.0) + magnitude
     if at_surface > magnitude:
