@@ -112,12 +112,12 @@ def closed_loop_cpu_rtf(config):
 
 def _accuracy(summary, final_constraint):
     return {
-        "final_velocity_error_percent": summary["final_velocity_error_percent"],
-        "final_force_error_percent": summary["final_force_error_percent"],
+        "final_velocity_error_percent": summary.final_velocity_error_percent,
+        "final_force_error_percent": summary.final_force_error_percent,
         "max_velocity_error_percent_after_5_time_constants":
-            summary["max_velocity_error_percent_after_5_time_constants"],
-        "max_force_error_percent_after_5_time_constants": summary["max_force_error_percent_after_5_time_constants"],
-        "max_constraint_residual": summary["max_constraint_residual"],
+            summary.max_velocity_error_percent_after_5_time_constants,
+        "max_force_error_percent_after_5_time_constants": summary.max_force_error_percent_after_5_time_constants,
+        "max_constraint_residual": summary.max_constraint_residual,
         "final_constraint_residual": final_constraint,
     }
 
@@ -183,7 +183,7 @@ def measure_task(name, repeats=3, modes=MODES, tick_samples=2000, log=print):
         try:
             run = simulate(config)
             entry.update(_accuracy(run.summary, float(np.max(np.abs(run.log["constraint"][-1])))))
-            entry["rtf"] = run.summary["real_time_factor"]
+            entry["rtf"] = run.summary.real_time_factor
             if mode == default.mode:
                 closed.append(entry["rtf"])
                 default_log = run.log
@@ -203,7 +203,7 @@ def measure_task(name, repeats=3, modes=MODES, tick_samples=2000, log=print):
         rtf, contacts_end, drift = plant_alone_rtf(default, "replay", default_log)
         replay.append(rtf)
         if len(closed) < repeats:
-            closed.append(simulate(default).summary["real_time_factor"])
+            closed.append(simulate(default).summary.real_time_factor)
         replay_cpu.append(plant_alone_rtf(default, "replay", default_log, clock=time.process_time)[0])
         closed_cpu.append(closed_loop_cpu_rtf(default))
     static.append(plant_alone_rtf(default, "static")[0])

@@ -85,7 +85,7 @@ def configure(task_name, changes):
 
 
 def _after_contact(log, summary):
-    return log["t"] >= summary["contact_time"] + 5 * summary["design_time_constant"]
+    return log["t"] >= summary.contact_time + 5 * summary.design_time_constant
 
 
 def _distance(log, reference, key, scale, mask):
@@ -102,9 +102,9 @@ def measure_setting(task_name, label, changes, reference=None):
     build_s = time.perf_counter() - start
     run = simulate(config)
     log, summary = run.log, run.summary
-    entry = {"label": label, "changes": changes, "build_s": build_s, "closed_loop_rtf": summary["real_time_factor"],
-             "velocity_error_percent": summary["max_velocity_error_percent_after_5_time_constants"],
-             "force_error_percent": summary["max_force_error_percent_after_5_time_constants"]}
+    entry = {"label": label, "changes": changes, "build_s": build_s, "closed_loop_rtf": summary.real_time_factor,
+             "velocity_error_percent": summary.max_velocity_error_percent_after_5_time_constants,
+             "force_error_percent": summary.max_force_error_percent_after_5_time_constants}
     entry["plant_rtf"], _, entry["replay_drift"] = plant_alone_rtf(config, "replay", log)
     entry["plant_rtf_cpu"] = plant_alone_rtf(config, "replay", log, clock=time.process_time)[0]
     linear = _linearization(config)
@@ -112,7 +112,7 @@ def measure_setting(task_name, label, changes, reference=None):
     entry["eigenvalues_matched"] = linear["eigenvalues_matched_within_5_percent"]
     if reference is not None:
         mask = _after_contact(log, summary)
-        scales = summary["command_scales"]
+        scales = summary.command_scales
         entry["velocity_from_finest_percent"] = _distance(log, reference, "velocity", scales["speed"], mask)
         entry["force_from_finest_percent"] = _distance(log, reference, "force", scales["force"], mask)
     return entry, log

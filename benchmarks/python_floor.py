@@ -185,7 +185,7 @@ def measure_rtf_floor(name, repeats=3):
     samples = {"closed_loop": [], "plant_alone": [], "floor_unsampled": [], "floor_sampled": []}
     drifts = {"plant_alone": 0.0, "floor_unsampled": 0.0, "floor_sampled": 0.0}
     for _ in range(repeats):                                       # alternated, so load hits all alike
-        samples["closed_loop"].append(simulate(config).summary["real_time_factor"])
+        samples["closed_loop"].append(simulate(config).summary.real_time_factor)
         rtf, _, drifts["plant_alone"] = plant_alone_rtf(config, "replay", log)
         samples["plant_alone"].append(rtf)
         for key, sampled in (("floor_unsampled", False), ("floor_sampled", True)):

@@ -86,15 +86,15 @@ def window_table(duration=None):
         run = simulate(config)
         summary, log = run.summary, run.log
         late = log["t"] >= EVALUATION_TIME
-        scales = summary["command_scales"]
+        scales = summary.command_scales
         linear = linearize_continuous(config)
         real = linear.eigenvalues.real
         slow = real[real < -MARGINAL]                   # the zeros (unregulated tangent position, ...) left out
         rows.append({"law": label, "controller": controller, "mode": mode,
                      "velocity_error_percent": float(100 * np.abs(log["velocity_error"][late]).max() / scales["speed"]),
                      "force_error_percent": float(100 * np.abs(log["force_error"][late]).max() / scales["force"]),
-                     "velocity_settling_s": summary["velocity_settling_time_1_percent"],
-                     "force_settling_s": summary["force_settling_time_1_percent"],
+                     "velocity_settling_s": summary.velocity_settling_time_1_percent,
+                     "force_settling_s": summary.force_settling_time_1_percent,
                      "worst_real": float(real.max()), "slowest_stable": float(slow.max()) if slow.size else None})
     return rows
 

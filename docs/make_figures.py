@@ -34,8 +34,8 @@ def window_washing():
         shutil.copy(Path(tmp) / "velocity_tracking.png", FIGURES / "window_washing_velocity.png")
         shutil.copy(Path(tmp) / "force_tracking.png", FIGURES / "window_washing_force.png")
     s = result.summary
-    print(f"window-washing: settles within 1 % after {s['velocity_settling_time_1_percent']:.3f} s (velocity), "
-          f"{s['force_settling_time_1_percent']:.3f} s (force); design time constant {s['design_time_constant']} s")
+    print(f"window-washing: settles within 1 % after {s.velocity_settling_time_1_percent:.3f} s (velocity), "
+          f"{s.force_settling_time_1_percent:.3f} s (force); design time constant {s.design_time_constant} s")
 
 
 def eigenvalues():

@@ -44,10 +44,10 @@ def task_row(name, options=None, label=None):
         method = f"discrete map, h = {linear.period * 1e3:g} ms"
     match = linear.match
     return {
-        "task": label or name, "mode": s["mode"], "rtf": s["real_time_factor"],
-        "velocity": s["max_velocity_error_percent_after_5_time_constants"],
-        "force": s["max_force_error_percent_after_5_time_constants"],
-        "residual": s["max_constraint_residual"], "torque": 100 * max(s["max_torque_to_effort_limit"]),
+        "task": label or name, "mode": s.mode, "rtf": s.real_time_factor,
+        "velocity": s.max_velocity_error_percent_after_5_time_constants,
+        "force": s.max_force_error_percent_after_5_time_constants,
+        "residual": s.max_constraint_residual, "torque": 100 * max(s.max_torque_to_effort_limit),
         "cond": worst, "method": method, "worst_eigen": 100 * float(np.max(match.relative_error)),
         "matched": "yes" if match.matched else ("as predicted (see notes)" if predicted_match(linear) is not None
                                                  else "no"),
@@ -117,7 +117,7 @@ def grinding_run(workpiece, mode, velocity_gain=None, position_gain=None, relaxa
     late = t >= 0.5
     row = 1 if workpiece == "sphere" else 0                          # the path's tangential row
     command = log["desired_velocity"][late, row].mean()
-    limits = np.asarray(summary["max_torque_to_effort_limit"])
+    limits = np.asarray(summary.max_torque_to_effort_limit)
     out = {"workpiece": workpiece, "mode": mode, "K_v": config.gains.velocity[row],
            "relaxation": "Drake default" if config.contact.relaxation_time < 0 else f"{config.contact.relaxation_time * 1e3:g} ms",
            "speed": 100 * log["velocity"][late, row].mean() / command,
@@ -129,7 +129,7 @@ def grinding_run(workpiece, mode, velocity_gain=None, position_gain=None, relaxa
            "twist": float(np.abs(log["velocity_error"][t >= 0.2, 1 - row if workpiece == "window" else 0]).max())}
     if mode == "impedance-force":
         realized = impedance_realization(result.scenario, log)
-        after = t >= summary["design_time_constant"]
+        after = t >= summary.design_time_constant
         rms = lambda a, s: np.sqrt((a[s] ** 2).sum(axis=1).mean())
         out["impedance residual"] = 100 * rms(realized["impedance_residual"], after) / rms(realized["tangential_force"], after)
         difference = realized["force_loop"] - realized["force_loop_predicted"]

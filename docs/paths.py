@@ -49,27 +49,28 @@ def line_changes(log, report):
     segment's first five design time constants (what the page explains)."""
     t = np.asarray(log["t"])
     rows = []
-    for segment in report["segments"]:
-        start = segment["start"]
-        window = (t >= start) & (t < start + report["settle_time_per_segment_s"])
-        rows.append({"segment": segment["segment"], "start": start,
+    for segment in report.segments:
+        start = segment.start
+        window = (t >= start) & (t < start + report.settle_time_per_segment_s)
+        rows.append({"segment": segment.segment, "start": start,
                      "velocity_error_peak": float(np.max(np.abs(log["velocity_error"][window, 1:]))),
                      "spin_error_peak": float(np.max(np.abs(log["velocity_error"][window, 0]))),
                      "tangential_force_peak": float(np.max(np.abs(log["tangential_force"][window, 1:]))),
-                     "path_error_along_surface_mm": segment["transient_max_path_error_along_surface_mm"],
-                     "force_error_percent": segment["transient_max_force_error_percent"]})
+                     "path_error_along_surface_mm": segment.transient_max_path_error_along_surface_mm,
+                     "force_error_percent": segment.transient_max_force_error_percent})
     return rows
 
 
 def job(name, task_name, config):
     result = simulate(config)
-    report = result.summary["path"]
-    for path in save_path_plots(result.log, result.summary, FIGURES):
+    summary = result.summary
+    for path in save_path_plots(result.log, summary, FIGURES):
         path.rename(FIGURES / f"paths_{name}_{path.stem.replace('path_', '')}.png")
     linear = linearize_continuous(with_path(config, hold_at=0.5))
-    return {"name": name, "task": task_name, "duration": config.duration, "wall_time": result.summary["wall_time"],
-            "report": report, "line_changes": line_changes(result.log, report),
-            "velocity_rows": result.summary["velocity_rows"], "force_rows": result.summary["force_rows"],
+    return {"name": name, "task": task_name, "duration": config.duration, "wall_time": summary.wall_time,
+            "report": summary.path.as_dict(), "line_changes": line_changes(result.log, summary.path),
+            "velocity_rows": [row.as_dict() for row in summary.velocity_rows],
+            "force_rows": [row.as_dict() for row in summary.force_rows],
             "eigenvalue_error": float(np.max(linear.match.relative_error)), "matched": bool(linear.match.matched),
             "designed": [[float(e.real), float(e.imag)] for e in linear.match.predicted],
             "linearized": [[float(e.real), float(e.imag)] for e in linear.match.partner],
@@ -88,8 +89,8 @@ def step_halved():
         config = with_path(config, pattern=dataclasses.replace(config.path.pattern, size=[0.04, 0.02], spacing=0.02))
         config.duration = job_duration(task, config)
         config.plant.time_step = config.control_period = config.log_period = step
-        report = simulate(config).summary["path"]
-        peaks = [s["transient_max_path_error_along_surface_mm"] for s in report["segments"][1:]]
+        report = simulate(config).summary.path
+        peaks = [s.transient_max_path_error_along_surface_mm for s in report.segments[1:]]
         figures.append({"time_step": step, "line_change_peak_mm": max(peaks),
                         "half_step_lead_mm": 1000 * step * config.path.speed / 2})
     return figures

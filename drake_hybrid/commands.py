@@ -24,7 +24,8 @@ commands:
 Bad input (a config field, a flag, a file) prints one line naming it and exits 2; a run that
 stops early (sensor fault, an error inside the simulation, Ctrl-C) writes what it logged up to
 the stop, prints why and exits 1. --traceback (or DRAKE_HYBRID_TRACEBACK=1) shows the full
-Python traceback instead.
+Python traceback instead. An error that is a bug of drake-hybrid's, not a mistake in your input,
+prints its traceback and a line saying so, and exits 70.
 """
 
 # Each command's line in the top-level help, in the parser's order.

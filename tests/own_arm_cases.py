@@ -126,12 +126,12 @@ def run(arm_name, shape, mode, cache_dir, impedance_mass=None):
     result = simulate(cfg)
     summary = result.summary
     match = linearization.match
-    drag, drag_error = run_drag(result.log, cfg, mode, summary["design_time_constant"])
+    drag, drag_error = run_drag(result.log, cfg, mode, summary.design_time_constant)
     figures = {
         "arm": arm_name, "shape": shape, "mode": mode, "impedance_mass": cfg.gains.impedance_mass,
-        "velocity_error_percent": summary["max_velocity_error_percent_after_5_time_constants"],
-        "force_error_percent": summary["max_force_error_percent_after_5_time_constants"],
-        "design_time_constant": summary["design_time_constant"],
+        "velocity_error_percent": summary.max_velocity_error_percent_after_5_time_constants,
+        "force_error_percent": summary.max_force_error_percent_after_5_time_constants,
+        "design_time_constant": summary.design_time_constant,
         "duration": cfg.duration,
         "eigenvalue_error": float(np.max(match.relative_error)),
         "eigenvalues_matched": bool(match.matched),
@@ -142,7 +142,8 @@ def run(arm_name, shape, mode, cache_dir, impedance_mass=None):
         "max_real_part": float(np.max(linearization.eigenvalues.real)),
         "jacobian_check": linearization.jacobian_check.summary(),
         # impedance-force: the run against the designed impedance driven by its measured F_v (% of the command)
-        "velocity_error_against_impedance_percent": (summary["impedance"] or {}).get("max_difference_percent"),
+        "velocity_error_against_impedance_percent": (summary.impedance.max_difference_percent
+                                                     if summary.impedance is not None else None),
         # the simulated (SAP) contact's steady drag along x, F_v / x-dot (N s/m), and in impedance-force mode
         # how far the designed roots move when the impedance closes through a damping that size
         "run_drag": drag,

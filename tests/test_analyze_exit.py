@@ -13,6 +13,7 @@ import drake_hybrid.cli as cli
 from drake_hybrid.analysis.derivatives import DerivativeMismatchWarning, JacobianCheck
 from drake_hybrid.analysis.discrete_linearization import linearize_discrete
 from drake_hybrid.analysis.matching import match_eigenvalues, shifted_design
+from drake_hybrid.report.eigenvalues import judge_eigenvalues
 from drake_hybrid.tasks.registry import get_task
 from drake_hybrid.tasks.task import EigenvalueShift
 
@@ -37,6 +38,20 @@ def test_the_crank_misses_only_what_the_handles_inertia_predicts(crank_lineariza
     assert ("Jacobian: the one-period map's, by central differences (a sampled loop has no AutoDiffXd Jacobian "
             "to check it against); eigenvalues from it") in printed
     assert cli.main(["analyze", "crank-turning", "--quiet", "--strict"]) == 1
+
+
+def test_the_verdict_is_the_reports_callable_without_the_command_line(crank_linearization):
+    """report.eigenvalues.judge_eigenvalues is what analyze prints and exits with: a notebook gets the same
+    verdict, lines and --json payload."""
+    config = get_task("crank-turning").default_config()
+    report = judge_eigenvalues(crank_linearization, config, continuous=False, velocity_dim=2, force_dim=4)
+    assert report.exit_code == 0 and report.matched_as_predicted and not crank_linearization.match.matched
+    assert report.verdict.endswith("no other mode unstable: matched as predicted")
+    assert any("missed; predicted -9.4" in line for line in report.lines())
+    payload = report.as_dict()
+    assert payload["matched_as_predicted"] is True and payload["method"] == "discrete" and payload["force_dim"] == 4
+    strict = judge_eigenvalues(crank_linearization, config, False, 2, 4, strict=True)
+    assert strict.exit_code == 1 and strict.verdict.endswith("(--strict: counted as a miss)")
 
 
 def test_a_miss_without_a_prediction_exits_1(crank_linearization, monkeypatch, capsys):

@@ -15,7 +15,7 @@ from drake_hybrid.experiments.simulation import simulate
 from drake_hybrid.scenario.builder import build_scenario, prepare_config
 from drake_hybrid.station.contact import ContactConfig
 from drake_hybrid.systems.sources import Profile
-from drake_hybrid.tasks.config import ScenarioConfig, StartConfig, load_config
+from drake_hybrid.tasks.config import StartConfig, load_config
 from drake_hybrid.tasks.path import with_path
 from drake_hybrid.tasks.registry import get_task
 

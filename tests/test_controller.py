@@ -9,7 +9,6 @@ import numpy as np
 import pytest
 
 from pydrake.autodiffutils import AutoDiffXd
-from pydrake.systems.framework import InputPortIndex, OutputPortIndex
 
 from drake_hybrid import ArgumentError, GainError
 from drake_hybrid.control.controller import HybridController, HybridController_

@@ -170,8 +170,9 @@ def test_the_outputs_page_documents_every_key_a_run_writes():
     result = simulate(config)
     page = (DOCS / "reference" / "outputs.md").read_text()
     documented = set(re.findall(r"`([a-z_0-9]+)`", page))
-    keys = set(result.log) | set(result.summary) | set(result.summary["gains"]) | set(result.summary["command_scales"])
-    for rows in (result.summary["velocity_rows"], result.summary["force_rows"]):
+    summary = result.summary.as_dict()                # summary.json's dict
+    keys = set(result.log) | set(summary) | set(summary["gains"]) | set(summary["command_scales"])
+    for rows in (summary["velocity_rows"], summary["force_rows"]):
         keys |= set(rows[0])
     assert keys - documented == set()
 

@@ -318,7 +318,6 @@ def test_the_compile_job_compiles_in_its_own_process_records_and_releases_its_lo
     import os
     import subprocess
     import sys
-    import time
 
     environment = dict(os.environ, DRAKE_HYBRID_CACHE=str(tmp_path), NUMBA_CACHE_DIR=str(tmp_path / "numba"))
     code = ("import sys, time, numpy as np\n"

@@ -29,8 +29,8 @@ from drake_hybrid.cli import main
 from drake_hybrid.control.gains import HybridGains
 from drake_hybrid.core.errors import ConfigError
 from drake_hybrid.experiments.simulation import simulate
-from drake_hybrid.hardware.controller_side import build_controller_station
 from drake_hybrid.hardware import loop as loop_module
+from drake_hybrid.hardware.controller_side import build_controller_station
 from drake_hybrid.hardware.loop import run_hardware_loop, start_state
 from drake_hybrid.hardware.messages import HardwareConfig, HardwareFault, Rejection
 from drake_hybrid.hardware.panda import panda_config, panda_drum_task, panda_table_task, panda_urdf
@@ -216,7 +216,8 @@ def test_tracking_after_five_time_constants_matches_the_direct_loop(make_task, w
     run = run_hardware_loop(config, HardwareConfig(wrench_source=wrench_source))
     assert run.stop is None
     for score in SCORES:
-        assert abs(run.summary[score] - direct.summary[score]) <= 0.2, (score, run.summary[score], direct.summary[score])
+        looped, wired = getattr(run.summary, score), getattr(direct.summary, score)
+        assert abs(looped - wired) <= 0.2, (score, looped, wired)
 
 
 # -- gains changed at run time ---------------------------------------------------------------------------

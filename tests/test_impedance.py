@@ -6,12 +6,12 @@ import pytest
 from drake_hybrid.analysis.design import impedance_realization
 from drake_hybrid.analysis.environment import impedance_response
 from drake_hybrid.analysis.linearization import linearize_continuous
-from drake_hybrid.cli import _impedance_text
 from drake_hybrid.control.controller import HybridController
 from drake_hybrid.control.gains import HybridGains
 from drake_hybrid.control.law import impedance_blocks, impedance_gain
 from drake_hybrid.experiments.metrics import impedance_check
 from drake_hybrid.experiments.simulation import simulate
+from drake_hybrid.report.run import impedance_text
 from drake_hybrid.tasks.plant import build_controller_plant
 from drake_hybrid.tasks.registry import get_task
 
@@ -104,7 +104,7 @@ def test_a_heavier_impedance_yields_less_to_the_same_friction():
         assert abs(F_v) > 4.0                                    # mu = 0.5 at 10 N: real friction
         assert e_p == pytest.approx(F_v / (mass * K_p), rel=0.001), (mass, e_p, F_v)
         out = impedance_realization(result.scenario, result.log)
-        after_tau = log["t"] >= result.summary["design_time_constant"]
+        after_tau = log["t"] >= result.summary.design_time_constant
         assert ratio(out["impedance_residual"], out["tangential_force"] / mass, after_tau) < 0.05
         settled[mass] = e_p
     assert settled[4.0] / settled[1.0] == pytest.approx(0.25, rel=0.002)
@@ -178,7 +178,7 @@ def test_window_grinding_realizes_the_designed_impedance():
     result = simulate(GRINDING.default_config())
     out = impedance_realization(result.scenario, result.log)
     t = result.log["t"]
-    after_tau = t >= result.summary["design_time_constant"]
+    after_tau = t >= result.summary.design_time_constant
     # e_p'' + K_v e_p' + K_p e_p - F_v, RMS after one design time constant: measured 4.0 % of |F_v|.
     assert ratio(out["impedance_residual"], out["tangential_force"], after_tau) < 0.05
     # The force loop follows -M_f^-1 M_fp F_v (measured 0.3 %) except where the friction force jumps
@@ -199,7 +199,7 @@ def test_window_grinding_realizes_the_designed_impedance():
 def test_sphere_grinding_realizes_the_designed_impedance():
     result = simulate(GRINDING.default_config({"workpiece": "sphere"}))
     out = impedance_realization(result.scenario, result.log)
-    after_tau = result.log["t"] >= result.summary["design_time_constant"]
+    after_tau = result.log["t"] >= result.summary.design_time_constant
     assert ratio(out["impedance_residual"], out["tangential_force"], after_tau) < 0.05       # measured 0.3 %
     assert ratio(out["force_loop"] - out["force_loop_predicted"], out["force_loop_predicted"],
                  after_tau) < 0.05                                                         # measured 1.4 %
@@ -255,25 +255,25 @@ def test_impedance_check_of_a_run_that_realizes_the_impedance_and_of_one_that_do
     log = {"t": t, "tangential_force": force, "velocity_error": velocity_error, "position_error": position_error,
            "desired_velocity": np.column_stack([np.full_like(t, 0.1), np.zeros_like(t)])}
     check = impedance_check(log, gains, 0.3, 1.0)
-    assert check["max_difference_percent"] < 1e-6
-    assert check["max_tangential_force"] == pytest.approx([0.2, 0.0])
-    assert "answer to its start and to F_v" in _impedance_text(check)
+    assert check.max_difference_percent < 1e-6
+    assert check.max_tangential_force == pytest.approx([0.2, 0.0])
+    assert "answer to its start and to F_v" in impedance_text(check)
     unseen = dict(log, tangential_force=np.zeros_like(force))
     missed = impedance_check(unseen, gains, 0.3, 1.0)
     peak = 0.2 * np.max(np.exp(-3 * t) - np.exp(-7 * t)) / 4
-    assert missed["max_difference_percent"] == pytest.approx(100 * peak / 0.1, rel=1e-3)
-    assert "does not realize the designed impedance" in _impedance_text(missed)
+    assert missed.max_difference_percent == pytest.approx(100 * peak / 0.1, rel=1e-3)
+    assert "does not realize the designed impedance" in impedance_text(missed)
 
 
 @pytest.mark.slow                # several seconds: not in the fast loop (-m 'not slow')
 def test_grinding_sticks_on_the_rough_patch_as_its_impedance_predicts():
     """The window grinding run: x-dot misses its command by 75 % on the rough patch (the pad sticks:
     the impedance yields to friction, by design), and the designed impedance driven by the run's
-    measured F_v predicts the run's velocity errors within 1.28 % of the command (summary["impedance"])."""
+    measured F_v predicts the run's velocity errors within 1.28 % of the command (summary.impedance)."""
     summary = simulate(GRINDING.default_config()).summary
-    assert summary["max_velocity_error_percent_after_5_time_constants"] > 50.0
-    assert summary["impedance"]["max_difference_percent"] < 2.0
-    assert max(summary["impedance"]["max_tangential_force"]) > 8.0      # the patch's mu = 0.9 at 10 N
+    assert summary.max_velocity_error_percent_after_5_time_constants > 50.0
+    assert summary.impedance.max_difference_percent < 2.0
+    assert max(summary.impedance.max_tangential_force) > 8.0      # the patch's mu = 0.9 at 10 N
     velocity_force = GRINDING.default_config()
     velocity_force.mode, velocity_force.duration = "velocity-force", 0.2
-    assert simulate(velocity_force).summary["impedance"] is None
+    assert simulate(velocity_force).summary.impedance is None

@@ -93,9 +93,9 @@ def test_the_xarm7_impedance_answers_a_force_through_its_damped_wrist(cache):
     cfg = cases.config(cases.task("xarm7", "sphere", cache), "impedance-force")
     cfg.contact.relaxation_time, cfg.contact.workpiece_relaxation_time = 0.01, 0.0
     summary = cases.simulate(cfg).summary
-    assert summary["max_velocity_error_percent_after_5_time_constants"] < 1.0, summary
-    assert summary["max_force_error_percent_after_5_time_constants"] < 1.0, summary
-    rotation = [row["max_error_after_5_time_constants"] for row in summary["velocity_rows"][2:]]   # wx, wy, wz
+    assert summary.max_velocity_error_percent_after_5_time_constants < 1.0, summary
+    assert summary.max_force_error_percent_after_5_time_constants < 1.0, summary
+    rotation = [row.max_error_after_5_time_constants for row in summary.velocity_rows[2:]]   # wx, wy, wz
     assert max(rotation) < 1e-3, rotation
 
 

@@ -50,31 +50,31 @@ def bump_job():
 @pytest.mark.parametrize("job", ["sphere_job", "bump_job"])
 def test_a_job_approaches_presses_follows_its_path_and_lifts_off(job, request):
     result = request.getfixturevalue(job)
-    log, report = result.log, result.summary["path"]
+    log, report = result.log, result.summary.path
     t, phase = log["t"], log["contact_phase"][:, 0]
     # The guarded approach (5 mm at 2 cm/s), then contact until the lift-off, which leaves the surface.
     assert phase[0] == ContactPhase.APPROACH
-    assert 0.2 < report["first_contact_time"] < 0.45
-    assert report["time_off_surface_s"] == 0.0 and report["contact_losses"] == 0
-    assert report["completed"] and report["segments_run"] == 3
-    assert report["path_start_time"] == pytest.approx(report["first_contact_time"] + result.config.path.dwell,
+    assert 0.2 < report.first_contact_time < 0.45
+    assert report.time_off_surface_s == 0.0 and report.contact_losses == 0
+    assert report.completed and report.segments_run == 3
+    assert report.path_start_time == pytest.approx(report.first_contact_time + result.config.path.dwell,
                                                      abs=2e-3)
-    assert report["lift_off_time"] >= report["path_end_time"] > report["path_start_time"]
+    assert report.lift_off_time >= report.path_end_time > report.path_start_time
     end = t > t[-1] - 0.05
     assert np.all(log["force"][end, 0] == 0.0)                               # off the surface at the end
     assert np.all(log["constraint"][end, 0] > 0.005)                         # and above it
-    assert np.all(phase[t >= report["lift_off_time"]] == ContactPhase.HOLD)
+    assert np.all(phase[t >= report.lift_off_time] == ContactPhase.HOLD)
     # Tracking (docs/paths.md): along the surface within 0.1 mm, the force within 2 %, once each
     # segment's first five design time constants have passed.
-    assert report["max_path_error_along_surface_mm"] < 0.1
-    assert report["max_force_error_percent"] < 2.0
+    assert report.max_path_error_along_surface_mm < 0.1
+    assert report.max_force_error_percent < 2.0
     # The line changes (docs/paths.md): the discrete plant's half-step lead, h v / 2 = 25 um at 1 ms, 5 cm/s;
     # on the bump its tessellated mesh's tangential force adds up to about 10 um (docs/paths.md's table: 0.033
     # mm in the full job; 0.0336 in this short one, with sampled or unsampled contact ports alike).
-    assert report["line_change_max_path_error_along_surface_mm"] < {"sphere_job": 0.03, "bump_job": 0.04}[job]
+    assert report.line_change_max_path_error_along_surface_mm < {"sphere_job": 0.03, "bump_job": 0.04}[job]
     # The rest of the distance from the reference point is the pad's compression along the normal.
     _, _, normal = error_parts(log)
-    settled = (t > report["path_start_time"] + 0.5) & (t < report["lift_off_time"])
+    settled = (t > report.path_start_time + 0.5) & (t < report.lift_off_time)
     compression = -log["constraint"][settled, 0]
     np.testing.assert_allclose(normal[settled], compression, atol=2e-5)
 
@@ -82,8 +82,8 @@ def test_a_job_approaches_presses_follows_its_path_and_lifts_off(job, request):
 def test_the_summary_and_the_rows_end_at_the_lift_off(sphere_job):
     summary = sphere_job.summary
     # Leaving the surface is not a force error: the rows' figures end at the lift-off.
-    assert summary["max_force_error_percent_after_5_time_constants"] < 2.0
-    assert summary["path"]["line_change_max_force_error_percent"] < 2.0
+    assert summary.max_force_error_percent_after_5_time_constants < 2.0
+    assert summary.path.line_change_max_force_error_percent < 2.0
 
 
 def test_the_eigenvalues_at_a_point_of_the_path_are_the_designed_ones():

@@ -37,18 +37,18 @@ def synthetic_log():
 
 def test_the_report_splits_the_error_and_finds_the_windows():
     report = path_report(synthetic_log(), design_time_constant=0.02, path_duration=2.0, path_length=0.1)
-    assert report["completed"] and report["segments_run"] == 2
-    assert report["first_contact_time"] == pytest.approx(0.2)
-    assert report["path_start_time"] == pytest.approx(0.5) and report["lift_off_time"] == pytest.approx(3.0)
-    assert report["max_path_error_along_normal_mm"] == pytest.approx(0.9)
+    assert report.completed and report.segments_run == 2
+    assert report.first_contact_time == pytest.approx(0.2)
+    assert report.path_start_time == pytest.approx(0.5) and report.lift_off_time == pytest.approx(3.0)
+    assert report.max_path_error_along_normal_mm == pytest.approx(0.9)
     # Settled from each segment's start + 0.1 s: the first segment's 1 mm transient (to 0.6 s) is not in it.
-    assert report["max_path_error_along_surface_mm"] == pytest.approx(0.2)
-    assert report["first_segment_max_path_error_along_surface_mm"] == pytest.approx(1.2)
-    assert report["line_change_max_path_error_along_surface_mm"] == pytest.approx(0.1)
-    assert report["max_path_error_mm"] == pytest.approx(np.hypot(0.2, 0.9))
-    assert report["max_force_error_percent"] == pytest.approx(1.0)
-    assert [s["max_path_error_along_surface_mm"] for s in report["segments"]] == pytest.approx([0.2, 0.1])
-    assert report["time_off_surface_s"] == pytest.approx(0.05, abs=1.5e-3) and report["contact_losses"] == 1
+    assert report.max_path_error_along_surface_mm == pytest.approx(0.2)
+    assert report.first_segment_max_path_error_along_surface_mm == pytest.approx(1.2)
+    assert report.line_change_max_path_error_along_surface_mm == pytest.approx(0.1)
+    assert report.max_path_error_mm == pytest.approx(np.hypot(0.2, 0.9))
+    assert report.max_force_error_percent == pytest.approx(1.0)
+    assert [s.max_path_error_along_surface_mm for s in report.segments] == pytest.approx([0.2, 0.1])
+    assert report.time_off_surface_s == pytest.approx(0.05, abs=1.5e-3) and report.contact_losses == 1
     assert any("0.050 s (1 contact losses)" in line for line in path_text(report))
 
 

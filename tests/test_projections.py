@@ -2,7 +2,6 @@
 
 import numpy as np
 import pytest
-import sympy
 from test_constraints import crank_point, random_sphere_points, sphere_paper_E_p, sphere_point
 
 from pydrake.autodiffutils import InitializeAutoDiff

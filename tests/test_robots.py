@@ -356,7 +356,7 @@ def tracking(arm, name, x):
     task = plane_task(arm, name, x)
     config = task.default_config(desired_velocity=[0.05, 0, 0, 0, 0], desired_force=[10.0], duration=1.0)
     summary = simulate(config).summary
-    assert summary["mode"] == "velocity-force" and summary["design_time_constant"] == pytest.approx(0.1)
+    assert summary.mode == "velocity-force" and summary.design_time_constant == pytest.approx(0.1)
     return summary
 
 
@@ -364,15 +364,15 @@ def tracking(arm, name, x):
 def test_loaded_six_dof_arm_tracks_on_a_plane(ur10):
     # Five time constants: 0.5 s; measured 0.66 % (velocity, the transient's tail) and 1e-4 % (force).
     summary = tracking(ur10, "ur10-plane", 0.7)
-    assert summary["max_velocity_error_percent_after_5_time_constants"] <= 2.0
-    assert summary["max_force_error_percent_after_5_time_constants"] <= 2.0
+    assert summary.max_velocity_error_percent_after_5_time_constants <= 2.0
+    assert summary.max_force_error_percent_after_5_time_constants <= 2.0
 
 
 @pytest.mark.slow
 def test_loaded_kinova_tracks_on_a_plane(kinova):
     summary = tracking(kinova, "kinova-plane", 0.45)
-    assert summary["max_velocity_error_percent_after_5_time_constants"] <= 2.0
-    assert summary["max_force_error_percent_after_5_time_constants"] <= 2.0
+    assert summary.max_velocity_error_percent_after_5_time_constants <= 2.0
+    assert summary.max_force_error_percent_after_5_time_constants <= 2.0
 
 
 @pytest.mark.slow
@@ -380,5 +380,5 @@ def test_loaded_seven_dof_arm_with_shipped_damping_tracks_on_a_plane(cache):
     """The xArm7's URDF joint damping (2-10 N m s/rad) as shipped: the law compensates the damping the
     discrete solver applies implicitly (control.damping); without that, about 75 % velocity error."""
     summary = tracking(load_arm(XARM7, flange="link7", cache_dir=cache), "xarm7-plane", 0.45)
-    assert summary["max_force_error_percent_after_5_time_constants"] <= 2.0
-    assert summary["max_velocity_error_percent_after_5_time_constants"] <= 2.0
+    assert summary.max_force_error_percent_after_5_time_constants <= 2.0
+    assert summary.max_velocity_error_percent_after_5_time_constants <= 2.0

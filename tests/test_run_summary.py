@@ -1,5 +1,6 @@
 """What a run reports: per-row errors in each row's units, settling and predictions from contact."""
 
+import dataclasses
 import json
 import math
 import re
@@ -8,10 +9,12 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from drake_hybrid.cli import _residual_text, _row_text, main
+from drake_hybrid.cli import main
 from drake_hybrid.control.phases import ContactPhase
-from drake_hybrid.experiments.metrics import contact_time, row_errors, row_units, worst
+from drake_hybrid.experiments.metrics import ForceRowFigures, contact_time, row_errors, row_units, worst
 from drake_hybrid.experiments.simulation import predicted_tracking, simulate
+from drake_hybrid.experiments.summary import RunSummary
+from drake_hybrid.report.run import residual_text, row_text
 from drake_hybrid.tasks.registry import TASKS, get_task
 
 
@@ -37,16 +40,36 @@ def test_each_row_is_in_its_own_units_and_percent_of_its_own_command():
     error = np.column_stack([np.full_like(t, 1e-3), np.full_like(t, 3.2e-3), np.full_like(t, 5e-4)])
     rows = row_errors(t, error, desired, ["x-dot", "y-dot", "theta-dot"], ["m/s", "m/s", "rad/s"], since=0.0,
                       settle_after=0.5)
-    assert rows[0]["units"] == "m/s" and rows[0]["final_error_percent"] == pytest.approx(1.0)
-    assert rows[0]["max_error_percent_after_5_time_constants"] == pytest.approx(1.0)
-    assert rows[0]["scale_of"] == "command" and rows[0]["scale"] == pytest.approx(0.1)
+    assert rows[0].units == "m/s" and rows[0].final_error_percent == pytest.approx(1.0)
+    assert rows[0].max_error_percent_after_5_time_constants == pytest.approx(1.0)
+    assert rows[0].scale_of == "command" and rows[0].scale == pytest.approx(0.1)
     # the cross-track row, commanded zero: 3.2 mm/s is 3.2 % of the 0.1 m/s slide
-    assert rows[1]["scale_of"] == "rows in its units" and rows[1]["final_error_percent"] == pytest.approx(3.2)
-    assert rows[1]["settling_time_1_percent"] == math.inf
+    assert rows[1].scale_of == "rows in its units" and rows[1].final_error_percent == pytest.approx(3.2)
+    assert rows[1].settling_time_1_percent == math.inf
     # no rad/s command: the run's command scale, |(0.1, 0, 0)|
-    assert rows[2]["scale_of"] == "run" and rows[2]["final_error"] == pytest.approx(5e-4)
-    assert rows[2]["final_error_percent"] == pytest.approx(0.5)
+    assert rows[2].scale_of == "run" and rows[2].final_error == pytest.approx(5e-4)
+    assert rows[2].final_error_percent == pytest.approx(0.5)
     assert worst(rows, "max_error_percent_after_5_time_constants") == pytest.approx(3.2)
+
+
+def test_the_summary_is_typed_and_its_dict_is_summary_json(tmp_path):
+    """simulate's summary is a RunSummary read by attribute (its rows RowFigures, the force rows
+    ForceRowFigures); as_dict() is summary.json's dict, key for key and in order, and from_dict reads it back."""
+    result = simulate(get_task("window-washing").default_config(duration=0.05))
+    summary = result.summary
+    assert isinstance(summary, RunSummary) and summary.status == "completed" and summary.task == "window-washing"
+    assert all(isinstance(row, ForceRowFigures) for row in summary.force_rows)
+    assert not any(isinstance(row, ForceRowFigures) for row in summary.velocity_rows)
+    written = json.loads(summary.to_json())
+    assert list(written) == [field.name for field in dataclasses.fields(RunSummary)]
+    assert list(written["force_rows"][0])[-2:] == ["held", "max_measured_force_after_contact"]
+    assert "held" not in written["velocity_rows"][0]
+    again = RunSummary.from_dict(summary.as_dict())
+    assert again == summary and again.to_json() == summary.to_json()
+    read = RunSummary.from_dict(written).force_rows[0]            # the file's inf ("never") reads None
+    assert isinstance(read, ForceRowFigures) and read.final_error == summary.force_rows[0].final_error
+    with pytest.raises(TypeError, match="no_such_key"):
+        RunSummary.from_dict(dict(written, no_such_key=1))
 
 
 def test_settling_is_counted_from_contact():
@@ -58,8 +81,8 @@ def test_settling_is_counted_from_contact():
     assert start == pytest.approx(0.4)
     error = np.where(t < start, 10.0, 10.0 * np.exp(-10.0 * (t - start)))[:, None]
     (row,) = row_errors(t, error, np.full((t.size, 1), 10.0), ["F"], ["N"], since=start, settle_after=start + 0.5)
-    assert row["settling_time_1_percent"] == pytest.approx(math.log(100) / 10.0, abs=2e-3)   # 0.46 s after contact
-    assert row["max_error_percent_after_5_time_constants"] == pytest.approx(100 * math.exp(-5), rel=1e-2)
+    assert row.settling_time_1_percent == pytest.approx(math.log(100) / 10.0, abs=2e-3)   # 0.46 s after contact
+    assert row.max_error_percent_after_5_time_constants == pytest.approx(100 * math.exp(-5), rel=1e-2)
     assert contact_time({"t": t, "contact_phase": np.zeros((t.size, 1))}) == math.inf
     assert contact_time({"t": t}) == 0.0                      # no supervisor: the run starts in contact
 
@@ -71,16 +94,16 @@ def test_an_off_surface_start_is_summarized_and_predicted_from_contact():
     config.duration, config.start.force_integral, config.start.in_contact = 1.3, [], False
     result = simulate(config)
     summary, log = result.summary, result.log
-    assert 0.5 < summary["contact_time"] < 0.6
-    force = summary["force_rows"][0]
+    assert 0.5 < summary.contact_time < 0.6
+    force = summary.force_rows[0]
     # The designed force loop settles to 1 % within 5 time constants of contact, not of t = 0.
-    assert force["settling_time_1_percent"] < 5 * summary["design_time_constant"]
-    assert summary["max_force_error_percent_after_5_time_constants"] < 1.0
+    assert force.settling_time_1_percent < 5 * summary.design_time_constant
+    assert summary.max_force_error_percent_after_5_time_constants < 1.0
     # C(r) before contact is the 10 mm gap; after it, the pad's compression (about 1 mm).
-    assert summary["max_constraint_residual"] == pytest.approx(0.01, rel=0.05)
-    assert summary["max_constraint_residual_after_contact"] < 2e-3
+    assert summary.max_constraint_residual == pytest.approx(0.01, rel=0.05)
+    assert summary.max_constraint_residual_after_contact < 2e-3
     velocity, force_prediction = predicted_tracking(result.scenario, config, log)
-    at = int(np.argmax(log["t"] >= summary["contact_time"]))
+    at = int(np.argmax(log["t"] >= summary.contact_time))
     assert np.all(np.isnan(velocity[:at])) and np.all(np.isnan(force_prediction[:at]))
     np.testing.assert_allclose(velocity[at], log["velocity"][at], atol=1e-12)
 
@@ -90,20 +113,20 @@ def test_the_grinding_default_says_it_ends_in_the_surge_after_the_rough_patch():
     """The default 3 s grinding run ends 0.2 s after the pad leaves the rough patch: the summary says
     so (and how long a run ending in steady sliding is), instead of a bare 26 % speed error."""
     result = simulate(get_task("grinding").default_config())
-    edges, force, note = result.summary["notes"]
+    edges, force, note = result.summary.notes
     assert "after the pad left the rough patch" in note and "--duration 3.8" in note and "x-dot's final error" in note
     # x-dot's settled max (75 %) is the impedance's answer to the patch's friction steps, and the note says so.
     assert "entering it" in edges and "leaving it" in edges and "peaking at 0.077 m/s" in edges
-    x_dot = result.summary["velocity_rows"][0]
-    assert x_dot["units"] == "m/s" and x_dot["final_error_percent"] > 5
+    x_dot = result.summary.velocity_rows[0]
+    assert x_dot.units == "m/s" and x_dot.final_error_percent > 5
     # F's settled max (6.6 %) is the force loop's answer to the same steps, just after the pad leaves the patch
     # (the summary's event); away from the edges F stays within 1 %.
-    (span,) = result.summary["events"]
-    F = result.summary["force_rows"][0]
-    assert 0 <= F["max_error_time_after_5_time_constants"] - span["end"] < 0.3
+    (span,) = result.summary.events
+    F = result.summary.force_rows[0]
+    assert 0 <= F.max_error_time_after_5_time_constants - span["end"] < 0.3
     assert "(3.2-11)" in force and "leaving it" in force
     away = float(re.search(r"at most [\d.e-]+ N \(([\d.]+) %\)", force).group(1))
-    assert away < 1.0 < F["max_error_percent_after_5_time_constants"]
+    assert away < 1.0 < F.max_error_percent_after_5_time_constants
 
 
 def test_the_impedance_step_peak_is_the_designed_impulse_response_at_its_largest():
@@ -162,12 +185,12 @@ def test_the_sphere_grinding_summary_says_when_the_pad_broke_away():
     config = get_task("grinding").default_config({"workpiece": "sphere"})
     config.duration = 1.0
     result = simulate(config)
-    (note,) = result.summary["notes"]
+    (note,) = result.summary.notes
     breakaway = float(re.search(r"held the pad until t = ([0-9.]+) s", note).group(1))
     assert 0.3 < breakaway < 0.8 and "into sliding" in note
     config.contact.friction = 0.0                 # nothing to break away from, and no force error from it
     frictionless = simulate(config)
-    assert frictionless.summary["notes"] == [] and frictionless.summary["final_force_error_percent"] < 0.1
+    assert frictionless.summary.notes == [] and frictionless.summary.final_force_error_percent < 0.1
 
 
 @pytest.mark.slow
@@ -178,7 +201,7 @@ def test_the_crank_summary_prints_the_true_crank_rates_deviation_for_both_veloci
     for rows in ("true", "paper"):
         config = get_task("crank-turning").default_config({"velocity_rows": rows})
         config.duration = 0.6
-        (note,) = simulate(config).summary["notes"]
+        (note,) = simulate(config).summary.notes
         deviations[rows] = float(re.search(r"deviates at most ([0-9.e+-]+) rad/s", note).group(1))
     assert deviations["true"] < 0.01 * 0.5
     assert deviations["paper"] > 3.0 * deviations["true"]
@@ -198,21 +221,19 @@ def test_grinding_on_the_sphere_labels_its_rows_as_the_sphere_task():
 def test_the_settled_max_says_when_and_in_which_phase_of_the_run():
     """The row's worst error after the start's transient comes with its time, and the CLI names the run's
     phase it falls in or just after (the grinding force peak 0.007 s after the pad left the rough patch)."""
-    from drake_hybrid.cli import _row_text
-
     t = np.arange(0.0, 3.0005, 1e-3)
     error = np.where(np.abs(t - 2.807) < 5e-4, 0.661, 0.03)[:, None]
     (row,) = row_errors(t, error, np.full((t.size, 1), 10.0), ["F"], ["N"], since=0.0, settle_after=0.5)
-    assert row["max_error_time_after_5_time_constants"] == pytest.approx(2.807)
+    assert row.max_error_time_after_5_time_constants == pytest.approx(2.807)
     events = [{"start": 1.67, "end": 2.80, "label": "pad on the rough patch (mu = 0.9)"}]
     assert "settled max 0.661 N (6.61 %) at t = 2.807 s, 0.01 s after the end of: pad on the rough patch" in \
-        _row_text(row, events)
-    assert _row_text(row, [{"start": 1.0, "end": None, "label": "x"}]).count("after") == 1   # only 'after contact'
-    assert "switch" not in _row_text(row, [{"start": 2.8, "end": None, "label": "switch", "explains_errors": False}])
-    assert "0.01 s after the moment of: slip" in _row_text(row, [{"start": 2.8, "end": None, "label": "slip"}])
+        row_text(row, events)
+    assert row_text(row, [{"start": 1.0, "end": None, "label": "x"}]).count("after") == 1   # only 'after contact'
+    assert "switch" not in row_text(row, [{"start": 2.8, "end": None, "label": "switch", "explains_errors": False}])
+    assert "0.01 s after the moment of: slip" in row_text(row, [{"start": 2.8, "end": None, "label": "slip"}])
     notes = ["x-dot's error at the rough patch's edges is the designed impedance yielding to the friction force",
              "F's error at the rough patch's edges is the force loop answering the friction force's step"]
-    assert _row_text(row, events, notes).endswith("pad on the rough patch (mu = 0.9), within 1 % from 2.808 s after "
+    assert row_text(row, events, notes).endswith("pad on the rough patch (mu = 0.9), within 1 % from 2.808 s after "
                                                   "contact on; see note 2")
 
 
@@ -231,10 +252,10 @@ def test_a_row_points_only_at_the_notes_that_name_it():
              "(F_v, measured by the F/T sensor)",
              "F's error at the rough patch's edges is the force loop answering the friction force's step",
              "the run ends 0.20 s after the pad left the rough patch: so x-dot's final error is that transient's"]
-    assert _row_text(x_dot, events, notes).endswith("not within 1 % at the end; see notes 1, 3")
-    assert "see note" not in _row_text(theta_dot, events, notes)
-    assert "0.03 s after the start of: pad on the rough patch" in _row_text(theta_dot, events, notes)
-    assert _row_text(force, events, notes).endswith("; see note 2")
+    assert row_text(x_dot, events, notes).endswith("not within 1 % at the end; see notes 1, 3")
+    assert "see note" not in row_text(theta_dot, events, notes)
+    assert "0.03 s after the start of: pad on the rough patch" in row_text(theta_dot, events, notes)
+    assert row_text(force, events, notes).endswith("; see note 2")
 
 
 def test_impedance_grinding_explains_fs_error_at_the_rough_patchs_edges():
@@ -299,16 +320,16 @@ def test_the_sphere_constraints_piece_switches_are_events():
 def test_a_held_row_prints_as_held_with_its_measured_force_not_as_an_error():
     """A row the controller holds kinematically (no force loop, no force commanded) has no force error to
     report; what it shows is the force measured along it."""
-    held = {"name": "orientation row 1", "units": "N", "command": 0.0, "final_error": None, "held": True,
-            "final_error_percent": None, "max_error_after_5_time_constants": None,
-            "max_error_percent_after_5_time_constants": None, "settling_time_1_percent": None,
-            "max_measured_force_after_contact": 0.00153}
-    assert _row_text(held) == ("held by the controller (no force commanded); measured force up to 0.00153 N "
-                               "after contact")
-    held["max_measured_force_after_contact"] = None               # a sensor fault: nothing measured to report
-    assert _row_text(held) == "held by the controller (no force commanded)"
-    tracked = dict(held, held=False, command=10.0, final_error=0.5, final_error_percent=5.0)
-    assert _row_text(tracked).startswith("command 10 N; final error 0.5 N (5.00 %)")
+    held = ForceRowFigures(name="orientation row 1", units="N", command=0.0, scale=None, scale_of=None,
+                           final_error=None, final_error_percent=None, max_error_after_5_time_constants=None,
+                           max_error_percent_after_5_time_constants=None, max_error_time_after_5_time_constants=None,
+                           settling_time_1_percent=None, held=True, max_measured_force_after_contact=0.00153)
+    assert row_text(held) == ("held by the controller (no force commanded); measured force up to 0.00153 N "
+                              "after contact")
+    held.max_measured_force_after_contact = None                  # a sensor fault: nothing measured to report
+    assert row_text(held) == "held by the controller (no force commanded)"
+    tracked = dataclasses.replace(held, held=False, command=10.0, final_error=0.5, final_error_percent=5.0)
+    assert row_text(tracked).startswith("command 10 N; final error 0.5 N (5.00 %)")
 
 
 def test_the_sphere_summary_lists_its_held_rows_and_their_measured_force(tmp_path, capsys):
@@ -340,16 +361,18 @@ def test_the_sphere_summary_lists_its_held_rows_and_their_measured_force(tmp_pat
 
 
 def test_the_constraint_residual_is_printed_in_cs_units():
-    one = {"max_constraint_residual_after_contact": 8.4e-4, "constraint_units": ["m"],
-           "max_constraint_residual_rows_after_contact": [8.4e-4]}
-    assert _residual_text(one) == "max |C(r)| after contact 0.00084 m"
-    crank = {"max_constraint_residual_after_contact": 1.5e-5, "constraint_units": ["m^2", "m", "1", "m"],
-             "max_constraint_residual_rows_after_contact": [1.5e-5, 2e-6, 3e-7, 4e-6]}
-    assert _residual_text(crank) == ("max |C_i(r)| after contact, per row of C: 1.5e-05 m^2, 2e-06 m, "
-                                     "3e-07 (no unit), 4e-06 m")
-    custom = dict(one, constraint_units=None)                       # a task that names no units for C
-    assert _residual_text(custom) == "max |C(r)| after contact 0.00084 (in the units of C's rows)"
-    assert _residual_text(dict(one, max_constraint_residual_after_contact=None)) == "no contact made"
+    one = RunSummary(task="window-washing", mode="velocity-force", duration=1.0,
+                     max_constraint_residual_after_contact=8.4e-4, constraint_units=["m"],
+                     max_constraint_residual_rows_after_contact=[8.4e-4])
+    assert residual_text(one) == "max |C(r)| after contact 0.00084 m"
+    crank = dataclasses.replace(one, max_constraint_residual_after_contact=1.5e-5,
+                                constraint_units=["m^2", "m", "1", "m"],
+                                max_constraint_residual_rows_after_contact=[1.5e-5, 2e-6, 3e-7, 4e-6])
+    assert residual_text(crank) == ("max |C_i(r)| after contact, per row of C: 1.5e-05 m^2, 2e-06 m, "
+                                    "3e-07 (no unit), 4e-06 m")
+    custom = dataclasses.replace(one, constraint_units=None)        # a task that names no units for C
+    assert residual_text(custom) == "max |C(r)| after contact 0.00084 (in the units of C's rows)"
+    assert residual_text(dataclasses.replace(one, max_constraint_residual_after_contact=None)) == "no contact made"
 
 
 def test_the_paper_rows_are_labelled_as_pseudo_velocities_in_their_mixed_units():
@@ -379,12 +402,12 @@ def test_the_crank_paper_rows_error_is_reported_against_the_true_command_in_rad_
     config = get_task("crank-turning").default_config({"velocity_rows": "paper"})
     config.duration = 0.05
     result = simulate(config)
-    log, (spin, rate) = result.log, result.summary["velocity_rows"]
+    log, (spin, rate) = result.log, result.summary.velocity_rows
     np.testing.assert_array_equal(log["true_desired_velocity"], np.tile([0.0, 0.5], (log["t"].size, 1)))
     assert np.max(log["desired_velocity"][:, 1]) > 0.505                  # the pseudo-velocity, not the command
-    assert rate["name"].startswith("alpha-dot (crank)") and rate["units"] == "rad/s" and rate["command"] == 0.5
-    assert rate["final_error_percent"] == pytest.approx(100 * abs(log["velocity_error"][-1, 1]) / 0.5)
-    assert spin["units"] == "rad/s" and spin["command"] == 0.0
+    assert rate.name.startswith("alpha-dot (crank)") and rate.units == "rad/s" and rate.command == 0.5
+    assert rate.final_error_percent == pytest.approx(100 * abs(log["velocity_error"][-1, 1]) / 0.5)
+    assert spin.units == "rad/s" and spin.command == 0.0
     assert "true_desired_velocity" not in simulate(get_task("crank-turning").default_config(duration=0.05)).log
 
 
@@ -395,10 +418,10 @@ def test_the_sphere_paper_rows_note_gives_the_measured_shortfall_and_why():
     config = get_task("sphere-polishing").default_config({"velocity_rows": "paper", "chart": "euler"})
     config.duration = 0.6
     summary = simulate(config).summary
-    (note,) = summary["notes"]
-    row = summary["velocity_rows"][1]
+    (note,) = summary.notes
+    row = summary.velocity_rows[1]
     shortfall = float(re.search(r"t_1 . p-dot ends ([0-9]+) % short of its", note).group(1))
-    assert shortfall == pytest.approx(abs(row["final_error_percent"]), abs=0.5) and row["final_error"] < 0
+    assert shortfall == pytest.approx(abs(row.final_error_percent), abs=0.5) and row.final_error < 0
     assert 80 < shortfall < 90 and "pseudo-velocity" in note and "docs/theory.md §6" in note
     default = get_task("sphere-polishing").default_config()
     assert get_task("sphere-polishing").run_notes(SimpleNamespace(config=default), {"t": np.zeros(2)}, 0.1) == []

@@ -214,8 +214,8 @@ def test_figures_leave_out_samples_read_while_the_wrench_was_invalid():
     error[-1] = math.nan                                  # at the very end, too
     desired = np.full((11, 1), 10.0)
     row, = row_errors(t, error, desired, ["F"], ["N"], since=0.0, settle_after=0.3)
-    assert row["max_error_after_5_time_constants"] == pytest.approx(0.05)
-    assert row["final_error"] == pytest.approx(0.05) and row["final_error_percent"] == pytest.approx(0.5)
-    assert row["settling_time_1_percent"] == 0.0
+    assert row.max_error_after_5_time_constants == pytest.approx(0.05)
+    assert row.final_error == pytest.approx(0.05) and row.final_error_percent == pytest.approx(0.5)
+    assert row.settling_time_1_percent == 0.0
     assert invalid_samples(error) == 2 and last_valid(error)[0] == pytest.approx(0.05)
     assert last_valid(np.full((3, 2), math.nan)) is None

@@ -16,6 +16,7 @@ from drake_hybrid.cli import main, make_parser
 from drake_hybrid.core.errors import MissingExtraError
 from drake_hybrid.experiments.config_paths import apply_parameters, set_config_value
 from drake_hybrid.experiments.metrics import row_errors
+from drake_hybrid.experiments.summary import RunSummary
 from drake_hybrid.experiments.sweep import run_sweep
 from drake_hybrid.experiments.sweep_point import RESULT_COLUMNS, simulation_metrics
 from drake_hybrid.experiments.sweep_results import read_results
@@ -407,11 +408,13 @@ def _window_result(x_dot_error, theta_dot_error):
            "velocity_error": np.tile([x_dot_error, theta_dot_error], (t.size, 1)),
            "desired_force": np.full((t.size, 1), 10.0), "force_error": np.full((t.size, 1), 0.01),
            "force": np.full((t.size, 1), 10.01)}
-    summary = {"velocity_rows": row_errors(t, log["velocity_error"], log["desired_velocity"], ["x-dot", "theta-dot"],
-                                           ["m/s", "rad/s"], 0.0, 0.5),
-               "force_rows": row_errors(t, log["force_error"], log["desired_force"], ["normal force"], ["N"], 0.0, 0.5),
-               "velocity_settling_time_1_percent": 0.1, "force_settling_time_1_percent": 0.1,
-               "max_constraint_residual": 1e-3, "wall_time": 1.0}
+    summary = RunSummary(task="window-washing", mode="velocity-force", duration=1.0,
+                         velocity_rows=row_errors(t, log["velocity_error"], log["desired_velocity"],
+                                                  ["x-dot", "theta-dot"], ["m/s", "rad/s"], 0.0, 0.5),
+                         force_rows=row_errors(t, log["force_error"], log["desired_force"], ["normal force"], ["N"],
+                                               0.0, 0.5),
+                         velocity_settling_time_1_percent=0.1, force_settling_time_1_percent=0.1,
+                         max_constraint_residual=1e-3, wall_time=1.0)
     return SimpleNamespace(log=log, summary=summary)
 
 
@@ -448,11 +451,12 @@ def test_peak_force_is_per_row_in_its_units_and_names_the_row():
     names, units = ["F_x", "F_y", "M_x", "M_y"], ["N", "N", "N m", "N m"]
     log = {"t": t, "desired_velocity": np.tile([0.5, 0.0], (t.size, 1)), "velocity_error": np.zeros((t.size, 2)),
            "desired_force": desired, "force_error": force - desired, "force": force}
-    summary = {"velocity_rows": row_errors(t, log["velocity_error"], log["desired_velocity"], ["spin", "crank"],
-                                           ["rad/s", "rad/s"], 0.0, 0.5),
-               "force_rows": row_errors(t, log["force_error"], desired, names, units, 0.0, 0.5),
-               "velocity_settling_time_1_percent": 0.1, "force_settling_time_1_percent": 0.1,
-               "max_constraint_residual": 1e-3, "wall_time": 1.0}
+    summary = RunSummary(task="crank-turning", mode="velocity-force", duration=1.0,
+                         velocity_rows=row_errors(t, log["velocity_error"], log["desired_velocity"], ["spin", "crank"],
+                                                  ["rad/s", "rad/s"], 0.0, 0.5),
+                         force_rows=row_errors(t, log["force_error"], desired, names, units, 0.0, 0.5),
+                         velocity_settling_time_1_percent=0.1, force_settling_time_1_percent=0.1,
+                         max_constraint_residual=1e-3, wall_time=1.0)
     metrics = simulation_metrics(SimpleNamespace(log=log, summary=summary), StabilityCriteria())
     assert metrics["peak_force"] == pytest.approx(6.0) and metrics["peak_force_row"] == "F_y (N)"   # 1.2 x 5 N
     force[10, 2] = 1.5                                            # 1.5 N m on a row commanded to zero: 1.5 units

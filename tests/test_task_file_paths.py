@@ -3,7 +3,6 @@ file, the path section, the paper's fields Y_d(r), F_d(r) as expressions; each b
 error naming the field."""
 
 import textwrap
-from pathlib import Path
 
 import numpy as np
 import pytest

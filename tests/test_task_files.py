@@ -68,8 +68,8 @@ def test_window_file_runs_as_the_built_in_task(window_file_task):
     for name in ("velocity_error", "force_error", "q", "constraint"):
         np.testing.assert_allclose(file_run.log[name], built_in_run.log[name], rtol=0, atol=1e-9, err_msg=name)
     for rows in ("velocity_rows", "force_rows"):
-        for ours, theirs in zip(file_run.summary[rows], built_in_run.summary[rows]):
-            assert ours["final_error"] == pytest.approx(theirs["final_error"], abs=1e-9)
+        for ours, theirs in zip(getattr(file_run.summary, rows), getattr(built_in_run.summary, rows)):
+            assert ours.final_error == pytest.approx(theirs.final_error, abs=1e-9)
 
 
 def test_window_file_linearizes_to_the_designed_eigenvalues(window_file_task):
@@ -306,12 +306,12 @@ def test_a_task_that_is_not_built_in_tilted_pane_with_a_redundant_arm():
     np.testing.assert_allclose(np.sort_complex(result.match.predicted), [-10, -10, -10, -8])
     run = simulate(config.replace(duration=1.0))
     summary = run.summary
-    along, turning = summary["velocity_rows"]
-    for row in (along, summary["force_rows"][0]):
-        assert row["settling_time_1_percent"] is not None and row["settling_time_1_percent"] < 5 * 0.125, row
-    assert turning["max_error_after_5_time_constants"] < 1e-3        # rad/s, commanded 0
-    assert abs(summary["velocity_rows"][0]["final_error"]) < 0.01 * 0.05
-    assert abs(summary["force_rows"][0]["final_error"]) < 0.01 * 10.0
+    along, turning = summary.velocity_rows
+    for row in (along, summary.force_rows[0]):
+        assert row.settling_time_1_percent is not None and row.settling_time_1_percent < 5 * 0.125, row
+    assert turning.max_error_after_5_time_constants < 1e-3        # rad/s, commanded 0
+    assert abs(summary.velocity_rows[0].final_error) < 0.01 * 0.05
+    assert abs(summary.force_rows[0].final_error) < 0.01 * 10.0
 
 
 def test_schema_page_is_generated_from_the_types():

@@ -31,8 +31,8 @@ def _assert_same_run(file_config, built_in_config, duration):
     for name in LOGS:
         assert ours.log[name].shape == theirs.log[name].shape, name
         np.testing.assert_allclose(ours.log[name], theirs.log[name], rtol=0, atol=1e-9, err_msg=name)
-    assert ours.summary["notes"] == theirs.summary["notes"]
-    assert ours.summary["events"] == theirs.summary["events"]
+    assert ours.summary.notes == theirs.summary.notes
+    assert ours.summary.events == theirs.summary.events
     return ours
 
 

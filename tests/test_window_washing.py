@@ -34,7 +34,7 @@ def default_run():
 @pytest.mark.slow                # several seconds: not in the fast loop (-m 'not slow')
 def test_velocity_and_force_errors_settle_below_one_percent_within_five_time_constants(default_run):
     log, summary = default_run.log, default_run.summary
-    tau = summary["design_time_constant"]
+    tau = summary.design_time_constant
     settled = log["t"] >= 5 * tau
     speed = np.linalg.norm(log["desired_velocity"], axis=1)
     force = np.linalg.norm(log["desired_force"], axis=1)
@@ -42,13 +42,13 @@ def test_velocity_and_force_errors_settle_below_one_percent_within_five_time_con
     force_error = np.linalg.norm(log["force_error"], axis=1)
     assert np.all(velocity_error[settled] < 0.01 * speed[settled])
     assert np.all(force_error[settled] < 0.01 * force[settled])
-    assert summary["velocity_settling_time_1_percent"] <= 5 * tau
-    assert summary["force_settling_time_1_percent"] <= 5 * tau
+    assert summary.velocity_settling_time_1_percent <= 5 * tau
+    assert summary.force_settling_time_1_percent <= 5 * tau
     # The start really had the designed transients to settle from.
     assert velocity_error[0] == pytest.approx(0.1)
     assert np.max(force_error) > 0.15 * force[0]
     # On the window throughout: the pad centre stays within its compression (about 1 mm) of y = 0.98.
-    assert summary["max_constraint_residual"] < 2e-3
+    assert summary.max_constraint_residual < 2e-3
     assert np.all(np.abs(log["torque"]) <= np.array([150.0, 80.0, 30.0]))
 
 

@@ -120,8 +120,8 @@ def test_custom_task_reproduces_the_built_in_task(custom_window):
     assert np.allclose(custom.log["q"][0], builtin.log["q"][0], atol=1e-8)      # the same pressing start
     for key in ("q", "velocity", "force", "torque"):
         assert np.allclose(custom.log[key], builtin.log[key], atol=1e-6), key
-    assert custom.summary["force_settling_time_1_percent"] == pytest.approx(
-        builtin.summary["force_settling_time_1_percent"], abs=2e-3)
+    assert custom.summary.force_settling_time_1_percent == pytest.approx(
+        builtin.summary.force_settling_time_1_percent, abs=2e-3)
 
 
 def test_custom_task_pressing_direction(custom_window):

@@ -31,6 +31,7 @@ import time
 from pathlib import Path
 
 from drake_hybrid.control import fast_kernels
+from drake_hybrid.core.errors import ConfigError
 from drake_hybrid.core.locks import process_alive
 
 POLICIES = ("background", "foreground")
@@ -45,14 +46,14 @@ def cache_folder():
 def policy():
     """"background" (the default) or "foreground": how a controller gets a law that is not compiled yet."""
     if _POLICY[0] not in POLICIES:
-        raise ValueError(f"DRAKE_HYBRID_COMPILE must be one of {', '.join(POLICIES)}, got '{_POLICY[0]}'")
+        raise ConfigError(f"DRAKE_HYBRID_COMPILE must be one of {', '.join(POLICIES)}, got '{_POLICY[0]}'")
     return _POLICY[0]
 
 
 def set_policy(value):
     """Set ``policy()`` for this process (returns the previous one)."""
     if value not in POLICIES:
-        raise ValueError(f"compile policy must be one of {', '.join(POLICIES)}, got '{value}'")
+        raise ConfigError(f"compile policy must be one of {', '.join(POLICIES)}, got '{value}'")
     previous, _POLICY[0] = _POLICY[0], value
     return previous
 
@@ -73,7 +74,7 @@ def foreground():
 def entry_key(function, signature):
     """The identity of one compiled entry: ``function`` (a numba dispatcher) at ``signature`` (a tuple of
     numba types), with what decides whether numba's cache of it is valid here."""
-    import numba                       # optional: fast_kernels.NUMBA_ERROR says when it is missing
+    import numba  # optional: fast_kernels.NUMBA_ERROR says when it is missing
 
     source = Path(function.py_func.__code__.co_filename)
     stat = source.stat()

@@ -18,7 +18,7 @@ from pydrake.multibody.tree import FrameIndex, JacobianWrtVariable
 from pydrake.systems.framework import ValueProducer
 
 from drake_hybrid.core.arguments import describe, instance, joint_vector, number, positive, vector
-from drake_hybrid.core.errors import ArgumentError, DimensionError, UnknownFrameError
+from drake_hybrid.core.errors import ArgumentError, DimensionError, UnknownFrameError, UnreachablePoseError
 from drake_hybrid.core.linalg import all_finite, value
 
 
@@ -212,11 +212,12 @@ def inverse_kinematics(kinematics, plant_context, X_target, q_guess, tolerance=1
         largest = np.max(np.abs(step))
         q = q + (step * (0.2 / largest) if largest > 0.2 else step)
     if error_norm > 1e-8:
-        raise ValueError(f"inverse kinematics did not converge (pose error {error_norm:.3g}); is the target reachable?")
+        raise UnreachablePoseError(f"inverse kinematics did not converge (pose error {error_norm:.3g}); is the target "
+                                   "reachable?")
     # Revolute joints: the same pose on the turn nearest the guess.
     q = q_guess + np.remainder(q - q_guess + np.pi, 2 * np.pi) - np.pi
     lower, upper = plant.GetPositionLowerLimits(), plant.GetPositionUpperLimits()
     if np.any(q < lower - 1e-9) or np.any(q > upper + 1e-9):
-        raise ValueError(f"inverse kinematics: the solution {np.round(q, 3).tolist()} violates the joint limits "
-                         f"[{np.round(lower, 3).tolist()}, {np.round(upper, 3).tolist()}]")
+        raise UnreachablePoseError(f"inverse kinematics: the solution {np.round(q, 3).tolist()} violates the joint "
+                                   f"limits [{np.round(lower, 3).tolist()}, {np.round(upper, 3).tolist()}]")
     return q

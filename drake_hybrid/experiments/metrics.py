@@ -1,7 +1,10 @@
 """Per-row error figures of a run: each row in its own units and in % of its command, settling from contact.
 
 The one definition of a row's error that ``summary.json`` (``simulation.summarize``), the command line's
-summary and the sweep's verdict (``sweep``) share; pure numpy on the logged arrays, no Drake.
+summary and the sweep's verdict (``sweep``) share; pure numpy on the logged arrays, no Drake. A row's
+figures are a ``RowFigures`` (a force row's a ``ForceRowFigures``, which adds whether the controller holds
+the row itself), the impedance's check an ``ImpedanceCheck``: typed records whose ``as_dict()`` is their
+entry of ``summary.json``.
 
 Arguments are checked at the call (``core.arguments``): times a nonempty vector of finite, nondecreasing
 numbers; a group of rows an array of samples x rows (a vector is one row) with one sample per time and,
@@ -10,8 +13,11 @@ so that no row may drop out. NaN is allowed in the logged errors (a sample taken
 wrench was invalid) and nowhere else. A mismatch is a one-line ArgumentError naming the argument.
 """
 
+import dataclasses
 import math
 import numbers
+from dataclasses import dataclass
+from typing import List, Optional
 
 import numpy as np
 
@@ -19,6 +25,56 @@ from drake_hybrid.analysis.environment import impedance_response
 from drake_hybrid.control.phases import ContactPhase
 from drake_hybrid.core.arguments import describe, number, numeric_array, text
 from drake_hybrid.core.errors import ArgumentError
+
+
+@dataclass
+class RowFigures:
+    """One row's error figures (``row_errors``; an entry of summary.json's ``velocity_rows``), in the row's
+    own units and in % of its scale; None where a figure cannot be computed (no sample that late, a held
+    row, a sensor fault)."""
+    name: str
+    units: str
+    command: float                                     # max |desired_i| over the run (0: commanded to zero)
+    scale: Optional[float]                             # what the % figures are of (``row_scales``)
+    scale_of: Optional[str]                            # "command", "rows in its units", "run" or "unit"
+    final_error: Optional[float]                       # e_i at the last valid sample (signed)
+    final_error_percent: Optional[float]
+    max_error_after_5_time_constants: Optional[float]
+    max_error_percent_after_5_time_constants: Optional[float]
+    max_error_time_after_5_time_constants: Optional[float]     # s
+    settling_time_1_percent: Optional[float]           # s from contact; inf: never within 1 %
+
+    def as_dict(self):
+        """The row as summary.json writes it (its fields, in order)."""
+        return dataclasses.asdict(self)
+
+    @classmethod
+    def from_dict(cls, entry):
+        """A row from its summary.json entry: a ``ForceRowFigures`` where the entry says ``held``."""
+        kind = ForceRowFigures if "held" in entry else RowFigures
+        return kind(**entry)
+
+
+@dataclass
+class ForceRowFigures(RowFigures):
+    """A force row's figures (summary.json's ``force_rows``): ``RowFigures`` and whether the controller
+    holds the row itself (``held``: no force commanded, so its error figures are None) and the largest
+    measured force along it after contact."""
+    held: bool = False
+    max_measured_force_after_contact: Optional[float] = None
+
+
+@dataclass
+class ImpedanceCheck:
+    """How closely an impedance-force run realizes the designed impedance (``impedance_check``;
+    summary.json's ``impedance``)."""
+    max_difference: List[Optional[float]]              # per row, in its units
+    max_difference_percent: Optional[float]            # the largest in % of its row's command
+    max_tangential_force: List[float]                  # per row, max |F_v| over the settled window
+
+    def as_dict(self):
+        """The check as summary.json writes it."""
+        return dataclasses.asdict(self)
 
 
 def _times(times, name, owner):
@@ -178,7 +234,7 @@ def max_row_errors(t, error, desired, after, units=None, fallback="run"):
 
 
 def row_errors(t, error, desired, names, units, since, settle_after):
-    """Per-row error figures, each in the row's own units and in % of that row's scale
+    """Per-row error figures (a list of ``RowFigures``), each in the row's own units and in % of that row's scale
     (``row_scales``): its command, or, for a row commanded to zero, the largest command in its units,
     else the run's scale (the speed or the force the run commands: the cross-track row of a slide
     against the slide's speed), so that no row drops out of the worst-row figures.
@@ -216,13 +272,13 @@ def row_errors(t, error, desired, names, units, since, settle_after):
             settle = None
         final_error = None if last is None else float(last[i])
         final_percent = None if final_error is None or sources[i] == "unit" else 100.0 * abs(final_error) / scale
-        rows.append({"name": names[i] if i < len(names) else f"row {i + 1}", "units": units[i],
-                     "command": command, "scale": scale, "scale_of": sources[i], "final_error": final_error,
-                     "final_error_percent": final_percent,
-                     "max_error_after_5_time_constants": settled[i][0],
-                     "max_error_percent_after_5_time_constants": settled[i][1],
-                     "max_error_time_after_5_time_constants": worst_time,
-                     "settling_time_1_percent": settle})
+        rows.append(RowFigures(name=names[i] if i < len(names) else f"row {i + 1}", units=units[i],
+                               command=command, scale=scale, scale_of=sources[i], final_error=final_error,
+                               final_error_percent=final_percent,
+                               max_error_after_5_time_constants=settled[i][0],
+                               max_error_percent_after_5_time_constants=settled[i][1],
+                               max_error_time_after_5_time_constants=worst_time,
+                               settling_time_1_percent=settle))
     return rows
 
 
@@ -239,8 +295,8 @@ def max_after(values, window):
 
 
 def worst(rows, key):
-    """The largest figure of ``key`` over the rows that have it (None if none has)."""
-    values = [row[key] for row in rows if row[key] is not None]
+    """The largest figure ``key`` (a field of ``RowFigures``) over the rows that have it (None if none has)."""
+    values = [getattr(row, key) for row in rows if getattr(row, key) is not None]
     return max(values) if values else None
 
 
@@ -248,10 +304,9 @@ def impedance_check(log, gains, since, settle_after):
     """Impedance-force mode: how closely the run realizes the designed impedance (3.2-11), whatever its
     measured F_v does. The impedance is driven by the run's logged F_v from its logged errors at
     ``since`` (contact; ``analysis.environment.impedance_response``) and compared with the run's
-    velocity errors from ``settle_after`` on:
-
-    {"max_difference": per row, in its units; "max_difference_percent": the largest in % of its
-    row's command (None if no row has a command); "max_tangential_force": per row, max |F_v|}
+    velocity errors from ``settle_after`` on, an ``ImpedanceCheck``: ``max_difference`` per row, in its
+    units; ``max_difference_percent`` the largest in % of its row's command (None if no row has a
+    command); ``max_tangential_force`` per row, max |F_v|.
 
     The caller checks the mode (every log has position errors, zeros outside position and impedance
     mode). None without position errors, with the paper's pseudo-velocity rows (the log's errors are
@@ -270,7 +325,7 @@ def impedance_check(log, gains, since, settle_after):
     # % of each commanded row's own command; a row commanded to zero has its absolute figure only
     figures = max_row_errors(t, difference, log["desired_velocity"], settle_after, fallback="unit")
     percents = [percent for _, percent in figures if percent is not None]
-    return {"max_difference": [worst for worst, _ in figures],
-            "max_difference_percent": max(percents) if percents else None,
-            "max_tangential_force": np.max(np.abs(np.asarray(log["tangential_force"])[t >= settle_after]),
-                                           axis=0).tolist()}
+    return ImpedanceCheck(max_difference=[worst for worst, _ in figures],
+                          max_difference_percent=max(percents) if percents else None,
+                          max_tangential_force=np.max(np.abs(np.asarray(log["tangential_force"])[t >= settle_after]),
+                                                      axis=0).tolist())

@@ -18,14 +18,72 @@ From the log of a path job (``station.path_job``: ``path_error`` = c - c_d, ``re
 * the job's timeline: first contact, the path's start and end, the lift-off, and how much of the
   path was run.
 
-Pure numpy on the logged arrays, no Drake.
+``path_report`` returns them as a ``PathReport`` (its ``segments`` a list of ``SegmentReport``), whose
+``as_dict()`` is summary.json's ``path``; ``path_text`` prints it. Pure numpy on the logged arrays, no Drake.
 """
 
+import dataclasses
 import math
+from dataclasses import dataclass
+from typing import List, Optional
 
 import numpy as np
 
 from drake_hybrid.control.phases import ContactPhase
+
+
+@dataclass
+class SegmentReport:
+    """One segment's figures (a stroke from rest to rest): its settled part (from its start + five design
+    time constants to its end) and its first five time constants (the transient); mm, %, s."""
+    segment: int
+    start: float
+    end: float
+    max_path_error_mm: Optional[float]
+    max_path_error_along_surface_mm: Optional[float]
+    max_force_error_percent: Optional[float]
+    transient_max_path_error_along_surface_mm: Optional[float]
+    transient_max_force_error_percent: Optional[float]
+
+
+@dataclass
+class PathReport:
+    """A job's figures (the module docstring; summary.json's ``path``, docs/reference/outputs.md): distances in
+    mm, times in s, None where no sample falls in the window."""
+    length_m: float
+    duration_s: float
+    segments_run: int
+    completed: bool
+    arc_length_reached_m: float
+    first_contact_time: Optional[float]
+    path_start_time: Optional[float]
+    path_end_time: Optional[float]
+    lift_off_time: Optional[float]
+    settle_time_per_segment_s: float
+    # Over every segment's settled part (its start + 5 design time constants to its end):
+    max_path_error_mm: Optional[float]
+    max_path_error_along_surface_mm: Optional[float]
+    max_path_error_along_normal_mm: Optional[float]
+    max_force_error_N: Optional[float]
+    max_force_error_percent: Optional[float]
+    # Over the first 5 design time constants of the segments after the first (the line changes), and of
+    # the first (the approach's landing is still settling there):
+    line_change_max_path_error_along_surface_mm: Optional[float]
+    line_change_max_force_error_percent: Optional[float]
+    first_segment_max_path_error_along_surface_mm: Optional[float]
+    first_segment_max_force_error_percent: Optional[float]
+    time_off_surface_s: float
+    contact_losses: int
+    segments: List[SegmentReport]
+
+    def as_dict(self):
+        """The report as summary.json writes it (its fields in order, each segment a dict)."""
+        return dataclasses.asdict(self)
+
+    @classmethod
+    def from_dict(cls, entry):
+        """A report from summary.json's ``path``."""
+        return cls(**dict(entry, segments=[SegmentReport(**segment) for segment in entry["segments"]]))
 
 
 def _first(mask, t):
@@ -40,7 +98,7 @@ def _max_or_none(values):
 
 def _largest(segments, key):
     """The largest ``key`` over ``segments`` that have it (None if none has)."""
-    return _max_or_none([s[key] for s in segments if s[key] is not None])
+    return _max_or_none([getattr(s, key) for s in segments if getattr(s, key) is not None])
 
 
 def lift_off_time(log):
@@ -71,7 +129,7 @@ def error_parts(log):
 
 
 def path_report(log, design_time_constant, path_duration, path_length, force_row=0):
-    """The job's figures (module docstring) as a dict for summary.json (distances in mm, times in s)."""
+    """The job's figures (module docstring), a ``PathReport`` (distances in mm, times in s)."""
     t = np.asarray(log["t"], dtype=float)
     segment, arc, t_path = (np.asarray(log["path_progress"], dtype=float)[:, i] for i in range(3))
     total, tangential, normal = (1000.0 * e for e in error_parts(log))
@@ -92,14 +150,14 @@ def path_report(log, design_time_constant, path_duration, path_length, force_row
         transient = samples & (t < start + tau5)
         settled_all |= settled
         percent = 100.0 * force_error / np.maximum(np.abs(desired), 1e-12)
-        segments.append({
-            "segment": int(index), "start": start, "end": end,
-            "max_path_error_mm": _max_or_none(total[settled]),
-            "max_path_error_along_surface_mm": _max_or_none(tangential[settled]),
-            "max_force_error_percent": _max_or_none(percent[settled]),
-            "transient_max_path_error_along_surface_mm": _max_or_none(tangential[transient]),
-            "transient_max_force_error_percent": _max_or_none(percent[transient]),
-        })
+        segments.append(SegmentReport(
+            segment=int(index), start=start, end=end,
+            max_path_error_mm=_max_or_none(total[settled]),
+            max_path_error_along_surface_mm=_max_or_none(tangential[settled]),
+            max_force_error_percent=_max_or_none(percent[settled]),
+            transient_max_path_error_along_surface_mm=_max_or_none(tangential[transient]),
+            transient_max_force_error_percent=_max_or_none(percent[transient]),
+        ))
     percent = 100.0 * force_error / np.maximum(np.abs(desired), 1e-12)
     contact = _first(phase == float(ContactPhase.CONTACT), t)
     # Off the surface: out of CONTACT between the first contact and the lift-off (or the end).
@@ -109,52 +167,49 @@ def path_report(log, design_time_constant, path_duration, path_length, force_row
     off = window & (phase != float(ContactPhase.CONTACT))
     losses = int(np.sum(np.diff((phase[window] == float(ContactPhase.CONTACT)).astype(int)) < 0))
     reached = float(np.max(arc[t_path >= 0])) if np.any(t_path >= 0) else 0.0
-    return {
-        "length_m": float(path_length), "duration_s": float(path_duration), "segments_run": len(segments),
-        "completed": bool(reached >= path_length - 1e-6), "arc_length_reached_m": reached,
-        "first_contact_time": contact, "path_start_time": _first(t_path >= 0, t),
-        "path_end_time": _first(t_path > path_duration, t), "lift_off_time": lift,
-        "settle_time_per_segment_s": tau5,
-        # Over every segment's settled part (its start + 5 design time constants to its end):
-        "max_path_error_mm": _max_or_none(total[settled_all]),
-        "max_path_error_along_surface_mm": _max_or_none(tangential[settled_all]),
-        "max_path_error_along_normal_mm": _max_or_none(normal[settled_all]),
-        "max_force_error_N": _max_or_none(force_error[settled_all]),
-        "max_force_error_percent": _max_or_none(percent[settled_all]),
-        # Over the first 5 design time constants of the segments after the first (the line changes), and of
-        # the first (the approach's landing is still settling there):
-        "line_change_max_path_error_along_surface_mm": _largest(segments[1:],
-                                                                "transient_max_path_error_along_surface_mm"),
-        "line_change_max_force_error_percent": _largest(segments[1:], "transient_max_force_error_percent"),
-        "first_segment_max_path_error_along_surface_mm": _largest(segments[:1],
-                                                                  "transient_max_path_error_along_surface_mm"),
-        "first_segment_max_force_error_percent": _largest(segments[:1], "transient_max_force_error_percent"),
-        "time_off_surface_s": float(np.sum(dt[off])), "contact_losses": losses,
-        "segments": segments,
-    }
+    return PathReport(
+        length_m=float(path_length), duration_s=float(path_duration), segments_run=len(segments),
+        completed=bool(reached >= path_length - 1e-6), arc_length_reached_m=reached,
+        first_contact_time=contact, path_start_time=_first(t_path >= 0, t),
+        path_end_time=_first(t_path > path_duration, t), lift_off_time=lift,
+        settle_time_per_segment_s=tau5,
+        max_path_error_mm=_max_or_none(total[settled_all]),
+        max_path_error_along_surface_mm=_max_or_none(tangential[settled_all]),
+        max_path_error_along_normal_mm=_max_or_none(normal[settled_all]),
+        max_force_error_N=_max_or_none(force_error[settled_all]),
+        max_force_error_percent=_max_or_none(percent[settled_all]),
+        line_change_max_path_error_along_surface_mm=_largest(segments[1:],
+                                                             "transient_max_path_error_along_surface_mm"),
+        line_change_max_force_error_percent=_largest(segments[1:], "transient_max_force_error_percent"),
+        first_segment_max_path_error_along_surface_mm=_largest(segments[:1],
+                                                               "transient_max_path_error_along_surface_mm"),
+        first_segment_max_force_error_percent=_largest(segments[:1], "transient_max_force_error_percent"),
+        time_off_surface_s=float(np.sum(dt[off])), contact_losses=losses,
+        segments=segments,
+    )
 
 
 def path_text(report):
-    """The printout's lines for a job's ``report`` (``path_report``)."""
+    """The printout's lines for a job's ``report`` (a ``PathReport``)."""
     def mm(value):
         return "n/a" if value is None else f"{value:.3f} mm"
 
     def pct(value):
         return "n/a" if value is None else f"{value:.2f} %"
 
-    run = ("completed" if report["completed"] else
-           f"NOT completed: reached {report['arc_length_reached_m']:.3f} m")
-    lines = [f"path: {report['length_m']:.3f} m in {report['segments_run']} segments, {run}"
-             f"; first contact at t = {report['first_contact_time']}, lift-off at t = {report['lift_off_time']}",
-             f"  settled (each segment from its start + {report['settle_time_per_segment_s']:.2f} s): path error "
-             f"{mm(report['max_path_error_mm'])} (along the surface {mm(report['max_path_error_along_surface_mm'])}, "
-             f"along the normal {mm(report['max_path_error_along_normal_mm'])}: the pad's compression), normal force "
-             f"error {pct(report['max_force_error_percent'])}",
-             f"  at the line changes (each later segment's first {report['settle_time_per_segment_s']:.2f} s): path "
-             f"error along the surface {mm(report['line_change_max_path_error_along_surface_mm'])}, force error "
-             f"{pct(report['line_change_max_force_error_percent'])}; after the approach (the first segment's): "
-             f"{mm(report['first_segment_max_path_error_along_surface_mm'])}, "
-             f"{pct(report['first_segment_max_force_error_percent'])}",
-             f"  off the surface between the first contact and the lift-off: {report['time_off_surface_s']:.3f} s "
-             f"({report['contact_losses']} contact losses)"]
+    run = ("completed" if report.completed else
+           f"NOT completed: reached {report.arc_length_reached_m:.3f} m")
+    lines = [f"path: {report.length_m:.3f} m in {report.segments_run} segments, {run}"
+             f"; first contact at t = {report.first_contact_time}, lift-off at t = {report.lift_off_time}",
+             f"  settled (each segment from its start + {report.settle_time_per_segment_s:.2f} s): path error "
+             f"{mm(report.max_path_error_mm)} (along the surface {mm(report.max_path_error_along_surface_mm)}, "
+             f"along the normal {mm(report.max_path_error_along_normal_mm)}: the pad's compression), normal force "
+             f"error {pct(report.max_force_error_percent)}",
+             f"  at the line changes (each later segment's first {report.settle_time_per_segment_s:.2f} s): path "
+             f"error along the surface {mm(report.line_change_max_path_error_along_surface_mm)}, force error "
+             f"{pct(report.line_change_max_force_error_percent)}; after the approach (the first segment's): "
+             f"{mm(report.first_segment_max_path_error_along_surface_mm)}, "
+             f"{pct(report.first_segment_max_force_error_percent)}",
+             f"  off the surface between the first contact and the lift-off: {report.time_off_surface_s:.3f} s "
+             f"({report.contact_losses} contact losses)"]
     return lines

@@ -3,8 +3,8 @@
 ``simulate(config)`` builds the scenario, sets the start, runs Drake's
 Simulator (with an optional progress bar and Meshcat recording) and returns a
 ``SimulationResult`` with the log (arrays keyed as in ``log.npz``) and the
-summary (as in ``summary.json``); ``viz.outputs.write_run(result, out_dir)`` writes both
-plus the tracking plots.
+summary (a ``summary.RunSummary``, whose ``to_json()`` is ``summary.json``); ``viz.outputs.write_run(result,
+out_dir)`` writes both plus the tracking plots.
 
 A run that stops early is never reported as a success: a sensor fault (the measured wrench
 non-finite for longer than ``sensor.fault_time``), an error raised inside the simulation, or an
@@ -29,6 +29,7 @@ A monitor set in ``setup`` runs after the sensor-fault monitor (both are kept; a
 the user's monitor asks for ends the run as a completed run, at that time).
 """
 
+import dataclasses
 import time
 from dataclasses import dataclass, field
 
@@ -41,9 +42,10 @@ from pydrake.systems.framework import EventStatus
 from drake_hybrid.analysis.design import controller_prediction, design_time_constant, predicted_errors
 from drake_hybrid.control.gains import ControlMode
 from drake_hybrid.core.progress import quiet
-from drake_hybrid.experiments.metrics import (contact_time, impedance_check, invalid_samples, last_valid, max_after,
-                                              row_errors, row_units, run_scale, worst)
+from drake_hybrid.experiments.metrics import (ForceRowFigures, contact_time, impedance_check, invalid_samples,
+                                              last_valid, max_after, row_errors, row_units, run_scale, worst)
 from drake_hybrid.experiments.path_report import before_lift_off, path_report
+from drake_hybrid.experiments.summary import RunSummary
 from drake_hybrid.scenario.builder import build_scenario
 from drake_hybrid.scenario.start import set_initial_conditions
 from drake_hybrid.station.loggers import read_log
@@ -59,7 +61,7 @@ COMPILING_NOTE = ("this run used the generic law (the compiled one gives the sam
 class SimulationResult:
     config: object
     log: dict
-    summary: dict
+    summary: RunSummary
     scenario: object = None                      # the built Scenario: diagram, plant, controller, ...
     html: str = None
     extra: dict = field(default_factory=dict)
@@ -73,8 +75,8 @@ class RunStopped(RuntimeError):
 
     def __init__(self, result):
         summary = result.summary
-        super().__init__(f"the run stopped at t = {summary['stop_time']:.4g} s ({summary['status']}): "
-                         f"{summary['stop_reason']}")
+        super().__init__(f"the run stopped at t = {summary.stop_time:.4g} s ({summary.status}): "
+                         f"{summary.stop_reason}")
         self.result = result
 
 
@@ -170,24 +172,35 @@ def simulate(config, progress=False, meshcat=None, record_html=False, setup=None
         html = meshcat.StaticHtml()
     log = collect_log(scenario, context)
     if stop and len(log["t"]) < 2:
-        summary = {"task": config.task, "mode": scenario.controller.mode.value, "duration": duration}
+        summary = RunSummary(task=config.task, mode=scenario.controller.mode.value, duration=duration)
     else:
         summary = summarize(scenario, log, wall)
-    summary.update(status=stop.get("status", "completed"), stop_time=float(stop.get("time", context.get_time())),
-                   stop_reason=stop.get("reason"))
-    if summary["status"] == "fault":
-        # The controller took F = F_d while the wrench was invalid: its force error is not a measurement.
-        for key in [key for key in summary if "force_error" in key or key == "force_settling_time_1_percent"]:
-            summary[key] = None
-        for row in summary.get("force_rows") or []:
-            row.update({key: None for key in row if key not in ("name", "units", "command", "held")})
+    summary.status = stop.get("status", "completed")
+    summary.stop_time = float(stop.get("time", context.get_time()))
+    summary.stop_reason = stop.get("reason")
+    if summary.status == "fault":
+        without_force_figures(summary)
     if getattr(getattr(scenario.controller, "fast_law", None), "compiling", False):
-        summary.setdefault("notes", []).append(COMPILING_NOTE)
+        summary.notes = (summary.notes or []) + [COMPILING_NOTE]
     result = SimulationResult(config=config, log=log, summary=summary, scenario=scenario, html=html,
                               simulator=simulator, context=context)
     if stop:
         raise RunStopped(result) from stop.get("error")
     return result
+
+
+def without_force_figures(summary):
+    """``summary`` with its force error figures None (a sensor fault: the controller took F = F_d while the
+    wrench was invalid, so its force error is not a measurement): the worst row's, and each force row's
+    figures but its name, units, command and whether it is held."""
+    for name in [f.name for f in dataclasses.fields(summary)
+                 if "force_error" in f.name or f.name == "force_settling_time_1_percent"]:
+        setattr(summary, name, None)
+    kept = ("name", "units", "command", "held")
+    for row in summary.force_rows or []:
+        for name in [f.name for f in dataclasses.fields(row) if f.name not in kept]:
+            setattr(row, name, None)
+    return summary
 
 
 # log.npz's names for the loggers' keys (station.loggers.LOG_KEYS) that it calls otherwise.
@@ -220,7 +233,8 @@ def _percent(error, scale):
 
 
 def summarize(scenario, log, wall_time):
-    """The run's summary (summary.json): gains, mode, designed eigenvalues, errors."""
+    """The run's summary (a ``RunSummary``, summary.json): gains, mode, designed eigenvalues, errors. Its
+    ``status`` is None: ``simulate`` sets it, with the stop's time and reason."""
     config = scenario.config
     controller = scenario.controller
     gains = controller.validated_gains()
@@ -242,70 +256,72 @@ def summarize(scenario, log, wall_time):
     force_rows = row_errors(job["t"], job["force_error"], job["desired_force"], labels.get("force", []),
                             row_units(labels.get("force_units", "SI"), m), start, settle_after)
     measured = max_after(job["force"], job["t"] >= start)
-    for i, row in enumerate(force_rows):      # a held row (controller.kinematic_rows) has no force loop
-        row.update(held=i in controller.kinematic_rows, max_measured_force_after_contact=measured[i])
-        if row["held"]:                        # no command, so no error: its figures are null, not 0
-            row.update({key: None for key in row if "error" in key or key == "settling_time_1_percent"})
+    force_rows = [ForceRowFigures(**dataclasses.asdict(row), held=i in controller.kinematic_rows,
+                                  max_measured_force_after_contact=measured[i])
+                  for i, row in enumerate(force_rows)]       # a held row (controller.kinematic_rows): no force loop
+    for row in force_rows:
+        if row.held:                           # no command, so no error: its figures are null, not 0
+            for name in [f.name for f in dataclasses.fields(row)
+                         if "error" in f.name or f.name == "settling_time_1_percent"]:
+                setattr(row, name, None)
     constraint_units = row_units(labels["constraint_units"], log["constraint"].shape[1]) \
         if "constraint_units" in labels else None
     torque_ratio = np.max(np.abs(log["torque"]) / effort_limits(scenario), axis=0)
     final_force_error = last_valid(log["force_error"])         # the last sample with a valid wrench
     pairs = lambda values: [[float(np.real(v)), float(np.imag(v))] for v in values]
-    summary = {
-        "task": config.task,
-        "mode": controller.mode.value,
-        "duration": float(config.duration),
-        "time_step": float(config.plant.time_step),
-        "control_period": float(config.control_period),
-        "velocity_dim": k,
-        "force_dim": m,
-        "gains": config.gains.as_lists(k, m, controller.mode),
-        "predicted_eigenvalues": pairs(predicted.designed),
-        "design_time_constant": float(tau),
-        "final_velocity_error": log["velocity_error"][-1].tolist(),
-        "final_force_error": None if final_force_error is None else final_force_error.tolist(),
+    return RunSummary(
+        task=config.task,
+        mode=controller.mode.value,
+        duration=float(config.duration),
+        time_step=float(config.plant.time_step),
+        control_period=float(config.control_period),
+        velocity_dim=k,
+        force_dim=m,
+        gains=config.gains.as_lists(k, m, controller.mode),
+        predicted_eigenvalues=pairs(predicted.designed),
+        design_time_constant=float(tau),
+        final_velocity_error=log["velocity_error"][-1].tolist(),
+        final_force_error=None if final_force_error is None else final_force_error.tolist(),
         # Samples taken while the measured wrench was invalid: F, e_f and F_v read NaN there (no figure).
-        "invalid_wrench_samples": invalid_samples(log["force_error"]),
+        invalid_wrench_samples=invalid_samples(log["force_error"]),
         # Headline figures: the worst row, each row in % of its own command (rows commanded to zero
         # are in velocity_rows / force_rows, in their own units); settling counted from contact.
-        "contact_time": start,
-        "final_velocity_error_percent": worst(velocity_rows, "final_error_percent"),
-        "final_force_error_percent": worst(force_rows, "final_error_percent"),
-        "max_velocity_error_percent_after_5_time_constants":
-            worst(velocity_rows, "max_error_percent_after_5_time_constants"),
-        "max_force_error_percent_after_5_time_constants":
-            worst(force_rows, "max_error_percent_after_5_time_constants"),
-        "velocity_settling_time_1_percent": worst(velocity_rows, "settling_time_1_percent"),
-        "force_settling_time_1_percent": worst(force_rows, "settling_time_1_percent"),
-        "velocity_rows": velocity_rows,
-        "force_rows": force_rows,
+        contact_time=start,
+        final_velocity_error_percent=worst(velocity_rows, "final_error_percent"),
+        final_force_error_percent=worst(force_rows, "final_error_percent"),
+        max_velocity_error_percent_after_5_time_constants=worst(velocity_rows,
+                                                                "max_error_percent_after_5_time_constants"),
+        max_force_error_percent_after_5_time_constants=worst(force_rows, "max_error_percent_after_5_time_constants"),
+        velocity_settling_time_1_percent=worst(velocity_rows, "settling_time_1_percent"),
+        force_settling_time_1_percent=worst(force_rows, "settling_time_1_percent"),
+        velocity_rows=velocity_rows,
+        force_rows=force_rows,
         # impedance-force: the run against the designed impedance driven by its measured F_v (None otherwise,
         # and with a mechanism's inertia in the law, whose F_m drives the impedance too)
-        "impedance": impedance_check(log, gains, start, settle_after)
+        impedance=impedance_check(log, gains, start, settle_after)
         if controller.mode is ControlMode.IMPEDANCE_FORCE and controller.velocity_row_inertia is None else None,
-        "max_constraint_residual": float(np.max(np.abs(log["constraint"]))),
-        # From contact on: before it, C is the start's gap, not a residual.
-        "max_constraint_residual_after_contact":      # (to a job's lift-off)
-            float(np.max(np.abs(job["constraint"][job["t"] >= start]))) if np.any(job["t"] >= start) else None,
-        "max_constraint_residual_rows_after_contact": max_after(job["constraint"], job["t"] >= start),
-        "constraint_units": constraint_units,      # per row of C (None where the task names none)
-        "held": [row["name"] for row in force_rows if row["held"]],    # no force commanded: see force_rows
-        "max_torque_to_effort_limit": torque_ratio.tolist(),
-        "wall_time": float(wall_time),
-        "real_time_factor": float(config.duration / wall_time) if wall_time > 0 else None,
-        "command_scales": {"speed": speed_scale, "force": force_scale},
-        "notes": list(scenario.task.run_notes(scenario, log, tau)),
-        "events": list(scenario.task.run_events(scenario, log)),
+        max_constraint_residual=float(np.max(np.abs(log["constraint"]))),
+        # From contact on (to a job's lift-off): before it, C is the start's gap, not a residual.
+        max_constraint_residual_after_contact=float(np.max(np.abs(job["constraint"][job["t"] >= start])))
+        if np.any(job["t"] >= start) else None,
+        max_constraint_residual_rows_after_contact=max_after(job["constraint"], job["t"] >= start),
+        constraint_units=constraint_units,       # per row of C (None where the task names none)
+        held=[row.name for row in force_rows if row.held],    # no force commanded: see force_rows
+        max_torque_to_effort_limit=torque_ratio.tolist(),
+        wall_time=float(wall_time),
+        real_time_factor=float(config.duration / wall_time) if wall_time > 0 else None,
+        command_scales={"speed": speed_scale, "force": force_scale},
+        notes=list(scenario.task.run_notes(scenario, log, tau)),
+        events=list(scenario.task.run_events(scenario, log)),
         # The start in contact presses with F_d (the start is solved for it); xi(0) then steps the first
         # force command by K_fi xi(0), per row (N in the row's units): the plots mark that step.
-        "start_in_contact": bool(config.start.in_contact),
-        "start_force_command_step": (np.asarray(gains.force_integral, dtype=float) @ np.asarray(
+        start_in_contact=bool(config.start.in_contact),
+        start_force_command_step=(np.asarray(gains.force_integral, dtype=float) @ np.asarray(
             config.start.force_integral, dtype=float)).tolist() if config.start.force_integral else [0.0] * m,
         # A job's path (station.path_job): path and force errors per segment, time off the surface.
-        "path": path_report(log, tau, scenario.source.path.duration, scenario.source.path.length,
-                            scenario.source.force_row) if "path_progress" in log else None,
-    }
-    return summary
+        path=path_report(log, tau, scenario.source.path.duration, scenario.source.path.length,
+                         scenario.source.force_row) if "path_progress" in log else None,
+    )
 
 
 def predicted_tracking(scenario_or_controller, config, log):

@@ -127,14 +127,15 @@ def steady_rows(log, summary, what, after, tolerance):
     the worst row's (max |e_i|, % of its command or None, "name (units)", index)), the worst row being
     the one furthest out relative to its scale."""
     desired = log.get(f"true_desired_{what}", log[f"desired_{what}"])     # the true rows' command (pseudo-velocity)
-    units = [row["units"] for row in summary[f"{what}_rows"]]
+    rows = getattr(summary, f"{what}_rows")
+    units = [row.units for row in rows]
     figures = max_row_errors(log["t"], log[f"{what}_error"], desired, after, units, fallback="unit")
     scales = row_scales(desired, units, fallback="unit")[0]
     ratios = [error / scale for (error, _), scale in zip(figures, scales)]
     worst = int(np.argmax(ratios))
-    row = summary[f"{what}_rows"][worst]
+    row = rows[worst]
     return (all(ratio <= tolerance for ratio in ratios),
-            (figures[worst][0], figures[worst][1], f"{row['name']} ({row['units']})", worst))
+            (figures[worst][0], figures[worst][1], f"{row.name} ({row.units})", worst))
 
 
 def peak_row_force(log, summary):
@@ -143,10 +144,10 @@ def peak_row_force(log, summary):
     "name (units)"). Per row, never a norm across rows (the crank's mix N and N m)."""
     force = np.abs(np.asarray(log["force"], dtype=float)).reshape(len(log["t"]), -1)
     peaks = np.max(force, axis=0)
-    scales = row_scales(log["desired_force"], [row["units"] for row in summary["force_rows"]], fallback="unit")[0]
+    scales = row_scales(log["desired_force"], [row.units for row in summary.force_rows], fallback="unit")[0]
     worst = int(np.argmax(peaks / scales))
-    row = summary["force_rows"][worst]
-    return float(peaks[worst]), f"{row['name']} ({row['units']})"
+    row = summary.force_rows[worst]
+    return float(peaks[worst]), f"{row.name} ({row.units})"
 
 
 def simulation_metrics(result, criteria):
@@ -161,8 +162,8 @@ def simulation_metrics(result, criteria):
     peak_force, peak_force_row = peak_row_force(log, summary)
     return {
         "stable_simulation": bool(finite and velocity_settled and force_settled),
-        "velocity_settling_time": summary["velocity_settling_time_1_percent"],
-        "force_settling_time": summary["force_settling_time_1_percent"],
+        "velocity_settling_time": summary.velocity_settling_time_1_percent,
+        "force_settling_time": summary.force_settling_time_1_percent,
         "steady_velocity_error": velocity[0],
         "steady_force_error": force[0],
         "steady_velocity_error_percent": velocity[1],
@@ -173,21 +174,21 @@ def simulation_metrics(result, criteria):
         "final_force_error": float(abs(log["force_error"][-1, force[3]])),
         "peak_force": peak_force,
         "peak_force_row": peak_force_row,
-        "max_constraint_residual": summary["max_constraint_residual"],
-        "simulation_wall_time": summary["wall_time"],
-        **path_columns(summary.get("path")),
+        "max_constraint_residual": summary.max_constraint_residual,
+        "simulation_wall_time": summary.wall_time,
+        **path_columns(summary.path),
     }
 
 
 def path_columns(report):
-    """The path columns of a job's ``summary["path"]`` (none for another run)."""
-    if not report:
+    """The path columns of a job's ``summary.path`` (a ``PathReport``; none for another run: None)."""
+    if report is None:
         return {}
-    return {"path_error_mm": report["max_path_error_mm"],
-            "path_error_along_surface_mm": report["max_path_error_along_surface_mm"],
-            "path_force_error_percent": report["max_force_error_percent"],
-            "path_time_off_surface": report["time_off_surface_s"],
-            "path_fraction_run": report["arc_length_reached_m"] / report["length_m"] if report["length_m"] else None}
+    return {"path_error_mm": report.max_path_error_mm,
+            "path_error_along_surface_mm": report.max_path_error_along_surface_mm,
+            "path_force_error_percent": report.max_force_error_percent,
+            "path_time_off_surface": report.time_off_surface_s,
+            "path_fraction_run": report.arc_length_reached_m / report.length_m if report.length_m else None}
 
 
 def _stage_error(stage, error):

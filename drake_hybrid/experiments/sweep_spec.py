@@ -50,6 +50,7 @@ import yaml
 
 from pydrake.common.yaml import yaml_dump_typed, yaml_load_typed
 
+from drake_hybrid.core.errors import DrakeHybridError
 from drake_hybrid.core.schema import check_yaml_against_schema, read_yaml_file
 from drake_hybrid.experiments.config_paths import apply_parameters, config_value
 from drake_hybrid.scenario.builder import prepare_config
@@ -58,8 +59,9 @@ GRID_KINDS = ("values", "linspace", "logspace")
 RANDOM_KINDS = ("uniform", "loguniform", "normal", "choice")
 
 
-class SweepSpecError(ValueError):
-    """A sweep spec that cannot be run (names the key and what is wrong)."""
+class SweepSpecError(DrakeHybridError):
+    """A sweep spec that cannot be run (names the key and what is wrong); a ``ValueError``, as every error
+    of the package's (``core.errors``)."""
 
 
 @dataclass

@@ -17,7 +17,7 @@ ticks at k h - delta too). ``MessageFaultRelay`` sits between the robot's channe
 controller's and changes, drops or delays messages for the fault tests.
 
 ``run_hardware_loop(config, ...)`` returns a ``HardwareRun``: the controller side's log and
-summary (keys as ``experiments.simulation``'s), the stop, and the message timing measured
+summary (an ``experiments.summary.RunSummary``, as ``simulate``'s), the stop, and the message timing measured
 (the simulated delay from a status's timestamp to the tick that used it; the wall-clock time
 each phase of a tick took).
 """
@@ -35,6 +35,7 @@ from pydrake.systems.analysis import ApplySimulatorConfig, Simulator
 
 from drake_hybrid.control.sampling import SAMPLE_LEAD
 from drake_hybrid.experiments.simulation import collect_log, simulate, summarize
+from drake_hybrid.experiments.summary import RunSummary
 from drake_hybrid.hardware.controller_side import build_controller_station, check_hardware_config
 from drake_hybrid.hardware.messages import HardwareConfig, HardwareFault
 from drake_hybrid.hardware.robot_side import build_robot_station
@@ -86,7 +87,7 @@ class MessageFaultRelay:
 class HardwareRun:
     config: object
     log: dict
-    summary: dict
+    summary: RunSummary
     controller: object                        # ControllerStation
     robot: object                             # RobotStation
     controller_context: object
@@ -247,19 +248,19 @@ def compare_with_direct(config, hardware=None):
     run = run_hardware_loop(config, hardware)
     figures = {"task": config.task, "duration": float(config.duration),
                "wrench_source": (hardware or HardwareConfig()).wrench_source,
-               "design_time_constant": direct.summary["design_time_constant"]}
+               "design_time_constant": direct.summary.design_time_constant}
     for score in SCORES:
         name = score.replace("max_", "").replace("_percent_after_5_time_constants", "")
-        figures[f"{name}_direct_percent"] = direct.summary[score]
-        figures[f"{name}_hardware_loop_percent"] = run.summary[score]
-        figures[f"{name}_difference_points"] = (None if direct.summary[score] is None else
-                                                abs(run.summary[score] - direct.summary[score]))
+        wired, looped = getattr(direct.summary, score), getattr(run.summary, score)
+        figures[f"{name}_direct_percent"] = wired
+        figures[f"{name}_hardware_loop_percent"] = looped
+        figures[f"{name}_difference_points"] = None if wired is None else abs(looped - wired)
     figures["max_joint_difference_rad"] = float(np.max(np.abs(run.log["q"] - direct.log["q"])))
     figures["max_force_difference_N"] = float(np.max(np.abs(run.log["force"] - direct.log["force"])))
     figures["status_delay_simulated_s"] = run.timing["status_delay_simulated_s"]
     figures["commands_published"] = run.commands_published
     figures["stop"] = None if run.stop is None else run.stop["reason"]
-    if direct.summary[SCORES[0]] is None:
+    if getattr(direct.summary, SCORES[0]) is None:
         figures["note"] = (f"the errors are measured after five design time constants "
                            f"({5 * figures['design_time_constant']:.3g} s); this run is shorter")
     return figures, direct, run

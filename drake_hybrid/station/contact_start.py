@@ -19,8 +19,7 @@ from pydrake.systems.framework import Context, Diagram
 
 from drake_hybrid.control.phases import ContactPhase
 from drake_hybrid.core.arguments import describe, instance, joint_vector, positive, vector
-from drake_hybrid.core.errors import (ArgumentError, ConfigError, DrakeHybridError, OffConstraintError,
-                                      UnreachablePoseError)
+from drake_hybrid.core.errors import ArgumentError, ConfigError, OffConstraintError, UnreachablePoseError
 from drake_hybrid.core.kinematics import inverse_kinematics
 from drake_hybrid.core.preconditions import check_pushing_force
 from drake_hybrid.station.clearance import check_robot_clearance
@@ -216,9 +215,7 @@ def _positions_at(kinematics, controller_context, X_target, joint_guess, depth, 
     """The inverse kinematics to ``X_target`` from ``joint_guess``; UnreachablePoseError naming ``what``."""
     try:
         return inverse_kinematics(kinematics, controller_context, X_target, joint_guess)
-    except DrakeHybridError:
-        raise
-    except ValueError as error:          # core.kinematics: no convergence, or outside the joint limits
+    except (UnreachablePoseError, np.linalg.LinAlgError) as error:     # no convergence, outside the joint limits
         where = what if depth == 0 else f"{what} pushed {depth * 1000:.3g} mm into the workpiece"
         raise UnreachablePoseError(f"{owner}: {where} is not reached from joint_guess: {error} Give a "
                                    f"reachable {what} or a joint_guess nearer to it") from None
@@ -294,9 +291,9 @@ def _press_and_prime(diagram, root_context, systems, pose_at_depth, joint_guess,
                 "the pressing direction: either max_depth is too small (raise it; the default is 0.01 m) or the "
                 "workpiece's geometry is farther than the surface C = 0 (a gap: move the workpiece or the start so "
                 "that they agree)") from error
-        except DrakeHybridError:
-            raise
-        except ValueError:                     # station.start.pressing_depth: too soft a contact for F_d
+        except ConfigError:                    # station.start.pressing_depth: too soft a contact for F_d
+            if max_depth not in reached:
+                raise
             raise ArgumentError(f"{owner}: max_depth = {max_depth:g} m of penetration presses with only "
                                 f"{reached[max_depth] + magnitude:.3g} N, less than |desired_force| = {magnitude:.3g} "
                                 "N: lower desired_force, raise max_depth or stiffen the pad (its hydroelastic "

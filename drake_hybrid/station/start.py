@@ -10,7 +10,7 @@ from scipy.optimize import brentq
 from pydrake.systems.framework import Context
 
 from drake_hybrid.core.arguments import joint_vector, vector
-from drake_hybrid.core.errors import ForceSignError, OffConstraintError
+from drake_hybrid.core.errors import ConfigError, ForceSignError, OffConstraintError
 from drake_hybrid.station.handles import HybridSystems
 from drake_hybrid.station.root_context import check_systems, systems_in_context
 
@@ -111,7 +111,7 @@ def pressing_depth(pressing_force: Callable[[float], float], desired: ArrayLike,
     pressing force's excess over the desired one) is zero, by Brent's method; the starts root
     finding cannot fix are named with typed errors (``who`` begins each message): the surface's
     geometry beyond C = 0 (OffConstraintError), a pulling F_d (ForceSignError), nothing touched
-    (OffConstraintError), too soft a contact (ValueError)."""
+    (OffConstraintError), too soft a contact (ConfigError: the pad's modulus or the desired force)."""
     magnitude = float(np.linalg.norm(desired))
     at_surface = pressing_force(0.0) + magnitude
     if at_surface > magnitude:
@@ -133,7 +133,7 @@ def pressing_depth(pressing_force: Callable[[float], float], desired: ArrayLike,
                 f"{who}: the pad touches nothing even {max_depth * 1000:.0f} mm beyond the start pose "
                 "along the pressing direction: the workpiece's geometry is farther than the surface C = 0 (a gap); "
                 "move the workpiece or the start so that they agree")
-        raise ValueError(
+        raise ConfigError(
             f"{who}: even {max_depth * 1000:.0f} mm of penetration presses with only {deepest:.3g} N, "
             f"less than the desired {magnitude:.3g} N; raise contact.pad_modulus or lower the desired force")
     return brentq(pressing_force, 0.0, max_depth, xtol=1e-10)

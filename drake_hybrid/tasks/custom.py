@@ -36,7 +36,7 @@ from pydrake.math import RigidTransform, RollPitchYaw
 
 from drake_hybrid.control.gains import HybridGains
 from drake_hybrid.core.arguments import describe, function, instance, text, vector
-from drake_hybrid.core.errors import ArgumentError, OffConstraintError
+from drake_hybrid.core.errors import ArgumentError, ConfigError, OffConstraintError
 from drake_hybrid.core.kinematics import inverse_kinematics
 from drake_hybrid.station.robot_model import RobotModel
 from drake_hybrid.systems.sources import Profile
@@ -122,8 +122,8 @@ class CustomTask(Task):
     def start_pose_of(self, config):
         values = list(config.start.configuration)
         if len(values) != 6:
-            raise ValueError(f"task '{self.name}': start.configuration must be [x, y, z, roll, pitch, yaw] "
-                             f"of the end-effector frame, got {values}")
+            raise ConfigError(f"task '{self.name}': start.configuration must be [x, y, z, roll, pitch, yaw] "
+                              f"of the end-effector frame, got {values}")
         return RigidTransform(RollPitchYaw(values[3:]), values[:3])
 
     def _position_gradient(self, X_WE):
@@ -142,8 +142,8 @@ class CustomTask(Task):
         direction = -(desired @ gradient)
         norm = np.linalg.norm(direction)
         if not norm > 0:
-            raise ValueError(f"task '{self.name}': the desired force F_d(0) = {desired.tolist()} pushes along no "
-                             "position direction of C; set a nonzero desired force on a position row")
+            raise ConfigError(f"task '{self.name}': the desired force F_d(0) = {desired.tolist()} pushes along no "
+                              "position direction of C; set a nonzero desired force on a position row")
         return direction / norm
 
     def check_start_pose(self, config, X_WP, direction):

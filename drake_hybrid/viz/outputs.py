@@ -1,7 +1,5 @@
 """The files of a run: log.npz, summary.json, config.yaml, the plots and, when asked, the animation."""
 
-import json
-import math
 from pathlib import Path
 
 import numpy as np
@@ -12,18 +10,6 @@ from drake_hybrid.viz.path_plots import save_path_plots
 from drake_hybrid.viz.run_plots import save_run_plots, save_tracking_plots
 
 
-def json_safe(value):
-    """``value`` with every non-finite float (NaN, inf: "never", "undefined") replaced by None, so
-    that the file is valid JSON."""
-    if isinstance(value, dict):
-        return {key: json_safe(item) for key, item in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [json_safe(item) for item in value]
-    if isinstance(value, float) and not math.isfinite(value):
-        return None
-    return value
-
-
 def write_run(result, out_dir, plots=True, html_path=None):
     """Write log.npz, summary.json, config.yaml and the plots (tracking, constraint residual,
     torques) to ``out_dir``, and the recorded animation (``result.html``, if any) to ``html_path``
@@ -31,13 +17,14 @@ def write_run(result, out_dir, plots=True, html_path=None):
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     np.savez_compressed(out / "log.npz", **result.log)
-    (out / "summary.json").write_text(json.dumps(json_safe(result.summary), indent=2, allow_nan=False))
+    (out / "summary.json").write_text(result.summary.to_json())
     (out / "config.yaml").write_text(dump_config(result.config))
     files = [out / "log.npz", out / "summary.json", out / "config.yaml"]
     if plots and len(result.log["t"]) >= 2:
         predicted_velocity, predicted_force = predicted_tracking(result.scenario, result.config, result.log)
         labels = result.scenario.task.labels(result.config)
-        files += save_tracking_plots(result.log, result.summary, predicted_velocity, predicted_force, out,
+        # The tracking plots read the summary as summary.json holds it (a dict).
+        files += save_tracking_plots(result.log, result.summary.as_dict(), predicted_velocity, predicted_force, out,
                                      labels=labels)
         files += save_run_plots(result.log, effort_limits(result.scenario), out,
                                 constraint_units=labels.get("constraint_units", "units of C"),

@@ -9,6 +9,9 @@ the path and force errors along it with the contact supervisor's phases.
   path, lift-off) shaded, each segment's start and its five design time constants marked.
 * ``save_path_plots``: writes both (path_top_view.png, path_errors.png); ``write_run`` calls it for a
   job.
+
+Each takes the run's log and its summary (an ``experiments.summary.RunSummary``: its task's name, its
+``path`` report's segments).
 """
 
 from pathlib import Path
@@ -69,7 +72,7 @@ def path_top_view_figure(log, summary=None, title=None):
     ax.set_aspect("equal", adjustable="datalim")
     ax.grid(alpha=0.3)
     ax.legend(fontsize=7, loc="best")
-    name = f"{summary['task']}: " if summary else ""
+    name = f"{summary.task}: " if summary is not None else ""
     ax.set_title(title or f"{name}the path from above (world x-y)", fontsize=10)
     fig.tight_layout()
     return fig
@@ -95,21 +98,20 @@ def path_error_figure(log, summary):
     spans = _phases(log)
     colors = {"guarded approach": "tab:orange", "pressing at the first point (dwell)": "tab:olive",
               "path": "tab:green", "lift-off": "tab:red"}
-    report = (summary or {}).get("path") or {}
-    settle = report.get("settle_time_per_segment_s")
+    report = summary.path if summary is not None else None
+    settle = report.settle_time_per_segment_s if report is not None else None
     for ax in (ax_path, ax_force):
         for start, end, label in spans:
             ax.axvspan(start, end, color=colors.get(label, "0.8"), alpha=0.08, lw=0,
                        label=label if ax is ax_path else None)
-        for segment in report.get("segments", []):
-            ax.axvline(segment["start"], color="0.5", lw=0.5, ls=":")
+        for segment in report.segments if report is not None else ():
+            ax.axvline(segment.start, color="0.5", lw=0.5, ls=":")
             if settle:
-                ax.axvspan(segment["start"], min(segment["start"] + settle, segment["end"]), color="0.5", alpha=0.06,
-                           lw=0)
+                ax.axvspan(segment.start, min(segment.start + settle, segment.end), color="0.5", alpha=0.06, lw=0)
         ax.grid(alpha=0.3, which="both")
     ax_path.legend(fontsize=7, loc="upper right")
     ax_force.legend(fontsize=7, loc="upper right")
-    title = f"{summary['task']}: path and force errors along the job" if summary else "path and force errors"
+    title = f"{summary.task}: path and force errors along the job" if summary is not None else "path and force errors"
     if settle:
         title += (f"\ndotted: each segment's start; grey: its first five design time constants ({settle:.2f} s), "
                   "the transient at a line change")

@@ -39,7 +39,7 @@ from pydrake.trajectories import PiecewisePolynomial
 from drake_hybrid.control.gains import HybridGains
 from drake_hybrid.core.charts import PlanarChart
 from drake_hybrid.core.constraints import window_constraint
-from drake_hybrid.core.errors import ConfigError
+from drake_hybrid.core.errors import ConfigError, UnreachablePoseError
 from drake_hybrid.core.projections import ConstraintSpace, GivenVelocityProjection
 from drake_hybrid.station.arm import PAD_CENTER_IN_TOOL, PAD_RADIUS, add_pad_tool
 from drake_hybrid.station.parsing import ConfigureParser, add_model
@@ -163,7 +163,8 @@ class WindowWashing(Task):
         wx, wy = x - L3 * math.cos(theta), y - L3 * math.sin(theta)
         cos_q2 = (wx * wx + wy * wy - L1 * L1 - L2 * L2) / (2 * L1 * L2)
         if not -1 < cos_q2 < 1:
-            raise ValueError(f"window-washing: the pad centre ({x:.3f}, {y:.3f}) at theta = {theta:.3f} is out of reach")
+            raise UnreachablePoseError(f"window-washing: the pad centre ({x:.3f}, {y:.3f}) at theta = {theta:.3f} is "
+                                       "out of reach")
         q2 = math.acos(cos_q2)
         q1 = math.atan2(wy, wx) - math.atan2(L2 * math.sin(q2), L1 + L2 * math.cos(q2))
         return np.array([q1, q2, theta - q1 - q2])
@@ -182,7 +183,8 @@ class WindowWashing(Task):
     def start_positions(self, scenario):
         config = scenario.config
         if len(config.start.configuration) != 2:
-            raise ValueError(f"window-washing: start.configuration must be [x, theta], got {config.start.configuration}")
+            raise ConfigError(f"window-washing: start.configuration must be [x, theta], got "
+                              f"{config.start.configuration}")
         x0, theta0 = config.start.configuration
         touching = self._height(config) - PAD_RADIUS
 
