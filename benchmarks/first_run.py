@@ -15,7 +15,7 @@ fresh processes, each timed from the command to its last line (wall clock):
   the "simulated in X s" the command prints (``Simulator.AdvanceTo``'s wall time).
 
 Each run's stage lines (stderr) are kept, so the loading, building, start and writing times are in
-the JSON too. Targets (issue 31): the first run at most 30 s, warm at most 5 s beyond the simulated
+the JSON too. Targets: the first run at most 30 s, warm at most 5 s beyond the simulated
 work, both helps under 1 s, on 2 cores.
 """
 

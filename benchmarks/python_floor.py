@@ -3,7 +3,7 @@
     python benchmarks/python_floor.py [--robots planar-3r ur5e panda] [--tasks window-washing ...]
                                       [--samples 3000] [--repeats 3] [--json FILE]
 
-Issue 14's targets are a tick within 4x of Drake's C++ ``InverseDynamicsController`` and a closed
+The performance targets are a tick within 4x of Drake's C++ ``InverseDynamicsController`` and a closed
 loop at 0.8 of the plant alone's real-time factor. This script measures the floor under both: the
 same figures for Python systems that do only what a force controller cannot avoid, and no law.
 

@@ -28,7 +28,7 @@ Measures, in one process (and the fresh processes and venv some parts need), and
 8. contact meshes and plant step, accuracy against cost per task (contact_resolution.py; part
    ``resolution``, which also rewrites docs/contact_resolution.md's table).
 
-Targets (issues 7, 14 and 31): tick <= 4x the InverseDynamicsController on the UR5e,
+Targets (docs/performance.md): tick <= 4x the InverseDynamicsController on the UR5e,
 the Panda and the planar 3R; closed-loop RTF >= 0.8x plant alone for every task with every accuracy
 figure held (<= 1 % planar, <= 2 % 6-DOF, eigenvalues within 5 %); the first run <= 30 s, warm <= 5 s
 beyond its simulated work, both helps < 1 s. The machine is shared and noisy: ratios are taken
@@ -67,7 +67,7 @@ TARGETS = {"tick_ratio": 4.0, "rtf_ratio": 0.8, "accuracy_percent_planar": 1.0,
            "warm_beyond_simulated_work_s": 5.0, "help_s": 1.0}
 PARTS = ("floor", "compile", "first_run", "sweep", "resolution")
 # Tasks whose tracking errors are the point of the task, not a defect: friction makes velocity/force
-# stall and impedance/force yield by its impedance (issue 5; docs/impedance.md measures them).
+# stall and impedance/force yield by its impedance (docs/impedance.md measures them).
 ACCURACY_NOT_APPLICABLE = {"grinding": "friction task: velocity/force stalls, impedance/force yields by design "
                                        "(docs/impedance.md)"}
 
@@ -105,7 +105,7 @@ def _fmt(value, digits=3):
 
 
 def targets(results):
-    """Which targets of issues 7, 14 and 31 this run meets (True/False per target, with the figure)."""
+    """Which performance targets this run meets (True/False per target, with the figure)."""
     verdict = {}
     first = results.get("first_run")
     if first:
@@ -324,7 +324,7 @@ def markdown(results):
         lines.append(f"| {name} | {k['joints']} | {k['force_rows']} | {k['controller_tick_us']:.1f} | "
                      f"{k['idc_tick_us']:.1f} | {k['tick_ratio']:.1f} |")
     lines += _floor_lines(results) + _first_run_lines(results) + _sweep_lines(results)
-    lines += ["", "## Targets (issues 7, 14 and 31)", "", "| target | this run | met |", "|---|---:|---|"]
+    lines += ["", "## Targets", "", "| target | this run | met |", "|---|---:|---|"]
     for name, v in results["targets"].items():
         met = v["met"] if v["met"] != "n/a" else f"n/a: {v['why']}"
         lines.append(f"| {name} | {_fmt(v['value'])} | {_fmt(met)} |")

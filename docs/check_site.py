@@ -17,9 +17,6 @@ loaded from the files (only file:, data: and blob: URLs load, the rest is blocke
 * the reader's text must not cite the project's bookkeeping: "issue N" (a tracker a reader cannot
   follow) or a maintainers' "Size: ..." note meant for the code.
 
-Two checks are PENDING for some pages (the API reference renders the package's docstrings, which are
-being rewritten): there their findings are printed but do not fail the check; ``--strict`` makes
-them fail too. Remove an entry of ``PENDING`` once its pages are clean.
 
 Screenshots of the front page (a wide and a narrow window) and of one API page are written to
 ``docs/_build/screenshots/`` (``--screenshots``) for a person to look at.
@@ -29,7 +26,6 @@ check is skipped (exit 0), unless DRAKE_HYBRID_REQUIRE_BROWSER=1 (set by .ci/run
 """
 
 import argparse
-import fnmatch
 import os
 import re
 import shutil
@@ -59,15 +55,6 @@ BOOKKEEPING = (
 )
 # A maintainers' note the docstrings' field lines made a definition list of (docs/_ext/plain_docstrings.py).
 NOTE_TERMS = re.compile(r"Size:?")
-# (kind, page glob, why): findings of that kind on those pages are printed, not failed (--strict fails them).
-PENDING = (
-    ("issue number", "reference/generated/*",
-     "the API pages render the package's docstrings (drake_hybrid/), which still cite issues"),
-    ("maintainers' note", "reference/generated/*",
-     "the API pages render the package's docstrings (drake_hybrid/), which still hold 'Size:' notes"),
-    ("issue number", "performance.html",
-     "docs/performance.md includes benchmarks/RESULTS.md and benchmarks/PROFILE.md verbatim"),
-)
 # The API page screenshotted: the first of these the site has, else its first API page.
 API_PAGES = ("reference/generated/drake_hybrid.control.controller.html",)
 WIDE, NARROW = {"width": 1400, "height": 900}, {"width": 390, "height": 844}
@@ -122,10 +109,9 @@ class Finding:
     page: str
     kind: str
     detail: str
-    pending: str = ""        # why it does not fail (an entry of PENDING), "" when it does
 
     def __str__(self):
-        return f"{self.page}: {self.kind}: {self.detail}" + (f"  [pending: {self.pending}]" if self.pending else "")
+        return f"{self.page}: {self.kind}: {self.detail}"
 
 
 @dataclass
@@ -138,11 +124,7 @@ class SiteReport:
 
     @property
     def failures(self):
-        return [finding for finding in self.findings if not finding.pending]
-
-    @property
-    def pending(self):
-        return [finding for finding in self.findings if finding.pending]
+        return self.findings
 
     @property
     def ok(self):
@@ -170,25 +152,16 @@ def _excerpt(text, match, context=40):
     return " ".join(("..." + text[start:end] + "...").split())
 
 
-def _pending(kind, page, strict):
-    """Why a finding of ``kind`` on ``page`` does not fail (its entry of PENDING), "" when it does."""
-    if strict:
-        return ""
-    return next((why for pending_kind, glob, why in PENDING if pending_kind == kind and fnmatch.fnmatch(page, glob)), "")
-
-
-def text_findings(page, text, strict=False, terms=()):
+def text_findings(page, text, terms=()):
     """Findings of raw markup and bookkeeping in a page's rendered text (``page`` names it);
     ``terms``: the page's definition-list terms and field names."""
     findings = []
     for kind, pattern in RAW_MARKUP + BOOKKEEPING:
         for match in pattern.finditer(text):
-            findings.append(Finding(page, kind, f"{match.group(0).strip()!r} in {_excerpt(text, match)!r}",
-                                    _pending(kind, page, strict)))
+            findings.append(Finding(page, kind, f"{match.group(0).strip()!r} in {_excerpt(text, match)!r}"))
     for term in terms:
         if NOTE_TERMS.fullmatch(term):
-            findings.append(Finding(page, "maintainers' note", f"a definition list's term {term!r}",
-                                    _pending("maintainers' note", page, strict)))
+            findings.append(Finding(page, "maintainers' note", f"a definition list's term {term!r}"))
     return findings
 
 
@@ -236,7 +209,7 @@ def _api_page(pages):
     return next((page for page in pages if page.startswith("reference/generated/")), None)
 
 
-def check_site(html_dir, screenshots=None, strict=False, executable=None, pages=None):
+def check_site(html_dir, screenshots=None, executable=None, pages=None):
     """Open every page of the built site ``html_dir`` in headless Chromium and check it (the module's
     docstring); screenshots of the front page and an API page go to ``screenshots`` (a folder; None:
     none). ``pages``: only these (relative paths), default every page. Returns a ``SiteReport``."""
@@ -274,7 +247,7 @@ def check_site(html_dir, screenshots=None, strict=False, executable=None, pages=
                 except Exception as error:           # a page that does not load is a finding, not a crash
                     report.findings.append(Finding(name, "page did not load", str(error).splitlines()[0]))
                     continue
-                report.findings += text_findings(name, f"{probe['title']}\n{probe['text']}", strict, probe["terms"])
+                report.findings += text_findings(name, f"{probe['title']}\n{probe['text']}", probe["terms"])
                 report.findings += image_findings(name, probe["images"])
                 report.findings += [Finding(name, "page error", error) for error in state["errors"]]
                 if probe["rows"]:
@@ -299,7 +272,6 @@ def main(argv=None):
     parser.add_argument("site", nargs="?", default="docs/_build/html", help="the built site (default: %(default)s)")
     parser.add_argument("--screenshots", default=None,
                         help="folder of the screenshots (default: screenshots/ next to the site)")
-    parser.add_argument("--strict", action="store_true", help="the PENDING checks fail too")
     args = parser.parse_args(argv)
     site = Path(args.site)
     if not (site / "index.html").is_file():
@@ -314,14 +286,11 @@ def main(argv=None):
         print(f"site check skipped: {error}")
         return 0
     screenshots = Path(args.screenshots) if args.screenshots else site.parent / "screenshots"
-    report = check_site(site, screenshots=screenshots, strict=args.strict, executable=executable)
+    report = check_site(site, screenshots=screenshots, executable=executable)
     for finding in report.findings:
         print(finding)
-    for kind, glob, why in PENDING:
-        if not args.strict and not any(f.kind == kind and fnmatch.fnmatch(f.page, glob) for f in report.pending):
-            print(f"note: the pending check {kind!r} on {glob} found nothing: remove it from PENDING ({__file__})")
     print(f"site check: {report.pages} pages in headless Chromium in {report.seconds:.0f} s: "
-          f"{len(report.failures)} failures, {len(report.pending)} pending findings (not failing); "
+          f"{len(report.failures)} failures; "
           f"screenshots in {screenshots}")
     return 0 if report.ok else 1
 

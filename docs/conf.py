@@ -63,7 +63,8 @@ html_show_sourcelink = False
 # project that no inventory here documents (the build reads no inventory over the network).
 nitpicky = True
 nitpick_ignore_regex = [
-    (r"py:.*", r"(pydrake|numpy|np|scipy|sympy|dask|distributed|matplotlib|typing|collections|enum|pathlib|abc)\..*"),
+    (r"py:.*", r"(pydrake|numpy|np|scipy|sympy|dask|distributed|matplotlib|typing|collections|enum|pathlib|abc|os)\..*"),
+    (r"py:.*", r"(drake_hybrid\.station\.ports\.)?SystemType"),     # a type variable of the annotations
     (r"py:.*", r"(Union|List|Dict|Tuple|Optional|Callable|Sequence|Mapping|Iterable|Any|NamedTuple)(\[.*)?"),
     (r"py:.*", r"(float|int|str|bool|object|list|dict|tuple|type|callable|optional|ndarray|array_like)"),
 ]

@@ -8,8 +8,7 @@ check finds what it is for and passes what is fine:
   fence, a directive name, a role left unresolved, pictures of a figure row stacked one under the
   other, and a JavaScript error;
 * the same markup inside code, literals and math does not (the pages show MyST and reST syntax);
-* "issue N" and a "Size:" note fail on a guide page; on an API page (PENDING: the docstrings) they
-  are reported and fail only with ``strict``.
+* "issue N" and a "Size:" note fail, on a guide page and on an API page (the docstrings) alike.
 
 The pattern tests run without a browser; the others open the pages in headless Chromium (skipped
 without it, unless DRAKE_HYBRID_REQUIRE_BROWSER=1, as .ci/run sets it).
@@ -28,9 +27,8 @@ sys.path.insert(0, str(DOCS))
 import check_site  # noqa: E402  (docs/, on the path above)
 
 
-def _kinds(findings, page=None, pending=None):
-    return {finding.kind for finding in findings if (page is None or finding.page == page)
-            and (pending is None or bool(finding.pending) == pending)}
+def _kinds(findings, page=None):
+    return {finding.kind for finding in findings if page is None or finding.page == page}
 
 
 # ------------------------------------------------------------------------------------------------
@@ -76,14 +74,10 @@ def test_a_note_made_a_definition_list_is_found_by_its_term():
     assert check_site.text_findings("guide.html", "size\nthe pad's", terms=["size", "Sizes", "mode"]) == []
 
 
-def test_the_pending_checks_are_pending_only_on_their_pages():
+def test_bookkeeping_fails_on_every_page_the_api_reference_included():
     text = "Baselines (issue 18).\nSize: one module for every figure."
-    api = check_site.text_findings("reference/generated/drake_hybrid.viz.run_plots.html", text)
-    assert _kinds(api, pending=True) == {"issue number", "maintainers' note"} and not _kinds(api, pending=False)
-    assert _kinds(check_site.text_findings("reference/generated/x.html", text, strict=True), pending=False) == \
-        {"issue number", "maintainers' note"}
-    assert _kinds(check_site.text_findings("howto/path.html", text), pending=False) == \
-        {"issue number", "maintainers' note"}
+    for page in ("reference/generated/drake_hybrid.viz.run_plots.html", "howto/path.html"):
+        assert _kinds(check_site.text_findings(page, text)) == {"issue number", "maintainers' note"}
 
 
 # ------------------------------------------------------------------------------------------------
@@ -159,6 +153,7 @@ EXPECTED = {
     "script_error.html": {"page error"},
     "issue.html": {"issue number"},
     "field_note.html": {"maintainers' note"},
+    "reference/generated/drake_hybrid.notes.html": {"issue number", "maintainers' note"},
 }
 
 
@@ -215,16 +210,6 @@ def test_the_front_page_defect_is_reported_where_a_reader_sees_it(checked):
     assert len(details) == 2 and all("'{w=49%}'" in detail for detail in details), details
     stacked = [finding.detail for finding in report.failures if finding.page == "stacked_row.html"]
     assert any("not side by side at 1400 px" in detail for detail in stacked), stacked
-
-
-@pytest.mark.browser
-def test_the_pending_checks_report_without_failing_and_fail_when_strict(checked):
-    site, report, executable = checked
-    api = "reference/generated/drake_hybrid.notes.html"
-    assert _kinds(report.pending, api) == {"issue number", "maintainers' note"}
-    assert not _kinds(report.failures, api)
-    strict = check_site.check_site(site, strict=True, executable=executable, pages=["index.html", api])
-    assert _kinds(strict.failures, api) == {"issue number", "maintainers' note"} and not strict.ok
 
 
 @pytest.mark.browser
