@@ -13,13 +13,22 @@ would.
 """
 
 import math
+from typing import Any, Sequence, Union, overload
 
 import numpy as np
+from numpy.typing import ArrayLike
 from scipy.linalg import lapack
 
 import pydrake.math as drake_math
 from pydrake.autodiffutils import AutoDiffXd
 from pydrake.math import sqrt
+
+# A numpy array of any shape and dtype (float, or object for AutoDiffXd), for type hints. pydrake's stubs
+# spell their arrays ndarray[float64[m, 1]], which numpy's own stubs (>= 2) do not accept as a shape: an
+# array hinted with a bare np.ndarray then does not match them, this one does.
+Array = np.ndarray[Any, Any]
+# A vector given as numbers in a list or tuple, or as an array.
+VectorLike = Union[Sequence[float], Array]
 
 _getrf, _getrs, _getri, _gesv, _potrf = lapack.dgetrf, lapack.dgetrs, lapack.dgetri, lapack.dgesv, lapack.dpotrf
 
@@ -34,7 +43,15 @@ def is_autodiff(*arrays):
     return False
 
 
-def value(array):
+@overload
+def value(array: AutoDiffXd) -> float: ...
+
+
+@overload
+def value(array: ArrayLike) -> Array: ...
+
+
+def value(array: Union[AutoDiffXd, ArrayLike]) -> Union[float, Array]:
     """The float value of a float or AutoDiffXd array."""
     if isinstance(array, AutoDiffXd):
         return array.value()
