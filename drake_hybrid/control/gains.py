@@ -288,18 +288,18 @@ def check_poles(poles: ArrayLike, name: str, control_period: Optional[float] = N
     """GainError naming the gain ``name`` if a loop it designs (poles s, 1/s) is faster than MAX_RATE, or, for
     a sampled controller of period h (``control_period``), not slower than MAX_RATE_PERIOD / h; or decays
     slower than MIN_RATE (-Re s < MIN_RATE: a time constant of more than eleven days is not a design)."""
-    poles = np.atleast_1d(np.asarray(poles, dtype=complex))
-    if not poles.size:
+    values: Array = np.atleast_1d(np.asarray(poles, dtype=complex))
+    if not values.size:
         return
     high, why = MAX_RATE, ""
     if control_period is not None:
         high = min(MAX_RATE, MAX_RATE_PERIOD / float(control_period))
         why = (f" (the sampling rate 1/h of this controller's control_period h = {float(control_period):g} s: a loop "
                "as fast overshoots at every tick, and twice as fast is unstable)")
-    fastest = float(np.max(np.abs(poles)))
+    fastest = float(np.max(np.abs(values)))
     if not fastest <= high:
         raise GainError(f"gain {name} designs a loop of rate {fastest:.3g} 1/s, faster than {high:.4g} 1/s{why}")
-    slowest = float(np.min(-poles.real))
+    slowest = float(np.min(-values.real))
     if not slowest >= MIN_RATE:
         raise GainError(f"gain {name} designs a loop that decays at {slowest:.3g} 1/s (a time constant of "
                         f"{1.0 / slowest if slowest > 0 else math.inf:.3g} s), slower than {MIN_RATE:g} 1/s: "
