@@ -22,13 +22,13 @@ entries, state and events.
 # and arguments), which the API reference renders.
 
 import sys
-from typing import Any, Dict, Optional, Tuple, Union
+from typing import Any, Dict, Optional, Tuple
 
 import numpy as np
 
 from pydrake.autodiffutils import AutoDiffXd
 from pydrake.common.value import AbstractValue
-from pydrake.multibody.tree import MultibodyForces, MultibodyForces_
+from pydrake.multibody.tree import MultibodyForces_
 from pydrake.systems.framework import Context, ContinuousState, EventStatus, InputPort, LeafSystem_, ValueProducer
 from pydrake.systems.scalar_conversion import TemplateSystem
 
@@ -63,7 +63,7 @@ class LawCache:
 
     __slots__ = ("plant_context", "forces", "solution")
 
-    def __init__(self, plant_context: AnyScalarContext, forces: Union[MultibodyForces, Any]) -> None:
+    def __init__(self, plant_context: AnyScalarContext, forces: Any) -> None:     # forces: a MultibodyForces_[T]
         self.plant_context, self.forces, self.solution = plant_context, forces, None
 
 
