@@ -70,6 +70,7 @@ nitpick_ignore_regex = [
 
 # The annotations' private type variables (e.g. drake_hybrid.core.errors._Owner) have no page of their own.
 nitpick_ignore_regex.append((r"py:.*", r"drake_hybrid\.[\w.]*\._\w+"))
+
 myst_enable_extensions = ["dollarmath", "colon_fence", "deflist", "attrs_inline"]
 myst_heading_anchors = 3
 nb_execution_mode = "off"         # the tutorials' outputs come from tests/test_notebooks.py's run
