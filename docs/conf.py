@@ -24,8 +24,9 @@ sys.path.insert(0, str(DOCS))
 
 os.environ.setdefault("MPLBACKEND", "Agg")
 
-import drake_hybrid  # noqa: E402  (after the path set-up above)
 from tutorial_sources import stage_tutorials  # noqa: E402
+
+import drake_hybrid  # noqa: E402  (after the path set-up above)
 
 project = "drake_hybrid"
 author = "the drake_hybrid developers"

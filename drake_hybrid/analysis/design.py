@@ -29,7 +29,7 @@ from drake_hybrid.control.gains import ControlMode, ValidatedGains
 from drake_hybrid.control.law import impedance_blocks
 from drake_hybrid.core.arguments import describe, instance, joint_rows, number, vector
 from drake_hybrid.core.errors import ArgumentError
-from drake_hybrid.core.linalg import Array
+from drake_hybrid.core.hints import Array
 from drake_hybrid.tasks.task import Scenario
 
 # The rows held kinematically: a count (the first ones) or the row indices.

@@ -32,7 +32,7 @@ from drake_hybrid.analysis.modes import ModeDiagnosis, diagnose_unstable_modes
 from drake_hybrid.control.gains import ControlMode
 from drake_hybrid.core.arguments import boolean, function, instance, positive, relative_tolerance, text
 from drake_hybrid.core.errors import ArgumentError, NotAtEquilibriumError
-from drake_hybrid.core.linalg import Array
+from drake_hybrid.core.hints import Array
 from drake_hybrid.core.progress import StagesLike, quiet
 from drake_hybrid.scenario.builder import build_scenario
 from drake_hybrid.scenario.start import set_initial_conditions

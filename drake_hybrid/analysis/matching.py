@@ -24,7 +24,7 @@ from scipy.optimize import linear_sum_assignment
 from drake_hybrid.analysis.modes import explained_modes
 from drake_hybrid.core.arguments import complex_vector, number, relative_tolerance
 from drake_hybrid.core.errors import ArgumentError
-from drake_hybrid.core.linalg import Array
+from drake_hybrid.core.hints import Array
 from drake_hybrid.tasks.task import EigenvalueShift
 
 

@@ -41,7 +41,7 @@ from numpy.typing import ArrayLike
 
 from drake_hybrid.core.arguments import describe, number, numeric_array
 from drake_hybrid.core.errors import ArgumentError, GainError
-from drake_hybrid.core.linalg import Array
+from drake_hybrid.core.hints import Array
 
 
 class ControlMode(enum.Enum):

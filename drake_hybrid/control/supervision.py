@@ -64,7 +64,8 @@ from drake_hybrid.control.phases import ContactPhase
 from drake_hybrid.control.sampling import SAMPLE_LEAD
 from drake_hybrid.core.arguments import MAX_TASK_SIZE, describe, instance, number, positive, vector
 from drake_hybrid.core.errors import ArgumentError, ConfigError, check_fields
-from drake_hybrid.core.linalg import Array, all_finite, value
+from drake_hybrid.core.hints import Array
+from drake_hybrid.core.linalg import all_finite, value
 from drake_hybrid.core.templates import default_instantiation
 
 

@@ -21,7 +21,7 @@ from typing import Any, Collection, Optional, Tuple, Type
 import numpy as np
 
 from drake_hybrid.core.errors import ArgumentError
-from drake_hybrid.core.linalg import Array
+from drake_hybrid.core.hints import Array
 
 _SHOWN_ENTRIES = 9          # an array with more entries is described by its shape only
 MAX_TASK_SIZE = 6           # the most coordinates a task has (a pose's d): a bound on k and m

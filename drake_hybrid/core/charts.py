@@ -52,7 +52,8 @@ from pydrake.math import RigidTransform, RotationMatrix
 
 from drake_hybrid.core.arguments import number, vector
 from drake_hybrid.core.errors import ChartSingularityError, DimensionError
-from drake_hybrid.core.linalg import Array, is_autodiff, value
+from drake_hybrid.core.hints import Array
+from drake_hybrid.core.linalg import is_autodiff, value
 from drake_hybrid.core.symbolic import CompiledFunction
 
 
@@ -343,7 +344,7 @@ class EulerZXZChart(Chart):
         self._check_size(x, 6, "x")
         R = (RotationMatrix.MakeZRotation(x[3]).multiply(RotationMatrix.MakeXRotation(x[4]))
              .multiply(RotationMatrix.MakeZRotation(x[5])))
-        p: Array = x[:3]     # Array: pydrake's stubs take no numpy slice (core.linalg.Array)
+        p: Array = x[:3]     # Array: pydrake's stubs take no numpy slice (core.hints.Array)
         return RigidTransform(R, p)
 
     def task_velocity(self, x: Array, V_WE: Array) -> Array:
@@ -405,7 +406,7 @@ class PoseChart(Chart):
     def pose(self, x: ArrayLike) -> RigidTransform:
         x = value(x)
         self._check_size(x, 12, "x")
-        p: Array = x[:3]     # Array: pydrake's stubs take no numpy slice (core.linalg.Array)
+        p: Array = x[:3]     # Array: pydrake's stubs take no numpy slice (core.hints.Array)
         return RigidTransform(RotationMatrix(x[3:].reshape(3, 3)), p)
 
     def task_velocity(self, x: Array, V_WE: Array) -> Array:

@@ -34,7 +34,8 @@ import sympy
 
 from drake_hybrid.core.charts import Chart, EulerZXZChart, PlanarChart, PoseChart
 from drake_hybrid.core.errors import BranchError, ConstraintRankError, DimensionError, OffConstraintError
-from drake_hybrid.core.linalg import Array, VectorLike, rank_margin, value
+from drake_hybrid.core.hints import Array, VectorLike
+from drake_hybrid.core.linalg import rank_margin, value
 from drake_hybrid.core.symbolic import CompiledFunction, compiled_time_derivative, to_sympy_matrix
 
 

@@ -39,7 +39,7 @@ from pydrake.math import RigidTransform
 from drake_hybrid.core.charts import EulerZXZChart, PoseChart
 from drake_hybrid.core.errors import PathError
 from drake_hybrid.core.height_field import DEGREE, HeightField, HeightFieldConstraint
-from drake_hybrid.core.linalg import Array, VectorLike
+from drake_hybrid.core.hints import Array, VectorLike
 from drake_hybrid.core.surfaces import Surface, ViewPlane, check_chart
 
 MIN_SAMPLES = DEGREE + 1          # per axis: a quintic spline needs six samples

@@ -23,7 +23,8 @@ from pydrake.systems.framework import CacheEntry, Context, InputPort, LeafSystem
 from drake_hybrid.core.arguments import describe, instance, joint_vector, number, positive, vector
 from drake_hybrid.core.charts import Chart
 from drake_hybrid.core.errors import ArgumentError, DimensionError, UnknownFrameError, UnreachablePoseError
-from drake_hybrid.core.linalg import Array, all_finite, value
+from drake_hybrid.core.hints import Array
+from drake_hybrid.core.linalg import all_finite, value
 
 # A plant, its context, a frame or a system of either scalar type (float or AutoDiffXd). pydrake's stubs name
 # the AutoDiffXd classes (MultibodyPlant_[AutoDiffXd], ...) in a way a type checker cannot read: they are Any.

@@ -13,7 +13,7 @@ would.
 """
 
 import math
-from typing import Any, Sequence, Union, overload
+from typing import Union, overload
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -23,12 +23,7 @@ import pydrake.math as drake_math
 from pydrake.autodiffutils import AutoDiffXd
 from pydrake.math import sqrt
 
-# A numpy array of any shape and dtype (float, or object for AutoDiffXd), for type hints. pydrake's stubs
-# spell their arrays ndarray[float64[m, 1]], which numpy's own stubs (>= 2) do not accept as a shape: an
-# array hinted with a bare np.ndarray then does not match them, this one does.
-Array = np.ndarray[Any, Any]
-# A vector given as numbers in a list or tuple, or as an array.
-VectorLike = Union[Sequence[float], Array]
+from drake_hybrid.core.hints import Array
 
 _getrf, _getrs, _getri, _gesv, _potrf = lapack.dgetrf, lapack.dgetrs, lapack.dgetri, lapack.dgesv, lapack.dpotrf
 

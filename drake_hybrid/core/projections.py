@@ -27,7 +27,8 @@ from numpy.typing import ArrayLike
 from drake_hybrid.core.charts import Chart, EulerZXZChart, PoseChart
 from drake_hybrid.core.constraints import ConstraintLike
 from drake_hybrid.core.errors import ChartSingularityError, ConstraintRankError, DimensionError
-from drake_hybrid.core.linalg import Array, LUFactorization, VectorLike, cholesky, inv, rank_margin_from_cholesky
+from drake_hybrid.core.hints import Array, VectorLike
+from drake_hybrid.core.linalg import LUFactorization, cholesky, inv, rank_margin_from_cholesky
 from drake_hybrid.core.preconditions import check_generic_rank
 from drake_hybrid.core.symbolic import CompiledFunction, compiled_time_derivative, to_sympy_matrix
 

@@ -45,7 +45,7 @@ from drake_hybrid.core.arguments import instance, nonnegative, number, numeric_a
 from drake_hybrid.core.charts import Chart, EulerZXZChart, PoseChart
 from drake_hybrid.core.constraints import ConstraintLike, surface_constraint
 from drake_hybrid.core.errors import PathError
-from drake_hybrid.core.linalg import Array, VectorLike
+from drake_hybrid.core.hints import Array, VectorLike
 from drake_hybrid.core.projections import GivenVelocityProjection
 
 MAX_TILT = 60.0         # deg: the largest angle between the surface normal and a view's w on a path

@@ -27,7 +27,7 @@ from drake_hybrid.control.gains import ValidatedGains
 from drake_hybrid.control.phases import ContactPhase
 from drake_hybrid.core.arguments import describe, number, numeric_array, text
 from drake_hybrid.core.errors import ArgumentError
-from drake_hybrid.core.linalg import Array
+from drake_hybrid.core.hints import Array
 
 
 @dataclass

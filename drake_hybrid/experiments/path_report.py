@@ -30,7 +30,7 @@ from typing import Any, Dict, List, Mapping, Optional, Tuple
 import numpy as np
 
 from drake_hybrid.control.phases import ContactPhase
-from drake_hybrid.core.linalg import Array
+from drake_hybrid.core.hints import Array
 
 
 @dataclass

@@ -44,7 +44,7 @@ from pydrake.systems.framework import Context, EventStatus
 from drake_hybrid.analysis.design import controller_prediction, design_time_constant, predicted_errors
 from drake_hybrid.control.controller import HybridController
 from drake_hybrid.control.gains import ControlMode
-from drake_hybrid.core.linalg import Array
+from drake_hybrid.core.hints import Array
 from drake_hybrid.core.progress import StagesLike, quiet
 from drake_hybrid.experiments.metrics import (ForceRowFigures, contact_time, impedance_check, invalid_samples,
                                               last_valid, max_after, row_errors, row_units, run_scale, worst)

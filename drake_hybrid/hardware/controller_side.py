@@ -38,7 +38,7 @@ from pydrake.systems.primitives import LogVectorOutput
 from drake_hybrid.control.controller import HybridController
 from drake_hybrid.control.gains import HybridGains
 from drake_hybrid.core.errors import ConfigError
-from drake_hybrid.core.linalg import Array
+from drake_hybrid.core.hints import Array
 from drake_hybrid.hardware.command import DriverGravityCompensation, TorqueCommandSafety
 from drake_hybrid.hardware.gain_change import GainSelector, bumpless_integrals
 from drake_hybrid.hardware.messages import HardwareConfig

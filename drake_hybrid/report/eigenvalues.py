@@ -24,7 +24,7 @@ from drake_hybrid.analysis.discrete_linearization import DiscreteLinearization
 from drake_hybrid.analysis.linearization import Linearization
 from drake_hybrid.analysis.matching import EigenvalueMatch, nyquist_split, predicted_match, shift_indices
 from drake_hybrid.control.gains import ControlMode
-from drake_hybrid.core.linalg import Array
+from drake_hybrid.core.hints import Array
 from drake_hybrid.tasks.config import ScenarioConfig
 from drake_hybrid.tasks.task import EigenvalueShift
 

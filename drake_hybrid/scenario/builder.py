@@ -29,7 +29,7 @@ from drake_hybrid.control.baselines import make_baseline
 from drake_hybrid.control.gains import ControlMode, ValidatedGains, gain_matrix
 from drake_hybrid.control.phases import ContactPhase
 from drake_hybrid.core.errors import ConfigError
-from drake_hybrid.core.linalg import Array
+from drake_hybrid.core.hints import Array
 from drake_hybrid.core.projections import ConstraintSpace
 from drake_hybrid.scenario.start import check_start_sizes
 from drake_hybrid.station.loggers import add_loggers

@@ -21,7 +21,7 @@ from pydrake.systems.framework import Context, Diagram
 from drake_hybrid.control.controller import HybridController
 from drake_hybrid.core.arguments import joint_vector
 from drake_hybrid.core.errors import DimensionError, OffConstraintError
-from drake_hybrid.core.linalg import Array
+from drake_hybrid.core.hints import Array
 from drake_hybrid.station.clearance import check_robot_clearance
 from drake_hybrid.station.root_context import check_systems
 from drake_hybrid.station.start import holding_torque, prime_start

@@ -20,8 +20,8 @@ from pydrake.systems.framework import Context, Diagram
 from drake_hybrid.control.phases import ContactPhase
 from drake_hybrid.core.arguments import describe, instance, joint_vector, positive, vector
 from drake_hybrid.core.errors import ArgumentError, ConfigError, OffConstraintError, UnreachablePoseError
+from drake_hybrid.core.hints import Array
 from drake_hybrid.core.kinematics import inverse_kinematics
-from drake_hybrid.core.linalg import Array
 from drake_hybrid.core.preconditions import check_pushing_force
 from drake_hybrid.station.clearance import check_robot_clearance
 from drake_hybrid.station.contact import geometry_ids

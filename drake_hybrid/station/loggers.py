@@ -8,7 +8,7 @@ from pydrake.systems.primitives import LogVectorOutput
 
 from drake_hybrid.core.arguments import instance, nonnegative
 from drake_hybrid.core.errors import ArgumentError
-from drake_hybrid.core.linalg import Array
+from drake_hybrid.core.hints import Array
 from drake_hybrid.station.handles import HybridSystems, Logger
 from drake_hybrid.station.root_context import subsystem_context
 

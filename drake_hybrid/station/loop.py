@@ -55,8 +55,8 @@ from drake_hybrid.control.phases import ContactPhase
 from drake_hybrid.control.supervision import ContactSupervisor, SupervisionConfig
 from drake_hybrid.core.arguments import describe, instance, vector
 from drake_hybrid.core.errors import ArgumentError, ConfigError
+from drake_hybrid.core.hints import Array
 from drake_hybrid.core.kinematics import EndEffectorKinematics
-from drake_hybrid.core.linalg import Array
 from drake_hybrid.core.projections import ConstraintSpace
 from drake_hybrid.station.handles import HybridSystems
 from drake_hybrid.station.path_job import PathJob

@@ -16,7 +16,7 @@ from pydrake.systems.framework import DiagramBuilder
 
 from drake_hybrid.core.arguments import describe, instance
 from drake_hybrid.core.errors import ArgumentError, ConfigError, UnknownFrameError
-from drake_hybrid.core.linalg import Array
+from drake_hybrid.core.hints import Array
 
 
 @dataclass

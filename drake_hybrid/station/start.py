@@ -11,7 +11,7 @@ from pydrake.systems.framework import Context
 
 from drake_hybrid.core.arguments import joint_vector, vector
 from drake_hybrid.core.errors import ConfigError, ForceSignError, OffConstraintError
-from drake_hybrid.core.linalg import Array
+from drake_hybrid.core.hints import Array
 from drake_hybrid.station.handles import HybridSystems
 from drake_hybrid.station.root_context import check_systems, systems_in_context
 from drake_hybrid.station.sensing import WrenchSensor

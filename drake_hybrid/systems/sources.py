@@ -30,8 +30,9 @@ from pydrake.systems.scalar_conversion import TemplateSystem
 
 from drake_hybrid.core.arguments import MAX_TASK_SIZE, describe, instance, nonnegative, number, positive, vector
 from drake_hybrid.core.errors import ConfigError, DimensionError, ForceSignError
+from drake_hybrid.core.hints import Array
 from drake_hybrid.core.kinematics import declare_cached_value, declare_task_input
-from drake_hybrid.core.linalg import Array, value
+from drake_hybrid.core.linalg import value
 from drake_hybrid.core.projections import pseudo_desired_velocity
 from drake_hybrid.core.symbolic import CompiledFunction, to_sympy_matrix
 from drake_hybrid.core.templates import default_instantiation

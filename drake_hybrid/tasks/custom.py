@@ -42,8 +42,8 @@ from pydrake.multibody.plant import MultibodyPlant
 from drake_hybrid.control.gains import HybridGains
 from drake_hybrid.core.arguments import describe, function, instance, text, vector
 from drake_hybrid.core.errors import ArgumentError, ConfigError, OffConstraintError
+from drake_hybrid.core.hints import Array
 from drake_hybrid.core.kinematics import inverse_kinematics
-from drake_hybrid.core.linalg import Array
 from drake_hybrid.core.projections import ConstraintSpace
 from drake_hybrid.station.robot_model import RobotModel
 from drake_hybrid.systems.sources import Profile
@@ -134,7 +134,7 @@ class CustomTask(Task):
         if len(values) != 6:
             raise ConfigError(f"task '{self.name}': start.configuration must be [x, y, z, roll, pitch, yaw] "
                               f"of the end-effector frame, got {values}")
-        rpy: Array = np.array(values[3:], dtype=float)     # Array: what pydrake's stubs take (core.linalg.Array)
+        rpy: Array = np.array(values[3:], dtype=float)     # Array: what pydrake's stubs take (core.hints.Array)
         p_WE: Array = np.array(values[:3], dtype=float)
         return RigidTransform(RollPitchYaw(rpy), p_WE)
 

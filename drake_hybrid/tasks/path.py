@@ -10,8 +10,8 @@ from numpy.typing import ArrayLike
 from pydrake.math import RigidTransform
 
 from drake_hybrid.core.errors import ConfigError
+from drake_hybrid.core.hints import Array
 from drake_hybrid.core.kinematics import inverse_kinematics
-from drake_hybrid.core.linalg import Array
 from drake_hybrid.core.paths import SurfacePath
 from drake_hybrid.core.projections import ConstraintSpace
 from drake_hybrid.core.schema import unknown_field

@@ -39,7 +39,7 @@ from pydrake.systems.framework import DiagramBuilder
 
 from drake_hybrid.core.arguments import function, joint_vector, number, positive
 from drake_hybrid.core.errors import ConfigError, UnreachablePoseError
-from drake_hybrid.core.linalg import Array
+from drake_hybrid.core.hints import Array
 from drake_hybrid.station.arm import mount_tool
 from drake_hybrid.station.robot_model import RobotModel
 from drake_hybrid.tasks.arm_chain import fix_arm

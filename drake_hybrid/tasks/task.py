@@ -34,7 +34,7 @@ from pydrake.systems.framework import Context, DiagramBuilder, System
 from drake_hybrid.core.arguments import instance, joint_rows
 from drake_hybrid.core.constraints import SelectingConstraint
 from drake_hybrid.core.errors import ConfigError
-from drake_hybrid.core.linalg import Array
+from drake_hybrid.core.hints import Array
 from drake_hybrid.core.projections import ConstraintSpace
 from drake_hybrid.core.schema import unknown_field
 from drake_hybrid.core.surfaces import Surface

@@ -30,7 +30,7 @@ from drake_hybrid.core.charts import Chart, EulerZXZChart, PlanarChart, PlanarPo
 from drake_hybrid.core.constraints import Constraint
 from drake_hybrid.core.errors import ConfigError
 from drake_hybrid.core.expressions import check_parameter_names, expression_row_to_sympy, expression_to_sympy
-from drake_hybrid.core.linalg import Array
+from drake_hybrid.core.hints import Array
 from drake_hybrid.core.projections import (AnyVelocityProjection, ConstraintSpace, GivenVelocityProjection,
                                            KernelVelocityProjection)
 from drake_hybrid.core.schema import read_yaml_file
@@ -211,7 +211,7 @@ def start_configuration_of(spec: TaskFile, chart: Chart, where: str) -> Array:
     if len(start.pose) != 6:
         raise ConfigError(f"{where}start: give configuration (chart coordinates) or pose [x, y, z, roll, pitch, "
                           f"yaw] of the end-effector frame, got pose {start.pose}")
-    rpy: Array = np.asarray(start.pose[3:], dtype=float)     # Array: what pydrake's stubs take (core.linalg.Array)
+    rpy: Array = np.asarray(start.pose[3:], dtype=float)     # Array: what pydrake's stubs take (core.hints.Array)
     p_WE: Array = np.asarray(start.pose[:3], dtype=float)
     p_EP: Array = np.asarray(spec.robot.end_effector_point, dtype=float)
     X_WE = RigidTransform(RollPitchYaw(rpy), p_WE)
