@@ -24,8 +24,9 @@ sys.path.insert(0, str(DOCS))
 
 os.environ.setdefault("MPLBACKEND", "Agg")
 
-import drake_hybrid  # noqa: E402  (after the path set-up above)
 from tutorial_sources import stage_tutorials  # noqa: E402
+
+import drake_hybrid  # noqa: E402  (after the path set-up above)
 
 project = "drake_hybrid"
 author = "the drake_hybrid developers"
@@ -68,6 +69,9 @@ nitpick_ignore_regex = [
     (r"py:.*", r"(Union|List|Dict|Tuple|Optional|Callable|Sequence|Mapping|Iterable|Any|NamedTuple)(\[.*)?"),
     (r"py:.*", r"(float|int|str|bool|object|list|dict|tuple|type|callable|optional|ndarray|array_like)"),
 ]
+
+# The annotations' private type variables (e.g. drake_hybrid.core.errors._Owner) have no page of their own.
+nitpick_ignore_regex.append((r"py:.*", r"drake_hybrid\.[\w.]*\._\w+"))
 
 myst_enable_extensions = ["dollarmath", "colon_fence", "deflist", "attrs_inline"]
 myst_heading_anchors = 3

@@ -16,16 +16,24 @@ The closed loop's own eigenvalues are measured by ``analysis.linearization`` (co
 
 import numbers
 from dataclasses import dataclass
+from typing import Dict, List, Mapping, Optional, Sequence, Tuple, Union
 
 import numpy as np
+from numpy.typing import ArrayLike
 from scipy.linalg import expm
 
 from drake_hybrid.analysis.environment import impedance_matrix
+from drake_hybrid.control.controller import HybridController
 from drake_hybrid.control.damping import step_task_mobility
 from drake_hybrid.control.gains import ControlMode, ValidatedGains
 from drake_hybrid.control.law import impedance_blocks
 from drake_hybrid.core.arguments import describe, instance, joint_rows, number, vector
 from drake_hybrid.core.errors import ArgumentError
+from drake_hybrid.core.hints import Array
+from drake_hybrid.tasks.task import Scenario
+
+# The rows held kinematically: a count (the first ones) or the row indices.
+KinematicRows = Union[int, Sequence[int], Array]
 
 
 @dataclass
@@ -37,22 +45,22 @@ class PredictedEigenvalues:
     marginal: int = 0             # zero eigenvalues expected: k = d - m (see predicted_eigenvalues)
 
     @property
-    def designed(self):
+    def designed(self) -> Array:
         return np.concatenate([self.velocity, self.force])
 
     @property
-    def all(self):
+    def all(self) -> Array:
         return np.concatenate([self.designed, np.zeros(self.marginal)])
 
 
-def _design(gains, mode, owner):
+def _design(gains: ValidatedGains, mode: Union[ControlMode, str], owner: str) -> Tuple[ValidatedGains, ControlMode]:
     """(``gains``, ``mode`` as a ControlMode) checked: ValidatedGains (``HybridGains.matrices(k, m, mode)``)
     and a control mode; ArgumentError naming ``owner`` otherwise."""
     instance(gains, "gains", owner, ValidatedGains, what="ValidatedGains (HybridGains(...).matrices(k, m, mode))")
     return gains, ControlMode.parse(mode, owner)
 
 
-def _kinematic_rows(kinematic_rows, force_size, owner):
+def _kinematic_rows(kinematic_rows: KinematicRows, force_size: int, owner: str) -> List[int]:
     """The rows held kinematically: a count (the first ones) or a list of distinct row indices < ``force_size``."""
     allowed = f"a count or a list of distinct row indices < {force_size}"
     if isinstance(kinematic_rows, numbers.Integral) and not isinstance(kinematic_rows, (bool, np.bool_)):
@@ -66,7 +74,7 @@ def _kinematic_rows(kinematic_rows, force_size, owner):
     return rows
 
 
-def velocity_loop_matrix(gains, mode):
+def velocity_loop_matrix(gains: ValidatedGains, mode: ControlMode) -> Array:
     """A of the velocity loop: e_p'-dot = A e_p' (velocity mode) or d/dt [e_p; e_p'] = A [e_p; e_p']."""
     gains, mode = _design(gains, mode, "velocity_loop_matrix")
     if mode.integrates_position:
@@ -74,7 +82,8 @@ def velocity_loop_matrix(gains, mode):
     return -gains.velocity
 
 
-def predicted_eigenvalues(gains, mode, kinematic_rows=0, redundancy=0):
+def predicted_eigenvalues(gains: ValidatedGains, mode: Union[ControlMode, str], kinematic_rows: KinematicRows = 0,
+                          redundancy: int = 0) -> PredictedEigenvalues:
     """The closed-loop eigenvalues the validated gains design (``ValidatedGains``).
 
     Besides the designed ones, a linearized closed loop has k = d - m zero
@@ -107,7 +116,9 @@ def predicted_eigenvalues(gains, mode, kinematic_rows=0, redundancy=0):
                                 marginal=gains.velocity.shape[0] + len(kinematic) + redundancy)
 
 
-def designed_eigenvalues_by_row(gains, mode, kinematic_rows=(), redundancy=0):
+def designed_eigenvalues_by_row(gains: ValidatedGains, mode: Union[ControlMode, str],
+                                kinematic_rows: KinematicRows = (), redundancy: int = 0
+                                ) -> Optional[Tuple[List[Array], List[Array], List[complex]]]:
     """The designed eigenvalues row by row: ([velocity row i's], [force row j's], [null-space ones]), or
     None when a gain couples rows (a full matrix: then only the loops have eigenvalues, not the rows).
 
@@ -120,6 +131,7 @@ def designed_eigenvalues_by_row(gains, mode, kinematic_rows=(), redundancy=0):
     gains, mode = _design(gains, mode, owner)
     kinematic_rows = _kinematic_rows(kinematic_rows, gains.force_integral.shape[0], owner)
     redundancy = number(redundancy, "redundancy", owner, low=0, integer=True, unit="joints beyond the task's d")
+    assert gains.impedance_mass is not None          # set by ValidatedGains.__post_init__
     matrices = (gains.velocity, gains.position, gains.force_proportional, gains.force_integral, gains.impedance_mass)
     if any(np.count_nonzero(matrix - np.diag(np.diag(matrix))) for matrix in matrices):
         return None
@@ -137,7 +149,9 @@ def designed_eigenvalues_by_row(gains, mode, kinematic_rows=(), redundancy=0):
     return velocity, force, [complex(-gains.null_space_damping)] * redundancy
 
 
-def predicted_errors(gains, mode, times, velocity_error0, force_integral0, position_error0=None, kinematic_rows=()):
+def predicted_errors(gains: ValidatedGains, mode: Union[ControlMode, str], times: ArrayLike, velocity_error0: ArrayLike,
+                     force_integral0: ArrayLike, position_error0: Optional[ArrayLike] = None,
+                     kinematic_rows: KinematicRows = ()) -> Tuple[Array, Array, Array]:
     """Errors predicted by (3.1-14), (3.1-15) / Remark 3 from an initial condition.
 
     Kinematic rows have no force loop (their force error is zero).
@@ -170,7 +184,7 @@ def predicted_errors(gains, mode, times, velocity_error0, force_integral0, posit
     return velocity, force, position
 
 
-def controller_prediction(controller):
+def controller_prediction(controller: HybridController) -> PredictedEigenvalues:
     """``predicted_eigenvalues`` for a HybridController (its gains, mode, kinematic rows, n - d)."""
     if not all(hasattr(controller, name) for name in ("validated_gains", "mode", "kinematic_rows", "num_joints")):
         raise ArgumentError(f"controller_prediction: controller must be a HybridController, got {describe(controller)}")
@@ -178,13 +192,14 @@ def controller_prediction(controller):
                                  controller.num_joints - controller.task_size)
 
 
-def design_time_constant(gains, mode, kinematic_rows=()):
+def design_time_constant(gains: ValidatedGains, mode: Union[ControlMode, str],
+                         kinematic_rows: KinematicRows = ()) -> float:
     """The slowest designed time constant 1 / min |Re(lambda)| (s) (arguments as ``predicted_eigenvalues``)."""
     eigenvalues = predicted_eigenvalues(gains, mode, kinematic_rows).designed
     return 1.0 / np.min(np.abs(eigenvalues.real))
 
 
-def impedance_realization(scenario, log):
+def impedance_realization(scenario: Scenario, log: Mapping[str, Array]) -> Dict[str, Array]:
     """How well a logged run realizes the impedance/force design (docs/theory.md §5).
 
     Returns a dict of arrays over the log:

@@ -15,6 +15,7 @@ closed loop's linearization is ``analysis.linearization``.
 
 import time
 from dataclasses import dataclass, field
+from typing import Any, Dict, List, Optional
 
 import numpy as np
 
@@ -26,9 +27,12 @@ from drake_hybrid.analysis.matching import EigenvalueMatch, match_eigenvalues
 from drake_hybrid.control.sampling import SAMPLE_LEAD
 from drake_hybrid.core.arguments import nonnegative, number, positive, relative_tolerance
 from drake_hybrid.core.errors import ConfigError
+from drake_hybrid.core.progress import StagesLike
 from drake_hybrid.scenario.builder import build_scenario
 from drake_hybrid.scenario.start import set_initial_conditions
+from drake_hybrid.tasks.config import ScenarioConfig
 from drake_hybrid.tasks.registry import get_task
+from drake_hybrid.tasks.task import EigenvalueShift
 
 
 def _one_period_jacobian(step, x0, epsilon):
@@ -60,17 +64,17 @@ class StepCheck:
     larger_worst_real: float
 
     @property
-    def confirmed(self):
+    def confirmed(self) -> bool:
         return self.worst_real > STEP_CHECK_RATE and self.larger_worst_real > STEP_CHECK_RATE
 
-    def summary(self):
+    def summary(self) -> str:
         verdict = ("confirmed" if self.confirmed else
                    "NOT confirmed: the one-period map is not smooth at this equilibrium (a contact-solver kink), "
                    "so the linearization cannot decide; trust the simulation")
         return (f"step check: worst real part {self.worst_real:.3g} 1/s at step {self.epsilon:g}, "
                 f"{self.larger_worst_real:.3g} 1/s at step {self.larger_epsilon:g}: {verdict}")
 
-    def as_dict(self):
+    def as_dict(self) -> Dict[str, Any]:
         return {"epsilon": self.epsilon, "worst_real": self.worst_real, "larger_epsilon": self.larger_epsilon,
                 "larger_worst_real": self.larger_worst_real, "confirmed": self.confirmed}
 
@@ -105,12 +109,13 @@ class DiscreteLinearization:
     predicted: PredictedEigenvalues
     match: EigenvalueMatch
     wall_time: float
-    shifts: list = field(default_factory=list)       # the task's EigenvalueShift predictions
-    shifted_match: EigenvalueMatch = None            # the match against the design with those shifts
-    step_check: StepCheck = None     # set when the map looked unstable: the check at a larger step
+    shifts: List[EigenvalueShift] = field(default_factory=list)       # the task's predictions
+    shifted_match: Optional[EigenvalueMatch] = None  # the match against the design with those shifts
+    step_check: Optional[StepCheck] = None     # set when the map looked unstable: the check at a larger step
 
 
-def linearize_discrete(config, tolerance=0.05, epsilon=1e-6, settle_time=0.0, stages=None):
+def linearize_discrete(config: ScenarioConfig, tolerance: float = 0.05, epsilon: float = 1e-6, settle_time: float = 0.0,
+                       stages: Optional[StagesLike] = None) -> DiscreteLinearization:
     """Linearize a discrete closed loop (discrete SAP plant and sampled controller) at its equilibrium.
 
     For plants that only exist in discrete time (the crank: its SAP weld constraint needs a discrete
@@ -140,7 +145,9 @@ def linearize_discrete(config, tolerance=0.05, epsilon=1e-6, settle_time=0.0, st
     c.sensor.bandwidth_hz = 0.0
     with stages(f"{c.task}: building the discrete closed loop"):
         scenario = build_scenario(c, with_loggers=False, sampled_plant_outputs=False, controller_sample_lead=False)
-        simulator = Simulator(scenario.diagram)
+        diagram = scenario.diagram
+        assert diagram is not None                   # build_scenario returns it built
+        simulator = Simulator(diagram)
         ApplySimulatorConfig(c.simulator, simulator)
         context = simulator.get_mutable_context()
     with stages(f"{c.task}: solving the start"):
@@ -152,7 +159,6 @@ def linearize_discrete(config, tolerance=0.05, epsilon=1e-6, settle_time=0.0, st
     if context.num_abstract_states() != 0 or context.num_continuous_states() != 0:
         raise ConfigError(f"{owner} needs a closed loop with discrete state only (no wrench filter or other "
                           "continuous or abstract state)")
-    diagram = scenario.diagram
 
     def state_vector(ctx):
         return np.concatenate([ctx.get_discrete_state(i).CopyToVector()
@@ -190,7 +196,8 @@ def linearize_discrete(config, tolerance=0.05, epsilon=1e-6, settle_time=0.0, st
 
 
 
-def linearize_sampled_loop(config, epsilon=1e-5, tolerance=0.05, periods=1):
+def linearize_sampled_loop(config: ScenarioConfig, epsilon: float = 1e-5, tolerance: float = 0.05,
+                           periods: int = 1) -> DiscreteLinearization:
     """Jacobian of the simulated sampled closed loop's one-period map at its contact equilibrium.
 
     Unlike ``linearize_discrete`` (which rebuilds the loop with one period of actuation delay so
@@ -248,6 +255,7 @@ def linearize_sampled_loop(config, epsilon=1e-5, tolerance=0.05, periods=1):
     c = at_rest_config(config, owner)
     scenario = build_scenario(c, with_loggers=False)
     diagram = scenario.diagram
+    assert diagram is not None                       # build_scenario returns it built
     base = diagram.CreateDefaultContext()
     set_initial_conditions(scenario, base)
     t_k = h * (1.0 - 0.5 * SAMPLE_LEAD)

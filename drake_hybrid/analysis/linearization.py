@@ -17,36 +17,43 @@ import copy
 import dataclasses
 import time
 from dataclasses import dataclass, field
+from typing import List, Optional, Tuple, cast
 
 import numpy as np
 
+from pydrake.systems.framework import Context, Diagram
 from pydrake.systems.primitives import Linearize
 
 from drake_hybrid.analysis.derivatives import JACOBIAN_TOLERANCE, JacobianCheck, checked_state_jacobian
 from drake_hybrid.analysis.design import PredictedEigenvalues, controller_prediction
 from drake_hybrid.analysis.environment import impedance_environment_shifts
 from drake_hybrid.analysis.matching import EigenvalueMatch, match_eigenvalues, shifted_design
-from drake_hybrid.analysis.modes import diagnose_unstable_modes
+from drake_hybrid.analysis.modes import ModeDiagnosis, diagnose_unstable_modes
 from drake_hybrid.control.gains import ControlMode
 from drake_hybrid.core.arguments import boolean, function, instance, positive, relative_tolerance, text
 from drake_hybrid.core.errors import ArgumentError, NotAtEquilibriumError
-from drake_hybrid.core.progress import quiet
+from drake_hybrid.core.hints import Array
+from drake_hybrid.core.progress import StagesLike, quiet
 from drake_hybrid.scenario.builder import build_scenario
 from drake_hybrid.scenario.start import set_initial_conditions
+from drake_hybrid.station.handles import HybridSystems
 from drake_hybrid.station.root_context import check_root_context
 from drake_hybrid.systems.faults import SensorFaultConfig
 from drake_hybrid.systems.sources import Profile
 from drake_hybrid.systems.wrist_force_torque_sensor import WristForceTorqueSensor
 from drake_hybrid.tasks.config import ScenarioConfig
 from drake_hybrid.tasks.registry import get_task
+from drake_hybrid.tasks.task import EigenvalueShift, Scenario, Task
 
 
-def task_shifts(task, scenario, root_context, predicted, measured, tolerance):
+def task_shifts(task: Optional[Task], scenario: HybridSystems, root_context: Context, predicted: PredictedEigenvalues,
+                measured: Array, tolerance: float) -> Tuple[List[EigenvalueShift], Optional[EigenvalueMatch]]:
     """The predicted shifts and the match against the shifted design (no shifts, no match): the
     task's own (physics the paper's model leaves out, e.g. the crank's handle inertia; ``task`` None:
     none), or else, in impedance-force mode, those of the impedance meeting its contact's stiffness
     and damping (``analysis.environment``)."""
-    shifts = task.eigenvalue_shifts(scenario, root_context) if task is not None else []
+    # A task's shifts are asked of its own Scenario (linearize_continuous builds it).
+    shifts = task.eigenvalue_shifts(cast(Scenario, scenario), root_context) if task is not None else []
     if not shifts and scenario.controller.mode is ControlMode.IMPEDANCE_FORCE:
         shifts = impedance_environment_shifts(scenario, root_context, predicted.designed, tolerance=tolerance)
     if not shifts:
@@ -57,7 +64,7 @@ def task_shifts(task, scenario, root_context, predicted, measured, tolerance):
 
 
 
-def at_rest_config(config, owner="at_rest_config"):
+def at_rest_config(config: ScenarioConfig, owner: str = "at_rest_config") -> ScenarioConfig:
     """A copy of ``config`` at rest, its sampling kept: zero desired velocity, constant F_d(0), zero
     start integrals, starting in contact, no contact supervisor, sensor faults or wrench conditioner
     (sampled systems outside the law, with their own timing); the model error is kept; a job's path
@@ -78,7 +85,8 @@ def at_rest_config(config, owner="at_rest_config"):
     return c
 
 
-def equilibrium_config(config, bandwidth_hz=200.0, owner="equilibrium_config"):
+def equilibrium_config(config: ScenarioConfig, bandwidth_hz: float = 200.0,
+                       owner: str = "equilibrium_config") -> ScenarioConfig:
     """The continuous-time version of ``at_rest_config(config)``: continuous plant and controller,
     a low-pass on the wrench (to break the algebraic loop), and no friction.
 
@@ -105,26 +113,27 @@ class Linearization:
     predicted: PredictedEigenvalues
     match: EigenvalueMatch
     wall_time: float
-    shifts: list = field(default_factory=list)       # the task's EigenvalueShift predictions
-    shifted_match: EigenvalueMatch = None            # the match against the design with those shifts
-    jacobian_check: JacobianCheck = None   # AutoDiffXd against central differences; which A is used
-    unstable_modes: list = field(default_factory=list)   # analysis.modes.ModeDiagnosis, real part > 0.01 1/s
+    shifts: List[EigenvalueShift] = field(default_factory=list)       # the task's predictions
+    shifted_match: Optional[EigenvalueMatch] = None  # the match against the design with those shifts
+    jacobian_check: Optional[JacobianCheck] = None   # AutoDiffXd against central differences; which A is used
+    unstable_modes: List[ModeDiagnosis] = field(default_factory=list)   # real part > 0.01 1/s
 
 
-def checked_stages(stages, owner):
+def checked_stages(stages: Optional[StagesLike], owner: str) -> StagesLike:
     """``stages`` (a ``core.progress.Stages``, or None: silent) checked, naming ``owner``."""
     function(stages, "stages", owner, "stages(label) -> a context manager (core.progress.Stages)", allow_none=True)
     return stages or quiet()
 
 
-def checked_scenario_config(config, owner):
+def checked_scenario_config(config: ScenarioConfig, owner: str) -> ScenarioConfig:
     """``config`` if it is a ScenarioConfig; ArgumentError naming ``owner`` otherwise."""
     return instance(config, "config", owner, ScenarioConfig,
                     what="a ScenarioConfig (e.g. get_task(name).default_config())")
 
 
-def linearize_continuous(config, tolerance=0.05, bandwidth_hz=200.0, stages=None,
-                         jacobian_tolerance=JACOBIAN_TOLERANCE, require_equilibrium=True):
+def linearize_continuous(config: ScenarioConfig, tolerance: float = 0.05, bandwidth_hz: float = 200.0,
+                         stages: Optional[StagesLike] = None, jacobian_tolerance: float = JACOBIAN_TOLERANCE,
+                         require_equilibrium: bool = True) -> Linearization:
     """Linearize the continuous closed loop of ``config`` at its contact equilibrium.
 
     Builds ``equilibrium_config(config)``, sets the start, checks it is an
@@ -146,10 +155,12 @@ def linearize_continuous(config, tolerance=0.05, bandwidth_hz=200.0, stages=None
     c = equilibrium_config(config, bandwidth_hz, owner)
     with stages(f"{c.task}: building the continuous closed loop"):
         scenario = build_scenario(c, with_loggers=False)
-        context = scenario.diagram.CreateDefaultContext()
+        diagram = scenario.diagram
+        assert diagram is not None                   # build_scenario returns it built
+        context = diagram.CreateDefaultContext()
     with stages(f"{c.task}: solving the start (contact equilibrium)"):
         set_initial_conditions(scenario, context)
-    return linearize_at_contact(scenario.diagram, context, scenario, tolerance=tolerance,
+    return linearize_at_contact(diagram, context, scenario, tolerance=tolerance,
                                 jacobian_tolerance=jacobian_tolerance, stages=stages, task=scenario.task,
                                 what=c.task, require_equilibrium=require_equilibrium)
 
@@ -176,7 +187,8 @@ def _largest_rates(diagram, root_context):
     return sorted(rates, reverse=True)
 
 
-def check_equilibrium(diagram, root_context, systems, what="your diagram", owner="check_equilibrium"):
+def check_equilibrium(diagram: Diagram, root_context: Context, systems: HybridSystems, what: str = "your diagram",
+                      owner: str = "check_equilibrium") -> float:
     """max |x-dot| of the continuous state at ``root_context``; NotAtEquilibriumError if it is above
     EQUILIBRIUM_RATE (1/s) times the state's size max(1, max |x|), naming the subsystem where it is
     largest and the likely cause: a desired velocity that is not zero, a wrist force/torque sensor on
@@ -209,8 +221,10 @@ def check_equilibrium(diagram, root_context, systems, what="your diagram", owner
         f"not be the design's; likely cause: {cause} (require_equilibrium=False linearizes there anyway)")
 
 
-def linearize_at_contact(diagram, root_context, systems, tolerance=0.05, jacobian_tolerance=JACOBIAN_TOLERANCE,
-                         stages=None, task=None, what="your diagram", require_equilibrium=True):
+def linearize_at_contact(diagram: Diagram, root_context: Context, systems: HybridSystems, tolerance: float = 0.05,
+                         jacobian_tolerance: float = JACOBIAN_TOLERANCE, stages: Optional[StagesLike] = None,
+                         task: Optional[Task] = None, what: str = "your diagram",
+                         require_equilibrium: bool = True) -> Linearization:
     """Linearize your continuous closed loop at the contact equilibrium ``root_context`` holds (e.g.
     after ``station.contact_start.solve_contact_start``), with what ``drake-hybrid analyze`` reports.
 

@@ -15,13 +15,17 @@ The designed eigenvalues come from ``analysis.design``, the measured ones from `
 """
 
 from dataclasses import dataclass, field
+from typing import Any, Dict, Iterable, Optional, Protocol, Tuple
 
 import numpy as np
+from numpy.typing import ArrayLike
 from scipy.optimize import linear_sum_assignment
 
 from drake_hybrid.analysis.modes import explained_modes
 from drake_hybrid.core.arguments import complex_vector, number, relative_tolerance
 from drake_hybrid.core.errors import ArgumentError
+from drake_hybrid.core.hints import Array
+from drake_hybrid.tasks.task import EigenvalueShift
 
 
 @dataclass
@@ -36,7 +40,7 @@ class EigenvalueMatch:
     unstable_extra: np.ndarray = field(default_factory=lambda: np.zeros(0, complex))
     marginal_partners: np.ndarray = field(default_factory=lambda: np.zeros(0, complex))  # nearest 0
 
-    def as_dict(self):
+    def as_dict(self) -> Dict[str, Any]:
         pairs = lambda values: [[float(np.real(v)), float(np.imag(v))] for v in values]
         return {"predicted": pairs(self.predicted), "closed_loop": pairs(self.measured),
                 "matched_partners": pairs(self.partner), "relative_error": [float(e) for e in self.relative_error],
@@ -44,7 +48,8 @@ class EigenvalueMatch:
                 "marginal_modes": pairs(self.marginal_partners), "unstable_modes": pairs(self.unstable_extra)}
 
 
-def match_eigenvalues(designed, measured, tolerance=0.05, marginal=0, marginal_real=None):
+def match_eigenvalues(designed: ArrayLike, measured: ArrayLike, tolerance: float = 0.05, marginal: int = 0,
+                      marginal_real: Optional[float] = None) -> EigenvalueMatch:
     """Pair each designed eigenvalue with a distinct measured one (Hungarian algorithm on the
     relative distance |mu - lambda| / |lambda|) and sort out the rest.
 
@@ -90,7 +95,7 @@ def match_eigenvalues(designed, measured, tolerance=0.05, marginal=0, marginal_r
                            marginal_partners=marginal_partners)
 
 
-def shift_indices(designed, shifts):
+def shift_indices(designed: ArrayLike, shifts: Iterable[EigenvalueShift]) -> Dict[int, EigenvalueShift]:
     """{index in ``designed``: shift}: each ``tasks.task.EigenvalueShift`` takes one designed
     eigenvalue equal to its ``designed``, not yet taken; ValueError if there is none."""
     designed = np.asarray(designed, dtype=complex)
@@ -104,7 +109,7 @@ def shift_indices(designed, shifts):
     return taken
 
 
-def nyquist_split(modes, period):
+def nyquist_split(modes: ArrayLike, period: Optional[float]) -> Tuple[Array, Array]:
     """(modes, the ones at the discrete step's Nyquist frequency): for a one-period map of step ``period``
     (None: a continuous linearization, nothing to split), log(mu)/h of a real multiplier mu < 0 has
     imaginary part +-pi/h; such a mode has no conjugate partner (log's principal branch gives one sign)."""
@@ -115,7 +120,7 @@ def nyquist_split(modes, period):
     return modes[~at], modes[at]
 
 
-def shifted_design(designed, shifts):
+def shifted_design(designed: ArrayLike, shifts: Iterable[EigenvalueShift]) -> Array:
     """The designed eigenvalues with, for each ``tasks.task.EigenvalueShift``, one equal designed
     eigenvalue replaced by the shift's prediction (order kept)."""
     corrected = np.array(designed, dtype=complex)
@@ -124,7 +129,16 @@ def shifted_design(designed, shifts):
     return corrected
 
 
-def predicted_match(result, tolerance=0.05):
+class MatchedLinearization(Protocol):
+    """What ``predicted_match`` reads of a linearization's result (``analysis.linearization.Linearization``,
+    ``analysis.discrete_linearization.DiscreteLinearization``): its ``match`` (and ``shifted_match`` and
+    ``unstable_modes`` when it has them). A type for type hints."""
+
+    @property
+    def match(self) -> EigenvalueMatch: ...
+
+
+def predicted_match(result: MatchedLinearization, tolerance: float = 0.05) -> Optional[EigenvalueMatch]:
     """The match of a linearization ``result`` in which every miss is a predicted one, or None.
 
     Tries the plain match, then the one against the task's shifted design (``shifted_match``); a

@@ -22,13 +22,14 @@ entries, state and events.
 # and arguments), which the API reference renders.
 
 import sys
+from typing import Any, Dict, Optional, Tuple
 
 import numpy as np
 
 from pydrake.autodiffutils import AutoDiffXd
 from pydrake.common.value import AbstractValue
 from pydrake.multibody.tree import MultibodyForces_
-from pydrake.systems.framework import EventStatus, LeafSystem_, ValueProducer
+from pydrake.systems.framework import Context, ContinuousState, EventStatus, InputPort, LeafSystem_, ValueProducer
 from pydrake.systems.scalar_conversion import TemplateSystem
 
 from drake_hybrid.control.damping import joint_damping, warn_damped_joints
@@ -41,7 +42,7 @@ from drake_hybrid.control.safety import SafetyConfig, warn_singularity
 from drake_hybrid.control.sampling import SAMPLE_LEAD
 from drake_hybrid.core.arguments import boolean, describe, instance, matrix, nonnegative, positive, vector
 from drake_hybrid.core.errors import ArgumentError, DimensionError, OffConstraintError
-from drake_hybrid.core.kinematics import declare_task_input, resolve_frame, set_plant_state
+from drake_hybrid.core.kinematics import AnyScalarContext, declare_task_input, resolve_frame, set_plant_state
 from drake_hybrid.core.linalg import all_finite, value
 from drake_hybrid.core.preconditions import check_generic_rank, check_pushing_force
 from drake_hybrid.core.templates import default_instantiation
@@ -62,7 +63,7 @@ class LawCache:
 
     __slots__ = ("plant_context", "forces", "solution")
 
-    def __init__(self, plant_context, forces):
+    def __init__(self, plant_context: AnyScalarContext, forces: Any) -> None:     # forces: a MultibodyForces_[T]
         self.plant_context, self.forces, self.solution = plant_context, forces, None
 
 
@@ -406,30 +407,30 @@ def HybridController_(T):
             return AbstractValue.Make(LawCache(self._plant.CreateDefaultContext(), MultibodyForces_[T](self._plant)))
 
         # -- public helpers ---------------------------------------------------------------
-        def get_desired_velocity_input_port(self):
+        def get_desired_velocity_input_port(self) -> InputPort:
             return self._velocity_port
 
-        def get_desired_acceleration_input_port(self):
+        def get_desired_acceleration_input_port(self) -> InputPort:
             return self._acceleration_port
 
-        def get_desired_force_input_port(self):
+        def get_desired_force_input_port(self) -> InputPort:
             return self._force_port
 
-        def get_contact_phase_input_port(self):
+        def get_contact_phase_input_port(self) -> Optional[InputPort]:
             """The ``contact_phase`` input (only with ``guarded_move``; else None)."""
             return self._phase_port
 
-        def get_approach_reference_input_port(self):
+        def get_approach_reference_input_port(self) -> Optional[InputPort]:
             """The ``approach_reference`` input (only with ``guarded_move``; else None)."""
             return self._reference_port
 
         @property
-        def compensate_tangential_force(self):
+        def compensate_tangential_force(self) -> bool:
             """Whether the law cancels the measured F_v (and the held rows' force) in velocity-force and
             position-force mode (the constructor's ``compensate_tangential_force``)."""
             return self._law.compensate_tangential_force
 
-        def check_start(self, context):
+        def check_start(self, context: Context) -> None:
             """Raise a typed error if the law cannot start at ``context`` (this controller's): E_f or E
             singular there (``ConstraintRankError``, ``ChartSingularityError``), a desired force that pulls
             (``ForceSignError``: the measured force pushes against F_d; or, off the surface with a guarded
@@ -473,11 +474,11 @@ def HybridController_(T):
         def _check_start_event(self, context):
             self.check_start(context)
             return EventStatus.Succeeded()
-        def get_path_position_error_input_port(self):
+        def get_path_position_error_input_port(self) -> Optional[InputPort]:
             """The ``path_position_error`` input (only with ``path_position_error``; else None)."""
             return self._path_error_port
 
-        def diagnostics(self, context):
+        def diagnostics(self, context: Context) -> Dict[str, Any]:
             """What the protections did in the evaluation at ``context``: a dict with the contact
             phase, the saturation scale s, whether an actuator was clipped, sigma_min(J) (None
             when the exact inverse was within its bound and no SVD was needed), the damping
@@ -488,7 +489,7 @@ def HybridController_(T):
                     "smallest_singular_value": solution.smallest_singular_value,
                     "singularity_damping": solution.singularity_damping, "wrench_valid": solution.wrench_valid}
 
-        def integral_state_slices(self):
+        def integral_state_slices(self) -> Tuple[slice, slice]:
             """Slices of (xi, e_p) in the continuous or discrete state vector."""
             m, k = self.force_size, self.velocity_size
             return slice(0, m), slice(m, m + (k if self.mode.integrates_position else 0))
@@ -572,7 +573,7 @@ def HybridController_(T):
             else:
                 output.SetFromVector(np.zeros(k))
 
-        def DoCalcTimeDerivatives(self, context, derivatives):
+        def DoCalcTimeDerivatives(self, context: Context, derivatives: ContinuousState) -> None:
             if self.control_period is not None or self._integrated_size == 0:
                 return
             solution = self._solution(context)

@@ -34,12 +34,14 @@ that drags (docs/drake_notes.md, "The simulated contact's drag and the impedance
 import enum
 import math
 from dataclasses import dataclass, field
-from typing import List
+from typing import Any, Dict, List, Optional, Tuple, Union
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from drake_hybrid.core.arguments import describe, number, numeric_array
 from drake_hybrid.core.errors import ArgumentError, GainError
+from drake_hybrid.core.hints import Array
 
 
 class ControlMode(enum.Enum):
@@ -50,7 +52,7 @@ class ControlMode(enum.Enum):
     IMPEDANCE_FORCE = "impedance-force"    # (3.2-6)
 
     @classmethod
-    def parse(cls, mode, owner=None):
+    def parse(cls, mode: Union["ControlMode", str], owner: Optional[str] = None) -> "ControlMode":
         """``mode`` (a ControlMode or its value) as a ControlMode; ArgumentError (naming ``owner`` if given)."""
         if isinstance(mode, cls):
             return mode
@@ -64,7 +66,7 @@ class ControlMode(enum.Enum):
                 from None
 
     @property
-    def integrates_position(self):
+    def integrates_position(self) -> bool:
         """True if the law uses e_p = integral of e_p' (and so needs K_p)."""
         return self is not ControlMode.VELOCITY_FORCE
 
@@ -92,7 +94,8 @@ def _given_form(array, given_shape):
     return f"has {array.size} diagonal entries"
 
 
-def gain_matrix(gain, size, name, semidefinite=False, given_shape=None):
+def gain_matrix(gain: ArrayLike, size: int, name: str, semidefinite: bool = False,
+                given_shape: Optional[Tuple[int, ...]] = None) -> Array:
     """``gain`` as a symmetric size x size matrix; GainError if it is not (semi)definite.
 
     Accepts a scalar, a vector (diagonal), a matrix, or the flat lists that
@@ -189,7 +192,8 @@ class HybridGains:
         return gain_matrix(getattr(self, name), size, label, semidefinite,
                            getattr(self, "_given_shapes", {}).get(name))
 
-    def matrices(self, velocity_size, force_size, mode, control_period=None):
+    def matrices(self, velocity_size: int, force_size: int, mode: Union[ControlMode, str],
+                 control_period: Optional[float] = None) -> "ValidatedGains":
         """Validated matrices (K_v, K_p, K_fp, K_fi) for d - m = velocity_size, m = force_size; with a
         ``control_period`` h, every designed rate is also checked to stay below 1/h."""
         mode = ControlMode.parse(mode)
@@ -205,22 +209,22 @@ class HybridGains:
         gains.check_rates(mode, control_period)
         return gains
 
-    def as_lists(self, velocity_size, force_size, mode):
+    def as_lists(self, velocity_size: int, force_size: int, mode: Union[ControlMode, str]) -> Dict[str, Any]:
         """The gains as nested lists (for summary.json), keyed as in the CLI's summary."""
         return self.matrices(velocity_size, force_size, mode).as_lists()
 
 
 @dataclass
 class ValidatedGains:
-    velocity: np.ndarray
-    position: np.ndarray
-    force_proportional: np.ndarray
-    force_integral: np.ndarray
+    velocity: Array
+    position: Array
+    force_proportional: Array
+    force_integral: Array
     null_space_damping: float
     constraint_frequency: float
-    impedance_mass: np.ndarray = None          # M_d (k x k); None: the paper's unit mass
-    force_rate: np.ndarray = field(init=False)
-    impedance_inverse_mass: np.ndarray = field(init=False)     # M_d^-1, the law's and the analyses'
+    impedance_mass: Optional[Array] = None     # M_d (k x k); None: the paper's unit mass (I once constructed)
+    force_rate: Array = field(init=False)
+    impedance_inverse_mass: Array = field(init=False)     # M_d^-1, the law's and the analyses'
 
     def __post_init__(self):
         if self.impedance_mass is None:
@@ -230,13 +234,14 @@ class ValidatedGains:
         m = self.force_proportional.shape[0]
         self.force_rate = np.linalg.solve(np.eye(m) + self.force_proportional, self.force_integral)
 
-    def as_lists(self):
+    def as_lists(self) -> Dict[str, Any]:
         """The matrices as nested lists (summary.json's ``gains``)."""
+        assert self.impedance_mass is not None          # set by __post_init__
         return {"velocity": self.velocity.tolist(), "position": self.position.tolist(),
                 "force_proportional": self.force_proportional.tolist(), "force_integral": self.force_integral.tolist(),
                 "impedance_mass": self.impedance_mass.tolist()}
 
-    def check_sizes(self, velocity_size, force_size, owner):
+    def check_sizes(self, velocity_size: int, force_size: int, owner: str) -> "ValidatedGains":
         """ArgumentError naming ``owner`` unless K_v is k x k and K_fi m x m (matrices validated for other sizes)."""
         if self.velocity.shape != (velocity_size, velocity_size) or \
                 self.force_integral.shape != (force_size, force_size):
@@ -245,7 +250,7 @@ class ValidatedGains:
                                 f"{velocity_size}, m = {force_size}")
         return self
 
-    def designed_poles(self, mode):
+    def designed_poles(self, mode: Union[ControlMode, str]) -> Dict[str, Array]:
         """{gain: the poles s (1/s) of the loops it designs}: the velocity rows' -eig(K_v) (or the roots of
         s^2 + K_v s + K_p), the force rows' -eig((I + K_fp)^-1 K_fi), the kinematic rows' -w_c and -2 w_c,
         the null space's -K_n (when > 0)."""
@@ -264,9 +269,10 @@ class ValidatedGains:
             poles["null_space_damping (K_n)"] = -np.array([self.null_space_damping])
         return poles
 
-    def check_rates(self, mode, control_period=None):
+    def check_rates(self, mode: Union[ControlMode, str], control_period: Optional[float] = None) -> None:
         """GainError naming the gain whose designed loop is too fast or too slow (``check_poles``), or whose
         K_fp or M_d is beyond a factor MAX_RATIO of 1."""
+        assert self.impedance_mass is not None          # set by __post_init__
         for name, poles in self.designed_poles(mode).items():
             check_poles(poles, name, control_period)
         for name, matrix, low, unit in (("force_proportional (K_fp)", self.force_proportional, 0.0, "(dimensionless)"),
@@ -278,22 +284,22 @@ class ValidatedGains:
                                 f"[{low:g}, {MAX_RATIO:g}]")
 
 
-def check_poles(poles, name, control_period=None):
+def check_poles(poles: ArrayLike, name: str, control_period: Optional[float] = None) -> None:
     """GainError naming the gain ``name`` if a loop it designs (poles s, 1/s) is faster than MAX_RATE, or, for
     a sampled controller of period h (``control_period``), not slower than MAX_RATE_PERIOD / h; or decays
     slower than MIN_RATE (-Re s < MIN_RATE: a time constant of more than eleven days is not a design)."""
-    poles = np.atleast_1d(np.asarray(poles, dtype=complex))
-    if not poles.size:
+    values: Array = np.atleast_1d(np.asarray(poles, dtype=complex))
+    if not values.size:
         return
     high, why = MAX_RATE, ""
     if control_period is not None:
         high = min(MAX_RATE, MAX_RATE_PERIOD / float(control_period))
         why = (f" (the sampling rate 1/h of this controller's control_period h = {float(control_period):g} s: a loop "
                "as fast overshoots at every tick, and twice as fast is unstable)")
-    fastest = float(np.max(np.abs(poles)))
+    fastest = float(np.max(np.abs(values)))
     if not fastest <= high:
         raise GainError(f"gain {name} designs a loop of rate {fastest:.3g} 1/s, faster than {high:.4g} 1/s{why}")
-    slowest = float(np.min(-poles.real))
+    slowest = float(np.min(-values.real))
     if not slowest >= MIN_RATE:
         raise GainError(f"gain {name} designs a loop that decays at {slowest:.3g} 1/s (a time constant of "
                         f"{1.0 / slowest if slowest > 0 else math.inf:.3g} s), slower than {MIN_RATE:g} 1/s: "

@@ -51,17 +51,20 @@ ramp (it has no speed feed-forward in HOLD).
 
 import sys
 from dataclasses import dataclass
+from typing import Union
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from pydrake.autodiffutils import AutoDiffXd
-from pydrake.systems.framework import LeafSystem_
+from pydrake.systems.framework import Context, LeafSystem_, OutputPort
 from pydrake.systems.scalar_conversion import TemplateSystem
 
 from drake_hybrid.control.phases import ContactPhase
 from drake_hybrid.control.sampling import SAMPLE_LEAD
 from drake_hybrid.core.arguments import MAX_TASK_SIZE, describe, instance, number, positive, vector
 from drake_hybrid.core.errors import ArgumentError, ConfigError, check_fields
+from drake_hybrid.core.hints import Array
 from drake_hybrid.core.linalg import all_finite, value
 from drake_hybrid.core.templates import default_instantiation
 
@@ -96,7 +99,7 @@ class SupervisionConfig:
     tare_time: float = 0.0
     lift_height: float = 0.01
 
-    def validate(self):
+    def validate(self) -> "SupervisionConfig":
         """ValueError naming the first bad field."""
         check_fields(self, "supervision.", positive=("approach_gain", "loss_dwell", "max_travel", "lift_height"),
                      nonnegative=("approach_speed", "tare_time"))
@@ -195,10 +198,11 @@ def ContactSupervisor_(T):
             Impl._construct(self, other.config, other.force_size, other.kinematic_rows, other.period,
                             other.initial_phase, other.lift_off, converter=converter)
 
-        def get_contact_phase_output_port(self):
+        def get_contact_phase_output_port(self) -> OutputPort:
             return self.GetOutputPort("contact_phase")
 
-        def set_initial_state(self, context, phase, constraint_value):
+        def set_initial_state(self, context: Context, phase: Union[ContactPhase, int],
+                              constraint_value: ArrayLike) -> None:
             """Start in ``phase`` with C_entry = C_r = ``constraint_value`` (C at the start: the travel
             and the reference of a first APPROACH count from there), timers and count reset. A loop built
             by hand must call it (``scenario.start`` does): the default state has C_r = 0, the surface,
@@ -207,8 +211,9 @@ def ContactSupervisor_(T):
             if constraint_value.shape != (self.force_size,):
                 raise ValueError(f"ContactSupervisor: constraint_value must have {self.force_size} entries, got "
                                  f"{constraint_value.shape}")
-            context.SetDiscreteState(0, np.concatenate([[float(ContactPhase(phase)), 0.0, 0.0], constraint_value,
-                                                        constraint_value, [0.0]]))
+            state: Array = np.concatenate([[float(ContactPhase(phase)), 0.0, 0.0], constraint_value, constraint_value,
+                                           [0.0]])
+            context.SetDiscreteState(0, state)
 
         def _calc_phase(self, context, output):
             output.SetFromVector(context.get_discrete_state(0).CopyToVector()[:1])
@@ -223,7 +228,8 @@ def ContactSupervisor_(T):
         def _calc_lifting(self, context, output):
             output.SetFromVector(context.get_discrete_state(0).CopyToVector()[3 + 2 * self.force_size:])
 
-        def next_state(self, state, force, desired_force, constraint_value, wrench_valid, lift=False):
+        def next_state(self, state: Array, force: Array, desired_force: Array, constraint_value: Array,
+                       wrench_valid: bool, lift: bool = False) -> Array:
             """The transition of the module docstring (floats): the state after one period (``lift``: the
             lift_off input is set; a state without the lifting entry is returned without it)."""
             config, h, m = self.config, self.period, self.force_size

@@ -16,10 +16,12 @@ and inf are refused unless the argument allows inf.
 
 import math
 import numbers
+from typing import Any, Collection, Optional, Tuple, Type
 
 import numpy as np
 
 from drake_hybrid.core.errors import ArgumentError
+from drake_hybrid.core.hints import Array
 
 _SHOWN_ENTRIES = 9          # an array with more entries is described by its shape only
 MAX_TASK_SIZE = 6           # the most coordinates a task has (a pose's d): a bound on k and m
@@ -29,7 +31,7 @@ def _entries(array):
     return "[" + ", ".join(f"{entry:g}" for entry in np.asarray(array, dtype=float).reshape(-1)) + "]"
 
 
-def describe(value):
+def describe(value: Any) -> str:
     """What an argument holds, in a few words for a message: a number as it prints, a string quoted,
     an array by its shape (and its entries when there are few), another object by its type."""
     if value is None:
@@ -112,7 +114,8 @@ def nonnegative(value, name, owner, *, unit="", allow_none=False, error=Argument
     return number(value, name, owner, low=0.0, unit=unit, allow_none=allow_none, error=error)
 
 
-def numeric_array(value, name, owner, *, what="a number, a vector or a matrix", finite=True, error=ArgumentError):
+def numeric_array(value: Any, name: str, owner: str, *, what: str = "a number, a vector or a matrix",
+                  finite: bool = True, error: Type[Exception] = ArgumentError) -> Array:
     """``value`` as a float ndarray of any shape: numbers only (no None, string, mapping, bool entries or
     ragged nesting), finite unless ``finite`` is False (NaN always refused)."""
     allowed = what + (" of finite numbers" if finite and what.endswith(("vector", "matrix")) else "")
@@ -139,7 +142,8 @@ def _flat(value):
             yield entry
 
 
-def vector(value, name, owner, size=None, *, unit="", finite=True, error=ArgumentError):
+def vector(value: Any, name: str, owner: str, size: Optional[int] = None, *, unit: str = "", finite: bool = True,
+           error: Type[Exception] = ArgumentError) -> Array:
     """``value`` as a 1-D float ndarray (of ``size`` entries if given): a number where a vector is
     meant, or a matrix, is refused naming what it is."""
     count = f"{size} " if size is not None else ""
@@ -155,8 +159,8 @@ _JOINT_KINDS = {"positions": ("num_positions", "joint positions, rad or m"),
                 "actuators": ("num_actuated_dofs", "actuation, N m or N")}
 
 
-def joint_vector(value, name, owner, plant, model_instance=None, *, kind="positions", unit=None,
-                 error=ArgumentError):
+def joint_vector(value: Any, name: str, owner: str, plant: Any, model_instance: Any = None, *, kind: str = "positions",
+                 unit: Optional[str] = None, error: Type[Exception] = ArgumentError) -> Array:
     """``value`` as a vector of ``plant``'s number of finite ``kind`` ("positions", "velocities" or
     "actuators"; those of ``model_instance`` if given): the check before a user's vector reaches Drake's
     SetPositions / SetVelocities / SetPositionsAndVelocities or an actuation port, which end the process
@@ -165,7 +169,8 @@ def joint_vector(value, name, owner, plant, model_instance=None, *, kind="positi
     return vector(value, name, owner, count, unit=unit or words, error=error)
 
 
-def joint_rows(value, name, owner, plant, model_instance=None, *, kind="positions", unit=None, error=ArgumentError):
+def joint_rows(value: Any, name: str, owner: str, plant: Any, model_instance: Any = None, *, kind: str = "positions",
+               unit: Optional[str] = None, error: Type[Exception] = ArgumentError) -> Array:
     """``value`` as a 2-D float array whose rows are each a ``joint_vector`` (a log's q or v, one row a sample)."""
     count, words = _joint_count(plant, model_instance, kind)
     allowed = f"a matrix of rows of {count} finite numbers ({unit or words})"
@@ -180,7 +185,8 @@ def _joint_count(plant, model_instance, kind):
     return (getattr(plant, method)() if model_instance is None else getattr(plant, method)(model_instance)), words
 
 
-def matrix(value, name, owner, shape, *, finite=True, error=ArgumentError):
+def matrix(value: Any, name: str, owner: str, shape: Tuple[int, int], *, finite: bool = True,
+           error: Type[Exception] = ArgumentError) -> Array:
     """``value`` as a float ndarray of ``shape`` (rows, columns)."""
     allowed = f"a {shape[0]}x{shape[1]} matrix of {'finite ' if finite else ''}numbers"
     array = numeric_array(value, name, owner, what=allowed, finite=finite, error=error)
@@ -189,14 +195,15 @@ def matrix(value, name, owner, shape, *, finite=True, error=ArgumentError):
     return array
 
 
-def boolean(value, name, owner, *, error=ArgumentError):
+def boolean(value: Any, name: str, owner: str, *, error: Type[Exception] = ArgumentError) -> bool:
     """``value`` as a bool: True or False only (not 0, 1 or "yes")."""
     if not isinstance(value, (bool, np.bool_)):
         _fail(error, owner, name, "True or False", value)
     return bool(value)
 
 
-def text(value, name, owner, *, allowed=None, error=ArgumentError):
+def text(value: Any, name: str, owner: str, *, allowed: Optional[Collection[str]] = None,
+         error: Type[Exception] = ArgumentError) -> str:
     """``value`` as a str (one of ``allowed`` if given)."""
     words = f"one of {', '.join(repr(word) for word in allowed)}" if allowed else "a string"
     if not isinstance(value, str) or (allowed and value not in allowed):
@@ -224,7 +231,7 @@ def instance(value, name, owner, kinds, *, what=None, allow_none=False, error=Ar
     return value
 
 
-def relative_tolerance(value, name, owner, *, error=ArgumentError):
+def relative_tolerance(value: Any, name: str, owner: str, *, error: Type[Exception] = ArgumentError) -> float:
     """``number`` in (0, 1]: a relative tolerance (0.05: within 5 %), as ``drake-hybrid analyze --tolerance``
     and ``analysis.matching`` and the linearizations take it (0, NaN, a negative one or one above 1 would give a
     verdict that means nothing)."""
@@ -232,7 +239,8 @@ def relative_tolerance(value, name, owner, *, error=ArgumentError):
                   error=error)
 
 
-def complex_vector(value, name, owner, *, nonzero=False, error=ArgumentError):
+def complex_vector(value: Any, name: str, owner: str, *, nonzero: bool = False,
+                   error: Type[Exception] = ArgumentError) -> Array:
     """``value`` as a 1-D complex ndarray (eigenvalues): real or complex numbers only (no string, bool or
     None entries), finite, and none zero if ``nonzero``."""
     allowed = "a vector of finite " + ("nonzero " if nonzero else "") + "real or complex numbers"

@@ -40,9 +40,11 @@ Charts provided:
 """
 
 import math
+from typing import Optional, Tuple, Union
 
 import numpy as np
 import sympy
+from numpy.typing import ArrayLike
 
 import pydrake.math as drake_math
 from pydrake.common.eigen_geometry import AngleAxis
@@ -50,6 +52,7 @@ from pydrake.math import RigidTransform, RotationMatrix
 
 from drake_hybrid.core.arguments import number, vector
 from drake_hybrid.core.errors import ChartSingularityError, DimensionError
+from drake_hybrid.core.hints import Array
 from drake_hybrid.core.linalg import is_autodiff, value
 from drake_hybrid.core.symbolic import CompiledFunction
 
@@ -76,19 +79,20 @@ class Chart:
     """
 
     name = "chart"
-    configuration_symbols = ()
-    velocity_symbols = ()
+    configuration_symbols: Tuple[sympy.Symbol, ...] = ()
+    velocity_symbols: Tuple[sympy.Symbol, ...] = ()
+    configuration_rate: sympy.Matrix
 
     @property
-    def configuration_size(self):
+    def configuration_size(self) -> int:
         return len(self.configuration_symbols)
 
     @property
-    def velocity_size(self):
+    def velocity_size(self) -> int:
         """d, the dimension of the task (3 planar, 6 spatial)."""
         return len(self.velocity_symbols)
 
-    def configuration_rate_at(self, x, nu):
+    def configuration_rate_at(self, x: Array, nu: Array) -> Array:
         """x-dot = L(x) nu, numerically (float or AutoDiffXd)."""
         if getattr(self, "_configuration_rate_function", None) is None:
             self._configuration_rate_function = CompiledFunction(
@@ -97,52 +101,52 @@ class Chart:
         return self._configuration_rate_function(x, nu)
 
     @property
-    def symbols(self):
+    def symbols(self) -> Tuple[sympy.Symbol, ...]:
         """The configuration symbols, for ``x, y, theta = chart.symbols``."""
         return self.configuration_symbols
 
     # -- numeric maps, implemented by subclasses --------------------------------
-    def configuration(self, R_WE, p_WE):
+    def configuration(self, R_WE: Array, p_WE: Array) -> Array:
         """Chart coordinates x of the pose (R_WE: 3x3 array, p_WE: 3-vector; float or AutoDiffXd)."""
         raise NotImplementedError
 
-    def configuration_of_pose(self, X_WE):
+    def configuration_of_pose(self, X_WE: RigidTransform) -> Array:
         """Chart coordinates x of a RigidTransform X_WE."""
         return self.configuration(X_WE.rotation().matrix(), X_WE.translation())
 
-    def pose(self, x):
+    def pose(self, x: ArrayLike) -> RigidTransform:
         """The pose X_WE (float RigidTransform) with chart coordinates x."""
         raise NotImplementedError
 
-    def check(self, x):
+    def check(self, x: Array) -> None:
         """Raise ChartSingularityError if x is at or near the chart's singular set."""
 
-    def singularity_margin(self, x):
+    def singularity_margin(self, x: Array) -> float:
         """Distance-like measure to the chart's singular set (1: far; 0: singular)."""
         return 1.0
 
-    def singularity_explanation(self, x):
+    def singularity_explanation(self, x: Array) -> Optional[str]:
         """Why a matrix built in this chart's coordinates may be singular at x (None: not the chart's
         doing). ConstraintSpace adds it to its error when E loses rank."""
         return None
 
-    def task_velocity(self, x, V_WE):
+    def task_velocity(self, x: Array, V_WE: Array) -> Array:
         """nu from the spatial velocity V_WE = [omega; v] (6-vector)."""
         raise NotImplementedError
 
-    def task_jacobian(self, x, J_spatial):
+    def task_jacobian(self, x: Array, J_spatial: Array) -> Array:
         """Analytic Jacobian J (d x n) from Drake's J_g (6 x n, rows [omega; v])."""
         raise NotImplementedError
 
-    def task_bias(self, x, nu, A_bias):
+    def task_bias(self, x: Array, nu: Array, A_bias: Array) -> Array:
         """J-dot q-dot (d) from Drake's bias spatial acceleration J_g-dot q-dot (6)."""
         raise NotImplementedError
 
-    def generalized_force(self, x, F_spatial):
+    def generalized_force(self, x: Array, F_spatial: Array) -> Array:
         """w = B^T F: the covector dual to nu of a spatial force [n; f] (world)."""
         raise NotImplementedError
 
-    def spatial_velocity(self, x, nu):
+    def spatial_velocity(self, x: Array, nu: Array) -> Array:
         """V_WE = [omega; v] = B(x) nu."""
         raise NotImplementedError
 
@@ -167,15 +171,16 @@ class PlanarChart(Chart):
 
     name = "planar"
 
-    def __init__(self, origin=(0.0, 0.0, 0.0), axis_x=(1.0, 0.0, 0.0), axis_y=(0.0, 0.0, 1.0),
-                 reference_rotation=None):
+    def __init__(self, origin: ArrayLike = (0.0, 0.0, 0.0), axis_x: ArrayLike = (1.0, 0.0, 0.0),
+                 axis_y: ArrayLike = (0.0, 0.0, 1.0),
+                 reference_rotation: Optional[Union[RotationMatrix, Array]] = None) -> None:
         e1 = vector(axis_x, "axis_x", "PlanarChart", 3, error=DimensionError)
         e2 = vector(axis_y, "axis_y", "PlanarChart", 3, error=DimensionError)
         if abs(np.linalg.norm(e1) - 1) > 1e-9 or abs(np.linalg.norm(e2) - 1) > 1e-9 or abs(e1 @ e2) > 1e-9:
             raise DimensionError(f"PlanarChart: axis_x {e1} and axis_y {e2} must be orthonormal")
         self.origin = vector(origin, "origin", "PlanarChart", 3, unit="m")
         self.axis_x, self.axis_y = e1, e2
-        self.normal = np.cross(e1, e2)
+        self.normal: Array = np.cross(e1, e2)
         self.reference_rotation = RotationMatrix() if reference_rotation is None else RotationMatrix(reference_rotation)
         # The end-effector vector that lies along e1 when theta = 0.
         self._u_E = self.reference_rotation.inverse().multiply(e1)
@@ -191,7 +196,7 @@ class PlanarChart(Chart):
         self._selector[1, 3:] = e2
         self._selector[2, :3] = self.normal
 
-    def configuration(self, R_WE, p_WE):
+    def configuration(self, R_WE: Array, p_WE: Array) -> Array:
         p = p_WE - self.origin
         R = R_WE
         _, _, atan2, _ = _trig(R)
@@ -199,25 +204,25 @@ class PlanarChart(Chart):
         return np.array([self.axis_x @ p, self.axis_y @ p, atan2(self.axis_y @ u_W, self.axis_x @ u_W)],
                         dtype=_dtype_of(R, p))
 
-    def pose(self, x):
+    def pose(self, x: ArrayLike) -> RigidTransform:
         x = value(x)
         self._check_size(x, 3, "x")
         R = RotationMatrix(AngleAxis(x[2], self.normal)).multiply(self.reference_rotation)
         return RigidTransform(R, self.origin + self.axis_x * x[0] + self.axis_y * x[1])
 
-    def task_velocity(self, x, V_WE):
+    def task_velocity(self, x: Array, V_WE: Array) -> Array:
         return self._selector @ V_WE
 
-    def task_jacobian(self, x, J_spatial):
+    def task_jacobian(self, x: Array, J_spatial: Array) -> Array:
         return self._selector @ J_spatial
 
-    def task_bias(self, x, nu, A_bias):
+    def task_bias(self, x: Array, nu: Array, A_bias: Array) -> Array:
         return self._selector @ A_bias
 
-    def generalized_force(self, x, F_spatial):
+    def generalized_force(self, x: Array, F_spatial: Array) -> Array:
         return self._selector @ F_spatial
 
-    def spatial_velocity(self, x, nu):
+    def spatial_velocity(self, x: Array, nu: Array) -> Array:
         return self._selector.T @ nu
 
 
@@ -230,7 +235,8 @@ class PlanarPointChart(PlanarChart):
 
     name = "planar_point"
 
-    def __init__(self, origin=(0.0, 0.0, 0.0), axis_x=(1.0, 0.0, 0.0), axis_y=(0.0, 0.0, 1.0)):
+    def __init__(self, origin: ArrayLike = (0.0, 0.0, 0.0), axis_x: ArrayLike = (1.0, 0.0, 0.0),
+                 axis_y: ArrayLike = (0.0, 0.0, 1.0)) -> None:
         super().__init__(origin, axis_x, axis_y)
         self.configuration_symbols = self.configuration_symbols[:2]
         self.velocity_symbols = self.velocity_symbols[:2]
@@ -238,11 +244,11 @@ class PlanarPointChart(PlanarChart):
         self.angle = None
         self._selector = self._selector[:2]
 
-    def configuration(self, R_WE, p_WE):
+    def configuration(self, R_WE: Array, p_WE: Array) -> Array:
         p = p_WE - self.origin
         return np.array([self.axis_x @ p, self.axis_y @ p], dtype=_dtype_of(R_WE, p))
 
-    def pose(self, x):
+    def pose(self, x: ArrayLike) -> RigidTransform:
         x = value(x)
         self._check_size(x, 2, "x")
         return RigidTransform(self.reference_rotation, self.origin + self.axis_x * x[0] + self.axis_y * x[1])
@@ -286,7 +292,7 @@ class EulerZXZChart(Chart):
     # Below this |sin(theta)| a singular E = [E_p; E_f] is blamed on the chart (singularity_explanation).
     NEAR_SINGULARITY = 0.1
 
-    def __init__(self, singularity_tolerance=1e-2):
+    def __init__(self, singularity_tolerance: float = 1e-2) -> None:
         self.singularity_tolerance = number(singularity_tolerance, "singularity_tolerance", "EulerZXZChart", low=0.0,
                                             low_inclusive=False, high=1.0, high_inclusive=False)
         (symbols, velocity, T, T_inverse, T_dot_eta_dot, rotation) = _euler_zxz_symbolic()
@@ -301,7 +307,7 @@ class EulerZXZChart(Chart):
         self.rate_matrix_inverse = CompiledFunction("T(eta)^-1", [eta], T_inverse)
         self.rate_matrix_bias = CompiledFunction("T-dot eta-dot", [eta, velocity[3:]], T_dot_eta_dot, vector=True)
 
-    def check(self, x):
+    def check(self, x: Array) -> None:
         margin = self.singularity_margin(x)
         if margin < self.singularity_tolerance:
             raise ChartSingularityError(
@@ -311,10 +317,10 @@ class EulerZXZChart(Chart):
                 "(singularity-free) or orient the task away from +-z."
             )
 
-    def singularity_margin(self, x):
+    def singularity_margin(self, x: Array) -> float:
         return abs(math.sin(float(value(x[4]))))
 
-    def singularity_explanation(self, x):
+    def singularity_explanation(self, x: Array) -> Optional[str]:
         margin = self.singularity_margin(x)
         if margin >= self.NEAR_SINGULARITY:
             return None
@@ -322,7 +328,7 @@ class EulerZXZChart(Chart):
                 "phi and psi turn about the same axis when the approach vector is along +-z. Use PoseChart "
                 "(singularity-free) for tasks that pass there.")
 
-    def configuration(self, R_WE, p_WE):
+    def configuration(self, R_WE: Array, p_WE: Array) -> Array:
         R, p = R_WE, p_WE
         _, _, atan2, acos = _trig(R)
         cos_theta = R[2, 2]
@@ -333,30 +339,31 @@ class EulerZXZChart(Chart):
         self.check(x)
         return x
 
-    def pose(self, x):
+    def pose(self, x: ArrayLike) -> RigidTransform:
         x = value(x)
         self._check_size(x, 6, "x")
         R = (RotationMatrix.MakeZRotation(x[3]).multiply(RotationMatrix.MakeXRotation(x[4]))
              .multiply(RotationMatrix.MakeZRotation(x[5])))
-        return RigidTransform(R, x[:3])
+        p: Array = x[:3]     # Array: pydrake's stubs take no numpy slice (core.hints.Array)
+        return RigidTransform(R, p)
 
-    def task_velocity(self, x, V_WE):
+    def task_velocity(self, x: Array, V_WE: Array) -> Array:
         self.check(x)
         return np.concatenate([V_WE[3:], self.rate_matrix_inverse(x[3:]) @ V_WE[:3]])
 
-    def task_jacobian(self, x, J_spatial):
+    def task_jacobian(self, x: Array, J_spatial: Array) -> Array:
         self.check(x)
         return np.vstack([J_spatial[3:], self.rate_matrix_inverse(x[3:]) @ J_spatial[:3]])
 
-    def task_bias(self, x, nu, A_bias):
+    def task_bias(self, x: Array, nu: Array, A_bias: Array) -> Array:
         self.check(x)
         angular = A_bias[:3] - self.rate_matrix_bias(x[3:], nu[3:])
         return np.concatenate([A_bias[3:], self.rate_matrix_inverse(x[3:]) @ angular])
 
-    def generalized_force(self, x, F_spatial):
+    def generalized_force(self, x: Array, F_spatial: Array) -> Array:
         return np.concatenate([F_spatial[3:], self.rate_matrix(x[3:]).T @ F_spatial[:3]])
 
-    def spatial_velocity(self, x, nu):
+    def spatial_velocity(self, x: Array, nu: Array) -> Array:
         return np.concatenate([self.rate_matrix(x[3:]) @ nu[3:], nu[:3]])
 
 
@@ -378,7 +385,7 @@ class PoseChart(Chart):
 
     name = "pose"
 
-    def __init__(self):
+    def __init__(self) -> None:
         x, y, z = sympy.symbols("x y z", real=True)
         entries = sympy.symbols("R00 R01 R02 R10 R11 R12 R20 R21 R22", real=True)
         velocity = sympy.symbols("vx vy vz wx wy wz", real=True)
@@ -393,25 +400,26 @@ class PoseChart(Chart):
         self.configuration_rate = sympy.Matrix(list(velocity[:3]) + list(R_dot))
         self._permutation = np.r_[3:6, 0:3]
 
-    def configuration(self, R_WE, p_WE):
+    def configuration(self, R_WE: Array, p_WE: Array) -> Array:
         return np.concatenate([p_WE, R_WE.reshape(-1)]).astype(_dtype_of(R_WE, p_WE))
 
-    def pose(self, x):
+    def pose(self, x: ArrayLike) -> RigidTransform:
         x = value(x)
         self._check_size(x, 12, "x")
-        return RigidTransform(RotationMatrix(x[3:].reshape(3, 3)), x[:3])
+        p: Array = x[:3]     # Array: pydrake's stubs take no numpy slice (core.hints.Array)
+        return RigidTransform(RotationMatrix(x[3:].reshape(3, 3)), p)
 
-    def task_velocity(self, x, V_WE):
+    def task_velocity(self, x: Array, V_WE: Array) -> Array:
         return V_WE[self._permutation]
 
-    def task_jacobian(self, x, J_spatial):
+    def task_jacobian(self, x: Array, J_spatial: Array) -> Array:
         return J_spatial[self._permutation]
 
-    def task_bias(self, x, nu, A_bias):
+    def task_bias(self, x: Array, nu: Array, A_bias: Array) -> Array:
         return A_bias[self._permutation]
 
-    def generalized_force(self, x, F_spatial):
+    def generalized_force(self, x: Array, F_spatial: Array) -> Array:
         return F_spatial[self._permutation]
 
-    def spatial_velocity(self, x, nu):
+    def spatial_velocity(self, x: Array, nu: Array) -> Array:
         return nu[self._permutation]

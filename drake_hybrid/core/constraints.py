@@ -27,11 +27,14 @@ Writing your own::
 """
 
 
+from typing import Any, Callable, Iterable, Optional, Protocol, Sequence, Tuple, Union
+
 import numpy as np
 import sympy
 
-from drake_hybrid.core.charts import EulerZXZChart, PlanarChart
+from drake_hybrid.core.charts import Chart, EulerZXZChart, PlanarChart, PoseChart
 from drake_hybrid.core.errors import BranchError, ConstraintRankError, DimensionError, OffConstraintError
+from drake_hybrid.core.hints import Array, VectorLike
 from drake_hybrid.core.linalg import rank_margin, value
 from drake_hybrid.core.symbolic import CompiledFunction, compiled_time_derivative, to_sympy_matrix
 
@@ -67,8 +70,9 @@ class Constraint:
         DimensionError: m is not between 1 and d - 1.
     """
 
-    def __init__(self, chart, expressions, name="constraint", rank_tolerance=1e-3, branch=None,
-                 branch_description="the intended branch", kinematic_rows=()):
+    def __init__(self, chart: Chart, expressions: Union[sympy.Matrix, Sequence[Any]], name: str = "constraint",
+                 rank_tolerance: float = 1e-3, branch: Optional[Any] = None,
+                 branch_description: str = "the intended branch", kinematic_rows: Iterable[int] = ()) -> None:
         self.chart = chart
         self.name = name
         self.rank_tolerance = float(rank_tolerance)
@@ -94,7 +98,7 @@ class Constraint:
         self._value = CompiledFunction(f"C[{name}]", [x], C, vector=True)
         self._force_projection = CompiledFunction(f"E_f[{name}]", [x], E_f)
         self._curvature = CompiledFunction(f"E_f-dot nu[{name}]", [x, nu], curvature, vector=True)
-        self._force_projection_rate = None
+        self._force_projection_rate: Optional[CompiledFunction] = None
         self.kinematic_rows = tuple(sorted(set(int(i) for i in kinematic_rows)))
         if any(not 0 <= i < m for i in self.kinematic_rows):
             raise DimensionError(f"constraint '{name}': kinematic_rows {self.kinematic_rows} out of range 0..{m - 1}")
@@ -108,19 +112,19 @@ class Constraint:
         return f"Constraint('{self.name}', m={self.size}, chart={self.chart.name})"
 
     # -- evaluation -------------------------------------------------------------
-    def value(self, x):
+    def value(self, x: Array) -> Array:
         """C(x)."""
         return self._value(x)
 
-    def force_projection(self, x):
+    def force_projection(self, x: Array) -> Array:
         """E_f(x) = dC/dx L(x), an m x d matrix whose rows span the constrained wrenches."""
         return self._force_projection(x)
 
-    def curvature(self, x, nu):
+    def curvature(self, x: Array, nu: Array) -> Array:
         """E_f-dot nu (3.0-8): the term with E_f r-ddot + E_f-dot r-dot = 0 (3.0-7)."""
         return self._curvature(x, nu)
 
-    def force_projection_rate(self, x, nu):
+    def force_projection_rate(self, x: Array, nu: Array) -> Array:
         """The matrix E_f-dot = sum_i dE_f/dx_i x-dot_i (m x d)."""
         if self._force_projection_rate is None:
             self._force_projection_rate = compiled_time_derivative(f"E_f-dot[{self.name}]", self._E_f_symbolic,
@@ -128,7 +132,7 @@ class Constraint:
         return self._force_projection_rate(x, nu)
 
     # -- checks -----------------------------------------------------------------
-    def check_rank(self, x, force_projection=None):
+    def check_rank(self, x: Array, force_projection: Optional[Array] = None) -> None:
         """Raise ConstraintRankError if E_f(x) has (numerically) lost rank."""
         E_f = self.force_projection(x) if force_projection is None else force_projection
         margin = rank_margin(E_f)
@@ -140,7 +144,7 @@ class Constraint:
                 "valid here (docs/theory.md §2): use another form of C near this configuration."
             )
 
-    def check_satisfied(self, x, tolerance):
+    def check_satisfied(self, x: Array, tolerance: float) -> None:
         """Raise OffConstraintError if max |C(x)| exceeds ``tolerance``."""
         residual = value(self.value(x))
         if np.max(np.abs(residual)) > tolerance:
@@ -149,7 +153,7 @@ class Constraint:
                 f"C = {np.array2string(residual, precision=4)} exceeds tolerance {tolerance:g}"
             )
 
-    def check_branch(self, x):
+    def check_branch(self, x: Array) -> None:
         """Raise BranchError if x is on the wrong branch of C = 0 (see ``branch``)."""
         if self._branch is None:
             return
@@ -173,7 +177,8 @@ class SelectingConstraint:
     piece is.
     """
 
-    def __init__(self, pieces, select, name, selector=None):
+    def __init__(self, pieces: Sequence[Constraint], select: Callable[[Array], int], name: str,
+                 selector: Optional[sympy.Matrix] = None) -> None:
         sizes = {piece.size for piece in pieces}
         if len(sizes) != 1:
             raise DimensionError(f"SelectingConstraint '{name}': pieces have different sizes {sorted(sizes)}")
@@ -190,29 +195,52 @@ class SelectingConstraint:
     def __repr__(self):
         return f"SelectingConstraint('{self.name}', m={self.size}, pieces={len(self.pieces)})"
 
-    def piece(self, x):
+    def piece(self, x: Array) -> Constraint:
         return self.pieces[self.select(x)]
 
-    def value(self, x):
+    def value(self, x: Array) -> Array:
         return self.piece(x).value(x)
 
-    def force_projection(self, x):
+    def force_projection(self, x: Array) -> Array:
         return self.piece(x).force_projection(x)
 
-    def curvature(self, x, nu):
+    def curvature(self, x: Array, nu: Array) -> Array:
         return self.piece(x).curvature(x, nu)
 
-    def force_projection_rate(self, x, nu):
+    def force_projection_rate(self, x: Array, nu: Array) -> Array:
         return self.piece(x).force_projection_rate(x, nu)
 
-    def check_rank(self, x, force_projection=None):
+    def check_rank(self, x: Array, force_projection: Optional[Array] = None) -> None:
         self.piece(x).check_rank(x, force_projection)
 
-    def check_satisfied(self, x, tolerance):
+    def check_satisfied(self, x: Array, tolerance: float) -> None:
         self.piece(x).check_satisfied(x, tolerance)
 
-    def check_branch(self, x):
+    def check_branch(self, x: Array) -> None:
         self.piece(x).check_branch(x)
+
+
+class ConstraintLike(Protocol):
+    """What every function that takes a constraint uses of it: ``Constraint``, ``SelectingConstraint`` and
+    ``core.height_field.HeightFieldConstraint`` have it (a type for type hints)."""
+
+    @property
+    def chart(self) -> Chart: ...
+    @property
+    def name(self) -> str: ...
+    @property
+    def size(self) -> int: ...
+    @property
+    def kinematic_rows(self) -> Tuple[int, ...]: ...
+    @property
+    def rank_tolerance(self) -> float: ...
+    def value(self, x: Array) -> Array: ...
+    def force_projection(self, x: Array) -> Array: ...
+    def curvature(self, x: Array, nu: Array) -> Array: ...
+    def force_projection_rate(self, x: Array, nu: Array) -> Array: ...
+    def check_rank(self, x: Array, force_projection: Optional[Array] = None) -> None: ...
+    def check_satisfied(self, x: Array, tolerance: float) -> None: ...
+    def check_branch(self, x: Array) -> None: ...
 
 
 # ----------------------------------------------------------------------------------------
@@ -230,7 +258,8 @@ def _spatial_chart(chart, what):
         raise TypeError(f"{what} needs a 6-DOF chart (EulerZXZChart or PoseChart), got {type(chart).__name__}")
 
 
-def window_constraint(chart, height=1.0, normal=(0.0, 1.0), name="window"):
+def window_constraint(chart: PlanarChart, height: float = 1.0, normal: VectorLike = (0.0, 1.0),
+                      name: str = "window") -> Constraint:
     """Example 2.1 / (2.2-1): the end-effector point on the line n . (x, y) = height.
 
     With the default normal (0, 1) this is the paper's C = y - height, E_f = [0 1 0].
@@ -245,7 +274,8 @@ def window_constraint(chart, height=1.0, normal=(0.0, 1.0), name="window"):
     return Constraint(chart, [expression], name=name)
 
 
-def crank_constraint(chart, radius=0.2, height=0.3, center=(0.0, 0.0), form="paper", name="crank"):
+def crank_constraint(chart: Union[EulerZXZChart, PoseChart], radius: float = 0.2, height: float = 0.3,
+                     center: VectorLike = (0.0, 0.0), form: str = "paper", name: str = "crank") -> Constraint:
     """Example 2.2: the end effector on a horizontal circle (the crank handle's path)
     with its approach vector pointing at the crank's vertical axis (inward branch).
 
@@ -284,8 +314,10 @@ def crank_constraint(chart, radius=0.2, height=0.3, center=(0.0, 0.0), form="pap
                       branch_description="the approach vector pointing toward the crank axis (a . (p - axis) < 0)")
 
 
-def sphere_constraint(chart, center=(0.0, 0.0, 0.0), radius=0.15, form="approach", dropped_component="auto",
-                      name="sphere", kinematic_rows=None, force_in_newtons=False):
+def sphere_constraint(chart: Union[EulerZXZChart, PoseChart], center: VectorLike = (0.0, 0.0, 0.0),
+                      radius: float = 0.15, form: str = "approach", dropped_component: Union[int, str] = "auto",
+                      name: str = "sphere", kinematic_rows: Optional[Sequence[int]] = None,
+                      force_in_newtons: bool = False) -> Union[Constraint, SelectingConstraint]:
     """Example 2.3: the end-effector point on a sphere with the approach vector toward its centre.
 
     Args:
@@ -338,7 +370,8 @@ def sphere_constraint(chart, center=(0.0, 0.0, 0.0), radius=0.15, form="approach
     return piece(dropped_component)
 
 
-def surface_constraint(chart, surface, name="surface", normal_rows=True):
+def surface_constraint(chart: Union[PlanarChart, EulerZXZChart, PoseChart], surface: Callable[[sympy.Matrix], Any],
+                       name: str = "surface", normal_rows: bool = True) -> Constraint:
     """The end-effector point on a user surface f(p) = 0, approach vector along -grad f.
 
     Args:

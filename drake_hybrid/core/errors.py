@@ -7,6 +7,9 @@ specific type. Messages always name the offending object and the numbers.
 
 import dataclasses
 import math
+from typing import Collection, Iterable, Type, TypeVar
+
+_Owner = TypeVar("_Owner")
 
 
 class DrakeHybridError(ValueError):
@@ -108,7 +111,8 @@ class ForceSignError(DrakeHybridError):
     go into the workpiece."""
 
 
-def check_fields(owner, prefix, positive=(), nonnegative=(), error=ConfigError):
+def check_fields(owner: _Owner, prefix: str, positive: Iterable[str] = (), nonnegative: Iterable[str] = (),
+                 error: Type[Exception] = ConfigError) -> _Owner:
     """Raise ``error`` (ConfigError) naming ``prefix.field`` if a field of ``owner`` (a config dataclass)
     listed in ``positive`` is not > 0 or one in ``nonnegative`` is not >= 0 (NaN fails both)."""
     for names, test, words in ((positive, lambda x: x > 0, "positive"), (nonnegative, lambda x: x >= 0, ">= 0")):
@@ -119,7 +123,7 @@ def check_fields(owner, prefix, positive=(), nonnegative=(), error=ConfigError):
     return owner
 
 
-def check_finite(owner, prefix="", allow_infinite=()):
+def check_finite(owner: _Owner, prefix: str = "", allow_infinite: Collection[str] = ()) -> _Owner:
     """Raise ConfigError naming the field for a NaN anywhere among the numbers of a config
     dataclass (its fields, lists, dicts and nested config dataclasses), and for +-inf except in the
     fields named (dotted, relative to ``owner``) in ``allow_infinite``. Other objects (e.g. Drake's

@@ -28,13 +28,18 @@ import hashlib
 import math
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Dict, Iterable, Optional, Tuple, Union
 
 import numpy as np
+import sympy
+from numpy.typing import ArrayLike
 
 from pydrake.math import RigidTransform
 
+from drake_hybrid.core.charts import EulerZXZChart, PoseChart
 from drake_hybrid.core.errors import PathError
 from drake_hybrid.core.height_field import DEGREE, HeightField, HeightFieldConstraint
+from drake_hybrid.core.hints import Array, VectorLike
 from drake_hybrid.core.surfaces import Surface, ViewPlane, check_chart
 
 MIN_SAMPLES = DEGREE + 1          # per axis: a quintic spline needs six samples
@@ -44,9 +49,9 @@ MIN_SAMPLES = DEGREE + 1          # per axis: a quintic spline needs six samples
 class HeightMap:
     """Heights ``heights[j, i]`` = h(x[i], y[j]) on a grid (m)."""
 
-    x: np.ndarray
-    y: np.ndarray
-    heights: np.ndarray
+    x: Array
+    y: Array
+    heights: Array
     name: str = "height map"
 
     def __post_init__(self):
@@ -55,7 +60,7 @@ class HeightMap:
         self.heights = np.asarray(self.heights, dtype=float)
         self.validate()
 
-    def validate(self):
+    def validate(self) -> None:
         """PathError (one line, naming the map) for a grid the surface cannot be made from."""
         heights, where = self.heights, self.name
         if heights.ndim != 2:
@@ -78,7 +83,8 @@ class HeightMap:
                 raise PathError(f"{where}: the {name} coordinates must be finite and strictly increasing")
 
     @staticmethod
-    def from_file(path, spacing=None, origin=(0.0, 0.0)):
+    def from_file(path: Union[str, Path], spacing: Optional[ArrayLike] = None,
+                  origin: VectorLike = (0.0, 0.0)) -> "HeightMap":
         """A HeightMap from ``path``: .csv or .npy (a matrix of heights; ``spacing`` (dx, dy) in m and
         ``origin`` (x, y) of the first sample required) or .npz (``heights``, and ``x``, ``y`` or a spacing)."""
         path = Path(path)
@@ -114,7 +120,7 @@ class HeightMap:
             x, y = x0 + dx * np.arange(columns), y0 + dy * np.arange(rows)
         return HeightMap(x, y, heights, name=f"height map '{path.name}'")
 
-    def digest(self):
+    def digest(self) -> str:
         """A short hash of the samples (names cached meshes and offsets)."""
         return hashlib.sha256(b"".join(a.tobytes() for a in (self.x, self.y, self.heights))).hexdigest()[:16]
 
@@ -122,27 +128,29 @@ class HeightMap:
 class HeightMapSurface(Surface):
     """A ``core.surfaces.Surface`` from a ``HeightMap`` placed at ``X_WM`` (see the module docstring)."""
 
-    def __init__(self, height_map, X_WM=None, name=None):
+    def __init__(self, height_map: HeightMap, X_WM: Optional[RigidTransform] = None,
+                 name: Optional[str] = None) -> None:
         self.height_map = height_map
         self.name = name or height_map.name
         self.X_WM = X_WM if X_WM is not None else RigidTransform()
         self.field = HeightField(height_map.x, height_map.y, height_map.heights, self.X_WM, self.name)
-        self._offsets = {}
+        self._offsets: Dict[float, HeightField] = {}
 
     # -- Surface ---------------------------------------------------------------------------------
-    def default_view(self):
+    def default_view(self) -> ViewPlane:
         """The map's own xy plane, seen from above (+Z)."""
         R = self.X_WM.rotation().matrix()
         return ViewPlane.make(self.X_WM.translation(), R[:, 0], R[:, 1])
 
-    def implicit(self, p, offset):
+    def implicit(self, p: sympy.Matrix, offset: float) -> sympy.Expr:
         raise TypeError(f"{self.name}: a height map has no closed-form f(p); use offset_constraint")
 
-    def offset_constraint(self, chart, offset, name=None):
+    def offset_constraint(self, chart: Union[PoseChart, EulerZXZChart], offset: float,
+                          name: Optional[str] = None) -> HeightFieldConstraint:
         check_chart(chart, f"{self.name}.offset_constraint")
         return HeightFieldConstraint(chart, self.offset_field(offset), name=name or self.name)
 
-    def held_normal(self, p, offset):
+    def held_normal(self, p: ArrayLike, offset: float) -> Array:
         """grad (Z - H_r(X, Y)) at p's (X, Y), normalized: what the constraint's orientation rows hold a
         against. Not constant along the normal line: 1 mm inside the offset surface (a pressed pad) it
         turns by about 1 mm x |H_r''| (0.3 deg on the bump's flank), so a start pressed along the
@@ -151,7 +159,7 @@ class HeightMapSurface(Surface):
         X, Y = field.map_point(p)[:2]
         return field.normal(X, Y)
 
-    def closest_point(self, p):
+    def closest_point(self, p: ArrayLike) -> Tuple[Array, Array]:
         """Newton's method on |p - (X, Y, h(X, Y))|^2 in the map's frame, from p's own (X, Y)."""
         field = self.field
         target = field.map_point(p)
@@ -169,7 +177,7 @@ class HeightMapSurface(Surface):
         q = field.world_point([X, Y, float(field(X, Y))])
         return q, field.normal(X, Y)
 
-    def lift(self, view, u, v):
+    def lift(self, view: ViewPlane, u: float, v: float) -> Tuple[Array, Array]:
         """The map point below (u, v) of a view in the map's xy plane."""
         if abs(float(view.normal @ self.X_WM.rotation().matrix()[:, 2])) < 1 - 1e-9:
             raise PathError(f"{self.name}: patterns on a height map are drawn in the map's own xy plane; the "
@@ -178,7 +186,7 @@ class HeightMapSurface(Surface):
         self.check_inside([(X, Y)], 0.0, f"the point (u, v) = ({u:.4g}, {v:.4g}) m")
         return self.field.world_point([X, Y, float(self.field(X, Y))]), self.field.normal(X, Y)
 
-    def check_inside(self, map_points, margin, what):
+    def check_inside(self, map_points: Iterable[Tuple[float, float]], margin: float, what: str) -> None:
         """PathError if a map-frame point (X, Y) is not ``margin`` inside the map's grid."""
         x0, x1, y0, y1 = self.field.bounds
         for X, Y in map_points:
@@ -188,7 +196,7 @@ class HeightMapSurface(Surface):
                                 f"(the grid less {margin * 1000:.3g} mm)")
 
     # -- the pad centre's surface ------------------------------------------------------------------
-    def offset_field(self, offset):
+    def offset_field(self, offset: float) -> HeightField:
         """The HeightField H_r of the ball's centre (radius ``offset``) rolling on the part."""
         offset = float(offset)
         if offset not in self._offsets:
@@ -264,7 +272,7 @@ class HeightMapSurface(Surface):
                                     "the pad); smooth the map or use a smaller pad")
 
     # -- geometry for the plant --------------------------------------------------------------------
-    def mesh(self, resolution=0.002, thickness=0.02):
+    def mesh(self, resolution: float = 0.002, thickness: float = 0.02) -> Tuple[Array, Array]:
         """(vertices (N x 3), triangles (M x 3), 0-based, outward) of the closed part in the map's frame:
         the top sampled from the spline every ``resolution`` m (at most), sides down to ``thickness`` m
         below the lowest sample, and a bottom."""
@@ -289,6 +297,6 @@ class HeightMapSurface(Surface):
         triangles.append(np.column_stack([loop, base + np.arange(count), base + following]))
         triangles.append(np.column_stack([loop, base + following, loop[following]]))
         centre = base + count
-        vertices.append([[0.5 * (x[0] + x[-1]), 0.5 * (y[0] + y[-1]), bottom]])
+        vertices.append(np.array([[0.5 * (x[0] + x[-1]), 0.5 * (y[0] + y[-1]), bottom]]))
         triangles.append(np.column_stack([np.full(count, centre), base + following, base + np.arange(count)]))
         return np.vstack(vertices), np.vstack(triangles)

@@ -9,38 +9,51 @@ scalar-converted plant with ``for_plant``.
 """
 
 from dataclasses import dataclass
+from typing import Any, Callable, Iterable, List, Optional, Tuple, Union, cast
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from pydrake.common.value import AbstractValue
 from pydrake.math import RigidTransform, RotationMatrix
-from pydrake.multibody.tree import FrameIndex, JacobianWrtVariable
-from pydrake.systems.framework import ValueProducer
+from pydrake.multibody.plant import MultibodyPlant
+from pydrake.multibody.tree import Frame, FrameIndex, JacobianWrtVariable
+from pydrake.systems.framework import CacheEntry, Context, InputPort, LeafSystem, ValueProducer
 
 from drake_hybrid.core.arguments import describe, instance, joint_vector, number, positive, vector
+from drake_hybrid.core.charts import Chart
 from drake_hybrid.core.errors import ArgumentError, DimensionError, UnknownFrameError, UnreachablePoseError
+from drake_hybrid.core.hints import Array
 from drake_hybrid.core.linalg import all_finite, value
+
+# A plant, its context, a frame or a system of either scalar type (float or AutoDiffXd). pydrake's stubs name
+# the AutoDiffXd classes (MultibodyPlant_[AutoDiffXd], ...) in a way a type checker cannot read: they are Any.
+AnyScalarPlant = Union[MultibodyPlant, Any]
+AnyScalarContext = Union[Context, Any]
+AnyScalarFrame = Union[Frame, Any]
+AnyScalarSystem = Union[LeafSystem, Any]
 
 
 @dataclass
 class TaskKinematics:
     """Chart quantities of the end-effector point at one plant state."""
 
-    configuration: np.ndarray        # x (the paper's r)
-    velocity: np.ndarray             # nu = J q-dot (the paper's r-dot)
-    jacobian: np.ndarray             # J (d x n)
-    bias: np.ndarray                 # J-dot q-dot (d)
-    rotation: np.ndarray             # R_WE (3 x 3)
-    position: np.ndarray             # p_WP (3)
-    spatial_jacobian: np.ndarray     # J_g (6 x n), rows [omega; v]
+    configuration: Array        # x (the paper's r)
+    velocity: Array             # nu = J q-dot (the paper's r-dot)
+    jacobian: Array             # J (d x n)
+    bias: Array                 # J-dot q-dot (d)
+    rotation: Array             # R_WE (3 x 3)
+    position: Array             # p_WP (3)
+    spatial_jacobian: Array     # J_g (6 x n), rows [omega; v]
 
 
-def frame_names(plant):
+def frame_names(plant: AnyScalarPlant) -> List[str]:
     """Names of all frames of ``plant`` (for error messages)."""
     return sorted({plant.get_frame(FrameIndex(i)).name() for i in range(plant.num_frames())})
 
 
-def resolve_frame(plant, frame, what="end_effector_frame"):
+def resolve_frame(plant: AnyScalarPlant, frame: Union[AnyScalarFrame, str], what: str = "end_effector_frame"
+                  ) -> AnyScalarFrame:
     """The Frame of ``plant`` given one of its Frames or a frame name (the argument ``what``). Raises
     UnknownFrameError naming the plant's frames if it is not there, ArgumentError for anything else."""
     if isinstance(frame, str):
@@ -69,7 +82,8 @@ class EndEffectorKinematics:
         chart: the coordinate chart; the end-effector orientation is E's.
     """
 
-    def __init__(self, plant, frame, point_in_frame, chart):
+    def __init__(self, plant: AnyScalarPlant, frame: Union[AnyScalarFrame, str], point_in_frame: ArrayLike,
+                 chart: Chart) -> None:
         if not plant.is_finalized():
             raise ValueError("EndEffectorKinematics: the plant must be finalized")
         if plant.num_positions() != plant.num_velocities():
@@ -83,17 +97,17 @@ class EndEffectorKinematics:
         self.chart = chart
         self._world = plant.world_frame()
 
-    def for_plant(self, plant):
+    def for_plant(self, plant: AnyScalarPlant) -> "EndEffectorKinematics":
         """The same kinematics on another scalar type of the same plant."""
         return EndEffectorKinematics(plant, plant.get_frame(self.frame.index()), self.point_in_frame, self.chart)
 
-    def evaluate(self, plant_context, check=True):
+    def evaluate(self, plant_context: AnyScalarContext, check: bool = True) -> TaskKinematics:
         """TaskKinematics at the state in ``plant_context``."""
         plant = self.plant
         X_WE = plant.CalcRelativeTransform(plant_context, self._world, self.frame)
-        R_WE = X_WE.rotation().matrix()
+        R_WE: Array = X_WE.rotation().matrix()
         p_WP = X_WE.translation() + R_WE @ self.point_in_frame
-        J_spatial = plant.CalcJacobianSpatialVelocity(
+        J_spatial: Array = plant.CalcJacobianSpatialVelocity(
             plant_context, JacobianWrtVariable.kV, self.frame, self.point_in_frame, self._world, self._world)
         A_bias = plant.CalcBiasSpatialAcceleration(
             plant_context, JacobianWrtVariable.kV, self.frame, self.point_in_frame, self._world, self._world
@@ -115,10 +129,11 @@ class EndEffectorKinematics:
         )
 
 
-def set_plant_state(system, plant, state_port, context, plant_context):
+def set_plant_state(system: AnyScalarSystem, plant: AnyScalarPlant, state_port: InputPort, context: AnyScalarContext,
+                    plant_context: AnyScalarContext) -> Array:
     """Set ``plant_context``'s positions and velocities to ``state_port``'s [q; v] at ``context``
     and return [q; v]; ValueError naming ``system`` and the port if it is not finite."""
-    state = state_port.Eval(context)
+    state = cast(Array, state_port.Eval(context))
     if not all_finite(state):
         # Drake's SetPositionsAndVelocities aborts on a non-finite state; say which input it was.
         raise ValueError(f"{system.get_name() or type(system).__name__}: input '{state_port.get_name()}' has "
@@ -127,7 +142,7 @@ def set_plant_state(system, plant, state_port, context, plant_context):
     return state
 
 
-def declare_plant_context_cache(system, plant, state_port):
+def declare_plant_context_cache(system: AnyScalarSystem, plant: AnyScalarPlant, state_port: InputPort) -> CacheEntry:
     """Declare, on ``system``, a cache entry holding a context of ``plant`` whose
     positions and velocities are those on ``state_port`` ([q; v]).
 
@@ -145,17 +160,21 @@ def declare_plant_context_cache(system, plant, state_port):
         prerequisites_of_calc={state_port.ticket()})
 
 
-def declare_cached_value(system, description, compute, prerequisites):
+def declare_cached_value(system: AnyScalarSystem, description: str, compute: Callable[[Any], Any],
+                         prerequisites: Iterable[Any]) -> CacheEntry:
     """Declare, on ``system``, a cache entry holding the Python object ``compute(context)``,
     recomputed only when one of ``prerequisites`` (cache tickets) changes. Returns the CacheEntry."""
     return system.DeclareCacheEntry(
         description=description,
         value_producer=ValueProducer(allocate=lambda: AbstractValue.Make(object()),
-                                     calc=lambda context, abstract_value: abstract_value.set_value(compute(context))),
+                                     calc=lambda context, abstract_value: cast(AbstractValue, abstract_value).set_value(
+                                         compute(context))),
         prerequisites_of_calc=set(prerequisites))
 
 
-def declare_task_input(system, T, plant, end_effector_frame, end_effector_point, chart, plant_context_cache=True):
+def declare_task_input(system: AnyScalarSystem, T: type, plant: MultibodyPlant, end_effector_frame: Union[Frame, str],
+                       end_effector_point: ArrayLike, chart: Chart, plant_context_cache: bool = True
+                       ) -> Tuple[Frame, EndEffectorKinematics, InputPort, Optional[CacheEntry]]:
     """The end-effector input of a system that reads the robot's state: declares the
     ``estimated_state`` input ([q; v]) and (unless ``plant_context_cache`` is False: the system keeps
     its plant context itself, see ``set_plant_state``) the per-context plant-context cache on ``system``.
@@ -164,14 +183,15 @@ def declare_task_input(system, T, plant, end_effector_frame, end_effector_point,
     float ``plant``, ``kinematics`` an EndEffectorKinematics on the plant of scalar type T.
     """
     frame = resolve_frame(plant, end_effector_frame)
-    plant_T = plant if T == float else plant.ToAutoDiffXd()
+    plant_T: AnyScalarPlant = plant if T == float else plant.ToAutoDiffXd()
     kinematics = EndEffectorKinematics(plant_T, plant_T.get_frame(frame.index()), end_effector_point, chart)
     state_port = system.DeclareVectorInputPort("estimated_state", 2 * plant.num_velocities())
     cache = declare_plant_context_cache(system, plant_T, state_port) if plant_context_cache else None
     return frame, kinematics, state_port, cache
 
 
-def inverse_kinematics(kinematics, plant_context, X_target, q_guess, tolerance=1e-12, max_iterations=200):
+def inverse_kinematics(kinematics: EndEffectorKinematics, plant_context: Context, X_target: RigidTransform,
+                       q_guess: ArrayLike, tolerance: float = 1e-12, max_iterations: int = 200) -> Array:
     """Joint positions that put the end-effector pose at ``X_target`` (RigidTransform of E with
     its point P at X_target's origin), by damped Gauss-Newton from ``q_guess``.
 
@@ -204,7 +224,7 @@ def inverse_kinematics(kinematics, plant_context, X_target, q_guess, tolerance=1
         task = kinematics.evaluate(plant_context, check=False)
         R_error = target_R.multiply(RotationMatrix(task.rotation).inverse()).ToAngleAxis()
         error = np.concatenate([R_error.angle() * R_error.axis(), target_p - task.position])
-        error_norm = np.linalg.norm(error)
+        error_norm = float(np.linalg.norm(error))
         if error_norm < tolerance:
             break
         J = task.spatial_jacobian

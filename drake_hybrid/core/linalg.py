@@ -13,13 +13,17 @@ would.
 """
 
 import math
+from typing import Union, overload
 
 import numpy as np
+from numpy.typing import ArrayLike
 from scipy.linalg import lapack
 
 import pydrake.math as drake_math
 from pydrake.autodiffutils import AutoDiffXd
 from pydrake.math import sqrt
+
+from drake_hybrid.core.hints import Array
 
 _getrf, _getrs, _getri, _gesv, _potrf = lapack.dgetrf, lapack.dgetrs, lapack.dgetri, lapack.dgesv, lapack.dpotrf
 
@@ -34,7 +38,15 @@ def is_autodiff(*arrays):
     return False
 
 
-def value(array):
+@overload
+def value(array: AutoDiffXd) -> float: ...
+
+
+@overload
+def value(array: ArrayLike) -> Array: ...
+
+
+def value(array: Union[AutoDiffXd, ArrayLike]) -> Union[float, Array]:
     """The float value of a float or AutoDiffXd array."""
     if isinstance(array, AutoDiffXd):
         return array.value()

@@ -12,6 +12,10 @@ everywhere, prints nothing::
 import sys
 import time
 from contextlib import contextmanager
+from typing import Any, Callable, ContextManager
+
+# What the library's functions take as ``stages``: a Stages, or any callable label -> context manager.
+StagesLike = Callable[[str], ContextManager[Any]]
 
 
 class Stages:
@@ -40,6 +44,6 @@ class Stages:
         self._write(f" {self.times[label]:.1f} s")
 
 
-def quiet():
+def quiet() -> Stages:
     """A Stages that prints nothing (the default of the library's functions)."""
     return Stages(enabled=False)

@@ -18,12 +18,16 @@ E_p^T (E_p E_p^T)^-1, so non-orthogonal E_p are handled exactly.
 """
 
 from dataclasses import dataclass
+from typing import Any, Optional, Sequence, Tuple, Union
 
 import numpy as np
 import sympy
+from numpy.typing import ArrayLike
 
-from drake_hybrid.core.charts import EulerZXZChart
+from drake_hybrid.core.charts import Chart, EulerZXZChart, PoseChart
+from drake_hybrid.core.constraints import ConstraintLike
 from drake_hybrid.core.errors import ChartSingularityError, ConstraintRankError, DimensionError
+from drake_hybrid.core.hints import Array, VectorLike
 from drake_hybrid.core.linalg import LUFactorization, cholesky, inv, rank_margin_from_cholesky
 from drake_hybrid.core.preconditions import check_generic_rank
 from drake_hybrid.core.symbolic import CompiledFunction, compiled_time_derivative, to_sympy_matrix
@@ -35,7 +39,7 @@ class GivenVelocityProjection:
     E_p-dot nu is derived symbolically (x-dot = L(x) nu), like E_f-dot nu.
     """
 
-    def __init__(self, chart, rows, name="E_p"):
+    def __init__(self, chart: Chart, rows: Union[sympy.Matrix, Sequence[Any]], name: str = "E_p") -> None:
         self.chart = chart
         self.name = name
         E_p = to_sympy_matrix(rows, chart.configuration_symbols, what=f"velocity projection '{name}'")
@@ -51,20 +55,21 @@ class GivenVelocityProjection:
         self._rate = CompiledFunction(f"E_p-dot nu[{name}]", [x, nu], rate, vector=True)
         self._symbolic = E_p
         self.symbolic_terms = (E_p, rate)        # E_p and E_p-dot nu as sympy (control/fast_law.py)
-        self._rate_matrix = None
+        self._rate_matrix: Optional[CompiledFunction] = None
 
     def __repr__(self):
         return f"GivenVelocityProjection('{self.name}', rows={self.size})"
 
-    def matrix(self, x):
+    def matrix(self, x: Array) -> Array:
         """E_p(x)."""
         return self._matrix(x)
 
-    def evaluate(self, x, nu, force_projection=None, force_projection_rate=None):
+    def evaluate(self, x: Array, nu: Array, force_projection: Optional[Array] = None,
+                 force_projection_rate: Optional[Array] = None) -> Tuple[Array, Array]:
         """(E_p, E_p-dot nu) at (x, nu)."""
         return self._matrix(x), self._rate(x, nu)
 
-    def matrix_and_rate(self, x, nu):
+    def matrix_and_rate(self, x: Array, nu: Array) -> Tuple[Array, Array]:
         """(E_p, E_p-dot) at (x, nu), E_p-dot = sum_i dE_p/dx_i x-dot_i the matrix."""
         if self._rate_matrix is None:
             self._rate_matrix = compiled_time_derivative(f"E_p-dot[{self.name}]", self._symbolic, self.chart)
@@ -83,7 +88,7 @@ class KernelVelocityProjection:
     ConstraintRankError; anchor the projection nearer the task.
     """
 
-    def __init__(self, constraint, anchor, rank_tolerance=1e-3):
+    def __init__(self, constraint: ConstraintLike, anchor: ArrayLike, rank_tolerance: float = 1e-3) -> None:
         self.constraint = constraint
         self.chart = constraint.chart
         self.name = f"ker E_f[{constraint.name}]"
@@ -105,15 +110,17 @@ class KernelVelocityProjection:
     def __repr__(self):
         return f"KernelVelocityProjection('{self.name}', rows={self.size})"
 
-    def matrix(self, x):
+    def matrix(self, x: Array) -> Array:
         return self.evaluate(x, np.zeros(self.chart.velocity_size))[0]
 
-    def evaluate(self, x, nu, force_projection=None, force_projection_rate=None):
+    def evaluate(self, x: Array, nu: Array, force_projection: Optional[Array] = None,
+                 force_projection_rate: Optional[Array] = None) -> Tuple[Array, Array]:
         """(E_p, E_p-dot nu) at (x, nu)."""
         E_p, E_p_dot = self.matrix_and_rate(x, nu, force_projection, force_projection_rate)
         return E_p, E_p_dot @ nu
 
-    def matrix_and_rate(self, x, nu, force_projection=None, force_projection_rate=None):
+    def matrix_and_rate(self, x: Array, nu: Array, force_projection: Optional[Array] = None,
+                        force_projection_rate: Optional[Array] = None) -> Tuple[Array, Array]:
         """(E_p, E_p-dot) at (x, nu); E_f and E_f-dot may be passed in when already evaluated."""
         E_f = self.constraint.force_projection(x) if force_projection is None else force_projection
         E_f_dot = (self.constraint.force_projection_rate(x, nu) if force_projection_rate is None
@@ -153,13 +160,17 @@ class KernelVelocityProjection:
 class ConstraintSpaceValues:
     """E and its pieces at one (x, nu)."""
 
-    constraint_value: np.ndarray     # C(x)                   (m)
-    force_projection: np.ndarray     # E_f                    (m x d)
-    velocity_projection: np.ndarray  # E_p                    (d-m x d)
-    force_curvature: np.ndarray      # E_f-dot nu             (m)
-    velocity_curvature: np.ndarray   # E_p-dot nu             (d-m)
-    matrix: np.ndarray               # E = [E_p; E_f]         (d x d)
+    constraint_value: Array          # C(x)                   (m)
+    force_projection: Array          # E_f                    (m x d)
+    velocity_projection: Array       # E_p                    (d-m x d)
+    force_curvature: Array           # E_f-dot nu             (m)
+    velocity_curvature: Array        # E_p-dot nu             (d-m)
+    matrix: Array                    # E = [E_p; E_f]         (d x d)
     factorization: LUFactorization   # E factored once for E^-1 and E^-T
+
+
+# A velocity projection of either kind: ConstraintSpace takes both.
+AnyVelocityProjection = Union[GivenVelocityProjection, KernelVelocityProjection]
 
 
 class ConstraintSpace:
@@ -173,7 +184,8 @@ class ConstraintSpace:
             the rank margin of E (see ``linalg.rank_margin``) is below it.
     """
 
-    def __init__(self, constraint, velocity_projection, invertibility_tolerance=1e-3):
+    def __init__(self, constraint: ConstraintLike, velocity_projection: AnyVelocityProjection,
+                 invertibility_tolerance: float = 1e-3) -> None:
         chart = constraint.chart
         d, m = chart.velocity_size, constraint.size
         if velocity_projection.size != d - m:
@@ -190,7 +202,7 @@ class ConstraintSpace:
         self.invertibility_tolerance = float(invertibility_tolerance)
         check_generic_rank(self)          # rows dependent everywhere (e.g. two identical rows): refused now
 
-    def evaluate(self, x, nu, check=True):
+    def evaluate(self, x: Array, nu: Array, check: bool = True) -> ConstraintSpaceValues:
         """All of E's pieces at (x, nu); checks the chart, rank E_f and invertibility of E."""
         if check:
             self.chart.check(x)
@@ -225,7 +237,8 @@ class ConstraintSpace:
             factorization=factorization,
         )
 
-    def task_acceleration(self, values, velocity_acceleration, constraint_acceleration=None):
+    def task_acceleration(self, values: ConstraintSpaceValues, velocity_acceleration: Array,
+                          constraint_acceleration: Optional[Array] = None) -> Array:
         """r-ddot* = E^-1 ([a_p; a_f] - E-dot nu) (3.0-11, docs/theory.md §4).
 
         Satisfies E_p r-ddot* + E_p-dot nu = a_p and E_f r-ddot* + E_f-dot nu = a_f,
@@ -238,7 +251,7 @@ class ConstraintSpace:
         rhs = np.concatenate([velocity_acceleration - values.velocity_curvature, force_rows])
         return values.factorization.solve(rhs)
 
-    def split_wrench(self, values, generalized_force):
+    def split_wrench(self, values: ConstraintSpaceValues, generalized_force: Array) -> Tuple[Array, Array]:
         """(F_v, F) with w = E_p^T F_v + E_f^T F, i.e. [F_v; F] = E^-T w.
 
         ``generalized_force`` is the chart covector w of the wrench on the
@@ -254,7 +267,7 @@ class ConstraintSpace:
 # The paper's velocity projections (section 3.3) and the true-velocity rows of docs/theory.md §6.
 # ------------------------------------------------------------------------------------------------
 
-def crank_paper_projection(chart, center=(0.0, 0.0)):
+def crank_paper_projection(chart: Chart, center: VectorLike = (0.0, 0.0)) -> GivenVelocityProjection:
     """(3.3-6): E_p = [[0 0 0 0 0 1], [-Y X 0 1 0 0]] (X = x - c_x, Y = y - c_y), EulerZXZChart.
 
     Orthogonal to the (2.2-5) E_f identically. Its second row mixes units: on
@@ -266,7 +279,8 @@ def crank_paper_projection(chart, center=(0.0, 0.0)):
     return GivenVelocityProjection(chart, [[0, 0, 0, 0, 0, 1], [-Y, X, 0, 1, 0, 0]], name="E_p crank (3.3-6)")
 
 
-def crank_true_velocity_projection(chart, center=(0.0, 0.0), radius=1.0):
+def crank_true_velocity_projection(chart: Chart, center: VectorLike = (0.0, 0.0),
+                                   radius: float = 1.0) -> GivenVelocityProjection:
     """Option A rows E_t for the crank: (psi-dot, crank angle rate alpha-dot) (docs/theory.md §6).
 
     Row 2 is (-Y x-dot + X y-dot) / radius^2, which is alpha-dot in rad/s on the
@@ -287,7 +301,8 @@ def _sphere_tangents(chart, center, radius, axis=(0.0, 0.0, 1.0)):
     return P_hat, t1, t2
 
 
-def sphere_paper_projection(chart, center=(0.0, 0.0, 0.0), radius=1.0):
+def sphere_paper_projection(chart: EulerZXZChart, center: VectorLike = (0.0, 0.0, 0.0),
+                            radius: float = 1.0) -> GivenVelocityProjection:
     """(3.3-11) with the corrected (3.3-13a): rows e_1 = psi-dot and e_i = (t_i, beta_i, 0),
     beta_i = -A^-1 B t_i with A, B the (phi, theta) and p blocks of rows 2-3 of the (2.2-8) E_f
     (EulerZXZChart; singular where det A = -sin(theta) cos(theta) = 0: poles and equator).
@@ -309,7 +324,9 @@ def sphere_paper_projection(chart, center=(0.0, 0.0, 0.0), radius=1.0):
     return GivenVelocityProjection(chart, rows, name="E_p sphere (3.3-11)")
 
 
-def sphere_true_velocity_projection(chart, center=(0.0, 0.0, 0.0), radius=1.0, axis=(0.0, 0.0, 1.0)):
+def sphere_true_velocity_projection(chart: Union[EulerZXZChart, PoseChart], center: VectorLike = (0.0, 0.0, 0.0),
+                                    radius: float = 1.0, axis: VectorLike = (0.0, 0.0, 1.0)
+                                    ) -> GivenVelocityProjection:
     """Option A rows E_t for the sphere: the spin about the approach axis and the tool-point
     velocity along t_1 = e x P-hat and t_2 = t_1 x P-hat, e = ``axis`` (docs/theory.md §6 uses
     e = e_z; m/s on the sphere, times |t_1| = sin of the angle between P-hat and e).
@@ -328,7 +345,8 @@ def sphere_true_velocity_projection(chart, center=(0.0, 0.0, 0.0), radius=1.0, a
                                    name="E_t sphere (Option A)")
 
 
-def pseudo_desired_velocity(paper_rows, true_rows, true_desired_velocity, velocity):
+def pseudo_desired_velocity(paper_rows: Array, true_rows: Array, true_desired_velocity: Array,
+                            velocity: Array) -> Array:
     """The paper's desired pseudo-velocity (3.3-8), (3.3-16), corrected:
     r-dot_pd = r-dot_td + (E_p - E_t) r-dot, which mixes the command with the measured r-dot."""
     return true_desired_velocity + (paper_rows - true_rows) @ velocity

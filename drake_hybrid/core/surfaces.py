@@ -35,14 +35,17 @@ one-line ``PathError`` naming it.
 import abc
 import math
 from dataclasses import dataclass
+from typing import Optional, Tuple, Union
 
 import numpy as np
 import sympy
+from numpy.typing import ArrayLike
 
 from drake_hybrid.core.arguments import instance, nonnegative, number, numeric_array, positive, text, vector
-from drake_hybrid.core.charts import EulerZXZChart, PoseChart
-from drake_hybrid.core.constraints import surface_constraint
+from drake_hybrid.core.charts import Chart, EulerZXZChart, PoseChart
+from drake_hybrid.core.constraints import ConstraintLike, surface_constraint
 from drake_hybrid.core.errors import PathError
+from drake_hybrid.core.hints import Array, VectorLike
 from drake_hybrid.core.projections import GivenVelocityProjection
 
 MAX_TILT = 60.0         # deg: the largest angle between the surface normal and a view's w on a path
@@ -60,23 +63,23 @@ def _unit(values, what, owner):
     return direction / norm
 
 
-def check_chart(chart, owner):
+def check_chart(chart: Chart, owner: str) -> Union[PoseChart, EulerZXZChart]:
     """``chart`` if it is a 3-D end-effector chart (PoseChart or EulerZXZChart), else a PathError."""
     return instance(chart, "chart", owner, (PoseChart, EulerZXZChart), what="a PoseChart or an EulerZXZChart",
                     error=PathError)
 
 
-def check_offset(offset, owner, name="offset"):
+def check_offset(offset: float, owner: str, name: str = "offset") -> float:
     """The pad's offset as a float: a finite number >= 0 (m; module docstring), else a PathError."""
     return nonnegative(offset, name, owner, unit="m, the pad's radius", error=PathError)
 
 
-def check_point(p, owner, name="p"):
+def check_point(p: ArrayLike, owner: str, name: str = "p") -> Array:
     """A world point as a float vector of 3 finite numbers (m), else a PathError."""
     return vector(p, name, owner, 3, unit="m", error=PathError)
 
 
-def check_view(view, owner, name="view"):
+def check_view(view: "ViewPlane", owner: str, name: str = "view") -> "ViewPlane":
     """``view`` if it is a ViewPlane, else a PathError."""
     return instance(view, name, owner, ViewPlane, what="a ViewPlane (ViewPlane.make)", error=PathError)
 
@@ -91,7 +94,8 @@ class ViewPlane:
     axis_v: tuple
 
     @staticmethod
-    def make(origin=(0.0, 0.0, 0.0), axis_u=(1.0, 0.0, 0.0), axis_v=(0.0, 1.0, 0.0), what="view"):
+    def make(origin: VectorLike = (0.0, 0.0, 0.0), axis_u: VectorLike = (1.0, 0.0, 0.0),
+             axis_v: VectorLike = (0.0, 1.0, 0.0), what: str = "view") -> "ViewPlane":
         """A ViewPlane with ``axis_v`` made orthogonal to ``axis_u`` (Gram-Schmidt); PathError naming
         ``what`` for parallel or non-finite axes."""
         owner = "ViewPlane.make"
@@ -104,16 +108,16 @@ class ViewPlane:
         return ViewPlane(tuple(o), tuple(u), tuple(v / np.linalg.norm(v)))
 
     @property
-    def normal(self):
+    def normal(self) -> Array:
         """w = u x v, toward the viewer."""
         return np.cross(self.axis_u, self.axis_v)
 
-    def point(self, u, v):
+    def point(self, u: float, v: float) -> Array:
         """The world point at (u, v) of the plane."""
         u, v = (number(x, name, "ViewPlane.point", unit="m", error=PathError) for x, name in ((u, "u"), (v, "v")))
         return np.asarray(self.origin) + u * np.asarray(self.axis_u) + v * np.asarray(self.axis_v)
 
-    def coordinates(self, points):
+    def coordinates(self, points: ArrayLike) -> Array:
         """(u, v) of world points (N x 3 or 3) projected onto the plane along w."""
         allowed = "a world point [x, y, z] or N x 3 world points (m)"
         array = numeric_array(points, "points", "ViewPlane.coordinates", what=allowed, error=PathError)
@@ -123,7 +127,7 @@ class ViewPlane:
         return np.stack([d @ np.asarray(self.axis_u), d @ np.asarray(self.axis_v)], axis=-1)
 
 
-def check_facing(normal, view, where, max_tilt=MAX_TILT):
+def check_facing(normal: ArrayLike, view: ViewPlane, where: str, max_tilt: float = MAX_TILT) -> None:
     """PathError if the surface normal at ``where`` turns more than ``max_tilt`` degrees from the view's
     w: the view's rows of E_p would lose rank against E_f there (and the surface would hide itself)."""
     if not np.all(np.isfinite(normal)):
@@ -136,7 +140,8 @@ def check_facing(normal, view, where, max_tilt=MAX_TILT):
                         "lose rank there; keep the path where the surface faces the view")
 
 
-def view_projection(chart, view, name="E_p (view)"):
+def view_projection(chart: Union[PoseChart, EulerZXZChart], view: ViewPlane,
+                    name: str = "E_p (view)") -> GivenVelocityProjection:
     """E_p of a path drawn in ``view``: rows (spin about a, u . p-dot, v . p-dot).
 
     The spin row is omega . a on the PoseChart, psi-dot on the EulerZXZChart. The other two are the
@@ -160,35 +165,36 @@ class Surface(abc.ABC):
     name = "surface"
 
     @abc.abstractmethod
-    def default_view(self):
+    def default_view(self) -> ViewPlane:
         """The ViewPlane patterns on this surface are drawn in by default."""
 
     @abc.abstractmethod
-    def implicit(self, p, offset):
+    def implicit(self, p: sympy.Matrix, offset: float) -> sympy.Expr:
         """f_r(p) as a sympy expression of the sympy column ``p``: zero on the surface offset by ``offset``
         along its outward normal, negative inside, |grad f_r| = 1 there."""
 
     @abc.abstractmethod
-    def closest_point(self, p):
+    def closest_point(self, p: ArrayLike) -> Tuple[Array, Array]:
         """(q, n): the surface point nearest to ``p`` and the outward unit normal there (floats)."""
 
     @abc.abstractmethod
-    def lift(self, view, u, v):
+    def lift(self, view: ViewPlane, u: float, v: float) -> Tuple[Array, Array]:
         """(q, n): the surface point seen at (u, v) of ``view`` (the line along -w meets it first);
         PathError if it misses the surface."""
 
-    def normal(self, p):
+    def normal(self, p: ArrayLike) -> Array:
         """The outward unit normal of the offset surface through ``p`` (the same as at its closest point)."""
         return self.closest_point(p)[1]
 
-    def held_normal(self, p, offset):
+    def held_normal(self, p: ArrayLike, offset: float) -> Array:
         """The unit direction along which the orientation rows of ``offset_constraint`` hold the approach
         vector (a = -it) at a point ``p`` near the offset surface: grad f_r(p) normalized (here the normal
         of the offset family through p, the same along the normal line)."""
         check_offset(offset, f"{self.name}.held_normal")
         return self.normal(p)
 
-    def offset_constraint(self, chart, offset, name=None):
+    def offset_constraint(self, chart: Union[PoseChart, EulerZXZChart], offset: float,
+                          name: Optional[str] = None) -> ConstraintLike:
         """The constraint on a point held ``offset`` along the outward normal (a ball pad's centre):
         ``surface_constraint`` of f_r, with the orientation rows (a along -grad f_r) as kinematic rows."""
         check_chart(chart, f"{self.name}.offset_constraint")
@@ -196,7 +202,7 @@ class Surface(abc.ABC):
         return surface_constraint(chart, lambda p: self.implicit(p, offset), name=name or self.name,
                                   normal_rows=True)
 
-    def signed_distance(self, p):
+    def signed_distance(self, p: ArrayLike) -> float:
         """Distance of ``p`` from the surface, positive outside."""
         p = check_point(p, f"{self.name}.signed_distance")
         q, n = self.closest_point(p)
@@ -214,26 +220,26 @@ def _largest_root(a, b, c, where):
 class PlaneSurface(Surface):
     """The plane through ``point`` with outward normal ``normal``."""
 
-    def __init__(self, point, normal, name="plane"):
+    def __init__(self, point: ArrayLike, normal: ArrayLike, name: str = "plane") -> None:
         self.name = text(name, "name", "PlaneSurface", error=PathError)
         self.point = _vector(point, f"{name}.point", "PlaneSurface")
         self.unit_normal = _unit(normal, f"{name}.normal", "PlaneSurface")
 
-    def default_view(self):
+    def default_view(self) -> ViewPlane:
         n = self.unit_normal
         helper = np.eye(3)[int(np.argmin(np.abs(n)))]
         u = np.cross(helper, n)
         return ViewPlane.make(self.point, u, np.cross(n, u))
 
-    def implicit(self, p, offset):
+    def implicit(self, p: sympy.Matrix, offset: float) -> sympy.Expr:
         n, o, offset = self.unit_normal, self.point, check_offset(offset, f"{self.name}.implicit")
         return sum(sympy.Float(n[i]) * (p[i] - sympy.Float(o[i])) for i in range(3)) - sympy.Float(offset)
 
-    def closest_point(self, p):
+    def closest_point(self, p: ArrayLike) -> Tuple[Array, Array]:
         p = check_point(p, f"{self.name}.closest_point")
         return p - ((p - self.point) @ self.unit_normal) * self.unit_normal, self.unit_normal.copy()
 
-    def lift(self, view, u, v):
+    def lift(self, view: ViewPlane, u: float, v: float) -> Tuple[Array, Array]:
         start, w = check_view(view, f"{self.name}.lift").point(u, v), view.normal
         facing = float(self.unit_normal @ w)
         if abs(facing) < 1e-12:
@@ -245,21 +251,21 @@ class PlaneSurface(Surface):
 class SphereSurface(Surface):
     """The sphere of ``radius`` about ``center``."""
 
-    def __init__(self, center, radius, name="sphere"):
+    def __init__(self, center: ArrayLike, radius: float, name: str = "sphere") -> None:
         self.name = text(name, "name", "SphereSurface", error=PathError)
         self.center = _vector(center, f"{name}.center", "SphereSurface")
         self.radius = positive(radius, f"{name}.radius", "SphereSurface", unit="m", error=PathError)
 
-    def default_view(self):
+    def default_view(self) -> ViewPlane:
         """Seen from above (+z): origin at the centre, u = x, v = y."""
         return ViewPlane.make(self.center)
 
-    def implicit(self, p, offset):
+    def implicit(self, p: sympy.Matrix, offset: float) -> sympy.Expr:
         rho = sympy.Float(self.radius + check_offset(offset, f"{self.name}.implicit"))
         P = [p[i] - sympy.Float(self.center[i]) for i in range(3)]
         return (sum(c * c for c in P) - rho * rho) / (2 * rho)
 
-    def closest_point(self, p):
+    def closest_point(self, p: ArrayLike) -> Tuple[Array, Array]:
         d = check_point(p, f"{self.name}.closest_point") - self.center
         norm = float(np.linalg.norm(d))
         if norm < 1e-12:
@@ -267,7 +273,7 @@ class SphereSurface(Surface):
         n = d / norm
         return self.center + self.radius * n, n
 
-    def lift(self, view, u, v):
+    def lift(self, view: ViewPlane, u: float, v: float) -> Tuple[Array, Array]:
         start, w = check_view(view, f"{self.name}.lift").point(u, v), view.normal
         d = start - self.center
         lam = _largest_root(1.0, float(d @ w), float(d @ d) - self.radius ** 2, f"{self.name} at (u, v) = ({u:.4g}, "
@@ -279,7 +285,8 @@ class CylinderSurface(Surface):
     """The cylinder of ``radius`` about the axis through ``center`` along ``axis``; ``length`` (m, default
     unbounded) limits it to |(p - center) . axis| <= length / 2."""
 
-    def __init__(self, center, axis, radius, length=math.inf, name="cylinder"):
+    def __init__(self, center: ArrayLike, axis: ArrayLike, radius: float, length: float = math.inf,
+                 name: str = "cylinder") -> None:
         self.name = text(name, "name", "CylinderSurface", error=PathError)
         self.center = _vector(center, f"{name}.center", "CylinderSurface")
         self.axis = _unit(axis, f"{name}.axis", "CylinderSurface")
@@ -287,7 +294,7 @@ class CylinderSurface(Surface):
         self.length = positive(length, f"{name}.length", "CylinderSurface", unit="m", allow_infinite=True,
                                error=PathError)
 
-    def default_view(self):
+    def default_view(self) -> ViewPlane:
         """Seen from the world +z (or +x for a vertical axis), u along the axis."""
         up = np.array([0.0, 0.0, 1.0]) if abs(self.axis[2]) < 0.9 else np.array([1.0, 0.0, 0.0])
         w = up - (up @ self.axis) * self.axis
@@ -297,7 +304,7 @@ class CylinderSurface(Surface):
     def _radial(self, d):
         return d - (d @ self.axis) * self.axis
 
-    def implicit(self, p, offset):
+    def implicit(self, p: sympy.Matrix, offset: float) -> sympy.Expr:
         rho = sympy.Float(self.radius + check_offset(offset, f"{self.name}.implicit"))
         k = [sympy.Float(c) for c in self.axis]
         d = [p[i] - sympy.Float(self.center[i]) for i in range(3)]
@@ -305,7 +312,7 @@ class CylinderSurface(Surface):
         radial = [d[i] - along * k[i] for i in range(3)]
         return (sum(c * c for c in radial) - rho * rho) / (2 * rho)
 
-    def closest_point(self, p):
+    def closest_point(self, p: ArrayLike) -> Tuple[Array, Array]:
         p = check_point(p, f"{self.name}.closest_point")
         d = p - self.center
         radial = self._radial(d)
@@ -315,7 +322,7 @@ class CylinderSurface(Surface):
         n = radial / norm
         return p - radial + self.radius * n, n
 
-    def lift(self, view, u, v):
+    def lift(self, view: ViewPlane, u: float, v: float) -> Tuple[Array, Array]:
         start, w = check_view(view, f"{self.name}.lift").point(u, v), view.normal
         d, w_radial = self._radial(start - self.center), self._radial(w)
         where = f"{self.name} at (u, v) = ({u:.4g}, {v:.4g}) m"

@@ -17,14 +17,17 @@ import dataclasses
 import math
 import numbers
 from dataclasses import dataclass
-from typing import List, Optional
+from typing import Any, Dict, Iterable, List, Mapping, Optional, Sequence, Tuple
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from drake_hybrid.analysis.environment import impedance_response
+from drake_hybrid.control.gains import ValidatedGains
 from drake_hybrid.control.phases import ContactPhase
 from drake_hybrid.core.arguments import describe, number, numeric_array, text
 from drake_hybrid.core.errors import ArgumentError
+from drake_hybrid.core.hints import Array
 
 
 @dataclass
@@ -44,12 +47,12 @@ class RowFigures:
     max_error_time_after_5_time_constants: Optional[float]     # s
     settling_time_1_percent: Optional[float]           # s from contact; inf: never within 1 %
 
-    def as_dict(self):
+    def as_dict(self) -> Dict[str, Any]:
         """The row as summary.json writes it (its fields, in order)."""
         return dataclasses.asdict(self)
 
     @classmethod
-    def from_dict(cls, entry):
+    def from_dict(cls, entry: Mapping[str, Any]) -> "RowFigures":
         """A row from its summary.json entry: a ``ForceRowFigures`` where the entry says ``held``."""
         kind = ForceRowFigures if "held" in entry else RowFigures
         return kind(**entry)
@@ -72,12 +75,12 @@ class ImpedanceCheck:
     max_difference_percent: Optional[float]            # the largest in % of its row's command
     max_tangential_force: List[float]                  # per row, max |F_v| over the settled window
 
-    def as_dict(self):
+    def as_dict(self) -> Dict[str, Any]:
         """The check as summary.json writes it."""
         return dataclasses.asdict(self)
 
 
-def _times(times, name, owner):
+def _times(times: Any, name: str, owner: str) -> Array:
     """A nonempty vector of finite, nondecreasing times (s)."""
     allowed = "a nonempty vector of finite nondecreasing times (s)"
     array = numeric_array(times, name, owner, what=allowed)
@@ -86,7 +89,8 @@ def _times(times, name, owner):
     return array
 
 
-def _rows(values, name, owner, samples=None, columns=None, nan=False):
+def _rows(values: Any, name: str, owner: str, samples: Optional[int] = None, columns: Optional[int] = None,
+          nan: bool = False) -> Array:
     """``values`` as a float array of samples x rows (a vector: one row), NaN allowed if ``nan``; with
     ``samples``, one sample per time; with ``columns``, that many rows."""
     allowed = "an array of samples x rows of numbers" + ("" if nan else " (no NaN)")
@@ -109,7 +113,7 @@ def _rows(values, name, owner, samples=None, columns=None, nan=False):
     return array
 
 
-def _per_row(items, name, owner, count):
+def _per_row(items: Any, name: str, owner: str, count: int) -> List[Any]:
     """``items`` (units, names) as a list of one entry per row."""
     if isinstance(items, (str, bytes)) or not hasattr(items, "__len__") or len(items) != count:
         got = f"{len(items)}: {list(items)!r:.80}" if hasattr(items, "__len__") and not isinstance(
@@ -118,7 +122,7 @@ def _per_row(items, name, owner, count):
     return list(items)
 
 
-def settling_time(times, error_norm, bound):
+def settling_time(times: ArrayLike, error_norm: ArrayLike, bound: float) -> float:
     """First time after which ``error_norm`` stays at or below ``bound`` (inf if never): ``times`` nonempty,
     nondecreasing; ``error_norm`` one finite value (or inf) per time; ``bound`` a finite number >= 0."""
     owner = "settling_time"
@@ -136,7 +140,7 @@ def settling_time(times, error_norm, bound):
     return float(times[outside[-1] + 1])
 
 
-def contact_time(log, start_in_contact=True):
+def contact_time(log: Mapping[str, Array], start_in_contact: bool = True) -> float:
     """When the hybrid law took over: the first sample in the CONTACT phase when a contact supervisor
     ran (``contact_phase`` logged), else the first sample (a start in contact)."""
     if not hasattr(log, "__contains__") or "t" not in log:
@@ -148,7 +152,7 @@ def contact_time(log, start_in_contact=True):
     return float(t[0])
 
 
-def row_units(units, count):
+def row_units(units: str, count: int) -> List[str]:
     """Per-row units from a task's label string ("m/s | rad/s"; one unit for every row if single)."""
     parts = [part.strip() for part in str(units).split("|")]
     if len(parts) == count:
@@ -156,25 +160,26 @@ def row_units(units, count):
     return [parts[-1] if i >= len(parts) else parts[i] for i in range(count)] if len(parts) > 1 else parts * count
 
 
-def display_unit(unit):
+def display_unit(unit: str) -> str:
     """A row's unit as the summary and the plots print it: "(no unit)" for a dimensionless row ("1")."""
     return "(no unit)" if str(unit).strip() == "1" else unit
 
 
-def row_commands(desired):
+def row_commands(desired: ArrayLike) -> Array:
     """Each row's command: max |desired_i| over the run (in the row's units; 0 for a row commanded to zero);
     ``desired`` samples x rows (a vector: one row)."""
     return np.max(np.abs(_rows(desired, "desired", "row_commands")), axis=0)
 
 
-def run_scale(desired):
+def run_scale(desired: ArrayLike) -> float:
     """The run's command scale: max over the samples of |desired| (the norm across the rows; the
     summary's ``command_scales``: the speed, the force)."""
     desired = _rows(desired, "desired", "run_scale")
     return float(np.max(np.linalg.norm(desired, axis=1))) if desired.size else 0.0
 
 
-def row_scales(desired, units=None, fallback="run"):
+def row_scales(desired: ArrayLike, units: Optional[Sequence[str]] = None,
+               fallback: str = "run") -> Tuple[Array, List[str]]:
     """What each row's % figures are of (no row may drop out of the worst-row figures): its command
     (``row_commands``); for a row commanded to zero, the largest command of the rows in its units
     (``units``, one string per row: the cross-track m/s row of a slide against the slide's speed), else
@@ -184,10 +189,11 @@ def row_scales(desired, units=None, fallback="run"):
     "command", "rows in its units", "run" or "unit" (no % figure is given against a unit)."""
     commands, scale = row_commands(desired), run_scale(desired)
     fallback = text(fallback, "fallback", "row_scales", allowed=("run", "unit"))
-    units = _per_row(units, "units", "row_scales", len(commands)) if units is not None else [None] * len(commands)
+    unit_of_row: List[Optional[str]] = (_per_row(units, "units", "row_scales", len(commands)) if units is not None
+                                         else [None] * len(commands))
     scales, sources = [], []
-    for command, unit in zip(commands, units):
-        same = [c for c, u in zip(commands, units) if unit is not None and u == unit and c > 0]
+    for command, unit in zip(commands, unit_of_row):
+        same = [c for c, u in zip(commands, unit_of_row) if unit is not None and u == unit and c > 0]
         run = scale if fallback == "run" else 0.0
         for value, source in ((command, "command"), (max(same, default=0.0), "rows in its units"), (run, "run"),
                               (1.0, "unit")):
@@ -198,7 +204,7 @@ def row_scales(desired, units=None, fallback="run"):
     return np.array(scales), sources
 
 
-def last_valid(values):
+def last_valid(values: ArrayLike) -> Optional[Array]:
     """The last row of ``values`` (samples x columns) without NaN (None if every row has one): a sample
     taken while the measured wrench was invalid reads NaN (control.law_system) and is no figure."""
     values = _rows(values, "values", "last_valid", nan=True)
@@ -206,12 +212,14 @@ def last_valid(values):
     return values[valid[-1]] if valid.size else None
 
 
-def invalid_samples(values):
+def invalid_samples(values: ArrayLike) -> int:
     """How many samples (rows of ``values``) read NaN: taken while the measured wrench was invalid."""
     return int(np.isnan(_rows(values, "values", "invalid_samples", nan=True)).any(axis=1).sum())
 
 
-def max_row_errors(t, error, desired, after, units=None, fallback="run"):
+def max_row_errors(t: ArrayLike, error: ArrayLike, desired: ArrayLike, after: float,
+                   units: Optional[Sequence[str]] = None,
+                   fallback: str = "run") -> List[Tuple[Optional[float], Optional[float]]]:
     """Per row, over t >= ``after``: (max |e_i| in the row's units, or None if no sample is that late;
     that in % of the row's scale, ``row_scales(desired, units, fallback)``: its command, or for a row
     commanded to zero the largest command in its units or the run's speed or force; None against one
@@ -233,7 +241,8 @@ def max_row_errors(t, error, desired, after, units=None, fallback="run"):
     return figures
 
 
-def row_errors(t, error, desired, names, units, since, settle_after):
+def row_errors(t: ArrayLike, error: ArrayLike, desired: ArrayLike, names: Sequence[str], units: Sequence[str],
+               since: float, settle_after: float) -> List[RowFigures]:
     """Per-row error figures (a list of ``RowFigures``), each in the row's own units and in % of that row's scale
     (``row_scales``): its command, or, for a row commanded to zero, the largest command in its units,
     else the run's scale (the speed or the force the run commands: the cross-track row of a slide
@@ -282,25 +291,27 @@ def row_errors(t, error, desired, names, units, since, settle_after):
     return rows
 
 
-def max_after(values, window):
+def max_after(values: ArrayLike, window: ArrayLike) -> List[Optional[float]]:
     """Per column, max |values| over the samples in ``window`` that do not read NaN (a list of floats,
     None where there is none)."""
-    values = np.abs(_rows(values, "values", "max_after", nan=True))
+    magnitudes: Array = np.abs(_rows(values, "values", "max_after", nan=True))
     window = np.asarray(window)
-    if window.dtype != bool or window.shape != (values.shape[0],):
-        raise ArgumentError(f"max_after: window must be a boolean mask of one entry per sample ({values.shape[0]}), "
-                            f"got {describe(window)}")
-    values = values[window]
-    return [float(np.max(column[~np.isnan(column)])) if np.any(~np.isnan(column)) else None for column in values.T]
+    if window.dtype != bool or window.shape != (magnitudes.shape[0],):
+        raise ArgumentError(f"max_after: window must be a boolean mask of one entry per sample "
+                            f"({magnitudes.shape[0]}), got {describe(window)}")
+    magnitudes = magnitudes[window]
+    return [float(np.max(column[~np.isnan(column)])) if np.any(~np.isnan(column)) else None
+            for column in magnitudes.T]
 
 
-def worst(rows, key):
+def worst(rows: Iterable[RowFigures], key: str) -> Optional[float]:
     """The largest figure ``key`` (a field of ``RowFigures``) over the rows that have it (None if none has)."""
     values = [getattr(row, key) for row in rows if getattr(row, key) is not None]
     return max(values) if values else None
 
 
-def impedance_check(log, gains, since, settle_after):
+def impedance_check(log: Mapping[str, Array], gains: ValidatedGains, since: float,
+                    settle_after: float) -> Optional[ImpedanceCheck]:
     """Impedance-force mode: how closely the run realizes the designed impedance (3.2-11), whatever its
     measured F_v does. The impedance is driven by the run's logged F_v from its logged errors at
     ``since`` (contact; ``analysis.environment.impedance_response``) and compared with the run's

@@ -25,11 +25,12 @@ From the log of a path job (``station.path_job``: ``path_error`` = c - c_d, ``re
 import dataclasses
 import math
 from dataclasses import dataclass
-from typing import List, Optional
+from typing import Any, Dict, List, Mapping, Optional, Tuple
 
 import numpy as np
 
 from drake_hybrid.control.phases import ContactPhase
+from drake_hybrid.core.hints import Array
 
 
 @dataclass
@@ -76,12 +77,12 @@ class PathReport:
     contact_losses: int
     segments: List[SegmentReport]
 
-    def as_dict(self):
+    def as_dict(self) -> Dict[str, Any]:
         """The report as summary.json writes it (its fields in order, each segment a dict)."""
         return dataclasses.asdict(self)
 
     @classmethod
-    def from_dict(cls, entry):
+    def from_dict(cls, entry: Mapping[str, Any]) -> "PathReport":
         """A report from summary.json's ``path``."""
         return cls(**dict(entry, segments=[SegmentReport(**segment) for segment in entry["segments"]]))
 
@@ -101,14 +102,14 @@ def _largest(segments, key):
     return _max_or_none([getattr(s, key) for s in segments if getattr(s, key) is not None])
 
 
-def lift_off_time(log):
+def lift_off_time(log: Mapping[str, Array]) -> Optional[float]:
     """When the lift-off began (the supervisor's ``lifting``), or None."""
     if "lifting" not in log:
         return None
     return _first(np.asarray(log["lifting"])[:, 0] > 0.5, np.asarray(log["t"]))
 
 
-def before_lift_off(log):
+def before_lift_off(log: Mapping[str, Array]) -> Mapping[str, Array]:
     """``log`` cut at the lift-off (every array's samples before it); the log itself without one."""
     lift = lift_off_time(log)
     if lift is None:
@@ -119,7 +120,7 @@ def before_lift_off(log):
             for key, value in log.items()}
 
 
-def error_parts(log):
+def error_parts(log: Mapping[str, Array]) -> Tuple[Array, Array, Array]:
     """(total, along the surface, along the normal) distances of the pad centre from its reference (m)."""
     error = np.asarray(log["path_error"], dtype=float)
     normal = np.asarray(log["reference_normal"], dtype=float)
@@ -128,7 +129,8 @@ def error_parts(log):
     return np.linalg.norm(error, axis=1), np.linalg.norm(tangential, axis=1), np.abs(along_normal)
 
 
-def path_report(log, design_time_constant, path_duration, path_length, force_row=0):
+def path_report(log: Mapping[str, Array], design_time_constant: float, path_duration: float, path_length: float,
+                force_row: int = 0) -> PathReport:
     """The job's figures (module docstring), a ``PathReport`` (distances in mm, times in s)."""
     t = np.asarray(log["t"], dtype=float)
     segment, arc, t_path = (np.asarray(log["path_progress"], dtype=float)[:, i] for i in range(3))
@@ -189,7 +191,7 @@ def path_report(log, design_time_constant, path_duration, path_length, force_row
     )
 
 
-def path_text(report):
+def path_text(report: PathReport) -> List[str]:
     """The printout's lines for a job's ``report`` (a ``PathReport``)."""
     def mm(value):
         return "n/a" if value is None else f"{value:.3f} mm"

@@ -32,24 +32,32 @@ the user's monitor asks for ends the run as a completed run, at that time).
 import dataclasses
 import time
 from dataclasses import dataclass, field
+from typing import Any, Callable, Dict, Mapping, Optional, Tuple, Union, cast
 
 import numpy as np
 from tqdm import tqdm
 
+from pydrake.geometry import Meshcat
 from pydrake.systems.analysis import ApplySimulatorConfig, Simulator
-from pydrake.systems.framework import EventStatus
+from pydrake.systems.framework import Context, EventStatus
 
 from drake_hybrid.analysis.design import controller_prediction, design_time_constant, predicted_errors
+from drake_hybrid.control.controller import HybridController
 from drake_hybrid.control.gains import ControlMode
-from drake_hybrid.core.progress import quiet
+from drake_hybrid.core.hints import Array
+from drake_hybrid.core.progress import StagesLike, quiet
 from drake_hybrid.experiments.metrics import (ForceRowFigures, contact_time, impedance_check, invalid_samples,
                                               last_valid, max_after, row_errors, row_units, run_scale, worst)
 from drake_hybrid.experiments.path_report import before_lift_off, path_report
 from drake_hybrid.experiments.summary import RunSummary
 from drake_hybrid.scenario.builder import build_scenario
 from drake_hybrid.scenario.start import set_initial_conditions
+from drake_hybrid.station.handles import HybridSystems
 from drake_hybrid.station.loggers import read_log
-from drake_hybrid.tasks.config import check_scenario_config
+from drake_hybrid.systems.path_source import PathSource
+from drake_hybrid.systems.sources import PseudoVelocitySource
+from drake_hybrid.tasks.config import ScenarioConfig, check_scenario_config
+from drake_hybrid.tasks.task import Scenario
 
 # The run's note when its controller ran the generic law while numba compiled the fast one (control/fast_compile.py).
 COMPILING_NOTE = ("this run used the generic law (the compiled one gives the same to 1e-12): the compiled law was "
@@ -57,30 +65,34 @@ COMPILING_NOTE = ("this run used the generic law (the compiled one gives the sam
                   "30-65 s on 2 cores)")
 
 
+# A Simulator monitor: called with the root context at every step, it may end the run.
+Monitor = Callable[[Context], EventStatus]
+
+
 @dataclass
 class SimulationResult:
-    config: object
-    log: dict
+    config: ScenarioConfig
+    log: Dict[str, Array]
     summary: RunSummary
-    scenario: object = None                      # the built Scenario: diagram, plant, controller, ...
-    html: str = None
-    extra: dict = field(default_factory=dict)
-    simulator: object = None                     # Drake's Simulator after the run
-    context: object = None                       # its root context (the diagram's) at the end
+    scenario: Optional[Scenario] = None          # the built Scenario: diagram, plant, controller, ...
+    html: Optional[str] = None
+    extra: Dict[str, Any] = field(default_factory=dict)
+    simulator: Optional[Simulator] = None        # Drake's Simulator after the run
+    context: Optional[Context] = None            # its root context (the diagram's) at the end
 
 
 class RunStopped(RuntimeError):
     """The run stopped before its duration; ``result`` holds its log and summary up to the stop
     (an error raised inside the run is the ``__cause__``)."""
 
-    def __init__(self, result):
+    def __init__(self, result: SimulationResult) -> None:
         summary = result.summary
         super().__init__(f"the run stopped at t = {summary.stop_time:.4g} s ({summary.status}): "
                          f"{summary.stop_reason}")
         self.result = result
 
 
-def sensor_fault_monitor(scenario, fault_time, stop):
+def sensor_fault_monitor(scenario: HybridSystems, fault_time: float, stop: Dict[str, Any]) -> Monitor:
     """A Simulator monitor that ends the run when the wrench the controller reads has been
     non-finite for longer than ``fault_time`` (s); it fills ``stop`` (status, time, reason)."""
     controller = scenario.controller
@@ -104,7 +116,7 @@ def sensor_fault_monitor(scenario, fault_time, stop):
     return monitor
 
 
-def chain_monitors(first, second):
+def chain_monitors(first: Monitor, second: Optional[Monitor]) -> Monitor:
     """A monitor that runs ``first`` and, unless it ends the run, ``second`` (None: only ``first``)."""
     if second is None:
         return first
@@ -116,7 +128,9 @@ def chain_monitors(first, second):
     return monitor
 
 
-def simulate(config, progress=False, meshcat=None, record_html=False, setup=None, stages=None):
+def simulate(config: ScenarioConfig, progress: bool = False, meshcat: Optional[Meshcat] = None,
+             record_html: bool = False, setup: Optional[Callable[[Scenario, Simulator, Context], Any]] = None,
+             stages: Optional[StagesLike] = None) -> SimulationResult:
     """Simulate ``config``; returns a SimulationResult (log arrays, summary, scenario, simulator and
     context). ``setup(scenario, simulator, context)``, if given, runs after the start is set and
     before ``Simulator.Initialize`` (e.g. ``simulator.set_monitor``). ``progress``: a progress bar
@@ -129,6 +143,7 @@ def simulate(config, progress=False, meshcat=None, record_html=False, setup=None
     stages = stages or quiet()
     with stages(f"{config.task}: building the diagram (plant, constraint, controller)"):
         scenario = build_scenario(config, meshcat=meshcat)
+        assert scenario.diagram is not None          # build_scenario returns it built
         simulator = Simulator(scenario.diagram)
         ApplySimulatorConfig(config.simulator, simulator)
         context = simulator.get_mutable_context()
@@ -136,7 +151,7 @@ def simulate(config, progress=False, meshcat=None, record_html=False, setup=None
         set_initial_conditions(scenario, context)
     if setup is not None:
         setup(scenario, simulator, context)
-    stop = {}
+    stop: Dict[str, Any] = {}
     if scenario.fault_injector is not None or scenario.conditioner is not None:
         # Only these make the wrench non-finite (a dropout, a hold run out): the check costs a Python call a step.
         simulator.set_monitor(chain_monitors(sensor_fault_monitor(scenario, float(config.sensor.fault_time), stop),
@@ -189,7 +204,7 @@ def simulate(config, progress=False, meshcat=None, record_html=False, setup=None
     return result
 
 
-def without_force_figures(summary):
+def without_force_figures(summary: RunSummary) -> RunSummary:
     """``summary`` with its force error figures None (a sensor fault: the controller took F = F_d while the
     wrench was invalid, so its force error is not a measurement): the worst row's, and each force row's
     figures but its name, units, command and whether it is held."""
@@ -207,7 +222,7 @@ def without_force_figures(summary):
 LOG_NAMES = {"projected_velocity": "velocity", "constraint_value": "constraint", "actuation": "torque"}
 
 
-def collect_log(scenario, context):
+def collect_log(scenario: HybridSystems, context: Context) -> Dict[str, Array]:
     """The logged signals as arrays (the keys of log.npz: ``station.loggers.read_log``'s, a few renamed
     by ``LOG_NAMES``, the state split into q and v)."""
     logged = read_log(scenario.loggers, context)
@@ -216,12 +231,12 @@ def collect_log(scenario, context):
     log["q"], log["v"] = logged["state"][:, :n], logged["state"][:, n:]
     if getattr(scenario.source, "true_projection", None) is not None:   # the paper's pseudo-velocity: its
         # velocity_error is E_t r-dot - r-dot_td (PseudoVelocitySource), the true rows'; r-dot_td is their command
-        log["true_desired_velocity"] = np.array([scenario.source.velocity_profile.evaluate(float(s))[0]
-                                                 for s in log["t"]])
+        profile = cast(PseudoVelocitySource, scenario.source).velocity_profile
+        log["true_desired_velocity"] = np.array([profile.evaluate(float(s))[0] for s in log["t"]])
     return log
 
 
-def effort_limits(systems):
+def effort_limits(systems: HybridSystems) -> Array:
     """The effort limits of the arm's actuators (N m for revolute joints), in actuation order: the
     controller's own model's (the robot alone, built as the simulated arm)."""
     plant = systems.controller_plant
@@ -232,7 +247,7 @@ def _percent(error, scale):
     return float(100.0 * error / scale) if scale > 0 else float("nan")
 
 
-def summarize(scenario, log, wall_time):
+def summarize(scenario: Scenario, log: Mapping[str, Array], wall_time: float) -> RunSummary:
     """The run's summary (a ``RunSummary``, summary.json): gains, mode, designed eigenvalues, errors. Its
     ``status`` is None: ``simulate`` sets it, with the stop's time and reason."""
     config = scenario.config
@@ -253,12 +268,12 @@ def summarize(scenario, log, wall_time):
                                labels.get("velocity_error", labels.get("velocity", [])),
                                row_units(labels.get("velocity_error_units", labels.get("velocity_units", "SI")), k),
                                start, settle_after)
-    force_rows = row_errors(job["t"], job["force_error"], job["desired_force"], labels.get("force", []),
-                            row_units(labels.get("force_units", "SI"), m), start, settle_after)
+    force_figures = row_errors(job["t"], job["force_error"], job["desired_force"], labels.get("force", []),
+                               row_units(labels.get("force_units", "SI"), m), start, settle_after)
     measured = max_after(job["force"], job["t"] >= start)
     force_rows = [ForceRowFigures(**dataclasses.asdict(row), held=i in controller.kinematic_rows,
                                   max_measured_force_after_contact=measured[i])
-                  for i, row in enumerate(force_rows)]       # a held row (controller.kinematic_rows): no force loop
+                  for i, row in enumerate(force_figures)]    # a held row (controller.kinematic_rows): no force loop
     for row in force_rows:
         if row.held:                           # no command, so no error: its figures are null, not 0
             for name in [f.name for f in dataclasses.fields(row)
@@ -269,6 +284,7 @@ def summarize(scenario, log, wall_time):
     torque_ratio = np.max(np.abs(log["torque"]) / effort_limits(scenario), axis=0)
     final_force_error = last_valid(log["force_error"])         # the last sample with a valid wrench
     pairs = lambda values: [[float(np.real(v)), float(np.imag(v))] for v in values]
+    path_source = cast(PathSource, scenario.source)          # a job's, when its path_progress is logged
     return RunSummary(
         task=config.task,
         mode=controller.mode.value,
@@ -319,16 +335,17 @@ def summarize(scenario, log, wall_time):
         start_force_command_step=(np.asarray(gains.force_integral, dtype=float) @ np.asarray(
             config.start.force_integral, dtype=float)).tolist() if config.start.force_integral else [0.0] * m,
         # A job's path (station.path_job): path and force errors per segment, time off the surface.
-        path=path_report(log, tau, scenario.source.path.duration, scenario.source.path.length,
-                         scenario.source.force_row) if "path_progress" in log else None,
+        path=path_report(log, tau, path_source.path.duration, path_source.path.length,
+                         path_source.force_row) if "path_progress" in log else None,
     )
 
 
-def predicted_tracking(scenario_or_controller, config, log):
+def predicted_tracking(scenario_or_controller: Union[HybridSystems, HybridController], config: ScenarioConfig,
+                       log: Mapping[str, Array]) -> Tuple[Array, Array]:
     """Predicted (velocity, force) trajectories: the desired ones plus the designed error decay from
     contact on (``contact_time``), from the logged velocity error at contact and the configured
     initial integrals (frozen until contact); NaN before contact, where the design predicts nothing."""
-    controller = getattr(scenario_or_controller, "controller", scenario_or_controller)
+    controller: HybridController = getattr(scenario_or_controller, "controller", scenario_or_controller)
     gains = controller.validated_gains()
     m = controller.force_size
     xi0 = np.asarray(config.start.force_integral, dtype=float) if config.start.force_integral else np.zeros(m)

@@ -17,13 +17,13 @@ import dataclasses
 import json
 import math
 from dataclasses import dataclass
-from typing import Dict, List, Optional
+from typing import Any, Dict, List, Mapping, Optional
 
-from drake_hybrid.experiments.metrics import ImpedanceCheck, RowFigures
+from drake_hybrid.experiments.metrics import ForceRowFigures, ImpedanceCheck, RowFigures
 from drake_hybrid.experiments.path_report import PathReport
 
 
-def json_safe(value):
+def json_safe(value: Any) -> Any:
     """``value`` with every non-finite float (NaN, inf: "never", "undefined") replaced by None, so
     that the file is valid JSON."""
     if isinstance(value, dict):
@@ -62,7 +62,7 @@ class RunSummary:
     velocity_settling_time_1_percent: Optional[float] = None       # inf: never within 1 %
     force_settling_time_1_percent: Optional[float] = None
     velocity_rows: Optional[List[RowFigures]] = None
-    force_rows: Optional[List[RowFigures]] = None      # ForceRowFigures: also held, measured force
+    force_rows: Optional[List[ForceRowFigures]] = None     # also held, measured force
     impedance: Optional[ImpedanceCheck] = None         # impedance-force mode only
     max_constraint_residual: Optional[float] = None    # max |C(r)| over the run
     max_constraint_residual_after_contact: Optional[float] = None  # from contact on (to a job's lift-off)
@@ -82,18 +82,18 @@ class RunSummary:
     stop_time: Optional[float] = None                  # s
     stop_reason: Optional[str] = None
 
-    def as_dict(self):
+    def as_dict(self) -> Dict[str, Any]:
         """The summary as the plain dict summary.json holds: every field by name, in order, the rows, the
         impedance's check and the path's report as dicts (non-finite numbers kept: ``to_json`` writes them
         as null)."""
         return dataclasses.asdict(self)
 
-    def to_json(self):
+    def to_json(self) -> str:
         """summary.json's text: ``as_dict()`` with every NaN and inf as null (valid JSON), indented."""
         return json.dumps(json_safe(self.as_dict()), indent=2, allow_nan=False)
 
     @classmethod
-    def from_dict(cls, entries):
+    def from_dict(cls, entries: Mapping[str, Any]) -> "RunSummary":
         """A summary from ``as_dict()``'s dict or a loaded summary.json (its rows, impedance check and path
         report typed again; a key that is no field is refused, as a TypeError)."""
         entries = dict(entries)

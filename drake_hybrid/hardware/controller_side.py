@@ -23,23 +23,28 @@ before the first valid status. Loggers carry the same names as the directly wire
 import dataclasses
 import math
 from dataclasses import dataclass, field
-from typing import Any, List, Optional
+from typing import Any, Dict, List, Optional, Sequence, Tuple, cast
 
 import numpy as np
 from drake import lcmt_force_torque, lcmt_panda_command, lcmt_panda_status
+from numpy.typing import ArrayLike
 
+from pydrake.lcm import DrakeLcmInterface
 from pydrake.manipulation import PandaCommandSender, PandaControlMode
-from pydrake.systems.framework import DiagramBuilder, System, TriggerType
+from pydrake.systems.framework import Context, DiagramBuilder, TriggerType
 from pydrake.systems.lcm import LcmPublisherSystem, LcmSubscriberSystem
 from pydrake.systems.primitives import LogVectorOutput
 
+from drake_hybrid.control.controller import HybridController
+from drake_hybrid.control.gains import HybridGains
 from drake_hybrid.core.errors import ConfigError
+from drake_hybrid.core.hints import Array
 from drake_hybrid.hardware.command import DriverGravityCompensation, TorqueCommandSafety
 from drake_hybrid.hardware.gain_change import GainSelector, bumpless_integrals
 from drake_hybrid.hardware.messages import HardwareConfig
 from drake_hybrid.hardware.watchdog import MessageWatchdog
 from drake_hybrid.hardware.wrench import ExternalTorqueWrench, ForceTorqueConditioning
-from drake_hybrid.scenario.builder import controller_options, prepare_config
+from drake_hybrid.scenario.builder import PreparedConfig, controller_options, prepare_config
 from drake_hybrid.station.handles import HybridSystems
 from drake_hybrid.station.loggers import add_loggers
 from drake_hybrid.station.loop import connect_hybrid_loop, make_hybrid_controller
@@ -60,16 +65,16 @@ class ControllerStation(HybridSystems):
     config: ScenarioConfig
     hardware: HardwareConfig
     task: Task
-    watchdog: System
-    safety: System
-    command_publisher: System
-    lcm: Any = None
-    controllers: List[System] = field(default_factory=list)     # one law per gain set (gain_changes)
-    gain_selector: Optional[System] = None
-    transfers: List[dict] = field(default_factory=list)          # the bumpless transfers made
+    watchdog: MessageWatchdog
+    safety: TorqueCommandSafety
+    command_publisher: LcmPublisherSystem
+    lcm: Optional[DrakeLcmInterface] = None
+    controllers: List[HybridController] = field(default_factory=list)     # one law per gain set (gain_changes)
+    gain_selector: Optional[GainSelector] = None
+    transfers: List[Dict[str, Any]] = field(default_factory=list)        # the bumpless transfers made
     bumpless: bool = True                                        # False: keep the integrals (for comparison)
 
-    def before_tick(self, root_context, tick):
+    def before_tick(self, root_context: Context, tick: int) -> None:
         """Make the bumpless transfer to the law that becomes active at ``tick`` (call before the
         controller advances to it; a no-op without gain changes)."""
         if self.gain_selector is None or tick not in self.gain_selector.change_ticks:
@@ -91,11 +96,12 @@ class ControllerStation(HybridSystems):
         self.transfers.append({"tick": tick, "time": tick * float(self.config.control_period), "xi": xi.tolist(),
                                "position_error": e_p.tolist()})
 
-    def enabled(self, root_context):
+    def enabled(self, root_context: Context) -> bool:
         """True once a command may be published (a valid status has arrived)."""
-        return self.safety.GetOutputPort("enabled").Eval(self.safety.GetMyContextFromRoot(root_context))[0] > 0.5
+        enabled = cast(Array, self.safety.GetOutputPort("enabled").Eval(self.safety.GetMyContextFromRoot(root_context)))
+        return enabled[0] > 0.5
 
-    def publish_command(self, root_context, utime=None):
+    def publish_command(self, root_context: Context, utime: Optional[int] = None) -> bool:
         """Publish the command of this tick if ``enabled``; returns whether it did.
 
         ``utime`` (int us) stamps the message with another clock than the diagram's: a real
@@ -106,21 +112,22 @@ class ControllerStation(HybridSystems):
         if utime is None:
             self.command_publisher.ForcedPublish(self.command_publisher.GetMyContextFromRoot(root_context))
             return True
-        torque = self.safety.GetOutputPort("torque").Eval(self.safety.GetMyContextFromRoot(root_context))
+        torque = cast(Array, self.safety.GetOutputPort("torque").Eval(self.safety.GetMyContextFromRoot(root_context)))
         message = lcmt_panda_command()
         message.utime = int(utime)
         message.num_joint_position = message.num_joint_velocity = 0
         message.num_joint_torque = len(torque)
         message.joint_torque = [float(x) for x in torque]
         message.control_mode_expected = int(PandaControlMode.kTorque)
+        assert self.lcm is not None                 # build_controller_station gives the station its lcm
         self.lcm.Publish(self.hardware.command_channel, message.encode())
         return True
 
-    def stop_reason(self, root_context):
+    def stop_reason(self, root_context: Context) -> Optional[str]:
         return self.safety.stop_reason(self.safety.GetMyContextFromRoot(root_context))
 
 
-def check_hardware_config(config):
+def check_hardware_config(config: ScenarioConfig) -> None:
     """ConfigError for what the hardware loop does not support (yet)."""
     if not isinstance(config, ScenarioConfig):
         raise TypeError(f"expected a ScenarioConfig, got {type(config).__name__}")
@@ -137,13 +144,15 @@ def check_hardware_config(config):
         raise ConfigError(f"controller: the hardware loop runs the li-sastry law, got {config.controller!r}")
 
 
-def prepared(config):
+def prepared(config: ScenarioConfig) -> PreparedConfig:
     """The config validated once (``scenario.builder.prepare_config``) for the hardware loop."""
     check_hardware_config(config)
     return prepare_config(config)
 
 
-def build_controller_station(config, lcm, hardware=None, initial_positions=None, with_loggers=True, gain_changes=()):
+def build_controller_station(config: ScenarioConfig, lcm: DrakeLcmInterface, hardware: Optional[HardwareConfig] = None,
+                             initial_positions: Optional[ArrayLike] = None, with_loggers: bool = True,
+                             gain_changes: Sequence[Tuple[float, HybridGains]] = ()) -> "ControllerStation":
     """The controller's side of ``config`` on ``lcm`` (a DrakeLcm). See the module docstring.
 
     ``gain_changes``: [(time s, HybridGains), ...] in increasing time: a law per gain set, the
@@ -175,9 +184,10 @@ def build_controller_station(config, lcm, hardware=None, initial_positions=None,
     # The arm's messages: its state and the wrench the law reads.
     status_subscriber = builder.AddNamedSystem("status_subscriber", LcmSubscriberSystem.Make(
         hardware.status_channel, lcmt_panda_status, lcm))
-    watchdog = builder.AddNamedSystem("watchdog", MessageWatchdog(
-        n, period, hardware.max_status_age, hardware.max_force_torque_age, use_force_torque,
-        initial_positions=initial_positions, status_type=lcmt_panda_status, force_torque_type=lcmt_force_torque))
+    watchdog = MessageWatchdog(n, period, hardware.max_status_age, hardware.max_force_torque_age, use_force_torque,
+                               initial_positions=initial_positions, status_type=lcmt_panda_status,
+                               force_torque_type=lcmt_force_torque)
+    builder.AddNamedSystem("watchdog", watchdog)
     builder.Connect(status_subscriber.get_output_port(), watchdog.get_status_input_port())
     state = watchdog.GetOutputPort("estimated_state")
     if use_force_torque:
@@ -197,8 +207,9 @@ def build_controller_station(config, lcm, hardware=None, initial_positions=None,
     source = builder.AddNamedSystem("desired", task.make_source(config, plant, robot, space))
 
     # The command's way to the arm: [gain selector] -> [the driver's gravity] -> limits and stops -> LCM.
-    safety = builder.AddNamedSystem("command_safety", TorqueCommandSafety(
-        n, period, limits, hardware.torque_rate_limit, hardware.hold_stiffness, hardware.hold_damping))
+    safety = TorqueCommandSafety(n, period, limits, hardware.torque_rate_limit, hardware.hold_stiffness,
+                                 hardware.hold_damping)
+    builder.AddNamedSystem("command_safety", safety)
     builder.Connect(state, safety.GetInputPort("estimated_state"))
     builder.Connect(watchdog.GetOutputPort("watchdog_status"), safety.GetInputPort("watchdog_status"))
     command = safety.GetInputPort("torque")
@@ -209,13 +220,14 @@ def build_controller_station(config, lcm, hardware=None, initial_positions=None,
         command = gravity.GetInputPort("torque")
     selector = None
     if gain_changes:
-        selector = builder.AddNamedSystem("gain_selector", GainSelector(n, period, [round(t / period) for t in times]))
+        selector = GainSelector(n, period, [round(t / period) for t in times])
+        builder.AddNamedSystem("gain_selector", selector)
         builder.Connect(selector.GetOutputPort("actuation"), command)
     sender = builder.AddNamedSystem("command_sender", PandaCommandSender(n, PandaControlMode.kTorque))
     builder.Connect(safety.GetOutputPort("torque"), sender.get_input_port())
-    publisher = builder.AddNamedSystem("command_publisher", LcmPublisherSystem.Make(
-        hardware.command_channel, lcmt_panda_command, lcm, use_cpp_serializer=True,
-        publish_triggers={TriggerType.kForced}))
+    publisher = LcmPublisherSystem.Make(hardware.command_channel, lcmt_panda_command, lcm, use_cpp_serializer=True,
+                                        publish_triggers={TriggerType.kForced})
+    builder.AddNamedSystem("command_publisher", publisher)
     builder.Connect(sender.get_output_port(), publisher.get_input_port())
 
     # The law (one per gain set), each closed by the loop's one wiring.

@@ -16,20 +16,29 @@ With predicted shifts the table pairs each designed eigenvalue as the prediction
 """
 
 from dataclasses import dataclass
+from typing import Any, Dict, Iterable, List, Optional, Union
 
 import numpy as np
 
-from drake_hybrid.analysis.matching import nyquist_split, predicted_match, shift_indices
+from drake_hybrid.analysis.discrete_linearization import DiscreteLinearization
+from drake_hybrid.analysis.linearization import Linearization
+from drake_hybrid.analysis.matching import EigenvalueMatch, nyquist_split, predicted_match, shift_indices
 from drake_hybrid.control.gains import ControlMode
+from drake_hybrid.core.hints import Array
+from drake_hybrid.tasks.config import ScenarioConfig
+from drake_hybrid.tasks.task import EigenvalueShift
+
+# A linearization ``judge_eigenvalues`` judges: ``linearize_continuous``'s or the discrete loop's.
+LinearizationResult = Union[Linearization, DiscreteLinearization]
 
 
-def format_eigenvalues(values):
+def format_eigenvalues(values: Iterable[complex]) -> str:
     """Eigenvalues as the command line prints them: "-10, -8.5+3j" (4 significant figures; real when the
     imaginary part is below 1e-9)."""
     return ", ".join(f"{v.real:.4g}{v.imag:+.4g}j" if abs(v.imag) > 1e-9 else f"{v.real:.4g}" for v in values)
 
 
-def sampled_loop_text(config, period):
+def sampled_loop_text(config: ScenarioConfig, period: float) -> str:
     """What ``linearize_discrete`` linearized (``period``: its step, the plant's) against what ``simulate`` runs."""
     low_pass = getattr(config.sensor, "bandwidth_hz", 0.0)
     simulated = (f"simulate runs the controller every {config.control_period * 1e3:g} ms (control_period)"
@@ -41,32 +50,32 @@ def sampled_loop_text(config, period):
 @dataclass
 class EigenvalueReport:
     """A linearization judged against its design (``judge_eigenvalues``; the module docstring)."""
-    result: object              # the linearization (match, shifted_match, shifts, period, checks, ...)
-    config: object              # the ScenarioConfig linearized
+    result: LinearizationResult     # the linearization (match, shifted_match, shifts, period, checks, ...)
+    config: ScenarioConfig      # the config linearized
     mode: ControlMode
     continuous: bool            # linearize_continuous's (else the discrete loop's one-period map)
     velocity_dim: int           # k
     force_dim: int              # m
     tolerance: float            # relative
     strict: bool
-    paired: object              # the EigenvalueMatch the table pairs by (the prediction's, else the match)
-    errors: np.ndarray          # each designed eigenvalue's relative error from its partner in ``paired``
-    shifted: dict               # index of a designed eigenvalue -> the task's EigenvalueShift for it
-    predicted_by: object        # the match that explains every miss (``predicted_match``), or None
+    paired: EigenvalueMatch     # the match the table pairs by (the prediction's, else the match)
+    errors: Array               # each designed eigenvalue's relative error from its partner in ``paired``
+    shifted: Dict[int, EigenvalueShift]      # index of a designed eigenvalue -> the task's shift for it
+    predicted_by: Optional[EigenvalueMatch]  # the match that explains every miss (``predicted_match``), or None
     verdict: str                # the verdict's line
     exit_code: int              # 0: matched (as predicted, without ``strict``); 1: not
 
     @property
-    def period(self):
+    def period(self) -> Optional[float]:
         """The discrete loop's step (s), None for the continuous loop."""
         return getattr(self.result, "period", None)
 
     @property
-    def matched_as_predicted(self):
+    def matched_as_predicted(self) -> bool:
         """Matched, or every miss within the tolerance of its prediction."""
         return bool(self.result.match.matched or self.predicted_by is not None)
 
-    def lines(self):
+    def lines(self) -> List[str]:
         """The lines ``drake-hybrid analyze`` prints: the method, the table of designed against linearized
         eigenvalues with each predicted miss, the predictions, the other modes, the worst deviations, the
         verdict, the unstable modes' diagnoses and the Jacobian's checks."""
@@ -75,6 +84,7 @@ class EigenvalueReport:
         if self.continuous:
             how = "Linearize of the continuous closed loop"
         else:
+            assert period is not None                # the discrete loop's step
             how = (f"Jacobian of the discrete closed loop's one-period map (h = {period * 1e3:g} ms), "
                    "eigenvalues log(mu)/h,")
         lines = [f"{self.config.task} ({self.mode.value}): {how} at a contact equilibrium (residual "
@@ -100,6 +110,7 @@ class EigenvalueReport:
         lines.append(f"  other modes (contact, filter, sampling, joint space): "
                      f"{format_eigenvalues(np.sort_complex(other))}")
         if nyquist.size:
+            assert period is not None                # nyquist_split finds modes only at a step's frequency
             lines.append(f"  at the step's Nyquist frequency pi/h = {np.pi / period:.4g} 1/s (multipliers mu < 0, "
                          "which log(mu)/h maps to ln|mu|/h +- j pi/h: real modes that change sign every step, none of "
                          f"them designed): {format_eigenvalues(np.sort_complex(nyquist))}")
@@ -120,7 +131,7 @@ class EigenvalueReport:
             lines.append(f"  {step_check.summary()}")
         return lines
 
-    def as_dict(self):
+    def as_dict(self) -> Dict[str, Any]:
         """``--json``'s payload: the match (``EigenvalueMatch.as_dict``), the predicted shifts, the pairing by
         prediction, the Nyquist frequency, whether it matched as predicted, the gains and the run's checks."""
         result, check, step_check = self.result, getattr(self.result, "jacobian_check", None), getattr(
@@ -146,7 +157,8 @@ class EigenvalueReport:
         return payload
 
 
-def judge_eigenvalues(result, config, continuous, velocity_dim, force_dim, tolerance=0.05, strict=False):
+def judge_eigenvalues(result: LinearizationResult, config: ScenarioConfig, continuous: bool, velocity_dim: int,
+                      force_dim: int, tolerance: float = 0.05, strict: bool = False) -> EigenvalueReport:
     """Judge a linearization (``result``: ``linearize_continuous``'s or ``linearize_discrete``'s, of ``config``)
     against its design within the relative ``tolerance``: an ``EigenvalueReport`` (the module docstring);
     ``strict`` counts a predicted miss as a miss (exit code 1)."""

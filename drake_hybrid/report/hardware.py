@@ -3,15 +3,18 @@ runs' errors after five design time constants and their difference (``hardware.l
 figures), for ``timing`` and ``run`` the ticks, the controller's cost, the period jitter and the deadline
 misses (``hardware.realtime``'s ``TickTiming.summary``); and whether the watchdog stopped the controller."""
 
+from typing import Any, List, Mapping, Optional
 
-def milliseconds(stats):
+
+def milliseconds(stats: Optional[Mapping[str, float]]) -> str:
     """Timing statistics ({"p50", "p99", "max"} in s, or None) in milliseconds."""
     if stats is None:
         return "none measured"
     return f"p50 {stats['p50'] * 1e3:.3g} ms, p99 {stats['p99'] * 1e3:.3g} ms, max {stats['max'] * 1e3:.3g} ms"
 
 
-def hardware_lines(figures, task, mode, wrench_source, lcm_url=None):
+def hardware_lines(figures: Mapping[str, Any], task: str, mode: str, wrench_source: str,
+                   lcm_url: Optional[str] = None) -> List[str]:
     """The lines ``drake-hybrid hardware MODE`` prints for its ``figures`` (with ``wall_time_s``, the command's
     own time): what ran, how long, the errors (hil) or the ticks and misses (timing, run: over ``lcm_url``), and
     "no fault" when the watchdog did not stop the controller (``hardware_fault_text`` says so otherwise)."""
@@ -53,7 +56,7 @@ def hardware_lines(figures, task, mode, wrench_source, lcm_url=None):
     return lines
 
 
-def hardware_fault_text(figures, task, mode):
+def hardware_fault_text(figures: Mapping[str, Any], task: str, mode: str) -> Optional[str]:
     """The fault's line when the watchdog stopped the controller (``figures["stop"]``: its reason), else None."""
     if figures["stop"] is None:
         return None

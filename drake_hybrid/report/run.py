@@ -9,12 +9,17 @@ nothing here computes one.
 """
 
 import re
+from typing import Any, Iterable, List, Mapping, Optional, Sequence
 
 import numpy as np
 
 from drake_hybrid.analysis.design import designed_eigenvalues_by_row
-from drake_hybrid.experiments.metrics import ForceRowFigures, display_unit
+from drake_hybrid.control.controller import HybridController
+from drake_hybrid.experiments.metrics import ForceRowFigures, ImpedanceCheck, RowFigures, display_unit
 from drake_hybrid.experiments.path_report import path_text
+from drake_hybrid.experiments.simulation import SimulationResult
+from drake_hybrid.experiments.summary import RunSummary
+from drake_hybrid.experiments.sweep import SweepRun
 from drake_hybrid.report.eigenvalues import format_eigenvalues
 
 # What a row's % figures are of, in words, where it is not its own command (``metrics.row_scales``' sources).
@@ -23,16 +28,18 @@ SCALE_WORDS = {"rows in its units": "the largest command in its units",
 IMPEDANCE_REALIZED = 2.0      # % of the command: a run this close to its driven impedance realizes it
 
 
-def eigenvalues_by_row(controller, summary):
+def eigenvalues_by_row(controller: HybridController, summary: RunSummary) -> str:
     """" by row, velocity: 'x-dot' -10, 'theta-dot' -8; force: 'F' -10": each designed eigenvalue with its
     row (``summary``'s rows' names), or by loop when a gain couples the rows (``controller``: the run's
     ``HybridController``, its validated gains and mode)."""
     by_row = designed_eigenvalues_by_row(controller.validated_gains(), controller.mode, controller.kinematic_rows,
                                          controller.num_joints - controller.task_size)
     if by_row is None:
+        assert summary.predicted_eigenvalues is not None       # a completed run's summary (run_lines')
         designed = np.array([complex(*e) for e in summary.predicted_eigenvalues])
         return f" (by loop: a gain couples the rows): {format_eigenvalues(designed)}"
     velocity, force, null_space = by_row
+    assert summary.velocity_rows is not None and summary.force_rows is not None     # a completed run's
     text = (" by row, velocity: " + ", ".join(f"'{row.name}' {format_eigenvalues(values)}"
                                                for row, values in zip(summary.velocity_rows, velocity))
             + "; force: " + ", ".join(f"'{row.name}' {format_eigenvalues(values)}"
@@ -43,7 +50,7 @@ def eigenvalues_by_row(controller, summary):
     return text
 
 
-def event_text(time, events):
+def event_text(time: float, events: Optional[Iterable[Mapping[str, Any]]]) -> str:
     """Where ``time`` (s) falls among the run's phases (the summary's ``events``): inside a span, or within
     0.3 s after its edge or an instant; empty if nowhere near one (or only near phases that cause no error)."""
     for event in events or ():
@@ -58,7 +65,7 @@ def event_text(time, events):
     return ""
 
 
-def notes_on(name, notes):
+def notes_on(name: str, notes: Optional[Iterable[str]]) -> List[int]:
     """The numbers (from 1) of the run's ``notes`` that name the row ``name`` (up to a comma or a parenthesis:
     "F" of "F, along E_f = [0 1 0]") as a word, e.g. "x-dot's error ...": the notes about that row."""
     short = re.split(r",| \(", name)[0].strip()
@@ -66,7 +73,8 @@ def notes_on(name, notes):
     return [n + 1 for n, note in enumerate(notes or ()) if pattern.search(note)]
 
 
-def row_text(row, events=(), notes=()):
+def row_text(row: RowFigures, events: Optional[Iterable[Mapping[str, Any]]] = (),
+             notes: Optional[Iterable[str]] = ()) -> str:
     """One row's errors (a ``RowFigures``): absolute in its units, % of its scale (its command; for a row
     commanded to zero, the run's speed or force: ``metrics.row_scales``), settling from contact; when its
     settled max falls in or just after a phase of the run (``events``), that phase; the numbers of the
@@ -100,7 +108,7 @@ def row_text(row, events=(), notes=()):
     return text + pointer
 
 
-def impedance_text(check):
+def impedance_text(check: ImpedanceCheck) -> str:
     """The impedance's check (an ``ImpedanceCheck``) in one line: the run against the designed impedance
     driven by its measured F_v, and whether the run realizes it (within ``IMPEDANCE_REALIZED`` %)."""
     forces = ", ".join(f"{force:.3g}" for force in check.max_tangential_force)
@@ -115,7 +123,7 @@ def impedance_text(check):
             f"errors it predicts are {agreement} of the measured ones (settled): {verdict}")
 
 
-def residual_text(summary):
+def residual_text(summary: RunSummary) -> str:
     """max |C(r)| after contact in C's units: one figure if every row has the same unit, else one per row."""
     residual = summary.max_constraint_residual_after_contact
     if residual is None:
@@ -129,11 +137,14 @@ def residual_text(summary):
     return f"max |C_i(r)| after contact, per row of C: {figures}"
 
 
-def run_lines(result):
+def run_lines(result: SimulationResult) -> List[str]:
     """The lines ``drake-hybrid simulate`` prints for a completed run (a ``SimulationResult``): what ran, the
     designed eigenvalues by row, each row's errors, the invalid wrench samples, the impedance's check, the
     constraint's residual, a job's path and the run's notes, numbered."""
     s = result.summary
+    # A completed run (simulate's result, not stopped): its scenario and every figure read here are there.
+    assert result.scenario is not None and s.contact_time is not None and s.design_time_constant is not None
+    assert s.velocity_rows is not None and s.force_rows is not None
     lines = [f"{s.task} ({s.mode}), {s.duration:.2f} s simulated in {s.wall_time:.1f} s "
              f"(real-time factor {s.real_time_factor:.2f})",
              f"  designed eigenvalues{eigenvalues_by_row(result.scenario.controller, s)}"
@@ -164,7 +175,7 @@ def _where(workers):
     return f"on the Dask scheduler at {workers} (--scheduler)"
 
 
-def sweep_lines(task_name, run, rows):
+def sweep_lines(task_name: str, run: SweepRun, rows: Sequence[Mapping[str, Any]]) -> List[str]:
     """The lines ``drake-hybrid sweep`` prints: how many points ran and where (``run``: a ``SweepRun``), how
     many of the table's ``rows`` (``read_results``) are stable and failed, and the table's path."""
     stable = sum(1 for row in rows if row.get("stable"))

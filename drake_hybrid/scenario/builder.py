@@ -22,17 +22,20 @@ import dataclasses
 from typing import Any, Dict, Optional
 
 from pydrake.geometry import Meshcat, MeshcatVisualizer
+from pydrake.multibody.plant import MultibodyPlant
 from pydrake.systems.framework import DiagramBuilder
 
 from drake_hybrid.control.baselines import make_baseline
 from drake_hybrid.control.gains import ControlMode, ValidatedGains, gain_matrix
 from drake_hybrid.control.phases import ContactPhase
 from drake_hybrid.core.errors import ConfigError
+from drake_hybrid.core.hints import Array
 from drake_hybrid.core.projections import ConstraintSpace
 from drake_hybrid.scenario.start import check_start_sizes
 from drake_hybrid.station.loggers import add_loggers
 from drake_hybrid.station.loop import add_hybrid_controller
 from drake_hybrid.station.path_job import draw_path
+from drake_hybrid.station.robot_model import RobotModel
 from drake_hybrid.systems.faults import JointFriction
 from drake_hybrid.tasks.config import ScenarioConfig, check_scenario_config
 from drake_hybrid.tasks.path import task_path_job, with_path_commands
@@ -78,7 +81,8 @@ def prepare_config(config: ScenarioConfig) -> PreparedConfig:
     return PreparedConfig(task=task, mode=mode, constraint_space=constraint_space, config=config, gains=gains)
 
 
-def controller_options(prepared: PreparedConfig, plant, controller_plant, robot, control_period: Optional[float],
+def controller_options(prepared: PreparedConfig, plant: MultibodyPlant, controller_plant: MultibodyPlant,
+                       robot: RobotModel, control_period: Optional[float],
                        with_loggers: bool, sample_lead: bool = True) -> Dict[str, Any]:
     """The controller's arguments that ``prepared.config`` sets beyond the loop's own (``gains``, ``mode``,
     ``safety``, the mechanism's inertia, the tangential force's compensation), for
@@ -96,7 +100,8 @@ def controller_options(prepared: PreparedConfig, plant, controller_plant, robot,
                 compensate_tangential_force=config.compensate_tangential_force)
 
 
-def velocity_row_inertia(config, task, plant, constraint_space):
+def velocity_row_inertia(config: ScenarioConfig, task: Task, plant: MultibodyPlant,
+                         constraint_space: ConstraintSpace) -> Optional[Array]:
     """I_v of ``config.mechanism`` (None for the paper's massless constraint): given, or the task's
     reading of the simulation plant (``Task.velocity_row_inertia``)."""
     source = config.mechanism.source

@@ -10,17 +10,27 @@ and ``holding_torque`` work on any diagram's systems (``station.loop.HybridSyste
 in your own diagram is ``station.contact_start.solve_contact_start``.
 """
 
-import numpy as np
+from typing import cast
 
+import numpy as np
+from numpy.typing import ArrayLike
+
+from pydrake.multibody.plant import MultibodyPlant
+from pydrake.systems.framework import Context, Diagram
+
+from drake_hybrid.control.controller import HybridController
 from drake_hybrid.core.arguments import joint_vector
 from drake_hybrid.core.errors import DimensionError, OffConstraintError
+from drake_hybrid.core.hints import Array
 from drake_hybrid.station.clearance import check_robot_clearance
 from drake_hybrid.station.root_context import check_systems
 from drake_hybrid.station.start import holding_torque, prime_start
+from drake_hybrid.tasks.config import ScenarioConfig
 from drake_hybrid.tasks.plant import apply_model_error
+from drake_hybrid.tasks.task import Scenario
 
 
-def check_start_sizes(config, controller):
+def check_start_sizes(config: ScenarioConfig, controller: HybridController) -> None:
     """DimensionError if the start's integrals do not have the controller's sizes."""
     xi_slice, e_p_slice = controller.integral_state_slices()
     m, k = xi_slice.stop, e_p_slice.stop - e_p_slice.start
@@ -30,19 +40,21 @@ def check_start_sizes(config, controller):
         raise DimensionError(f"start.position_error must have k = {k} entries, got {len(config.start.position_error)}")
 
 
-def set_initial_conditions(scenario, root_context):
+def set_initial_conditions(scenario: Scenario, root_context: Context) -> None:
     """Put the robot at the task's start, pressing with the desired force if ``start.in_contact``
     (else ``start.gap`` away, for the supervisor's approach); apply the model error to the
     simulated plant; then ``prime_start``: the controller's integrals (``start.force_integral``,
     ``start.position_error``) and held torque, the sensors' first reading."""
-    config, task, plant = scenario.config, scenario.task, scenario.plant
+    config, task = scenario.config, scenario.task
+    plant = cast(MultibodyPlant, scenario.plant)          # a built scenario's: build_scenario sets it
     plant_context = scenario.plant_context(root_context)
     apply_model_error(plant, plant_context, scenario.robot, config.model_error)
     q0 = task.start_positions(scenario)
     check_start(scenario, q0)
-    check_robot_clearance(scenario.diagram, root_context, scenario, q0, f"task '{task.name}'")
+    check_robot_clearance(cast(Diagram, scenario.diagram), root_context, scenario, q0, f"task '{task.name}'")
     plant.SetPositions(plant_context, scenario.robot.arm, q0)
-    plant.SetVelocities(plant_context, scenario.robot.arm, np.zeros(len(q0)))
+    at_rest: Array = np.zeros(len(q0))
+    plant.SetVelocities(plant_context, scenario.robot.arm, at_rest)
     task.set_environment_state(scenario, plant_context)
     xi_slice, e_p_slice = scenario.controller.integral_state_slices()
     integrals = np.zeros(xi_slice.stop + (e_p_slice.stop - e_p_slice.start))
@@ -55,7 +67,7 @@ def set_initial_conditions(scenario, root_context):
                 integrals)
 
 
-def check_start(scenario, q):
+def check_start(scenario: Scenario, q: ArrayLike) -> None:
     """Raise a typed error if the arm at ``q`` is not a valid start of the hybrid law: off the
     constraint (OffConstraintError), on the wrong branch (BranchError), at a chart singularity
     (ChartSingularityError) or where E loses rank (ConstraintRankError); ArgumentError for a ``q`` that
@@ -76,7 +88,7 @@ def check_start(scenario, q):
     constraint.check_branch(x)
 
 
-def static_torque(scenario, q, pressing=True):
+def static_torque(scenario: Scenario, q: ArrayLike, pressing: bool = True) -> Array:
     """tau = g(q) - J^T E_f^T F_d(0): the actuation that holds the robot at rest pressing with the
     config's F_d (``pressing=False``: g(q) only, in free space). ArgumentError for a ``q`` that is
     not a vector of the controller plant's number of finite positions."""

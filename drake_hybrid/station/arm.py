@@ -3,7 +3,7 @@
 
 import os
 import re
-from typing import Callable, Dict, List, Mapping, Optional, Sequence, Tuple, Union
+from typing import Callable, Dict, List, Mapping, Optional, Sequence, Tuple, Union, cast
 from xml.etree import ElementTree
 
 import numpy as np
@@ -43,13 +43,13 @@ def weld_joints(plant: MultibodyPlant, joint_names: Union[str, Sequence[str]],
     joint_names = [text(name, "joint_names[]", owner) for name in joint_names]
     joints = []
     for name in joint_names:
-        owner = () if model_instance is None else (model_instance,)
-        if not plant.HasJointNamed(name, *owner):
-            indices = plant.GetJointIndices(*owner)
+        scope = () if model_instance is None else (model_instance,)
+        if not plant.HasJointNamed(name, *scope):
+            indices = plant.GetJointIndices(*scope)
             known = sorted(plant.get_joint(index).name() for index in indices)
-            where = "the plant" if not owner else f"model '{plant.GetModelInstanceName(model_instance)}'"
+            where = "the plant" if model_instance is None else f"model '{plant.GetModelInstanceName(model_instance)}'"
             raise ArgumentError(f"weld_joints: {where} has no joint '{name}'; its joints: {', '.join(known)}")
-        joints.append(plant.GetJointByName(name, *owner))
+        joints.append(plant.GetJointByName(name, *scope))
     for constraint_id in plant.GetConstraintIds():
         plant.RemoveConstraint(constraint_id)
     welds = []
@@ -71,8 +71,13 @@ def urdf_effort_limits(path: Union[str, os.PathLike]) -> Dict[str, float]:
         root = ElementTree.parse(path).getroot()
     except ElementTree.ParseError as error:
         raise ArgumentError(f"urdf_effort_limits: path: '{os.fspath(path)}' is not XML ({error})") from None
-    return {joint.get("name"): float(joint.find("limit").get("effort"))
-            for joint in root.iter("joint") if joint.find("limit") is not None and joint.find("limit").get("effort")}
+    limits = {}
+    for joint in root.iter("joint"):
+        limit = joint.find("limit")
+        effort = limit.get("effort") if limit is not None else None
+        if effort:
+            limits[cast(str, joint.get("name"))] = float(effort)     # a URDF's joints have names
+    return limits
 
 
 def add_actuators(plant: MultibodyPlant, model_instance: ModelInstanceIndex,
@@ -240,12 +245,12 @@ def carried_bodies(plant: MultibodyPlant, model_instance: ModelInstanceIndex, bo
         joint = plant.get_joint(index)
         parent[joint.child_body().index()] = joint.parent_body().index()
     carried = []
-    for index in plant.GetBodyIndices(model_instance):
-        ancestor = parent.get(index)
+    for body_index in plant.GetBodyIndices(model_instance):
+        ancestor = parent.get(body_index)
         while ancestor is not None and ancestor != body.index():
             ancestor = parent.get(ancestor)
         if ancestor == body.index():
-            carried.append(plant.get_body(index))
+            carried.append(plant.get_body(body_index))
     return carried
 
 

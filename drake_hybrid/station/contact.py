@@ -3,10 +3,10 @@
 
 import math
 from dataclasses import dataclass
-from typing import Any, List, Optional, Sequence, Tuple, Union
+from typing import Any, Collection, List, Optional, Sequence, Tuple, Type, Union, cast
 
 from pydrake.geometry import (CollisionFilterDeclaration, GeometryId, GeometrySet, ProximityProperties, Role,
-                              RoleAssign, SceneGraph)
+                              RoleAssign, SceneGraph, SourceId)
 from pydrake.multibody.plant import CoulombFriction, MultibodyPlant, MultibodyPlantConfig
 
 from drake_hybrid.core.arguments import describe, instance, nonnegative
@@ -60,7 +60,7 @@ class ContactConfig:
     workpiece_resolution: float = 0.0            # m, the hint of each workpiece geometry that has one; 0: the model's
     # (docs/contact_resolution.md measures both hints' accuracy against their cost)
 
-    def validate(self, prefix="contact."):
+    def validate(self, prefix: str = "contact.") -> None:
         """ConfigError naming ``prefix`` and the field: the types first (``core.schema.check_types``: a
         config built in Python is checked as a file is), NaN and inf, then the values."""
         check_types(self, ContactConfig, prefix.rstrip("."))
@@ -101,6 +101,7 @@ def apply_contact_defaults(plant: MultibodyPlant, scene_graph: SceneGraph,
     contact = instance(contact, "contact", owner, ContactConfig, allow_none=True) or ContactConfig()
     contact.validate(f"{owner}: contact.")
     inspector, source = scene_graph.model_inspector(), plant.get_source_id()
+    assert source is not None                   # the plant's geometry source is registered (above)
     if not inspector.SourceIsRegistered(source):
         raise ArgumentError(f"{owner}: scene_graph is not the plant's SceneGraph (AddMultibodyPlant returns the pair)")
     known = set(inspector.GetAllGeometryIds())
@@ -113,7 +114,8 @@ def apply_contact_defaults(plant: MultibodyPlant, scene_graph: SceneGraph,
     set_contact_properties(plant, scene_graph, workpiece, contact, pad=False)
 
 
-def geometry_ids(value: Any, name: str, owner: str, what: str, *, collections: Tuple[type, ...] = (list, tuple),
+def geometry_ids(value: Any, name: str, owner: str, what: str, *,
+                 collections: Tuple[Type[Collection[Any]], ...] = (list, tuple),
                  nonempty: bool = False) -> List[GeometryId]:
     """``value`` (a GeometryId, or one of ``collections`` of them; not empty if ``nonempty``) as a list of
     GeometryIds; ArgumentError naming ``owner`` and ``name``, ``what`` saying what it must be."""
@@ -148,7 +150,8 @@ def set_contact_properties(plant: MultibodyPlant, scene_graph: SceneGraph, geome
                 properties.UpdateProperty("hydroelastic", "resolution_hint", float(config.workpiece_resolution))
         properties.UpdateProperty("material", "coulomb_friction",
                                   CoulombFriction(float(config.friction), float(config.friction)))
-        scene_graph.AssignRole(plant.get_source_id(), geometry_id, properties, RoleAssign.kReplace)
+        # The plant's geometry source: registered (a plant with a SceneGraph, before Finalize).
+        scene_graph.AssignRole(cast(SourceId, plant.get_source_id()), geometry_id, properties, RoleAssign.kReplace)
 
 
 def only_tool_touches(plant: MultibodyPlant, scene_graph: SceneGraph, robot: RobotModel,

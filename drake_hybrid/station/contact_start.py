@@ -7,12 +7,12 @@ integrated), the typed checks (on the constraint, the branch, a pushing force, t
 says, the links clear of the scene), then ``station.start.prime_start``.
 """
 
-from typing import Iterable, Optional
+from typing import Iterable, Optional, cast
 
 import numpy as np
 from numpy.typing import ArrayLike
 
-from pydrake.geometry import GeometryId, HydroelasticContactRepresentation
+from pydrake.geometry import GeometryId, HydroelasticContactRepresentation, QueryObject
 from pydrake.math import RigidTransform
 from pydrake.multibody.plant import MultibodyPlant
 from pydrake.systems.framework import Context, Diagram
@@ -20,6 +20,7 @@ from pydrake.systems.framework import Context, Diagram
 from drake_hybrid.control.phases import ContactPhase
 from drake_hybrid.core.arguments import describe, instance, joint_vector, positive, vector
 from drake_hybrid.core.errors import ArgumentError, ConfigError, OffConstraintError, UnreachablePoseError
+from drake_hybrid.core.hints import Array
 from drake_hybrid.core.kinematics import inverse_kinematics
 from drake_hybrid.core.preconditions import check_pushing_force
 from drake_hybrid.station.clearance import check_robot_clearance
@@ -55,7 +56,7 @@ def rest_contact_wrench(plant: MultibodyPlant, plant_context: Context, robot_geo
     if not port.HasValue(plant_context):
         raise ArgumentError(f"{owner}: plant's geometry_query input is not connected: the plant must be registered "
                             "with a SceneGraph (AddMultibodyPlant) in a built diagram")
-    query = port.Eval(plant_context)
+    query = cast(QueryObject, port.Eval(plant_context))        # pydrake's stubs: an object
     robot = _registered_geometries(robot_geometries, query.inspector(), owner)
     wrench = np.zeros(6)
     try:
@@ -74,7 +75,8 @@ def rest_contact_wrench(plant: MultibodyPlant, plant_context: Context, robot_geo
             continue
         mesh, pressure = surface.tri_mesh_W(), surface.tri_e_MN()
         for face in range(mesh.num_triangles()):
-            force = sign * pressure.Evaluate(face, CENTROID) * mesh.area(face) * mesh.face_normal(face)
+            normal: Array = mesh.face_normal(face)
+            force = sign * float(pressure.Evaluate(face, CENTROID)) * mesh.area(face) * normal
             wrench[:3] += np.cross(mesh.element_centroid(face) - p_WP, force)
             wrench[3:] += force
     return wrench
@@ -93,7 +95,7 @@ def _registered_geometries(robot_geometries, inspector, owner):
     return set(robot_geometries)
 
 
-CENTROID = np.full(3, 1.0 / 3.0)           # a triangle's centroid in barycentric coordinates
+CENTROID: Array = np.full(3, 1.0 / 3.0)           # a triangle's centroid in barycentric coordinates
 
 
 def check_start_sensor(systems: HybridSystems, owner: str) -> None:
@@ -103,7 +105,8 @@ def check_start_sensor(systems: HybridSystems, owner: str) -> None:
     a fixed point of priming the filter with it is the contact's rest wrench (measured on a Kinova Jaco
     pressing 10 N: the filter primed to 11.94 N, the sensor then reading 11.46 N; iterated, the prime
     settles at 11.54 N with max |x-dot| still 12.3; with hydroelastic_with_fallback max |x-dot| 565)."""
-    if isinstance(systems.sensor, WristForceTorqueSensor) and not systems.plant.time_step() > 0:
+    plant = cast(MultibodyPlant, systems.plant)        # a simulated station's (a real arm's has none)
+    if isinstance(systems.sensor, WristForceTorqueSensor) and not plant.time_step() > 0:
         raise ArgumentError(
             f"{owner}: systems has a WristForceTorqueSensor on a continuous plant (time_step = 0): its reading (the "
             "weld's reaction) depends on the accelerations the controller's torque causes, so the start cannot be "

@@ -8,15 +8,26 @@ the analysis. The two compositions that know more add it in a subclass.
 """
 
 from dataclasses import dataclass, field
-from typing import Any, Dict, Optional
+from typing import Dict, Optional, Tuple, Union, cast
 
 from pydrake.multibody.plant import MultibodyPlant
 from pydrake.systems.framework import Context, Diagram, OutputPort, System
+from pydrake.systems.primitives import VectorLogSink
 
+from drake_hybrid.control.controller import HybridController
+from drake_hybrid.control.supervision import ContactSupervisor
 from drake_hybrid.core.kinematics import EndEffectorKinematics
 from drake_hybrid.core.projections import ConstraintSpace
 from drake_hybrid.station.path_job import PathJob
 from drake_hybrid.station.robot_model import RobotModel
+from drake_hybrid.station.sensing import WrenchSensor
+from drake_hybrid.systems.faults import SensorFaultInjector
+from drake_hybrid.systems.low_pass_filter import LowPassFilter
+from drake_hybrid.systems.wrench_conditioner import WrenchConditioner
+
+# A logger of ``station.loggers.add_loggers``: a VectorLogSink, or (sink, columns) for a signal the
+# controller's ``diagnostics`` port carries with others.
+Logger = Union[VectorLogSink, Tuple[VectorLogSink, slice]]
 
 
 @dataclass(kw_only=True)
@@ -38,23 +49,24 @@ class HybridSystems:
     robot: RobotModel
     controller_plant: MultibodyPlant
     constraint_space: ConstraintSpace
-    controller: System
+    controller: HybridController        # or a baseline of control.baselines (the same ports)
     state: OutputPort
     wrench_output: OutputPort
     actuation: OutputPort
     plant: Optional[MultibodyPlant] = None
-    sensor: Optional[System] = None
+    sensor: Optional[WrenchSensor] = None
     true_wrench: Optional[OutputPort] = None
     kinematics: Optional[EndEffectorKinematics] = None
     source: Optional[System] = None
-    wrench_filter: Optional[System] = None
-    conditioner: Optional[System] = None
-    fault_injector: Optional[System] = None
-    supervisor: Optional[System] = None
+    wrench_filter: Optional[LowPassFilter] = None
+    conditioner: Optional[WrenchConditioner] = None
+    fault_injector: Optional[SensorFaultInjector] = None
+    supervisor: Optional[ContactSupervisor] = None
     path: Optional[PathJob] = None
-    loggers: Dict[str, Any] = field(default_factory=dict)
+    loggers: Dict[str, Logger] = field(default_factory=dict)
     diagram: Optional[Diagram] = None
 
     def plant_context(self, root_context: Context) -> Context:
         """The simulated plant's mutable context in the diagram's ``root_context``."""
-        return self.plant.GetMyMutableContextFromRoot(root_context)
+        plant = cast(MultibodyPlant, self.plant)       # a simulated station's (a real arm's has none)
+        return plant.GetMyMutableContextFromRoot(root_context)

@@ -1,16 +1,15 @@
 """Loggers of every signal of a hybrid loop, and the log they give.
 """
 
-from typing import Any, Dict, Optional, Tuple
-
-import numpy as np
+from typing import Dict, Optional, Tuple
 
 from pydrake.systems.framework import Context, DiagramBuilder
 from pydrake.systems.primitives import LogVectorOutput
 
 from drake_hybrid.core.arguments import instance, nonnegative
 from drake_hybrid.core.errors import ArgumentError
-from drake_hybrid.station.handles import HybridSystems
+from drake_hybrid.core.hints import Array
+from drake_hybrid.station.handles import HybridSystems, Logger
 from drake_hybrid.station.root_context import subsystem_context
 
 # The log's keys (read_log; log.npz names a few otherwise), each (samples x size), with "t" the sample times.
@@ -46,7 +45,7 @@ PATH_LOGS = ("reference_position", "reference_normal", "path_error", "path_progr
 
 
 def add_loggers(builder: DiagramBuilder, systems: HybridSystems,
-                period: Optional[float] = None) -> Dict[str, Any]:
+                period: Optional[float] = None) -> Dict[str, Logger]:
     """Loggers for every signal of ``systems`` (a HybridSystems), keyed by ``LOG_KEYS``; a path job's
     reference, error and progress (and the supervisor's lift-off) too.
 
@@ -57,7 +56,7 @@ def add_loggers(builder: DiagramBuilder, systems: HybridSystems,
     instance(builder, "builder", "add_loggers", DiagramBuilder)
     instance(systems, "systems", "add_loggers", HybridSystems, what="the HybridSystems of add_hybrid_controller")
     controller = systems.controller
-    loggers = {}
+    loggers: Dict[str, Logger] = {}
     period = nonnegative(0.0 if period is None else period, "period", "add_loggers", unit="s")
     if getattr(controller, "sampled_diagnostics", False):
         diagnostics = LogVectorOutput(controller.GetOutputPort("diagnostics"), builder, period)
@@ -86,8 +85,8 @@ def add_loggers(builder: DiagramBuilder, systems: HybridSystems,
     return loggers
 
 
-def logged(loggers: Dict[str, Any], root_context: Context, name: str,
-           owner: str = "logged") -> Tuple[np.ndarray, np.ndarray]:
+def logged(loggers: Dict[str, Logger], root_context: Context, name: str,
+           owner: str = "logged") -> Tuple[Array, Array]:
     """(times, samples x size) of logger ``name`` of ``loggers`` (``add_loggers``) in ``root_context`` (the
     root context of the diagram they were added to: ArgumentError naming ``owner`` otherwise)."""
     instance(loggers, "loggers", owner, dict, what="the dict of add_loggers")
@@ -101,11 +100,11 @@ def logged(loggers: Dict[str, Any], root_context: Context, name: str,
     return log.sample_times(), log.data().T[:, columns]
 
 
-def read_log(loggers: Dict[str, Any], root_context: Context) -> Dict[str, np.ndarray]:
+def read_log(loggers: Dict[str, Logger], root_context: Context) -> Dict[str, Array]:
     """{key: array} of every logger of ``add_loggers`` in ``root_context``, with "t" (the sample times of
     the first), keyed by ``LOG_KEYS`` (log.npz calls a few otherwise: velocity, constraint, torque, q and v)."""
     instance(loggers, "loggers", "read_log", dict, what="the dict of add_loggers")
-    log = {}
+    log: Dict[str, Array] = {}
     for name in loggers:
         times, values = logged(loggers, root_context, name, "read_log")
         log.setdefault("t", times)

@@ -42,7 +42,7 @@ process at an input connected twice, these raise an ArgumentError naming the por
 
 import inspect
 import numbers
-from typing import Any, Optional, Sequence, Union
+from typing import Any, List, Optional, Sequence, Union
 
 import numpy as np
 
@@ -55,6 +55,7 @@ from drake_hybrid.control.phases import ContactPhase
 from drake_hybrid.control.supervision import ContactSupervisor, SupervisionConfig
 from drake_hybrid.core.arguments import describe, instance, vector
 from drake_hybrid.core.errors import ArgumentError, ConfigError
+from drake_hybrid.core.hints import Array
 from drake_hybrid.core.kinematics import EndEffectorKinematics
 from drake_hybrid.core.projections import ConstraintSpace
 from drake_hybrid.station.handles import HybridSystems
@@ -81,7 +82,7 @@ CONTROLLER_OPTIONS = tuple(name for name in inspect.signature(HybridController._
 
 def connect_hybrid_loop(builder: DiagramBuilder, controller: System, *, state: OutputPort, wrench: OutputPort,
                         actuation: InputPort, source: Optional[System] = None,
-                        supervisor: Optional[System] = None, conditioner: Optional[System] = None,
+                        supervisor: Optional[ContactSupervisor] = None, conditioner: Optional[System] = None,
                         owner: str = "connect_hybrid_loop") -> None:
     """Every connection of the hybrid loop to and from ``controller``'s ports, in one place::
 
@@ -281,26 +282,28 @@ def add_hybrid_controller(builder: DiagramBuilder, plant: MultibodyPlant, robot:
                                             gains=gains, mode=mode, control_period=control_period,
                                             supervision=supervision, path=path is not None, **controller_options)
     arm = arm_model_name(plant, robot)
-    controller = add_named(builder, "controller", controller, arm)
+    # The law made above, or yours (a baseline: the HybridController's ports and sizes).
+    law: HybridController = add_named(builder, "controller", controller, arm)
     tare = supervision is not None and supervision.tare_time > 0 and phase == ContactPhase.TARE
     wrench_sensor, true_wrench, wrench_output, injector, conditioner, wrench_filter = sensing_of_checked(
         builder, plant, robot, sensor, control_period, sensor_faults, tare, owner)
     if source is not False:
+        assert isinstance(source, System)          # made above, or checked by _check_source
         source = add_named(builder, "desired", source, arm)
     supervisor = None
     if supervision is not None:
         supervisor = add_named(builder, "contact_supervisor", ContactSupervisor(
-            supervision, controller.force_size, controller.kinematic_rows, control_period, phase,
+            supervision, law.force_size, law.kinematic_rows, control_period, phase,
             lift_off=path is not None and path.lifts_off(supervised=True)), arm)
-    connect_hybrid_loop(builder, controller, state=plant.get_state_output_port(robot.arm), wrench=wrench_output,
+    connect_hybrid_loop(builder, law, state=plant.get_state_output_port(robot.arm), wrench=wrench_output,
                         actuation=plant.get_actuation_input_port(robot.arm), source=source or None,
                         supervisor=supervisor, conditioner=conditioner if tare else None, owner=owner)
     kinematics = EndEffectorKinematics(plant, robot.end_effector_frame, robot.end_effector_point,
                                        constraint_space.chart)
     return HybridSystems(plant=plant, robot=robot, controller_plant=controller_plant,
-                         constraint_space=constraint_space, controller=controller, sensor=wrench_sensor,
+                         constraint_space=constraint_space, controller=law, sensor=wrench_sensor,
                          kinematics=kinematics, state=plant.get_state_output_port(robot.arm),
-                         wrench_output=wrench_output, actuation=controller.GetOutputPort("actuation"),
+                         wrench_output=wrench_output, actuation=law.GetOutputPort("actuation"),
                          true_wrench=true_wrench, source=source or None, wrench_filter=wrench_filter,
                          conditioner=conditioner, fault_injector=injector, supervisor=supervisor, path=path)
 
@@ -312,7 +315,8 @@ def _check_source(source, owner):
         port_of(source, name, "output", owner, "source")
 
 
-def as_profile(command, size, name="command", owner="add_hybrid_controller"):
+def as_profile(command: Union[Profile, Sequence[float], None], size: int, name: str = "command",
+               owner: str = "add_hybrid_controller") -> Profile:
     """``command`` as a Profile of ``size`` entries: a Profile as it is (checked), a sequence of ``size``
     numbers as a constant one, None as zeros. Typed errors name ``name``."""
     if command is None:
@@ -348,7 +352,8 @@ _MATCH_TOLERANCE = 1e-6      # m and rad: the controller plant's end-effector po
 _MATCH_CONFIGURATIONS = 3    # the default positions and two random ones within the limits
 
 
-def check_controller_plant(plant, robot, controller_plant, owner="check_controller_plant"):
+def check_controller_plant(plant: MultibodyPlant, robot: RobotModel, controller_plant: MultibodyPlant,
+                           owner: str = "check_controller_plant") -> None:
     """ArgumentError naming ``controller_plant`` if it does not model ``plant``'s arm ``robot.arm``: the
     numbers of positions, velocities and actuators, and the end-effector pose (``robot``'s frame and
     point) at the arm's default positions and two random ones within the joint limits (to
@@ -365,18 +370,19 @@ def check_controller_plant(plant, robot, controller_plant, owner="check_controll
             raise ArgumentError(f"{owner}: controller_plant has {model} {what}, the plant's arm '{arm_name}' "
                                 f"{simulated}: pass the controller's model of this arm (robot_plant(add_robot))")
     frame = robot.end_effector_frame
-    for name, model in (("plant", plant), ("controller_plant", controller_plant)):
-        if not model.HasFrameNamed(frame):
+    for name, model_plant in (("plant", plant), ("controller_plant", controller_plant)):
+        if not model_plant.HasFrameNamed(frame):
             raise ArgumentError(f"{owner}: {name} has no end-effector frame '{frame}' (robot.end_effector_frame): "
                                 f"pass the controller's model of this arm (robot_plant(add_robot))")
     context, model_context = plant.CreateDefaultContext(), controller_plant.CreateDefaultContext()
     lower, upper = plant.GetPositionLowerLimits(), plant.GetPositionUpperLimits()
     default = plant.GetPositions(context, arm)
-    in_arm = plant.GetPositionsFromArray(arm, np.arange(plant.num_positions(), dtype=float)).astype(int)
+    positions: Array = np.arange(plant.num_positions(), dtype=float)
+    in_arm = plant.GetPositionsFromArray(arm, positions).astype(int)
     low = np.where(np.isfinite(lower[in_arm]), lower[in_arm], -np.pi)
     high = np.where(np.isfinite(upper[in_arm]), upper[in_arm], np.pi)
     generator = np.random.default_rng(0)
-    configurations = [default] + [generator.uniform(low, high) for _ in range(_MATCH_CONFIGURATIONS - 1)]
+    configurations: List[Array] = [default] + [generator.uniform(low, high) for _ in range(_MATCH_CONFIGURATIONS - 1)]
     point = np.asarray(robot.end_effector_point, dtype=float)
     for number, q in enumerate(configurations):
         plant.SetPositions(context, arm, q)

@@ -18,7 +18,7 @@ a task file may write ``package://example-robot-data/robots/...``.
 import functools
 import sys
 from pathlib import Path
-from typing import Dict, List, Mapping, Optional
+from typing import Dict, List, Mapping, Optional, Union
 
 from pydrake.multibody.parsing import Parser
 from pydrake.multibody.tree import ModelInstanceIndex
@@ -34,11 +34,11 @@ def models_directory() -> Path:
     raise FileNotFoundError(f"drake_hybrid's models folder (with package.xml) is missing next to {_PACKAGE}")
 
 
-def installed_model_packages() -> Dict[str, Path]:
+def installed_model_packages() -> Dict[str, str]:
     """{package name: folder} of the model packages pip installed in the cmeel layout: every
     ``<sys.path entry>/cmeel.prefix/share/<folder>/package.xml`` (named by the folder, as
     example-robot-data's URDFs name themselves). Read from the disk, nothing is downloaded."""
-    packages = {}
+    packages: Dict[str, str] = {}
     for entry in sys.path:
         share = Path(entry or ".") / "cmeel.prefix" / "share"
         if share.is_dir():
@@ -47,17 +47,17 @@ def installed_model_packages() -> Dict[str, Path]:
     return packages
 
 
-def ConfigureParser(parser: Parser, packages: Optional[Mapping[str, Path]] = None) -> Parser:
+def ConfigureParser(parser: Parser, packages: Optional[Mapping[str, Union[str, Path]]] = None) -> Parser:
     """Make ``package://drake_hybrid/...`` resolve to the models folder and ``package://<name>/...``
     to ``packages`` {name: folder} (e.g. a task file's, with ``installed_model_packages``). Returns
     the parser."""
     package_map = parser.package_map()
     if not package_map.Contains("drake_hybrid"):
-        package_map.AddPackageXml(str(models_directory() / "package.xml"))
+        package_map.AddPackageXml(models_directory() / "package.xml")
     for name, folder in (packages or {}).items():
         if package_map.Contains(name):
             package_map.Remove(name)
-        package_map.Add(name, str(folder))
+        package_map.Add(name, Path(folder))
     return parser
 
 

@@ -28,7 +28,7 @@ built, before the run.
 
 import math
 from dataclasses import dataclass, field
-from typing import List
+from typing import List, Union
 
 import numpy as np
 
@@ -96,16 +96,16 @@ class PathConfig:
     hold_at: float = -1.0                    # >= 0: hold at this fraction of the path's length instead
 
     @property
-    def active(self):
+    def active(self) -> bool:
         """True if the config has a path (waypoints or a pattern)."""
         return bool(self.waypoints or self.pattern.kind)
 
     @property
-    def holding(self):
+    def holding(self) -> bool:
         """True if the path is held at one point (``hold_at`` >= 0) instead of run."""
         return self.active and self.hold_at >= 0
 
-    def force_argument(self):
+    def force_argument(self) -> Union[float, List[float], List[List[float]]]:
         """The force for ``core.paths``: a number, one per waypoint, or a table [[s, F], ...]."""
         if self.force_by_arc_length:
             return [[point.arc_length, point.force] for point in self.force_by_arc_length]
@@ -113,7 +113,7 @@ class PathConfig:
             return [w.force for w in self.waypoints]
         return self.force
 
-    def initial_force(self):
+    def initial_force(self) -> float:
         """The normal force at the path's start (N)."""
         force = self.force_argument()
         if not isinstance(force, list):
@@ -122,7 +122,7 @@ class PathConfig:
             return float(np.interp(0.0, [s for s, _ in force], [f for _, f in force]))
         return float(force[0])                               # per waypoint
 
-    def validate(self, prefix="path."):
+    def validate(self, prefix: str = "path.") -> "PathConfig":
         """PathError naming the first field that is not allowed (every field, also of an inactive path:
         a misspelt value is refused wherever it is); the types first (``core.schema.check_types``)."""
         check_types(self, PathConfig, prefix.rstrip("."), error=PathError)

@@ -20,7 +20,7 @@ starts in contact presses at the first point at t = 0 and starts the path after 
 
 import math
 from dataclasses import dataclass
-from typing import Any, Dict, List, Mapping, Optional, Tuple
+from typing import Any, Dict, List, Mapping, Optional, Tuple, cast
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -32,6 +32,7 @@ from drake_hybrid.control.phases import ContactPhase
 from drake_hybrid.control.supervision import SupervisionConfig
 from drake_hybrid.core.arguments import instance, vector
 from drake_hybrid.core.errors import PathError
+from drake_hybrid.core.height_map import HeightMapSurface
 from drake_hybrid.core.paths import PathLimits, SurfacePath, path_from_strokes, path_from_waypoints
 from drake_hybrid.core.patterns import raster, spiral
 from drake_hybrid.core.surfaces import Surface, ViewPlane, check_offset
@@ -86,7 +87,7 @@ class PathJob:
         instance(supervision, "supervision", "PathJob.duration", SupervisionConfig, allow_none=True)
         approach = gap / supervision.approach_speed + 0.2 if supervision is not None and gap is not None else 0.0
         lift = (supervision.lift_height / supervision.approach_speed + 0.3
-                if self.lifts_off(supervision is not None) else 0.0)
+                if supervision is not None and self.lifts_off(True) else 0.0)
         return math.ceil(10 * (approach + self.settings.dwell + self.path.duration + lift)) / 10
 
 
@@ -172,7 +173,8 @@ def path_on(surface: Surface, offset: float, settings: PathConfig) -> SurfacePat
         check_inside = getattr(surface, "check_inside", None)
         if check_inside is not None:                     # a height map: the pad must stay on the map
             corners = np.vstack([stroke[[0, -1]] for stroke in strokes])
-            map_points = [surface.field.map_point(view.point(u, v))[:2] for u, v in corners]
+            field = cast(HeightMapSurface, surface).field          # the surface with check_inside
+            map_points = [field.map_point(view.point(u, v))[:2] for u, v in corners]
             check_inside(map_points, offset, "the pattern's corner")
         path = path_from_strokes(surface, view, strokes, offset, limits, force, what="path", force_field=force_field)
     if settings.holding:

@@ -1,7 +1,7 @@
 """Wiring by name, guarded: Drake ends the process at an input connected twice or a duplicate system name.
 """
 
-from typing import TypeVar, Union
+from typing import TypeVar, Union, cast
 
 from pydrake.systems.framework import DiagramBuilder, InputPort, OutputPort, System
 
@@ -12,7 +12,8 @@ SystemType = TypeVar("SystemType", bound=System)
 
 def port_label(port: Union[InputPort, OutputPort]) -> str:
     """'system.port' of an input or output port, for a message."""
-    return f"'{port.get_system().get_name()}.{port.get_name()}'"
+    system = cast(System, port.get_system())           # pydrake's stubs: an object
+    return f"'{system.get_name()}.{port.get_name()}'"
 
 
 def refuse_wired(builder: DiagramBuilder, input_port: InputPort, owner: str, hint: str = "") -> None:
@@ -39,7 +40,7 @@ def unique_name(builder: DiagramBuilder, name: str, suffix: str) -> str:
 
 def add_named(builder: DiagramBuilder, name: str, system: SystemType, robot_name: str) -> SystemType:
     """``builder.AddNamedSystem`` with ``unique_name``."""
-    return builder.AddNamedSystem(unique_name(builder, name, robot_name), system)
+    return cast(SystemType, builder.AddNamedSystem(unique_name(builder, name, robot_name), system))   # the same system
 
 
 def port_of(system: System, name: str, kind: str, owner: str, argument: str) -> Union[InputPort, OutputPort]:

@@ -7,29 +7,29 @@ differ from that model (``ModelErrorConfig``).
 """
 
 from dataclasses import dataclass, field
-from typing import List
+from typing import List, Optional
 
-import numpy as np
-
+from pydrake.geometry import GeometryId
 from pydrake.multibody.plant import MultibodyPlant
-from pydrake.multibody.tree import Frame, ModelInstanceIndex
+from pydrake.multibody.tree import Frame, ModelInstanceIndex, WeldJoint
 from pydrake.systems.framework import DiagramBuilder
 
 from drake_hybrid.core.arguments import describe, instance
 from drake_hybrid.core.errors import ArgumentError, ConfigError, UnknownFrameError
+from drake_hybrid.core.hints import Array
 
 
 @dataclass
 class RobotModel:
     """What a task's ``add_robot`` added to a plant."""
 
-    arm: object                                  # ModelInstanceIndex of the actuated arm
-    model_instances: list                        # arm and tool instances
+    arm: ModelInstanceIndex                      # the actuated arm
+    model_instances: List[ModelInstanceIndex]    # arm and tool instances
     end_effector_frame: str                      # name of frame E
-    end_effector_point: np.ndarray               # p_EP
-    tool_weld: object = None                     # WeldJoint wrist -> tool (for the wrist sensor)
-    pad_geometries: list = field(default_factory=list)
-    passive_geometries: list = field(default_factory=list)   # collision geometries to drop (arm links)
+    end_effector_point: Array                    # p_EP
+    tool_weld: Optional[WeldJoint] = None        # wrist -> tool (for the wrist sensor)
+    pad_geometries: List[GeometryId] = field(default_factory=list)
+    passive_geometries: List[GeometryId] = field(default_factory=list)   # collision geometries to drop (arm links)
     only_pad_contact: bool = False               # filter every contact of the robot but the pad's
 
 

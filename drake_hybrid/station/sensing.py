@@ -2,16 +2,17 @@
 """
 
 from dataclasses import dataclass
-from typing import Union
+from typing import List, Optional, Tuple, Union
 
 from pydrake.multibody.plant import MultibodyPlant
+from pydrake.multibody.tree import RigidBody
 from pydrake.systems.framework import DiagramBuilder, OutputPort
 
 from drake_hybrid.core.arguments import instance
 from drake_hybrid.core.errors import ConfigError, check_fields, check_finite
 from drake_hybrid.core.schema import check_types
 from drake_hybrid.station.ports import add_named, guarded_connect
-from drake_hybrid.station.robot_model import arm_model_name, check_station_parts
+from drake_hybrid.station.robot_model import RobotModel, arm_model_name, check_station_parts
 from drake_hybrid.systems.contact_wrench_sensor import ContactWrenchSensor, sampled_reading_age
 from drake_hybrid.systems.faults import SensorFaultConfig, SensorFaultInjector
 from drake_hybrid.systems.low_pass_filter import LowPassFilter, low_pass_lag
@@ -29,7 +30,7 @@ class WrenchPathConfig:
     fault_time: float = 0.05                     # s, a wrench invalid (non-finite) this long is a sensor fault:
                                                  # the run stops there and reports it (inf = never)
 
-    def validate(self, prefix="sensor."):
+    def validate(self, prefix: str = "sensor.") -> None:
         """As ``ContactConfig.validate`` (``fault_time`` may be inf: never)."""
         check_types(self, type(self), prefix.rstrip("."))
         check_finite(self, prefix, allow_infinite=("fault_time",))
@@ -58,15 +59,21 @@ class WristSensorConfig(WrenchPathConfig):
 
 
 SensorConfig = Union[ContactSensorConfig, WristSensorConfig]
+# The wrench sensor of a SensorConfig (``add_wrench_sensor``).
+WrenchSensor = Union[ContactWrenchSensor, WristForceTorqueSensor]
+# What ``add_sensing`` adds: (sensor, its own output, the output the controller reads, injector, conditioner, filter).
+Sensing = Tuple[WrenchSensor, OutputPort, OutputPort, Optional[SensorFaultInjector], Optional[WrenchConditioner],
+                Optional[LowPassFilter]]
 CONTINUOUS_LOOP_BANDWIDTH = 200.0     # Hz: the wrench low-pass a continuous controller needs (no algebraic loop)
 
 
-def robot_bodies(plant, robot):
+def robot_bodies(plant: MultibodyPlant, robot: RobotModel) -> List[RigidBody]:
     """The bodies of every model instance of ``robot``: what a contact sensor counts as the robot."""
     return [plant.get_body(index) for instance in robot.model_instances for index in plant.GetBodyIndices(instance)]
 
 
-def add_wrench_sensor(builder, plant, robot, sensor=None):
+def add_wrench_sensor(builder: DiagramBuilder, plant: MultibodyPlant, robot: RobotModel,
+                      sensor: Optional[SensorConfig] = None) -> WrenchSensor:
     """The wrench sensor of ``sensor`` (a ContactSensorConfig, default; or a WristSensorConfig) on your
     plant, its inputs wired: the environment's wrench on the robot at the end-effector point, in
     world (the contact results of the robot's bodies, or the wrist weld's reaction force). Returns it
@@ -101,7 +108,9 @@ def _add_wrench_sensor(builder, plant, robot, sensor, owner):
     return system
 
 
-def add_wrench_path(builder, wrench_output, sensor, period, sequence=None, tare=False, suffix="wrench"):
+def add_wrench_path(builder: DiagramBuilder, wrench_output: OutputPort, sensor: SensorConfig, period: Optional[float],
+                    sequence: Optional[OutputPort] = None, tare: bool = False, suffix: str = "wrench"
+                    ) -> Tuple[OutputPort, Optional[WrenchConditioner], Optional[LowPassFilter]]:
     """The wrench's way to the controller (``sensor``: a ContactSensorConfig or WristSensorConfig): a
     WrenchConditioner with ``sensor.condition`` (fed the sample ``sequence`` output when given;
     ``tare``), else a low-pass filter when ``sensor.bandwidth_hz`` > 0, else nothing (``suffix``: what
@@ -132,7 +141,7 @@ def _add_wrench_path(builder, wrench_output, sensor, period, sequence, tare, suf
     return wrench_output, conditioner, wrench_filter
 
 
-def wrench_lag(sensor, plant, control_period):
+def wrench_lag(sensor: SensorConfig, plant: MultibodyPlant, control_period: Optional[float]) -> float:
     """How late the wrench reaches the law (s), which splits it where it was exerted (the controller's
     ``wrench_lag``): the low-pass of ``sensor`` (``systems.low_pass_filter.low_pass_lag``), plus, for the
     contact sensor on a discrete plant's sampled results, their one step of age
@@ -144,7 +153,9 @@ def wrench_lag(sensor, plant, control_period):
     return low_pass_lag(sensor.bandwidth_hz, control_period) + age
 
 
-def add_sensing(builder, plant, robot, sensor, control_period, sensor_faults=None, tare=False):
+def add_sensing(builder: DiagramBuilder, plant: MultibodyPlant, robot: RobotModel, sensor: Optional[SensorConfig],
+                control_period: Optional[float], sensor_faults: Optional[SensorFaultConfig] = None,
+                tare: bool = False) -> Sensing:
     """The wrench sensor (``add_wrench_sensor``), a SensorFaultInjector when ``sensor_faults`` is active,
     and the wrench path (``add_wrench_path``): the wrench a controller reads (``station.loop`` connects
     it). Returns (sensor, its own output, the output the controller reads, injector, conditioner, filter)."""
@@ -155,7 +166,9 @@ def add_sensing(builder, plant, robot, sensor, control_period, sensor_faults=Non
     return sensing_of_checked(builder, plant, robot, sensor, control_period, sensor_faults, tare, owner)
 
 
-def sensing_of_checked(builder, plant, robot, sensor, control_period, sensor_faults, tare, owner):
+def sensing_of_checked(builder: DiagramBuilder, plant: MultibodyPlant, robot: RobotModel, sensor: SensorConfig,
+                       control_period: Optional[float], sensor_faults: Optional[SensorFaultConfig], tare: bool,
+                       owner: str) -> Sensing:
     """``add_sensing`` of arguments already checked (by ``add_sensing`` or ``station.loop.add_hybrid_controller``,
     naming ``owner``)."""
     arm = arm_model_name(plant, robot)
@@ -172,7 +185,7 @@ def sensing_of_checked(builder, plant, robot, sensor, control_period, sensor_fau
     return wrench_sensor, true_wrench, wrench_output, injector, conditioner, wrench_filter
 
 
-def check_sensor_config(sensor, owner):
+def check_sensor_config(sensor: SensorConfig, owner: str) -> SensorConfig:
     """``sensor`` (a ContactSensorConfig or WristSensorConfig) with its fields checked, naming ``owner``."""
     instance(sensor, "sensor", owner, (ContactSensorConfig, WristSensorConfig))
     sensor.validate(f"{owner}: sensor.")

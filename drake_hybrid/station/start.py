@@ -1,7 +1,7 @@
 """A start in any diagram: the states around the plant primed for the arm where it is.
 """
 
-from typing import Callable, Optional
+from typing import Callable, Optional, cast
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -11,8 +11,10 @@ from pydrake.systems.framework import Context
 
 from drake_hybrid.core.arguments import joint_vector, vector
 from drake_hybrid.core.errors import ConfigError, ForceSignError, OffConstraintError
+from drake_hybrid.core.hints import Array
 from drake_hybrid.station.handles import HybridSystems
 from drake_hybrid.station.root_context import check_systems, systems_in_context
+from drake_hybrid.station.sensing import WrenchSensor
 
 # Plant steps taken (and undone) at the start so that a discrete plant's sampled outputs hold the
 # start's static contact or constraint wrench (see set_initial_conditions).
@@ -40,6 +42,7 @@ def prime_start(systems: HybridSystems, root_context: Context, held_torque: Arra
     owner = "prime_start"
     systems_in_context(root_context, systems, owner)
     plant, controller = systems.plant, systems.controller
+    assert plant is not None                       # found in root_context's diagram (systems_in_context)
     plant_context = plant.GetMyMutableContextFromRoot(root_context)
     q0 = plant.GetPositions(plant_context, systems.robot.arm)
     environment = plant.GetPositionsAndVelocities(plant_context)
@@ -62,7 +65,7 @@ def prime_start(systems: HybridSystems, root_context: Context, held_torque: Arra
         for _ in range(PRIMING_STEPS):
             plant.ExecuteForcedEvents(plant_context, publish=False)
         plant.SetPositionsAndVelocities(plant_context, environment)
-    sensor = systems.sensor
+    sensor = cast(WrenchSensor, systems.sensor)    # a simulated station's (a real arm's has none)
     if getattr(sensor, "samples_point", False):        # the contact sensor on those sampled results
         sensor.set_sampled_point(sensor.GetMyMutableContextFromRoot(root_context))
     reading = sensor.get_output_port(0).Eval(sensor.GetMyContextFromRoot(root_context))
@@ -101,7 +104,8 @@ def holding_torque(systems: HybridSystems, q: ArrayLike, desired_force: ArrayLik
     values = systems.constraint_space.evaluate(task.configuration, task.velocity)
     desired_force = vector(desired_force, "desired_force", owner, values.force_projection.shape[0],
                            unit="N, in E_f's coordinates")
-    gravity = -plant.CalcGravityGeneralizedForces(context)
+    tau_g: Array = plant.CalcGravityGeneralizedForces(context)
+    gravity = -tau_g
     torque = gravity - task.jacobian.T @ (values.force_projection.T @ desired_force)
     return np.linalg.solve(plant.MakeActuationMatrix(), torque)
 

@@ -8,8 +8,6 @@ curvature (``default_resolution``); ``mesh_shape`` makes a height map's closed p
 
 from typing import List, Optional, Sequence
 
-import numpy as np
-
 from pydrake.common import MemoryFile
 from pydrake.geometry import (AddRigidHydroelasticProperties, Capsule, Cylinder, Ellipsoid, GeometryId, InMemoryMesh,
                               Mesh, ProximityProperties, Shape, Sphere)
@@ -18,13 +16,13 @@ from pydrake.multibody.plant import CoulombFriction, MultibodyPlant
 
 from drake_hybrid.core.arguments import instance, positive, text, vector
 from drake_hybrid.core.errors import ArgumentError
-from drake_hybrid.core.surfaces import Surface
+from drake_hybrid.core.height_map import HeightMapSurface
 
 MAX_RESOLUTION = 0.005            # m, the coarsest workpiece mesh
 FACETS_PER_RADIUS = 20            # a curved shape's mesh: radius / 20 (2.5 mm at R = 5 cm)
 
 
-def default_resolution(shape: Shape) -> Optional[float]:
+def default_resolution(shape: Shape) -> float:
     """The workpiece mesh's resolution hint (m): MAX_RESOLUTION, finer on a curved shape of small
     radius (its smallest, for an ellipsoid). A facet's normal is off the surface's by up to half a
     facet angle, resolution / (2 R), and the pad reads that as a tangential force that comes and
@@ -55,7 +53,7 @@ def add_rigid_workpiece(plant: MultibodyPlant, shape: Shape, X_WG: RigidTransfor
     instance(shape, "shape", owner, Shape, what="a pydrake.geometry Shape (Box, Sphere, Cylinder, Ellipsoid, ...)")
     instance(X_WG, "X_WG", owner, RigidTransform)
     resolution_hint = positive(resolution_hint, "resolution_hint", owner, unit="m", allow_none=True)
-    color = vector(color, "color", owner, 4)
+    rgba = vector(color, "color", owner, 4)
     world = plant.world_body()
     properties = ProximityProperties()
     AddRigidHydroelasticProperties(default_resolution(shape) if resolution_hint is None else resolution_hint,
@@ -63,7 +61,7 @@ def add_rigid_workpiece(plant: MultibodyPlant, shape: Shape, X_WG: RigidTransfor
     properties.AddProperty("material", "coulomb_friction", CoulombFriction(0.0, 0.0))
     try:
         geometry = plant.RegisterCollisionGeometry(world, X_WG, shape, name, properties)
-        plant.RegisterVisualGeometry(world, X_WG, shape, f"{name}_visual", np.asarray(color, dtype=float))
+        plant.RegisterVisualGeometry(world, X_WG, shape, f"{name}_visual", rgba)
     except RuntimeError as error:
         if "already been used" not in str(error):
             raise
@@ -72,7 +70,7 @@ def add_rigid_workpiece(plant: MultibodyPlant, shape: Shape, X_WG: RigidTransfor
     return [geometry]
 
 
-def mesh_shape(surface: Surface, name: str) -> Shape:
+def mesh_shape(surface: HeightMapSurface, name: str) -> Shape:
     """A Drake Mesh (in memory, OBJ) of a HeightMapSurface's closed part (``HeightMapSurface.mesh``), for
     a rigid hydroelastic geometry at ``surface.X_WM``."""
     vertices, triangles = surface.mesh()

@@ -20,7 +20,7 @@
 import math
 import sys
 from dataclasses import dataclass, field
-from typing import List
+from typing import List, Tuple
 
 import numpy as np
 
@@ -30,6 +30,7 @@ from pydrake.systems.scalar_conversion import TemplateSystem
 
 from drake_hybrid.core.arguments import MAX_TASK_SIZE, describe, instance, nonnegative, number, positive, vector
 from drake_hybrid.core.errors import ConfigError, DimensionError, ForceSignError
+from drake_hybrid.core.hints import Array
 from drake_hybrid.core.kinematics import declare_cached_value, declare_task_input
 from drake_hybrid.core.linalg import value
 from drake_hybrid.core.projections import pseudo_desired_velocity
@@ -65,12 +66,12 @@ class Profile:
 
     KINDS = ("constant", "smooth_step", "sine")
 
-    def check_kind(self, what):
+    def check_kind(self, what: str) -> None:
         """ConfigError naming ``what``.kind if it is not one of KINDS (the sizes are checked by ``validate``)."""
         if self.kind not in self.KINDS:
             raise ConfigError(f"{what}.kind must be one of {', '.join(self.KINDS)}, got {describe(self.kind)}")
 
-    def validate(self, size, what):
+    def validate(self, size: int, what: str) -> None:
         """Raise a typed error naming ``what``.field for a field that does not make a profile of ``size``
         entries: the kind, entries that are not finite numbers, the sizes, a duration <= 0."""
         self.check_kind(what)
@@ -90,7 +91,7 @@ class Profile:
         if self.kind == "sine":
             nonnegative(self.frequency, f"{what}.frequency", owner, unit="Hz", error=ConfigError)
 
-    def bounds(self):
+    def bounds(self) -> Tuple[Array, Array]:
         """(lowest, highest) value of each row over the profile's whole course, t >= 0."""
         base = np.asarray(self.value, dtype=float)
         if self.kind == "smooth_step":                  # the quintic blend is monotone from value to final_value
@@ -101,7 +102,7 @@ class Profile:
             return base - swing, base + swing
         return base, base
 
-    def check_keeps_sign(self, what):
+    def check_keeps_sign(self, what: str) -> None:
         """ForceSignError naming ``what`` if a row of this (desired force) profile takes both signs over
         its course: a contact only pushes, so a row of F_d that presses at one time would pull at
         another (F_d is the force ON the robot in E_f's coordinates). Zero (letting go) is allowed."""
@@ -118,7 +119,7 @@ class Profile:
                     "only pushes, so F_d (the force ON the robot in E_f's coordinates) must keep one sign on every row "
                     "(it may reach 0)")
 
-    def evaluate(self, t):
+    def evaluate(self, t: float) -> Tuple[Array, Array]:
         """(value, time derivative) at time t (floats)."""
         base = np.asarray(self.value, dtype=float)
         if self.kind == "constant":

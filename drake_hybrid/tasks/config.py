@@ -21,8 +21,9 @@ the dotted field name; ``ScenarioConfig.validate`` calls them all.
 import copyreg
 import dataclasses
 import math
+import os
 from dataclasses import dataclass, field
-from typing import Dict, List
+from typing import Any, Dict, List, Optional, Union
 
 from pydrake.common.yaml import yaml_dump_typed, yaml_load_typed
 from pydrake.multibody.plant import MultibodyPlantConfig
@@ -59,7 +60,7 @@ for _struct in (MultibodyPlantConfig, SimulatorConfig):
     copyreg.pickle(_struct, _reduce_struct)
 
 
-def validate_simulator_config(simulator, prefix="simulator."):
+def validate_simulator_config(simulator: SimulatorConfig, prefix: str = "simulator.") -> None:
     """ConfigError naming the SimulatorConfig field Drake would reject or misuse."""
     if simulator.integration_scheme not in GetIntegrationSchemes():
         raise ConfigError(f"{prefix}integration_scheme must be one of {GetIntegrationSchemes()}, "
@@ -86,7 +87,7 @@ class StartConfig:
     force_integral: List[float] = field(default_factory=list)  # xi(0) (N s); empty = zeros
     position_error: List[float] = field(default_factory=list)  # e_p(0) (m, rad); empty = zeros
 
-    def validate(self, prefix="start."):
+    def validate(self, prefix: str = "start.") -> None:
         check_fields(self, prefix, positive=("tolerance", "gap"))
 
 
@@ -109,7 +110,7 @@ class MechanismConfig:
     source: str = "none"
     velocity_row_inertia: List[float] = field(default_factory=list)
 
-    def validate(self, prefix="mechanism."):
+    def validate(self, prefix: str = "mechanism.") -> "MechanismConfig":
         if self.source not in MECHANISM_SOURCES:
             raise ConfigError(f"{prefix}source must be one of {', '.join(MECHANISM_SOURCES)}, got '{self.source}'")
         if self.source == "given" and not self.velocity_row_inertia:
@@ -150,7 +151,7 @@ class ModelErrorConfig:
     joint_friction: float = 0.0
     friction_speed: float = 0.05
 
-    def validate(self, prefix="model_error."):
+    def validate(self, prefix: str = "model_error.") -> "ModelErrorConfig":
         return check_fields(self, prefix, positive=("payload_mass_scale", "link_mass_scale", "link_inertia_scale",
                                              "friction_speed"),
                             nonnegative=("joint_damping", "joint_friction"))
@@ -213,7 +214,7 @@ class ScenarioConfig:
     # and force then come from the path (station.path_job), not from desired_velocity / desired_force.
     path: PathConfig = field(default_factory=PathConfig)
 
-    def replace(self, **changes):
+    def replace(self, **changes: Any) -> "ScenarioConfig":
         """A copy with some top-level fields changed; ConfigError (one line, as for a YAML file) for a name
         that is not a field or a value not of the field's type (``core.schema.check_types``; the values
         are checked by ``validate``)."""
@@ -223,15 +224,15 @@ class ScenarioConfig:
         return check_types(dataclasses.replace(self, **changes), ScenarioConfig)
 
     @property
-    def supervised(self):
+    def supervised(self) -> bool:
         """True if the run has a contact supervisor: asked for, or needed by a start off the surface."""
         return bool(self.supervision.enabled or not self.start.in_contact)
 
     @property
-    def continuous_plant(self):
+    def continuous_plant(self) -> bool:
         return self.plant.time_step == 0
 
-    def validate(self):
+    def validate(self) -> "ScenarioConfig":
         """Check every field's type (by the YAML loader's rules, ``core.schema.check_types``: a config
         built or changed in Python is checked as a file is) and value, once; ConfigError naming the
         field. The gains and profiles are checked against the task's sizes by the systems that use
@@ -305,7 +306,7 @@ class ScenarioConfig:
         return self
 
 
-def check_scenario_config(config, owner):
+def check_scenario_config(config: ScenarioConfig, owner: str) -> ScenarioConfig:
     """``config`` if it is a ScenarioConfig, else ArgumentError (one line) naming ``owner``'s argument."""
     return instance(config, "config", owner, ScenarioConfig,
                     what="a ScenarioConfig (e.g. get_task('window-washing').default_config(); from YAML: load_config)")
@@ -315,7 +316,8 @@ def check_scenario_config(config, owner):
 ALLOWED_INFINITE = ("sensor.fault_time", "safety.effort_limits", "supervision.max_travel")
 
 
-def load_config(path=None, data=None, defaults=None):
+def load_config(path: Union[str, os.PathLike, None] = None, data: Optional[str] = None,
+                defaults: Optional[ScenarioConfig] = None) -> ScenarioConfig:
     """A ScenarioConfig from a YAML file or string, on top of ``defaults``; ConfigError (one line)
     for an unknown key, a wrong type, a repeated key or an unknown sensor tag."""
     where = f"{path}: " if path else ""
@@ -337,5 +339,5 @@ def load_config(path=None, data=None, defaults=None):
         raise ConfigError(f"{where}{str(error).splitlines()[0]}") from None
 
 
-def dump_config(config):
+def dump_config(config: ScenarioConfig) -> str:
     return yaml_dump_typed(config)

@@ -30,19 +30,26 @@ The pieces:
   -sum_i F_d,i grad_p C_i (the robot pushes the workpiece with -F_d).
 """
 
-import numpy as np
+from typing import Any, Callable, Dict, Iterable, List, Optional, Sequence, Tuple
 
+import numpy as np
+from numpy.typing import ArrayLike
+
+from pydrake.geometry import GeometryId
 from pydrake.math import RigidTransform, RollPitchYaw
+from pydrake.multibody.plant import MultibodyPlant
 
 from drake_hybrid.control.gains import HybridGains
 from drake_hybrid.core.arguments import describe, function, instance, text, vector
 from drake_hybrid.core.errors import ArgumentError, ConfigError, OffConstraintError
+from drake_hybrid.core.hints import Array
 from drake_hybrid.core.kinematics import inverse_kinematics
+from drake_hybrid.core.projections import ConstraintSpace
 from drake_hybrid.station.robot_model import RobotModel
 from drake_hybrid.systems.sources import Profile
 from drake_hybrid.tasks.config import ScenarioConfig, StartConfig
 from drake_hybrid.tasks.pressing import pressing_positions
-from drake_hybrid.tasks.task import Task
+from drake_hybrid.tasks.task import Scenario, Task
 
 
 class CustomTask(Task):
@@ -62,8 +69,11 @@ class CustomTask(Task):
         camera: Meshcat view for animations, (camera position, target) in world (m).
     """
 
-    def __init__(self, name, add_robot, add_workpiece, constraint_space, start_pose, joint_guess,
-                 labels=None, camera=None, description="a user-defined task"):
+    def __init__(self, name: str, add_robot: Callable[[MultibodyPlant], RobotModel],
+                 add_workpiece: Callable[[MultibodyPlant], Iterable[GeometryId]], constraint_space: ConstraintSpace,
+                 start_pose: RigidTransform, joint_guess: ArrayLike, labels: Optional[Dict[str, Any]] = None,
+                 camera: Optional[Tuple[Sequence[float], Sequence[float]]] = None,
+                 description: str = "a user-defined task") -> None:
         owner = "CustomTask"
         self.name = text(name, "name", owner)
         if not name.strip():
@@ -87,7 +97,7 @@ class CustomTask(Task):
         self._labels = labels or {"velocity": [f"r-dot_p[{i}]" for i in range(k)], "velocity_units": "SI",
                                   "force": [f"F[{i}]" for i in range(m)], "force_units": "SI"}
 
-    def base_config(self, options):
+    def base_config(self, options: Dict[str, Any]) -> ScenarioConfig:
         """A ScenarioConfig for this task: velocity-force mode (as every built-in task), constant
         zero desired velocity (k entries) and force (m entries) unless ``default_config`` is given
         ``desired_velocity=[...]``, ``desired_force=[...]``; hydroelastic contact with point-contact
@@ -102,29 +112,31 @@ class CustomTask(Task):
         config.plant.contact_model = "hydroelastic_with_fallback"
         return config
 
-    def labels(self, config=None):
+    def labels(self, config: Optional[ScenarioConfig] = None) -> Dict[str, Any]:
         return self._labels
 
     # -- the Task protocol (scenario.task) -----------------------------------------------------
-    def add_robot(self, plant, config):
+    def add_robot(self, plant: MultibodyPlant, config: ScenarioConfig) -> RobotModel:
         robot = self._add_robot(plant)
         if not isinstance(robot, RobotModel):
             raise TypeError(f"task '{self.name}': add_robot must return a RobotModel (see mount_tool), "
                             f"got {type(robot).__name__}")
         return robot
 
-    def add_workpiece(self, plant, config):
+    def add_workpiece(self, plant: MultibodyPlant, config: ScenarioConfig) -> List[GeometryId]:
         return list(self._add_workpiece(plant))
 
-    def constraint_space(self, config):
+    def constraint_space(self, config: ScenarioConfig) -> ConstraintSpace:
         return self.space
 
-    def start_pose_of(self, config):
+    def start_pose_of(self, config: ScenarioConfig) -> RigidTransform:
         values = list(config.start.configuration)
         if len(values) != 6:
             raise ConfigError(f"task '{self.name}': start.configuration must be [x, y, z, roll, pitch, yaw] "
                               f"of the end-effector frame, got {values}")
-        return RigidTransform(RollPitchYaw(values[3:]), values[:3])
+        rpy: Array = np.array(values[3:], dtype=float)     # Array: what pydrake's stubs take (core.hints.Array)
+        p_WE: Array = np.array(values[:3], dtype=float)
+        return RigidTransform(RollPitchYaw(rpy), p_WE)
 
     def _position_gradient(self, X_WE):
         """(C(x), E_f, grad_p C: rows of C-dot for a unit world velocity of the point along x, y, z)."""
@@ -134,7 +146,7 @@ class CustomTask(Task):
         gradient = np.column_stack([E_f @ chart.task_velocity(x, np.r_[0, 0, 0, axis]) for axis in np.eye(3)])
         return np.atleast_1d(space.constraint.value(x)), gradient
 
-    def pressing_direction(self, config, X_WE):
+    def pressing_direction(self, config: ScenarioConfig, X_WE: RigidTransform) -> Array:
         """Unit world direction in which the robot pushes the workpiece at the start:
         -sum_i F_d,i grad_p C_i (F_d: force on the robot, in E_f's coordinates)."""
         gradient = self._position_gradient(X_WE)[1]
@@ -146,7 +158,7 @@ class CustomTask(Task):
                               "position direction of C; set a nonzero desired force on a position row")
         return direction / norm
 
-    def check_start_pose(self, config, X_WP, direction):
+    def check_start_pose(self, config: ScenarioConfig, X_WP: RigidTransform, direction: Array) -> None:
         """OffConstraintError if the start pose's controlled point (X_WP) is not on C = 0 within
         ``start.tolerance``, naming the gap or penetration along the pressing direction."""
         value, gradient = self._position_gradient(X_WP)
@@ -166,7 +178,7 @@ class CustomTask(Task):
             f"{config.start.tolerance:g} ({where} {np.round(direction, 3).tolist()}); give a start_pose with the "
             "controlled point on C = 0, or set start.in_contact: false to approach from a gap")
 
-    def start_positions(self, scenario):
+    def start_positions(self, scenario: Scenario) -> Array:
         config = scenario.config
         X_WE = self.start_pose_of(config)
         kinematics = scenario.controller.kinematics

@@ -2,22 +2,31 @@
 """
 
 import dataclasses
+from typing import Any, Dict, Tuple
 
 import numpy as np
+from numpy.typing import ArrayLike
+
+from pydrake.math import RigidTransform
 
 from drake_hybrid.core.errors import ConfigError
+from drake_hybrid.core.hints import Array
 from drake_hybrid.core.kinematics import inverse_kinematics
+from drake_hybrid.core.paths import SurfacePath
+from drake_hybrid.core.projections import ConstraintSpace
 from drake_hybrid.core.schema import unknown_field
+from drake_hybrid.core.surfaces import Surface
 from drake_hybrid.station.path_config import PathConfig
-from drake_hybrid.station.path_job import path_job
+from drake_hybrid.station.path_job import PathJob, path_job
 from drake_hybrid.systems.sources import Profile
-from drake_hybrid.tasks.config import check_scenario_config
+from drake_hybrid.tasks.config import ScenarioConfig, check_scenario_config
 from drake_hybrid.tasks.pressing import pressing_positions
+from drake_hybrid.tasks.task import Scenario, Task
 
-_JOBS = {}
+_JOBS: Dict[Tuple[str, str, str, str], PathJob] = {}
 
 
-def workpiece_surface(task, config):
+def workpiece_surface(task: Task, config: ScenarioConfig) -> Tuple[Surface, float]:
     """(surface, pad offset) of the task's workpiece; ConfigError if the task names none."""
     surface = task.workpiece_surface(config)
     if surface is None:
@@ -26,7 +35,7 @@ def workpiece_surface(task, config):
     return surface
 
 
-def task_path_job(task, config):
+def task_path_job(task: Task, config: ScenarioConfig) -> PathJob:
     """The PathJob of ``config.path`` on the task's workpiece (``station.path_job.path_job``; cached per
     task and config): what ``build_scenario`` runs. PathError (one line) for a path the job cannot follow."""
     key = (task.name, repr(config.path), repr(sorted(config.task_parameters.items())),
@@ -37,18 +46,18 @@ def task_path_job(task, config):
     return _JOBS[key]
 
 
-def build_path(task, config):
+def build_path(task: Task, config: ScenarioConfig) -> SurfacePath:
     """The SurfacePath of ``config.path`` on the task's workpiece (``task_path_job``'s); held at one point
     when ``path.hold_at`` >= 0."""
     return task_path_job(task, config).path
 
 
-def path_start_pose(task, config):
+def path_start_pose(task: Task, config: ScenarioConfig) -> Tuple[RigidTransform, np.ndarray]:
     """(X_WP, normal): the pad centre's pose at the first point of the task's path and the normal there."""
     return task_path_job(task, config).start_pose()
 
 
-def path_start_positions(task, scenario, joint_guess):
+def path_start_positions(task: Task, scenario: Scenario, joint_guess: ArrayLike) -> Array:
     """The arm's start for a path job: the pad centre at the path's first point in its reference
     orientation (frame E turned as the reference, its point P there), pressing with F_d(0)
     (``start.in_contact``) or ``start.gap`` above along the normal (IK from ``joint_guess``)."""
@@ -67,14 +76,14 @@ def path_start_positions(task, scenario, joint_guess):
     return pressing_positions(scenario, positions_at_depth)
 
 
-def job_duration(task, config):
+def job_duration(task: Task, config: ScenarioConfig) -> float:
     """The simulated time a job needs (s, rounded up to 0.1 s; ``PathJob.duration``): the guarded approach
     from ``start.gap`` (when the start is off the surface), the dwell, the path and the lift-off."""
     supervision = config.supervision if config.supervised else None
     return task_path_job(task, config).duration(supervision, None if config.start.in_contact else config.start.gap)
 
 
-def with_path_commands(config, constraint_space):
+def with_path_commands(config: ScenarioConfig, constraint_space: ConstraintSpace) -> ScenarioConfig:
     """``config`` with desired_velocity zero and desired_force F(0) on the force row, constant: what the
     start (pressing with F_d(0)), the static torque and the summaries read; the run's commands come
     from the path."""
@@ -87,7 +96,7 @@ def with_path_commands(config, constraint_space):
                                desired_force=Profile(kind="constant", value=force))
 
 
-def with_path(config, **changes):
+def with_path(config: ScenarioConfig, **changes: Any) -> ScenarioConfig:
     """A copy of ``config`` with ``config.path`` fields changed (e.g. ``hold_at=0.5``); ConfigError (one
     line, as for a YAML file) for a name that is not a PathConfig field or a value not of its type."""
     check_scenario_config(config, "with_path")

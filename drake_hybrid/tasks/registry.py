@@ -6,6 +6,8 @@ how to add its robot and workpiece to a plant, its chart, constraint and
 velocity projection, its default ScenarioConfig and its start configuration.
 """
 
+from typing import Dict, Type, TypeVar
+
 from drake_hybrid.core.arguments import describe, text
 from drake_hybrid.core.errors import ArgumentError, DrakeHybridError
 from drake_hybrid.tasks.builtin.crank_turning import CrankTurning
@@ -13,15 +15,17 @@ from drake_hybrid.tasks.builtin.grinding import Grinding
 from drake_hybrid.tasks.builtin.sphere_polishing import SpherePolishing
 from drake_hybrid.tasks.builtin.surface_polishing import SurfacePolishing
 from drake_hybrid.tasks.builtin.window_washing import WindowWashing
+from drake_hybrid.tasks.task import Task
 
-TASKS = {task.name: task for task in (WindowWashing(), CrankTurning(), SpherePolishing(), Grinding(),
+TASKS: Dict[str, Task] = {task.name: task for task in (WindowWashing(), CrankTurning(), SpherePolishing(), Grinding(),
                                       SurfacePolishing())}
 
 
 BUILT_IN_TASKS = frozenset(TASKS)
+_Task = TypeVar("_Task", bound=Task)
 
 
-def register_task(task):
+def register_task(task: _Task) -> _Task:
     """Make ``task`` (e.g. a ``tasks.custom.CustomTask``) known by its name to ``get_task``, and so to
     ``build_scenario``, ``simulate`` and ``linearize_continuous``. A task registered earlier under
     the same name is replaced (re-running a notebook cell); a built-in task cannot be. Returns it."""
@@ -34,7 +38,7 @@ def register_task(task):
     return task
 
 
-def get_task(name, *, where="get_task", error=ArgumentError):
+def get_task(name: str, *, where: str = "get_task", error: Type[DrakeHybridError] = ArgumentError) -> Task:
     """The task registered as ``name`` (``TASKS``); ``error`` (one line, prefixed by ``where``: a config's
     ``task`` field gives its own) naming the known tasks for another name. ``where``: a string (the
     caller's name, or the config field's); ``error``: a DrakeHybridError subclass (ArgumentError,

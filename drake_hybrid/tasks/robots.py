@@ -20,11 +20,15 @@ Unknown frames raise ``UnknownFrameError`` listing the model's frames. The joint
 joint limits and keeps the solution whose pad Jacobian is best conditioned.
 """
 
+import os
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Callable, Iterable, List, Mapping, Optional, Tuple, Union
 
 import numpy as np
+from numpy.typing import ArrayLike
 
+from pydrake.geometry import GeometryId
 from pydrake.math import RigidTransform, RotationMatrix
 from pydrake.multibody.inverse_kinematics import InverseKinematics
 from pydrake.multibody.parsing import Parser
@@ -35,9 +39,11 @@ from pydrake.systems.framework import DiagramBuilder
 
 from drake_hybrid.core.arguments import function, joint_vector, number, positive
 from drake_hybrid.core.errors import ConfigError, UnreachablePoseError
+from drake_hybrid.core.hints import Array
 from drake_hybrid.station.arm import mount_tool
+from drake_hybrid.station.robot_model import RobotModel
 from drake_hybrid.tasks.arm_chain import fix_arm
-from drake_hybrid.tasks.model_files import model_effort_limits, prepare_model
+from drake_hybrid.tasks.model_files import LoadReport, model_effort_limits, prepare_model
 
 TOOL_AXES = {"+z": RotationMatrix(), "-z": RotationMatrix.MakeXRotation(np.pi),
              "+x": RotationMatrix.MakeYRotation(np.pi / 2), "-x": RotationMatrix.MakeYRotation(-np.pi / 2),
@@ -59,7 +65,8 @@ class LoadedArm:
     """An arm made usable by ``load_arm``: ``add_robot(plant)`` for ``CustomTask``, the ``report``,
     the joint limits and ``find_joint_guess``."""
 
-    def __init__(self, report, flange, tool_frame, base_pose, tool_axis, effort_limits, name):
+    def __init__(self, report: LoadReport, flange: str, tool_frame: str, base_pose: Optional[RigidTransform],
+                 tool_axis: str, effort_limits: Mapping[str, float], name: str) -> None:
         self.report = report
         self.flange = flange
         self.tool_frame = tool_frame
@@ -67,19 +74,20 @@ class LoadedArm:
         self.tool_axis = tool_axis
         self.effort_limits = effort_limits
         self.name = name
-        self._plant = None
+        self._plant: Optional[MultibodyPlant] = None
 
-    def add_robot(self, plant, report=None):
+    def add_robot(self, plant: MultibodyPlant, report: Optional[LoadReport] = None) -> RobotModel:
         """Parse the arm into ``plant`` (before Finalize), fix it and attach the pad tool; returns the
         RobotModel that ``CustomTask``'s ``add_robot`` returns."""
         parser = Parser(plant)
         parser.SetAutoRenaming(True)
-        arm = parser.AddModels(self.report.model)[0]
+        arm = parser.AddModels(Path(self.report.model))[0]
         flange, tool = fix_arm(plant, arm, self.flange, self.tool_frame, self.base_pose, self.effort_limits, report)
-        return mount_tool(plant, arm, tool, RigidTransform(TOOL_AXES[self.tool_axis], np.zeros(3)))
+        origin: Array = np.zeros(3)
+        return mount_tool(plant, arm, tool, RigidTransform(TOOL_AXES[self.tool_axis], origin))
 
     @property
-    def plant(self):
+    def plant(self) -> MultibodyPlant:
         """A finalized continuous plant of the arm and pad (no SceneGraph), built once."""
         if self._plant is None:
             plant = MultibodyPlant(0.0)
@@ -89,24 +97,25 @@ class LoadedArm:
         return self._plant
 
     @property
-    def num_joints(self):
+    def num_joints(self) -> int:
         return self.plant.num_positions()
 
-    def joint_limits(self):
+    def joint_limits(self) -> Tuple[Array, Array]:
         """(lower, upper) position limits of the arm's joints (rad; +-inf for continuous joints)."""
         return self.plant.GetPositionLowerLimits(), self.plant.GetPositionUpperLimits()
 
-    def pad_jacobian(self, q):
+    def pad_jacobian(self, q: ArrayLike) -> Array:
         """The 6 x n spatial Jacobian (angular; translational, world frame) of the pad centre at ``q``
         (ArgumentError unless a vector of the arm's number of finite positions)."""
         plant = self.plant
         context = plant.CreateDefaultContext()
         plant.SetPositions(context, joint_vector(q, "q", "LoadedArm.pad_jacobian", plant))
         frame = plant.GetFrameByName(self.robot.end_effector_frame)
-        return plant.CalcJacobianSpatialVelocity(context, JacobianWrtVariable.kV, frame, np.zeros(3),
+        origin: Array = np.zeros(3)
+        return plant.CalcJacobianSpatialVelocity(context, JacobianWrtVariable.kV, frame, origin,
                                                  plant.world_frame(), plant.world_frame())
 
-    def condition_number(self, q, length_scale=None):
+    def condition_number(self, q: ArrayLike, length_scale: Optional[float] = None) -> float:
         """cond(S J) of the pad's spatial Jacobian at ``q``, its translational rows divided by
         ``length_scale`` (m; default: the distance from the base to the pad, at least 0.1 m) so that
         the number does not depend on the unit of length. ArgumentError for a ``q`` that is not a
@@ -117,12 +126,12 @@ class LoadedArm:
                                 allow_none=True)
         J = self.pad_jacobian(q)
         if length_scale is None:
-            base = self.base_pose.translation() if self.base_pose is not None else np.zeros(3)
+            base: Array = self.base_pose.translation() if self.base_pose is not None else np.zeros(3)
             length_scale = max(float(np.linalg.norm(self.pad_pose(q).translation() - base)), 0.1)
         singular = np.linalg.svd(np.vstack([J[:3], J[3:] / length_scale]), compute_uv=False)
         return float(singular[0] / singular[-1]) if singular[-1] > 0 else float("inf")
 
-    def pad_pose(self, q):
+    def pad_pose(self, q: ArrayLike) -> RigidTransform:
         """X_WE of the pad centre frame at joint positions ``q`` (ArgumentError unless a vector of the
         arm's number of finite positions)."""
         plant = self.plant
@@ -130,7 +139,8 @@ class LoadedArm:
         plant.SetPositions(context, joint_vector(q, "q", "LoadedArm.pad_pose", plant))
         return plant.GetFrameByName(self.robot.end_effector_frame).CalcPoseInWorld(context)
 
-    def workpiece_penetrations(self, add_workpiece, q):
+    def workpiece_penetrations(self, add_workpiece: Callable[[MultibodyPlant], Iterable[GeometryId]],
+                               q: ArrayLike) -> List[str]:
         """Names of the arm's bodies (the pad excepted) whose collision shapes penetrate the
         workpiece of ``add_workpiece(plant) -> geometry ids`` (CustomTask's) at joint positions ``q``
         (ArgumentError unless a vector of the arm's number of finite positions)."""
@@ -159,8 +169,11 @@ class LoadedArm:
                 touching.add(plant.GetBodyFromFrameId(inspector.GetFrameId(other)).name())
         return sorted(touching)
 
-    def find_joint_guess(self, X_WE, seeds=12, rng=0, near=None, add_workpiece=None, position_tolerance=1e-6,
-                         angle_tolerance=1e-6, limit_margin=0.05):
+    def find_joint_guess(self, X_WE: RigidTransform, seeds: int = 12, rng: Union[int, np.random.Generator] = 0,
+                         near: Optional[ArrayLike] = None,
+                         add_workpiece: Optional[Callable[[MultibodyPlant], Iterable[GeometryId]]] = None,
+                         position_tolerance: float = 1e-6, angle_tolerance: float = 1e-6,
+                         limit_margin: float = 0.05) -> JointGuess:
         """Joint positions that put the pad centre frame at ``X_WE`` (a RigidTransform: e.g. the
         start pose of a CustomTask, its point on the surface), from Drake's InverseKinematics.
 
@@ -173,13 +186,13 @@ class LoadedArm:
         (a JointGuess). UnreachablePoseError if none is left."""
         plant = self.plant
         lower, upper = self.joint_limits()
-        low = np.where(np.isfinite(lower), lower, -np.pi) + limit_margin
-        high = np.where(np.isfinite(upper), upper, np.pi) - limit_margin
+        low: Array = np.where(np.isfinite(lower), lower, -np.pi) + limit_margin
+        high: Array = np.where(np.isfinite(upper), upper, np.pi) - limit_margin
         generator = np.random.default_rng(rng)
         if near is not None:
             near = joint_vector(near, "near", "LoadedArm.find_joint_guess", self.plant, unit="rad, m: one per arm joint")
         seeds = number(seeds, "seeds", "LoadedArm.find_joint_guess", low=1, integer=True)
-        starts = ([np.clip(near, low, high)] if near is not None else []) + [(low + high) / 2]
+        starts: List[Array] = ([np.clip(near, low, high)] if near is not None else []) + [(low + high) / 2]
         starts += [generator.uniform(low, high) for _ in range(max(seeds - len(starts), 0))]
         frame = plant.GetFrameByName(self.robot.end_effector_frame)
         best, solutions = None, 0
@@ -187,18 +200,22 @@ class LoadedArm:
             ik = InverseKinematics(plant, with_joint_limits=False)
             q = ik.q()
             ik.prog().AddBoundingBoxConstraint(low, high, q)
-            p = X_WE.translation()
-            ik.AddPositionConstraint(frame, np.zeros(3), plant.world_frame(), p - position_tolerance,
-                                     p + position_tolerance)
+            p: Array = X_WE.translation()
+            origin: Array = np.zeros(3)
+            lower_p: Array = p - position_tolerance
+            upper_p: Array = p + position_tolerance
+            ik.AddPositionConstraint(frame, origin, plant.world_frame(), lower_p, upper_p)
             ik.AddOrientationConstraint(plant.world_frame(), X_WE.rotation(), frame, RotationMatrix(),
                                         angle_tolerance)
-            ik.prog().AddQuadraticErrorCost(1e-3 * np.eye(len(start)), start, q)
+            weights: Array = 1e-3 * np.eye(len(start))
+            ik.prog().AddQuadraticErrorCost(weights, start, q)
             # SNOPT often reports "infeasible" at a solution within 1e-6 of the pose: judge by the pose itself.
-            solution = Solve(ik.prog(), start).GetSolution(q)
+            solution: Array = Solve(ik.prog(), start).GetSolution(q)
             if np.any(solution < low - 1e-9) or np.any(solution > high + 1e-9):
                 continue
             X = self.pad_pose(solution)
-            error = max(np.linalg.norm(X.translation() - X_WE.translation()),
+            p_WE: Array = X.translation()
+            error = max(np.linalg.norm(p_WE - X_WE.translation()),
                         X.rotation().inverse().multiply(X_WE.rotation()).ToAngleAxis().angle())
             if error > 10 * max(position_tolerance, angle_tolerance):
                 continue
@@ -219,8 +236,10 @@ class LoadedArm:
                           limit_margin=margin)
 
 
-def load_arm(path, flange, tool_frame=None, base_pose=None, tool_axis="+z", collision="convert", packages=None,
-             cache_dir=None):
+def load_arm(path: Union[str, os.PathLike], flange: str, tool_frame: Optional[str] = None,
+             base_pose: Optional[RigidTransform] = None, tool_axis: str = "+z", collision: str = "convert",
+             packages: Optional[Mapping[str, Union[str, Path]]] = None,
+             cache_dir: Union[str, os.PathLike, None] = None) -> LoadedArm:
     """Make the arm of URDF/SDF ``path`` usable by the hybrid law (see the module docstring).
 
     Args:

@@ -23,17 +23,24 @@ they get their types, once, for ``ScenarioConfig.validate``-time checking
 import abc
 import dataclasses
 from dataclasses import dataclass
-from typing import Optional
+from typing import Any, Dict, Iterable, List, Mapping, Optional, Sequence, Tuple, cast
 
 import numpy as np
 
-from pydrake.geometry import Meshcat, SceneGraph
+from pydrake.geometry import GeometryId, Meshcat, SceneGraph
+from pydrake.multibody.plant import MultibodyPlant
+from pydrake.systems.framework import Context, DiagramBuilder, System
 
 from drake_hybrid.core.arguments import instance, joint_rows
+from drake_hybrid.core.constraints import SelectingConstraint
 from drake_hybrid.core.errors import ConfigError
+from drake_hybrid.core.hints import Array
+from drake_hybrid.core.projections import ConstraintSpace
 from drake_hybrid.core.schema import unknown_field
+from drake_hybrid.core.surfaces import Surface
 from drake_hybrid.station.handles import HybridSystems
 from drake_hybrid.station.path_job import path_events
+from drake_hybrid.station.robot_model import RobotModel
 from drake_hybrid.systems.sources import Profile, ProfileSource
 from drake_hybrid.tasks.config import ScenarioConfig
 from drake_hybrid.tasks.task_options import option_help
@@ -83,7 +90,7 @@ def _coerce(task_name, field, raw):
     return word
 
 
-def pad_kinematic_rows(profile, force_size, kinematic_rows):
+def pad_kinematic_rows(profile: Profile, force_size: int, kinematic_rows: Iterable[int]) -> Profile:
     """``profile`` (a desired force) with zeros inserted at ``kinematic_rows`` when it gives only the
     force-controlled rows (m - len(kinematic_rows) entries): rows held kinematically (e.g. the
     tool's orientation rows of ``surface_constraint(normal_rows=True)``) have no force to track.
@@ -105,7 +112,7 @@ def pad_kinematic_rows(profile, force_size, kinematic_rows):
                                amplitude=padded(profile.amplitude))
 
 
-def as_profile(value):
+def as_profile(value: Any) -> Any:
     """A constant Profile from a list (a tuple, a 1-D array) of values; anything else as it is (its type
     is checked with the config's, ``ScenarioConfig.replace``)."""
     if isinstance(value, (list, tuple)) or (isinstance(value, np.ndarray) and value.ndim == 1):
@@ -119,18 +126,18 @@ class Task(abc.ABC):
 
     name = "task"
     description = ""
-    camera = None
+    camera: Optional[Tuple[Sequence[float], Sequence[float]]] = None
     Options = NoOptions
 
     # -- configuration -----------------------------------------------------------------------------
     continuous_plant = True        # the task runs on a continuous plant too (linearize_continuous)
 
     @abc.abstractmethod
-    def base_config(self, options):
+    def base_config(self, options: Dict[str, Any]) -> ScenarioConfig:
         """The task's default ScenarioConfig before ``options`` and changes are applied (``options``,
         the dict the caller gave, for tasks whose defaults depend on an option)."""
 
-    def default_config(self, options=None, **changes):
+    def default_config(self, options: Optional[Dict[str, Any]] = None, **changes: Any) -> ScenarioConfig:
         """The task's default ScenarioConfig with ``options`` (names of ``Options``) and ``changes``
         (top-level ScenarioConfig fields; desired_velocity and desired_force may be lists), validated
         (``ScenarioConfig.validate``: ConfigError naming the field)."""
@@ -165,12 +172,12 @@ class Task(abc.ABC):
         else:
             config.task_options[name] = value
 
-    def option_help(self):
+    def option_help(self) -> List[str]:
         """One line per option for help texts: ``name=VALUE`` with its type or allowed values and default
         (``tasks.task_options.option_help``)."""
         return option_help(self.Options)
 
-    def options(self, config):
+    def options(self, config: ScenarioConfig) -> Any:
         """The task's typed options from ``config.task_parameters`` and ``config.task_options``."""
         fields = {f.name: f for f in dataclasses.fields(self.Options)}
         values = {}
@@ -182,17 +189,17 @@ class Task(abc.ABC):
                 values[name] = _coerce(self.name, fields[name], raw)
         return self.Options(**values)
 
-    def eigenvalue_shifts(self, scenario, root_context):
+    def eigenvalue_shifts(self, scenario: "Scenario", root_context: Context) -> List[EigenvalueShift]:
         """Designed eigenvalues this task's physics moves (``EigenvalueShift``), at the linearization
         point ``root_context`` of ``scenario``. Default: none (the paper's model is the plant's)."""
         return []
 
-    def run_notes(self, scenario, log, design_time_constant):
+    def run_notes(self, scenario: "Scenario", log: Mapping[str, Array], design_time_constant: float) -> List[str]:
         """Lines the run's summary should carry about where the run ends (e.g. in a transient the
         task causes on purpose). Default: none."""
         return []
 
-    def run_events(self, scenario, log):
+    def run_events(self, scenario: "Scenario", log: Mapping[str, Array]) -> List[Dict[str, Any]]:
         """Phases of the run the plots mark and the summary names where a row's worst error falls
         (e.g. the pad on a rough patch): a list of ``{"start": t0, "end": t1 or None, "label": ...}``
         (s; ``end`` None: an instant; ``"explains_errors": False`` for a phase the plots mark but that
@@ -201,7 +208,7 @@ class Task(abc.ABC):
         phases (``path_job.path_events``: approach, dwell, line changes, lift-off)."""
         return piece_switches(scenario, log) + path_events(log)
 
-    def labels(self, config=None):
+    def labels(self, config: Optional[ScenarioConfig] = None) -> Dict[str, Any]:
         """Plot labels of the velocity- and force-controlled coordinates (``config``: the run's, for a
         task whose rows depend on its options). Optional: ``constraint_units`` (C's rows),
         ``constraint_note`` (what the simulated C measures: a compliant contact's compression, a weld's
@@ -212,34 +219,36 @@ class Task(abc.ABC):
 
     # -- models ------------------------------------------------------------------------------------
     @abc.abstractmethod
-    def add_robot(self, plant, config):
+    def add_robot(self, plant: MultibodyPlant, config: ScenarioConfig) -> RobotModel:
         """Add the robot and its tool to ``plant``; return a ``station.robot_model.RobotModel``."""
 
     @abc.abstractmethod
-    def add_workpiece(self, plant, config):
+    def add_workpiece(self, plant: MultibodyPlant, config: ScenarioConfig) -> List[GeometryId]:
         """Add the workpiece to ``plant``; return its collision geometry ids."""
 
-    def connect_environment(self, builder, plant, config):
+    def connect_environment(self, builder: DiagramBuilder, plant: MultibodyPlant, config: ScenarioConfig) -> None:
         """Wire systems that drive the environment (e.g. a moving window). Default: none."""
 
     # -- the law's task ----------------------------------------------------------------------------
     @abc.abstractmethod
-    def constraint_space(self, config):
+    def constraint_space(self, config: ScenarioConfig) -> ConstraintSpace:
         """The ConstraintSpace (chart, C, E_p) of the task."""
 
-    def velocity_row_inertia(self, plant, config, constraint_space):
+    def velocity_row_inertia(self, plant: MultibodyPlant, config: ScenarioConfig,
+                             constraint_space: ConstraintSpace) -> Array:
         """I_v (k x k): the inertia of the task's mechanism along the velocity rows, read from the
         simulation ``plant`` (``mechanism.source: plant``). Default: the task has no mechanism."""
         raise ConfigError(f"mechanism.source: task '{self.name}' has no mechanism to read from the plant; "
                           "use source 'given' with mechanism.velocity_row_inertia, or 'none'")
 
-    def workpiece_surface(self, config):
+    def workpiece_surface(self, config: ScenarioConfig) -> Optional[Tuple[Surface, float]]:
         """(surface, pad offset): the workpiece's surface (a ``core.surfaces.Surface``) and how far the
         controlled point is held off it along the normal (a ball pad's radius), for a job's path
         (``config.path``, ``station.path_job``). Default: None (the task has no path over a surface)."""
         return None
 
-    def make_source(self, config, controller_plant, robot, constraint_space):
+    def make_source(self, config: ScenarioConfig, controller_plant: MultibodyPlant, robot: RobotModel,
+                    constraint_space: ConstraintSpace) -> System:
         """The system producing desired_velocity, desired_acceleration and desired_force.
         Default: the config's profiles."""
         return ProfileSource(config.desired_velocity, config.desired_force, constraint_space.velocity_size,
@@ -247,10 +256,10 @@ class Task(abc.ABC):
 
     # -- the start ---------------------------------------------------------------------------------
     @abc.abstractmethod
-    def start_positions(self, scenario):
+    def start_positions(self, scenario: "Scenario") -> Array:
         """The arm's joint positions at the start of ``scenario``."""
 
-    def set_environment_state(self, scenario, plant_context):
+    def set_environment_state(self, scenario: "Scenario", plant_context: Context) -> None:
         """Set the environment's own state at the start (e.g. the crank's angle). Default: none."""
 
 
@@ -267,7 +276,7 @@ class Scenario(HybridSystems):
     meshcat: Optional[Meshcat] = None
 
 
-def piece_switches(scenario, log):
+def piece_switches(scenario: Scenario, log: Mapping[str, Array]) -> List[Dict[str, Any]]:
     """The instants a switching constraint (core.constraints.SelectingConstraint, e.g. (2.2-8) with the
     equator fix, which drops the component of (p - c) x a along the largest |a_k|) changes piece along
     the logged run: its rows change basis there, so the held rows' forces jump while the pad does not.
@@ -275,12 +284,13 @@ def piece_switches(scenario, log):
     constraint = scenario.constraint_space.constraint
     if not hasattr(constraint, "pieces") or "q" not in log:
         return []
+    select = cast(SelectingConstraint, constraint).select        # the constraint of pieces
     plant = scenario.controller_plant
     context = plant.CreateDefaultContext()
     pieces = []
     for q in joint_rows(log["q"], "log['q']", "piece_switches", plant):
         plant.SetPositions(context, q)
-        pieces.append(constraint.select(scenario.controller.kinematics.evaluate(context).configuration))
+        pieces.append(select(scenario.controller.kinematics.evaluate(context).configuration))
     changes = np.nonzero(np.diff(pieces))[0] + 1
     # The pad's motion and the normal force do not see the switch: it names no row's error (explains_errors).
     return [{"start": float(log["t"][i]), "end": None, "explains_errors": False,

@@ -15,31 +15,41 @@ name.
 
 import dataclasses
 import math
+import os
 from pathlib import Path
+from typing import Any, Callable, Dict, List, Mapping, Optional, Tuple, Union, cast
 
 import numpy as np
 
+from pydrake.geometry import GeometryId
 from pydrake.math import RigidTransform, RollPitchYaw
+from pydrake.multibody.plant import MultibodyPlant
+from pydrake.systems.framework import Context, System
 
-from drake_hybrid.core.charts import EulerZXZChart, PlanarChart, PlanarPointChart, PoseChart
+from drake_hybrid.core.charts import Chart, EulerZXZChart, PlanarChart, PlanarPointChart, PoseChart
 from drake_hybrid.core.constraints import Constraint
 from drake_hybrid.core.errors import ConfigError
 from drake_hybrid.core.expressions import check_parameter_names, expression_row_to_sympy, expression_to_sympy
-from drake_hybrid.core.projections import ConstraintSpace, GivenVelocityProjection, KernelVelocityProjection
+from drake_hybrid.core.hints import Array
+from drake_hybrid.core.projections import (AnyVelocityProjection, ConstraintSpace, GivenVelocityProjection,
+                                           KernelVelocityProjection)
 from drake_hybrid.core.schema import read_yaml_file
-from drake_hybrid.core.surfaces import view_projection
+from drake_hybrid.core.surfaces import Surface, view_projection
 from drake_hybrid.station.path_job import path_on, start_pose_on, view_of
+from drake_hybrid.station.robot_model import RobotModel
 from drake_hybrid.systems.sources import Profile
+from drake_hybrid.tasks.config import ScenarioConfig
 from drake_hybrid.tasks.custom import CustomTask
 from drake_hybrid.tasks.hooks import make_hooks
 from drake_hybrid.tasks.path import path_start_positions
 from drake_hybrid.tasks.registry import register_task
+from drake_hybrid.tasks.task import EigenvalueShift, Scenario
 from drake_hybrid.tasks.task_file_models import _robot_adder, _workpiece_adder, model_packages
-from drake_hybrid.tasks.task_file_schema import CHARTS, MAX_FILE_SIZE, read_task_file
+from drake_hybrid.tasks.task_file_schema import CHARTS, MAX_FILE_SIZE, ChartSpec, TaskFile, read_task_file
 from drake_hybrid.tasks.task_file_surface import field_expressions, field_source, surface_of
 
 
-def make_chart(spec, where):
+def make_chart(spec: ChartSpec, where: str) -> Chart:
     if spec.kind not in CHARTS:
         raise ConfigError(f"{where}chart.kind must be one of {', '.join(CHARTS)}, got '{spec.kind}'")
     if spec.kind == "euler_zxz":
@@ -62,13 +72,16 @@ class DataTask(CustomTask):
     and ``path``. Its start is in the chart's coordinates of the controlled point (``config.start.configuration``
     with the chart's number of coordinates; six numbers [x, y, z, roll, pitch, yaw] of E otherwise)."""
 
-    def __init__(self, spec, path, text, hooks=None, continuous_plant=True, surface=None, fields=None, **pieces):
+    def __init__(self, spec: TaskFile, path: Union[str, os.PathLike], text: str,
+                 hooks: Optional[Mapping[str, Callable[..., Any]]] = None, continuous_plant: bool = True,
+                 surface: Optional[Tuple[Surface, float]] = None, fields: Optional[Tuple[List[Any], List[Any]]] = None,
+                 **pieces: Any) -> None:
         super().__init__(**pieces)
         self.spec, self.path, self.text = spec, Path(path), text
         self.hooks = dict(hooks or {})            # {Task method: the hook's implementation} (tasks/hooks.py)
         self.continuous_plant = continuous_plant
         self.surface, self.fields = surface, fields   # (Surface, offset) or None; (Y_d, F_d) or None
-        self._config = None
+        self._config: Optional[ScenarioConfig] = None     # set by load_task_file
 
     def _hook(self, method):
         return self.hooks.get(method)
@@ -78,52 +91,58 @@ class DataTask(CustomTask):
         again (the compiled constraint and Drake's config structs do not pickle)."""
         return _task_from_text, (str(self.path), self.text, self.name)
 
-    def base_config(self, options):
+    def base_config(self, options: Dict[str, Any]) -> ScenarioConfig:
+        assert self._config is not None             # set by load_task_file, which makes every DataTask
         return dataclasses.replace(self._config, start=dataclasses.replace(self._config.start))
 
     # -- the Task methods a hook may provide (the CustomTask's otherwise) --------------------------
-    def add_workpiece(self, plant, config):
+    def add_workpiece(self, plant: MultibodyPlant, config: ScenarioConfig) -> List[GeometryId]:
         return list(self._add_workpiece(plant, config))     # the file's workpiece, then a hook's
 
-    def workpiece_surface(self, config):
+    def workpiece_surface(self, config: ScenarioConfig) -> Optional[Tuple[Surface, float]]:
         return self.surface
 
-    def make_source(self, config, controller_plant, robot, constraint_space):
+    def make_source(self, config: ScenarioConfig, controller_plant: MultibodyPlant, robot: RobotModel,
+                    constraint_space: ConstraintSpace) -> System:
         if self.fields is not None:                # the paper's fields Y_d(r), F_d(r) (tasks/task_file_surface.py)
             return field_source(self.fields, controller_plant, robot, constraint_space, f"{self.path}: ")
         hook = self._hook("make_source") or super().make_source
         return hook(config, controller_plant, robot, constraint_space)
 
-    def start_positions(self, scenario):
+    def start_positions(self, scenario: Scenario) -> Array:
         if scenario.config.path.active and self._hook("start_positions") is None:   # a job: the path's first point
             return path_start_positions(self, scenario, self.joint_guess)
         return (self._hook("start_positions") or super().start_positions)(scenario)
 
-    def set_environment_state(self, scenario, plant_context):
-        return (self._hook("set_environment_state") or super().set_environment_state)(scenario, plant_context)
+    def set_environment_state(self, scenario: Scenario, plant_context: Context) -> None:
+        (self._hook("set_environment_state") or super().set_environment_state)(scenario, plant_context)
 
-    def velocity_row_inertia(self, plant, config, constraint_space):
+    def velocity_row_inertia(self, plant: MultibodyPlant, config: ScenarioConfig,
+                             constraint_space: ConstraintSpace) -> Array:
         return (self._hook("velocity_row_inertia") or super().velocity_row_inertia)(plant, config, constraint_space)
 
-    def eigenvalue_shifts(self, scenario, root_context):
+    def eigenvalue_shifts(self, scenario: Scenario, root_context: Context) -> List[EigenvalueShift]:
         return (self._hook("eigenvalue_shifts") or super().eigenvalue_shifts)(scenario, root_context)
 
-    def run_notes(self, scenario, log, design_time_constant):
+    def run_notes(self, scenario: Scenario, log: Mapping[str, Array], design_time_constant: float) -> List[str]:
         return (self._hook("run_notes") or super().run_notes)(scenario, log, design_time_constant)
 
-    def run_events(self, scenario, log):
+    def run_events(self, scenario: Scenario, log: Mapping[str, Array]) -> List[Dict[str, Any]]:
         return (self._hook("run_events") or super().run_events)(scenario, log)
 
-    def start_pose_of(self, config):
+    def start_pose_of(self, config: ScenarioConfig) -> RigidTransform:
         values = list(config.start.configuration)
         if len(values) == self.space.chart.configuration_size:
             # The chart's coordinates are the controlled point's: X_WE = X_WP X_PE, p_PE = -p_EP.
             X_WP = self.space.chart.pose(np.asarray(values, dtype=float))
-            return X_WP.multiply(RigidTransform(-np.asarray(self.spec.robot.end_effector_point, dtype=float)))
+            p_PE: Array = -np.asarray(self.spec.robot.end_effector_point, dtype=float)
+            return X_WP.multiply(RigidTransform(p_PE))
         return super().start_pose_of(config)
 
 
-def constraint_space_of(spec, chart, where, anchor, hooks=None, surface=None):
+def constraint_space_of(spec: TaskFile, chart: Chart, where: str, anchor: Array,
+                        hooks: Optional[Mapping[str, Callable[..., Any]]] = None,
+                        surface: Optional[Tuple[Surface, float]] = None) -> ConstraintSpace:
     """The ConstraintSpace of the file: C from ``constraint.rows`` (or a hook's ``constraint``, or the
     ``workpiece.surface`` offset by the pad's radius), E_p from ``velocity_projection`` (the view's rows
     with a surface, else the kernel of E_f at ``anchor``, when no rows are given)."""
@@ -135,7 +154,8 @@ def constraint_space_of(spec, chart, where, anchor, hooks=None, surface=None):
         constraint = hooks["constraint"](chart)
     elif surface is not None and not spec.constraint.rows:
         try:
-            constraint = surface[0].offset_constraint(chart, surface[1])
+            # A file may name any chart: offset_constraint refuses one that is not 3-D (PathError).
+            constraint = surface[0].offset_constraint(cast(Union[PoseChart, EulerZXZChart], chart), surface[1])
         except TypeError as error:
             raise ConfigError(f"{where}workpiece.surface: {error} (chart.kind: pose)") from None
     else:
@@ -146,9 +166,10 @@ def constraint_space_of(spec, chart, where, anchor, hooks=None, surface=None):
         if given:
             matrix = [expression_row_to_sympy(text, d, symbols, parameters, f"{where}velocity_projection.rows[{i}]")
                       for i, text in enumerate(given)]
-            projection = GivenVelocityProjection(chart, matrix, name="E_p")
+            projection: AnyVelocityProjection = GivenVelocityProjection(chart, matrix, name="E_p")
         elif surface is not None:
-            projection = view_projection(chart, view_of(spec.config.path, surface[0]))
+            projection = view_projection(cast(Union[PoseChart, EulerZXZChart], chart),   # refuses a planar one
+                                         view_of(spec.config.path, surface[0]))
         else:
             projection = KernelVelocityProjection(constraint, anchor)
         return ConstraintSpace(constraint, projection)
@@ -173,7 +194,7 @@ def _constraint_of_rows(spec, chart, where):
         raise ConfigError(f"{where}constraint: {error}") from None
 
 
-def start_configuration_of(spec, chart, where):
+def start_configuration_of(spec: TaskFile, chart: Chart, where: str) -> Array:
     """The start's chart coordinates (numbers) from ``start.configuration`` or ``start.pose``."""
     start = spec.start
     if start.configuration and start.pose:
@@ -190,9 +211,11 @@ def start_configuration_of(spec, chart, where):
     if len(start.pose) != 6:
         raise ConfigError(f"{where}start: give configuration (chart coordinates) or pose [x, y, z, roll, pitch, "
                           f"yaw] of the end-effector frame, got pose {start.pose}")
-    X_WE = RigidTransform(RollPitchYaw(start.pose[3:]), start.pose[:3])
-    return chart.configuration_of_pose(X_WE.multiply(RigidTransform(np.asarray(spec.robot.end_effector_point,
-                                                                               dtype=float))))
+    rpy: Array = np.asarray(start.pose[3:], dtype=float)     # Array: what pydrake's stubs take (core.hints.Array)
+    p_WE: Array = np.asarray(start.pose[:3], dtype=float)
+    p_EP: Array = np.asarray(spec.robot.end_effector_point, dtype=float)
+    X_WE = RigidTransform(RollPitchYaw(rpy), p_WE)
+    return chart.configuration_of_pose(X_WE.multiply(RigidTransform(p_EP)))
 
 
 def _task_from_text(path, text, name):
@@ -201,7 +224,8 @@ def _task_from_text(path, text, name):
     return task
 
 
-def load_task_file(path, register=True, text=None):
+def load_task_file(path: Union[str, os.PathLike], register: bool = True,
+                   text: Optional[str] = None) -> Tuple[DataTask, ScenarioConfig]:
     """(DataTask, ScenarioConfig) of the task file ``path``; the task is registered by its name
     (``register_task``: known to ``simulate``, ``linearize_continuous``, the CLI) unless ``register``
     is False. ConfigError naming the file and the field for anything the file gets wrong."""
@@ -213,7 +237,7 @@ def load_task_file(path, register=True, text=None):
     check_parameter_names(spec.parameters, (), f"{where}parameters")
     chart = make_chart(spec.chart, where)
     check_parameter_names(spec.parameters, chart.configuration_symbols, f"{where}parameters")
-    surface = surface_of(spec.workpiece.surface, path, where)
+    surface: Optional[Tuple[Surface, float]] = surface_of(spec.workpiece.surface, path, where)
     job = spec.config.path
     if job.active:
         job.validate(f"{where}config.path.")
@@ -221,6 +245,7 @@ def load_task_file(path, register=True, text=None):
             raise ConfigError(f"{where}config.path: a path needs workpiece.surface (the surface it lies on)")
     if job.active and not (spec.start.configuration or spec.start.pose):
         # A job starts at its path's first point (station.path_job).
+        assert surface is not None                  # a job without one was refused above
         start = chart.configuration_of_pose(start_pose_on(surface[0], path_on(*surface, job), job)[0])
     else:
         start = start_configuration_of(spec, chart, where)
