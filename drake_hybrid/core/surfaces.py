@@ -7,8 +7,9 @@ workpiece (waypoints, a coverage pattern) becomes a path of the pad's centre by
 ``closest_point`` / ``lift`` and the normal::
 
     surface.offset_constraint(chart, r)   C = (f_r(p), grad f_r . o_1, grad f_r . o_2)      (m = 3)
-                                          f_r = 0 the offset surface, |grad f_r| = 1 on it, so F_1 is
-                                          the normal force in N; rows 2, 3 (a along -grad f_r) are held
+                                          f_r the signed distance from the offset surface, so
+                                          |grad f_r| = 1 wherever the pad is, pressed in or not, and F_1
+                                          is the normal force in N; rows 2, 3 (a along -grad f_r) are held
                                           by the controller (kinematic rows), as in ``surface_constraint``
     surface.closest_point(p) -> (q, n)    the nearest surface point and the outward unit normal there
     surface.lift(view, u, v) -> (q, n)    the surface point seen at (u, v) of a ``ViewPlane``
@@ -170,8 +171,9 @@ class Surface(abc.ABC):
 
     @abc.abstractmethod
     def implicit(self, p: sympy.Matrix, offset: float) -> sympy.Expr:
-        """f_r(p) as a sympy expression of the sympy column ``p``: zero on the surface offset by ``offset``
-        along its outward normal, negative inside, |grad f_r| = 1 there."""
+        """f_r(p) as a sympy expression of the sympy column ``p``: the signed distance from the surface
+        offset by ``offset`` along its outward normal (negative inside), so |grad f_r| = 1 wherever the pad
+        can be, on the offset surface and pressed into it: the force row reads the normal force in N."""
 
     @abc.abstractmethod
     def closest_point(self, p: ArrayLike) -> Tuple[Array, Array]:
@@ -263,7 +265,7 @@ class SphereSurface(Surface):
     def implicit(self, p: sympy.Matrix, offset: float) -> sympy.Expr:
         rho = sympy.Float(self.radius + check_offset(offset, f"{self.name}.implicit"))
         P = [p[i] - sympy.Float(self.center[i]) for i in range(3)]
-        return (sum(c * c for c in P) - rho * rho) / (2 * rho)
+        return sympy.sqrt(sum(c * c for c in P)) - rho          # the signed distance: |grad f_r| = 1
 
     def closest_point(self, p: ArrayLike) -> Tuple[Array, Array]:
         d = check_point(p, f"{self.name}.closest_point") - self.center
@@ -310,7 +312,7 @@ class CylinderSurface(Surface):
         d = [p[i] - sympy.Float(self.center[i]) for i in range(3)]
         along = sum(k[i] * d[i] for i in range(3))
         radial = [d[i] - along * k[i] for i in range(3)]
-        return (sum(c * c for c in radial) - rho * rho) / (2 * rho)
+        return sympy.sqrt(sum(c * c for c in radial)) - rho     # the signed distance: |grad f_r| = 1
 
     def closest_point(self, p: ArrayLike) -> Tuple[Array, Array]:
         p = check_point(p, f"{self.name}.closest_point")

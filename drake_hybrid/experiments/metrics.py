@@ -178,16 +178,24 @@ def run_scale(desired: ArrayLike) -> float:
     return float(np.max(np.linalg.norm(desired, axis=1))) if desired.size else 0.0
 
 
+# A row's command below this fraction of the run's scale is rounding, not a command (a path's spin row
+# commanded about 1e-7 rad/s beside 0.05 m/s along the surface): its % figures are of what a row commanded to
+# zero is judged by, not of the rounding, against which an error of a few 1e-5 reads tens of thousands of %.
+COMMAND_FLOOR = 1e-4
+
+
 def row_scales(desired: ArrayLike, units: Optional[Sequence[str]] = None,
                fallback: str = "run") -> Tuple[Array, List[str]]:
     """What each row's % figures are of (no row may drop out of the worst-row figures): its command
-    (``row_commands``); for a row commanded to zero, the largest command of the rows in its units
+    (``row_commands``; below ``COMMAND_FLOOR`` of the run's scale, zero); for a row commanded to zero, the
+    largest command of the rows in its units
     (``units``, one string per row: the cross-track m/s row of a slide against the slide's speed), else
     the run's scale (``run_scale``: the norm of the whole command, the speed or the force the run
     commands, the plots' scale; ``fallback="unit"`` skips it, as the sweep's verdict does to keep its
     tolerance in each row's units), else one of its units. Returns (scales, sources), each source
     "command", "rows in its units", "run" or "unit" (no % figure is given against a unit)."""
     commands, scale = row_commands(desired), run_scale(desired)
+    commands = np.where(commands >= COMMAND_FLOOR * scale, commands, 0.0)
     fallback = text(fallback, "fallback", "row_scales", allowed=("run", "unit"))
     unit_of_row: List[Optional[str]] = (_per_row(units, "units", "row_scales", len(commands)) if units is not None
                                          else [None] * len(commands))

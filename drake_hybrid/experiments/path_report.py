@@ -2,13 +2,16 @@
 long it was off the surface (``summary.json``'s ``path``, the printout, the plots).
 
 From the log of a path job (``station.path_job``: ``path_error`` = c - c_d, ``reference_normal``,
-``path_progress`` = [segment, arc length, t_path], the controller's force rows, the supervisor's
-``contact_phase`` and ``lifting``):
+``path_progress`` = [segment, arc length, t_path], the measured wrench, the commanded force, the
+supervisor's ``contact_phase`` and ``lifting``):
 
 * the path error, the distance of the pad centre from its reference point (mm): in all, along the
   surface (its part in the tangent plane: where on the workpiece the pad is) and along the normal
   (the compliant contact's compression: the reference lies on C = 0, the pressed pad inside it);
-* the force error along the path, |F - F_d| in N and in % of F_d, on the force-controlled row;
+* the force error along the path, |F_n - F_d| in N and in % of F_d: F_n the normal force measured by the
+  sensor (``normal_force``: the logged wrench, the sensor's own, along the surface's outward normal), F_d
+  the path's command; not the controller's own force row, so that a row that misreads the contact (a
+  constraint whose gradient is not the unit normal) shows here as a force error;
 * both per segment (a stroke from rest to rest: a raster line, the step to the next one), over its
   *settled* part (from the segment's start + five design time constants to its end) and over its
   first five time constants (the transient at the line change; in the first segment, the approach's
@@ -129,13 +132,24 @@ def error_parts(log: Mapping[str, Array]) -> Tuple[Array, Array, Array]:
     return np.linalg.norm(error, axis=1), np.linalg.norm(tangential, axis=1), np.abs(along_normal)
 
 
+def normal_force(log: Mapping[str, Array]) -> Array:
+    """The normal force the sensor measured (N, per sample): the force of its wrench on the robot (the
+    sensor's own, ``true_wrench``, where faults, a filter or a conditioner follow it; else ``wrench``) along
+    the surface's outward unit normal at the path's reference point (``reference_normal``). The pad is
+    within the path error along the surface of that point (hundredths of a millimetre once settled), so the
+    normal there is the true normal at the pad to an angle of that error times the surface's curvature."""
+    wrench = np.asarray(log["true_wrench"] if "true_wrench" in log else log["wrench"], dtype=float)
+    return np.sum(wrench[:, 3:] * np.asarray(log["reference_normal"], dtype=float), axis=1)
+
+
 def path_report(log: Mapping[str, Array], design_time_constant: float, path_duration: float, path_length: float,
                 force_row: int = 0) -> PathReport:
-    """The job's figures (module docstring), a ``PathReport`` (distances in mm, times in s)."""
+    """The job's figures (module docstring), a ``PathReport`` (distances in mm, times in s); ``force_row``: the
+    row of the logged ``desired_force`` that commands the normal force."""
     t = np.asarray(log["t"], dtype=float)
     segment, arc, t_path = (np.asarray(log["path_progress"], dtype=float)[:, i] for i in range(3))
     total, tangential, normal = (1000.0 * e for e in error_parts(log))
-    force = np.asarray(log["force"], dtype=float)[:, force_row]
+    force = normal_force(log)
     desired = np.asarray(log["desired_force"], dtype=float)[:, force_row]
     force_error = np.abs(force - desired)
     phase = np.asarray(log["contact_phase"], dtype=float)[:, 0] if "contact_phase" in log else np.full(

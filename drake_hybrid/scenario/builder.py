@@ -70,7 +70,7 @@ def prepare_config(config: ScenarioConfig) -> PreparedConfig:
     config = dataclasses.replace(config, desired_force=pad_kinematic_rows(
         config.desired_force, constraint_space.force_size, constraint_space.constraint.kinematic_rows))
     if config.path.active:
-        config = with_path_commands(config, constraint_space)
+        config = with_path_commands(config, constraint_space, task_path_job(task, config))
     config.desired_force.validate(constraint_space.force_size, "desired_force")   # (a task may fill desired_velocity)
     if config.supervised:          # a guarded approach to a surface, which only pushes: over the whole course
         config.desired_force.check_keeps_sign("desired_force")

@@ -17,7 +17,8 @@ from pydrake.multibody.tree import Frame, ModelInstanceIndex, RigidBody, WeldJoi
 from drake_hybrid.core.arguments import describe, function, instance, positive, text
 from drake_hybrid.core.errors import ArgumentError, ConfigError, DrakeHybridError
 from drake_hybrid.station.parsing import ConfigureParser, add_model, models_directory
-from drake_hybrid.station.robot_model import RobotModel, check_model_instance, check_unfinalized_plant, get_frame
+from drake_hybrid.station.robot_model import (RobotModel, check_arm_moves_end_effector, check_model_instance,
+                                              check_unfinalized_plant, get_frame)
 
 
 def weld_joints(plant: MultibodyPlant, joint_names: Union[str, Sequence[str]],
@@ -149,6 +150,33 @@ def _moved_by(plant, model_instance, body):
     return False
 
 
+def _welded_to_world(plant, body):
+    """True if ``body`` hangs from the world body by welds alone (no joint with a degree of freedom between
+    them, in the joint tree as it stands: a body not yet welded nor jointed to anything is not)."""
+    parent = {}
+    for index in plant.GetJointIndices():
+        joint = plant.get_joint(index)
+        parent[joint.child_body().index()] = (joint.parent_body().index(), joint.num_velocities())
+    world, index, seen = plant.world_body().index(), body.index(), set()
+    while index != world:
+        if index in seen or index not in parent:
+            return False
+        seen.add(index)
+        index, velocities = parent[index]
+        if velocities > 0:
+            return False
+    return True
+
+
+def _check_moved(plant, frame, owner):
+    """ArgumentError if no joint moves ``frame``'s body (it is welded to the world: the arm's base)."""
+    body = frame.body()
+    if _welded_to_world(plant, body):
+        raise ArgumentError(f"{owner}: flange_frame '{frame.name()}' (on body '{body.name()}') is welded to the world: "
+                            "no joint moves it, so the pad could not move (the arm's base?); pass the frame at the end "
+                            "of the arm (its flange, e.g. 'tool0')")
+
+
 def _flange(plant, arm, flange_frame, owner):
     """The Frame ``flange_frame`` (a Frame or the name of one of ``arm``'s), checked to be moved by ``arm``."""
     if isinstance(flange_frame, str):
@@ -221,6 +249,7 @@ def mount_tool(plant: MultibodyPlant, arm: ModelInstanceIndex, flange_frame: Uni
     frame = _flange(plant, arm, flange_frame, owner)
     if gripper_joints:
         weld_joints(plant, list(gripper_joints), arm)
+    _check_moved(plant, frame, owner)
     removed = []
     if gripper == "remove" and plant.geometry_source_is_registered():
         removed = [geometry for body in carried_bodies(plant, arm, frame.body())
@@ -270,6 +299,7 @@ def robot_plant(add_robot: Callable[[MultibodyPlant], RobotModel]) -> MultibodyP
         raise ArgumentError(f"robot_plant: add_robot must return the RobotModel of mount_tool, got "
                             f"{type(robot).__name__}")
     plant.Finalize()
+    check_arm_moves_end_effector(plant, robot, "robot_plant")
     return plant
 
 

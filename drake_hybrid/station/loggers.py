@@ -35,8 +35,7 @@ LOG_KEYS = {
     # A path job's (add_hybrid_controller(..., path=job)): the PathSource's outputs and the supervisor's lift-off.
     "reference_position": "the path's reference point, the pad centre's (3, m, world)",
     "reference_normal": "the surface's outward unit normal at the reference (3)",
-    "path_error": "the pad centre's error against the reference: [along the path, across it on the surface, "
-                  "along the normal] (3, m)",
+    "path_error": "c - c_d: the pad centre's error against the reference point (3, m, world)",
     "path_progress": "[segment, arc length (m), path time (s; < 0 before the path starts)] (3)",
     "path_done": "1 once the path has ended (1)",
     "lifting": "1 while the supervisor lifts the pad off at the path's end (1)",

@@ -113,21 +113,14 @@ class PathConfig:
             return [w.force for w in self.waypoints]
         return self.force
 
-    def initial_force(self) -> float:
-        """The normal force at the path's start (N)."""
-        force = self.force_argument()
-        if not isinstance(force, list):
-            return float(force)
-        if isinstance(force[0], list):                       # a table [[s, F], ...]
-            return float(np.interp(0.0, [s for s, _ in force], [f for _, f in force]))
-        return float(force[0])                               # per waypoint
-
     def validate(self, prefix: str = "path.") -> "PathConfig":
         """PathError naming the first field that is not allowed (every field, also of an inactive path:
         a misspelt value is refused wherever it is); the types first (``core.schema.check_types``)."""
         check_types(self, PathConfig, prefix.rstrip("."), error=PathError)
         if self.waypoints and self.pattern.kind:
-            raise PathError(f"{prefix}: give waypoints or a pattern, not both")
+            raise PathError(f"{prefix}waypoints and {prefix}pattern (kind '{self.pattern.kind}'): give waypoints or a "
+                            f"pattern, not both; a pattern you did not write is the task's default path: clear it with "
+                            f"{prefix}pattern.kind: '' to follow the waypoints")
         if self.pattern.kind not in PATTERN_KINDS:
             raise PathError(f"{prefix}pattern.kind must be one of raster, spiral (or empty), got "
                             f"'{self.pattern.kind}'")
@@ -156,6 +149,10 @@ class PathConfig:
         forces = [w.force for w in self.waypoints]
         if any(f > 0 for f in forces) and not all(f > 0 for f in forces):
             raise PathError(f"{prefix}waypoints: give a force at every waypoint or at none, got {forces}")
+        if any(f > 0 for f in forces) and self.force_by_arc_length:
+            table = [[point.arc_length, point.force] for point in self.force_by_arc_length]
+            raise PathError(f"{prefix}waypoints[].force and {prefix}force_by_arc_length both give the path's force "
+                            f"(per waypoint {forces} N, by arc length {table}): give one of them")
         for name in ("origin", "axis_u", "axis_v"):
             if len(getattr(self.view, name)) not in (0, 3):
                 raise PathError(f"{prefix}view.{name} must be [x, y, z] or empty, got {getattr(self.view, name)}")

@@ -160,8 +160,16 @@ def path_on(surface: Surface, offset: float, settings: PathConfig) -> SurfacePat
     view = view_of(settings, surface)
     limits = PathLimits(settings.speed, settings.acceleration)
     force, force_field = settings.force_argument(), _force_field(settings)
+    check_inside = getattr(surface, "check_inside", None)       # a height map: the pad must stay on the map
     if settings.waypoints:
         points = [w.point for w in settings.waypoints]
+        if check_inside is not None:
+            field = cast(HeightMapSurface, surface).field
+            for index, point in enumerate(points):
+                check_inside([field.map_point(vector(point, f"path.waypoints[{index}].point", "path_on", 3,
+                                                     error=PathError))[:2]],
+                             offset, f"path.waypoints[{index}].point {list(point)} (the pad must stay on the map: "
+                                     "move it inside)")
         path = path_from_waypoints(surface, points, offset, limits, force, settings.tolerance,
                                    settings.interpolation, view, what="path", force_field=force_field)
     else:
@@ -170,18 +178,33 @@ def path_on(surface: Surface, offset: float, settings: PathConfig) -> SurfacePat
             strokes = raster(pattern.center, pattern.size, pattern.spacing, pattern.direction, what="path.pattern")
         else:
             strokes = spiral(pattern.center, pattern.radius, pattern.spacing, what="path.pattern")
-        check_inside = getattr(surface, "check_inside", None)
-        if check_inside is not None:                     # a height map: the pad must stay on the map
+        if check_inside is not None:
             corners = np.vstack([stroke[[0, -1]] for stroke in strokes])
             field = cast(HeightMapSurface, surface).field          # the surface with check_inside
             map_points = [field.map_point(view.point(u, v))[:2] for u, v in corners]
             check_inside(map_points, offset, "the pattern's corner")
         path = path_from_strokes(surface, view, strokes, offset, limits, force, what="path", force_field=force_field)
+    if check_inside is not None:
+        _check_on_map(cast(HeightMapSurface, surface), path, offset, "waypoints" if settings.waypoints else "pattern")
     if settings.holding:
         arc = settings.hold_at * path.length
         sample = path.evaluate(_time_at_arc(path, arc))
         path = SurfacePath.hold(sample.position, sample.normal, path.force(arc))
     return path
+
+
+def _check_on_map(surface, path, offset, field):
+    """PathError naming ``path.<field>`` and the arc length where a contact point of ``path`` leaves the height
+    map's grid (less the pad's radius): there the surface is the spline's extrapolation, not the part."""
+    map_points = []
+    for segment in path.segments:
+        for arc, point in zip(segment.start_arc + segment.arc_lengths, surface.field.map_point(segment.contact_points)):
+            map_points.append((arc, point[:2]))
+    x0, x1, y0, y1 = surface.field.bounds
+    for arc, (X, Y) in map_points:
+        if not (x0 + offset <= X <= x1 - offset and y0 + offset <= Y <= y1 - offset):
+            surface.check_inside([(X, Y)], offset, f"path.{field}: the path at arc length {arc:.4g} m (keep the "
+                                                   "path on the map, the pad's radius inside its edge)")
 
 
 def _time_at_arc(path, arc):

@@ -81,3 +81,23 @@ def check_finalized_robot_plant(plant: MultibodyPlant, robot: RobotModel, owner:
     if not plant.is_finalized():
         raise ConfigError(f"{owner}: finalize the plant first (plant.Finalize())")
     check_model_instance(plant, robot.arm, "robot.arm", owner)
+    check_arm_moves_end_effector(plant, robot, owner)
+
+
+def check_arm_moves_end_effector(plant: MultibodyPlant, robot: RobotModel, owner: str) -> None:
+    """ArgumentError if no joint of ``robot.arm`` moves the body of ``robot.end_effector_frame`` in the finalized
+    ``plant`` (a tool mounted on the arm's base, welded to the world): the law could not move the pad. A frame
+    the plant does not have (or has in several models) is left to the checks that name it."""
+    name = robot.end_effector_frame
+    if not isinstance(name, str) or not plant.HasFrameNamed(name):
+        return
+    try:
+        body = plant.GetFrameByName(name).body()
+    except RuntimeError:                       # the name in several models: the frame's own checks name it
+        return
+    joints = [index for index in plant.GetJointIndices(robot.arm) if plant.get_joint(index).num_velocities() > 0]
+    if not joints or body.index() not in plant.GetBodiesKinematicallyAffectedBy(joints):
+        raise ArgumentError(f"{owner}: no joint of the arm '{plant.GetModelInstanceName(robot.arm)}' moves the "
+                            f"end-effector frame '{name}' (on body '{body.name()}'): the tool is mounted on a part "
+                            "that is welded to the world (the arm's base?); mount_tool it on the frame at the end of "
+                            "the arm (its flange, e.g. 'tool0')")

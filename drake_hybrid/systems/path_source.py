@@ -19,8 +19,8 @@ twist nu (docs/theory.md §4.2)::
     F_d       = F(s) on the force row (the normal force, N), 0 on the others
 
 with P = I - n n^T, so that d/dt e_p = e_p' = E_p nu - r-dot_pd to first order. (delta is the
-distance to first order: on the sphere's pad-centre surface |P| - rho = delta + delta^2 / (2 rho);
-P removes that second-order normal remainder from e_p, so a pad pressed at rest is an equilibrium.) Measured from c_d instead, the compression
+pad's distance from C = 0: exact for the signed distances of ``core.surfaces``; P removes any normal
+remainder from e_p, so a pad pressed at rest is an equilibrium.) Measured from c_d instead, the compression
 would count as a position error wherever E_p's rows are not tangent (u . n delta: 0.42 mm at the sphere
 cap's 28 deg), and measured from c_d but projected onto the tangent plane its rate would differ from
 e_p' by u . delta n-dot: 1 mm/s on the bump's top (delta 1 mm, n turning at 1 rad/s), which K_p, K_v

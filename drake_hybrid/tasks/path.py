@@ -83,14 +83,16 @@ def job_duration(task: Task, config: ScenarioConfig) -> float:
     return task_path_job(task, config).duration(supervision, None if config.start.in_contact else config.start.gap)
 
 
-def with_path_commands(config: ScenarioConfig, constraint_space: ConstraintSpace) -> ScenarioConfig:
-    """``config`` with desired_velocity zero and desired_force F(0) on the force row, constant: what the
-    start (pressing with F_d(0)), the static torque and the summaries read; the run's commands come
-    from the path."""
+def with_path_commands(config: ScenarioConfig, constraint_space: ConstraintSpace, job: PathJob) -> ScenarioConfig:
+    """``config`` with desired_velocity zero and desired_force constant, the force ``job`` (the config's
+    ``task_path_job``) commands where it starts on the force row: at the path's first point, or at the
+    point it holds (``path.hold_at``: per waypoint or by arc length, the force there). What the start
+    (pressing with that force), the static torque and the summaries read; the run's commands come from
+    the path."""
     kinematic = constraint_space.constraint.kinematic_rows
     force_row = next(i for i in range(constraint_space.force_size) if i not in kinematic)
     force = [0.0] * constraint_space.force_size
-    force[force_row] = config.path.initial_force()
+    force[force_row] = float(job.path.force(0.0))
     return dataclasses.replace(config, desired_velocity=Profile(kind="constant",
                                                                 value=[0.0] * constraint_space.velocity_size),
                                desired_force=Profile(kind="constant", value=force))
