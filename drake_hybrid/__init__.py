@@ -8,7 +8,7 @@ The names a user starts with, importable from here (each lives in the module nam
 * the law: ``HybridController``, ``HybridGains``, ``ControlMode``, ``SupervisionConfig``, ``ContactPhase``;
 * your own station: ``default_plant_config``, ``mount_tool``, ``robot_plant``, ``add_rigid_workpiece``,
   ``apply_contact_defaults``, ``only_tool_touches``, ``add_hybrid_controller``, ``add_loggers``,
-  ``read_log``, ``solve_contact_start``, a path job (``PathConfig``, ``PatternConfig``, ``path_job``,
+  ``read_log``, ``solve_contact_start``, ``solve_approach_start``, a path job (``PathConfig``, ``PatternConfig``, ``path_job``,
   ``solve_path_start``) and ``linearize_at_contact``;
 * the package's tasks: ``get_task``, ``simulate``, ``linearize_continuous``, ``load_task_file``, ``CustomTask``,
   ``register_task``, ``load_arm``;
@@ -48,7 +48,7 @@ _EXPORTS = {
     "drake_hybrid.station.loggers": ["LOG_KEYS", "add_loggers", "read_log"],
     "drake_hybrid.station.path_config": ["PathConfig", "PatternConfig", "WaypointConfig"],
     "drake_hybrid.station.path_job": ["PathJob", "path_job"],
-    "drake_hybrid.station.contact_start": ["solve_contact_start", "solve_path_start"],
+    "drake_hybrid.station.contact_start": ["solve_approach_start", "solve_contact_start", "solve_path_start"],
     "drake_hybrid.tasks.config": ["ScenarioConfig", "load_config"],
     "drake_hybrid.tasks.registry": ["get_task", "register_task"],
     "drake_hybrid.tasks.custom": ["CustomTask"],

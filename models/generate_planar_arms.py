@@ -7,7 +7,9 @@ The 3R arm is the reference arm of docs/theory.md §9: links 1.0, 0.8,
 docs/theory.md §8 (0.8, 0.7, 0.5, 0.2 m; 2.0, 1.5, 1.0, 0.3 kg). Both move in the
 world x-z plane with every joint turning about -y, so the absolute angle of
 the last link is the sum of the joint angles (PlanarChart's theta) and gravity
-acts along the chart's -y. A frame "tip" marks the end of the last link. The 2R arm (1.0, 0.8 m;
+acts along the chart's -y. A frame "tip" marks the end of the last link. Each rod is also a collision
+cylinder (the last one stopping 5 cm before the tip, where the pad tool sits), so that a start with a
+link through the workpiece is refused (``station.clearance``); the tasks let only the pad touch. The 2R arm (1.0, 0.8 m;
 2.0, 1.5 kg) is the arm of the kinematic instability of the Raibert-Craig hybrid controller
 (issue 18, analysis.kinematic_instability).
 """
@@ -20,12 +22,16 @@ ARMS = {
     "planar_4r": dict(lengths=[0.8, 0.7, 0.5, 0.2], masses=[2.0, 1.5, 1.0, 0.3], efforts=[150.0, 100.0, 50.0, 20.0]),
 }
 RADIUS = 0.03
+TOOL_CLEARANCE = 0.05        # m: the pad tool's flange is 5 cm before the tip (the pad's centre at the tip)
 COLORS = ["0.8 0.45 0.1 1", "0.2 0.5 0.8 1", "0.3 0.7 0.3 1", "0.6 0.3 0.7 1"]
 
 
 def arm_sdf(name, lengths, masses, efforts):
     links, x0 = [], 0.0
     for i, (length, mass, effort) in enumerate(zip(lengths, masses, efforts)):
+        # The rod's collision shape (the start's clearance check sees a link through the workpiece); the last
+        # link's stops TOOL_CLEARANCE short of its tip, where the pad tool sits.
+        collision_length = length - (TOOL_CLEARANCE if i == len(lengths) - 1 else 0.0)
         i_perp = mass * length**2 / 12 + mass * RADIUS**2 / 4
         i_axial = mass * RADIUS**2 / 2
         links.append(f"""
@@ -41,6 +47,10 @@ def arm_sdf(name, lengths, masses, efforts):
         <geometry><cylinder><radius>{RADIUS}</radius><length>{length}</length></cylinder></geometry>
         <material><diffuse>{COLORS[i % len(COLORS)]}</diffuse></material>
       </visual>
+      <collision name="rod">
+        <pose>{collision_length / 2} 0 0 0 1.5707963267948966 0</pose>
+        <geometry><cylinder><radius>{RADIUS}</radius><length>{collision_length}</length></cylinder></geometry>
+      </collision>
       <visual name="joint">
         <pose>0 0 0 1.5707963267948966 0 0</pose>
         <geometry><cylinder><radius>{1.6 * RADIUS}</radius><length>{3 * RADIUS}</length></cylinder></geometry>

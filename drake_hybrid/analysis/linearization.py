@@ -187,12 +187,26 @@ def _largest_rates(diagram, root_context):
     return sorted(rates, reverse=True)
 
 
+# The held (kinematic) rows' residual above which a start's orientation is off them (C's units: a sine, rad).
+HELD_ROWS_RESIDUAL = 1e-6
+
+
+def _held_rows_off(controller, controller_context):
+    """'C[i] = ...' for each kinematic row of the controller's constraint off zero by more than
+    HELD_ROWS_RESIDUAL at the context, joined; '' if none is."""
+    rows = list(controller.kinematic_rows)
+    if not rows:
+        return ""
+    values = np.asarray(controller.GetOutputPort("constraint_value").Eval(controller_context), dtype=float)
+    return ", ".join(f"C[{i}] = {values[i]:.3g}" for i in rows if abs(values[i]) > HELD_ROWS_RESIDUAL)
+
+
 def check_equilibrium(diagram: Diagram, root_context: Context, systems: HybridSystems, what: str = "your diagram",
                       owner: str = "check_equilibrium") -> float:
     """max |x-dot| of the continuous state at ``root_context``; NotAtEquilibriumError if it is above
     EQUILIBRIUM_RATE (1/s) times the state's size max(1, max |x|), naming the subsystem where it is
     largest and the likely cause: a desired velocity that is not zero, a wrist force/torque sensor on
-    a continuous plant, or else the start not solved (``solve_contact_start`` / ``prime_start`` not
+    a continuous plant, the constraint's held rows not zero (the tool turned off them), or else the start not solved (``solve_contact_start`` / ``prime_start`` not
     called, or the state changed after it). ArgumentError (naming ``owner``) for a ``diagram``,
     ``root_context`` and ``systems`` that do not belong together (``station.root_context``)."""
     where = f"{owner}({text(what, 'what', owner)})"
@@ -204,13 +218,19 @@ def check_equilibrium(diagram: Diagram, root_context: Context, systems: HybridSy
     if not residual > EQUILIBRIUM_RATE * scale:
         return residual
     controller = systems.controller
-    velocity = controller.get_desired_velocity_input_port().Eval(controller.GetMyContextFromRoot(root_context))
+    controller_context = controller.GetMyContextFromRoot(root_context)
+    velocity = controller.get_desired_velocity_input_port().Eval(controller_context)
+    held_rows = _held_rows_off(controller, controller_context)
     if np.any(np.asarray(velocity) != 0):
         cause = (f"the controller is commanded to move (desired_velocity = {np.round(velocity, 6).tolist()}): "
                  "linearize with a zero desired velocity")
     elif isinstance(systems.sensor, WristForceTorqueSensor):
         cause = ("a WristForceTorqueSensor on a continuous plant: its reading is not the contact's at rest; use the "
                  "contact sensor (sensor=None) for the continuous loop")
+    elif held_rows:
+        cause = (f"the constraint's held rows are not zero at the start ({held_rows}): the controller turns the tool "
+                 "onto them, so the start is not at rest; start with the orientation they want (solve_contact_start "
+                 "and solve_path_start turn it so), and change no state after it")
     else:
         cause = ("the start is not solved: call station.contact_start.solve_contact_start (or prime_start after "
                  "setting the arm at rest pressing with F_d) on this context, and change no state after it")

@@ -84,6 +84,8 @@ MAX_RATIO = 1e6            # dimensionless gains (K_fp) and the impedance mass M
 def _given_form(array, given_shape):
     """How a gain was given, for a message: "is a scalar", "has k diagonal entries", "is a k x k matrix"."""
     shape = tuple(given_shape) if given_shape is not None else array.shape
+    if len(shape) > 2:
+        return f"is an array of shape {list(shape)}, not a scalar, a vector or a matrix"
     if len(shape) == 2:
         return f"is a {shape[0]}x{shape[1]} matrix"
     if len(shape) == 0 or array.size == 1:
@@ -176,6 +178,9 @@ class HybridGains:
         shapes = {}
         for name in GAIN_LISTS:
             array = numeric_array(getattr(self, name), name, "HybridGains", error=GainError)
+            if array.ndim > 2:
+                raise GainError(f"HybridGains: {name} must be a scalar, a vector (the diagonal) or a k x k matrix, got "
+                                f"an array of shape {list(array.shape)}")
             shapes[name] = array.shape
             setattr(self, name, _flat(array))
         self._check_scalars()

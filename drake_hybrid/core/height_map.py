@@ -36,6 +36,7 @@ from numpy.typing import ArrayLike
 
 from pydrake.math import RigidTransform
 
+from drake_hybrid.core.arguments import instance
 from drake_hybrid.core.charts import EulerZXZChart, PoseChart
 from drake_hybrid.core.errors import PathError
 from drake_hybrid.core.height_field import DEGREE, HeightField, HeightFieldConstraint
@@ -130,8 +131,13 @@ class HeightMapSurface(Surface):
 
     def __init__(self, height_map: HeightMap, X_WM: Optional[RigidTransform] = None,
                  name: Optional[str] = None) -> None:
-        self.height_map = height_map
+        self.height_map = instance(height_map, "height_map", "HeightMapSurface", HeightMap,
+                                   what="a HeightMap (HeightMap.from_file)", error=PathError)
         self.name = name or height_map.name
+        X_WM = instance(X_WM, "X_WM", "HeightMapSurface", RigidTransform, allow_none=True, error=PathError)
+        if X_WM is not None and not np.all(np.isfinite(X_WM.GetAsMatrix4())):
+            raise PathError(f"HeightMapSurface: X_WM must be a RigidTransform of finite numbers, got translation "
+                            f"{X_WM.translation().tolist()}")
         self.X_WM = X_WM if X_WM is not None else RigidTransform()
         self.field = HeightField(height_map.x, height_map.y, height_map.heights, self.X_WM, self.name)
         self._offsets: Dict[float, HeightField] = {}

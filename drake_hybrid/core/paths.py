@@ -352,7 +352,13 @@ def path_from_strokes(surface, view, strokes, offset, limits, force, what="path"
     for index, stroke in enumerate(strokes):
         lifted = []
         for u, v in stroke:
-            q, n = surface.lift(view, u, v)
+            try:
+                q, n = surface.lift(view, u, v)
+            except PathError as error:
+                reason = str(error).rsplit(": ", 1)[-1]
+                raise PathError(f"{what}: stroke {index} at (u, v) = ({u:.4g}, {v:.4g}) m is off '{surface.name}' as "
+                                f"the view sees it ({reason}); keep the pattern on the surface: make "
+                                f"{what}.pattern.size smaller or move {what}.pattern.center") from None
             check_facing(n, view, f"{what}: stroke {index} at (u, v) = ({u:.4g}, {v:.4g}) m")
             lifted.append((q, n))
         segments.append(PathSegment([q for q, _ in lifted], [n for _, n in lifted], offset, limits))

@@ -167,7 +167,9 @@ class Surface(abc.ABC):
 
     @abc.abstractmethod
     def default_view(self) -> ViewPlane:
-        """The ViewPlane patterns on this surface are drawn in by default."""
+        """The ViewPlane patterns on this surface are drawn in by default. Its origin is where a pattern's
+        ``center`` (u, v) = (0, 0) lies: the plane's ``point``, the sphere's and the cylinder's ``center``, a
+        height map's frame origin (``X_WM``'s translation)."""
 
     @abc.abstractmethod
     def implicit(self, p: sympy.Matrix, offset: float) -> sympy.Expr:
@@ -228,6 +230,8 @@ class PlaneSurface(Surface):
         self.unit_normal = _unit(normal, f"{name}.normal", "PlaneSurface")
 
     def default_view(self) -> ViewPlane:
+        """Seen along the normal: origin at ``point``, w = the normal, u = e x n with e the world axis least
+        along n (so u is horizontal for a plane that is not)."""
         n = self.unit_normal
         helper = np.eye(3)[int(np.argmin(np.abs(n)))]
         u = np.cross(helper, n)
@@ -297,7 +301,7 @@ class CylinderSurface(Surface):
                                error=PathError)
 
     def default_view(self) -> ViewPlane:
-        """Seen from the world +z (or +x for a vertical axis), u along the axis."""
+        """Seen from the world +z (or +x for a vertical axis): origin at ``center``, u along the axis."""
         up = np.array([0.0, 0.0, 1.0]) if abs(self.axis[2]) < 0.9 else np.array([1.0, 0.0, 0.0])
         w = up - (up @ self.axis) * self.axis
         w /= np.linalg.norm(w)

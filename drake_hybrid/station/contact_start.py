@@ -12,8 +12,9 @@ from typing import Iterable, Optional, cast
 import numpy as np
 from numpy.typing import ArrayLike
 
+from pydrake.common.eigen_geometry import AngleAxis
 from pydrake.geometry import GeometryId, HydroelasticContactRepresentation, QueryObject
-from pydrake.math import RigidTransform
+from pydrake.math import RigidTransform, RotationMatrix
 from pydrake.multibody.plant import MultibodyPlant
 from pydrake.systems.framework import Context, Diagram
 
@@ -121,11 +122,12 @@ def solve_contact_start(diagram: Diagram, root_context: Context, systems: Hybrid
     ``systems`` is what ``station.loop.add_hybrid_controller`` returned; ``start_pose`` the
     end-effector frame E's pose (RigidTransform, world) with its point P on the surface C = 0;
     ``joint_guess`` the arm's joint positions near it (the inverse kinematics' seed). The pad is
-    pushed into the workpiece along the direction a world force must take to give F_d
-    (``desired_force``, m entries in E_f's coordinates; default the command source's at t = 0),
-    to the depth where the contact's rest force in E_f's coordinates equals F_d (Brent's method on
-    ``rest_contact_wrench``); then ``prime_start`` with the torque that holds it there. Returns the
-    arm's joint positions.
+    pushed into the workpiece along -sum_i F_d,i grad_p C_i (``desired_force``, m entries in E_f's
+    coordinates; default the command source's at t = 0: a surface's inward normal), turned at each
+    depth about its point as the constraint's held (kinematic) rows want it, to the depth where the
+    contact's rest force in E_f's coordinates equals F_d (Brent's method on ``rest_contact_wrench``);
+    then ``prime_start`` with the torque that holds it there. Returns the arm's joint positions. (A
+    start ``gap`` above the surface for a guarded approach is ``solve_approach_start``.)
 
     Typed errors before the first step: a start pose off C = 0 beyond ``tolerance`` (C's units) or
     on the wrong branch (OffConstraintError, BranchError), E singular there (ConstraintRankError,
@@ -146,21 +148,11 @@ def solve_contact_start(diagram: Diagram, root_context: Context, systems: Hybrid
     max_depth = positive(max_depth, "max_depth", owner, unit="m")
     tolerance = positive(tolerance, "tolerance", owner)
     desired = _desired_force(systems, root_context, desired_force, owner)
-    controller_context = kinematics.plant.CreateDefaultContext()
-    q_surface = _positions_at(kinematics, controller_context, start_pose, joint_guess, 0.0, owner, "start_pose")
-    kinematics.plant.SetPositions(controller_context, q_surface)
-    task = kinematics.evaluate(controller_context)
-    values = space.evaluate(task.configuration, task.velocity)
-    direction = np.zeros(3)
-    if np.linalg.norm(desired) > 0:
-        # The world force at P that the rows read as F_d (least squares): the pad presses against it.
-        unit_forces = np.array([space.split_wrench(values, space.chart.generalized_force(
-            task.configuration, np.concatenate([np.zeros(3), axis])))[1] for axis in np.eye(3)]).T
-        force_W = np.linalg.lstsq(unit_forces, desired, rcond=None)[0]
-        direction = -force_W / np.linalg.norm(force_W)
+    _check_start_pose(space, start_pose, tolerance, owner)
+    direction = _pressing_direction(space, start_pose, desired) if np.linalg.norm(desired) > 0 else np.zeros(3)
 
     def pose_at_depth(depth):
-        return RigidTransform(start_pose.rotation(), start_pose.translation() + depth * direction)
+        return _held_pose(space, RigidTransform(start_pose.rotation(), start_pose.translation() + depth * direction))
 
     return _press_and_prime(diagram, root_context, systems, pose_at_depth, joint_guess, desired, max_depth,
                             tolerance, owner, "start_pose")
@@ -199,6 +191,107 @@ def solve_path_start(diagram: Diagram, root_context: Context, systems: HybridSys
                        0.0, owner, f"the pose {gap:g} m above the path's first point")
     _rest_at(diagram, root_context, systems, q0, np.zeros_like(desired), owner)
     return q0
+
+
+def _position_gradient(space, x):
+    """grad_p C: C-dot per unit world velocity of the controlled point along x, y, z (m x 3)."""
+    E_f = space.constraint.force_projection(x)
+    return np.column_stack([E_f @ space.chart.task_velocity(x, np.concatenate([np.zeros(3), axis]))
+                            for axis in np.eye(3)])
+
+
+def _pressing_direction(space, X_WP, desired):
+    """The unit world direction the pad pushes the workpiece at rest pressing with ``desired``: -sum_i F_d,i
+    grad_p C_i (the force part of the wrench E_f^T F_d the rows read as F_d, reversed): a surface's inward
+    normal for the signed distances of ``core.surfaces``."""
+    x = space.chart.configuration(X_WP.rotation().matrix(), X_WP.translation())
+    direction = -(np.asarray(desired, dtype=float) @ _position_gradient(space, x))
+    norm = float(np.linalg.norm(direction))
+    return direction / norm if norm > 0 else direction
+
+
+# The held rows' residual a start's orientation is turned to (C's units: a sine) and the Newton steps allowed.
+HELD_ROWS_TOLERANCE, HELD_ROWS_STEPS = 1e-12, 20
+
+
+def _held_pose(space, X_WP):
+    """``X_WP`` turned about its point until the constraint's kinematic rows (held by the controller, e.g. the
+    approach vector along a surface's normal) are zero there (Newton's method on the rotation; as it was if
+    the constraint has none, or they do not depend on the orientation)."""
+    kinematic = list(space.constraint.kinematic_rows)
+    if not kinematic:
+        return X_WP
+    chart, p, R = space.chart, X_WP.translation(), X_WP.rotation()
+    for _ in range(HELD_ROWS_STEPS):
+        x = chart.configuration(R.matrix(), p)
+        residual = np.atleast_1d(space.constraint.value(x))[kinematic]
+        if not np.max(np.abs(residual)) > HELD_ROWS_TOLERANCE:
+            break
+        E_f = space.constraint.force_projection(x)[kinematic]
+        turning = np.column_stack([E_f @ chart.task_velocity(x, np.concatenate([axis, np.zeros(3)]))
+                                   for axis in np.eye(3)])
+        omega = -np.linalg.lstsq(turning, residual, rcond=None)[0]
+        angle = float(np.linalg.norm(omega))
+        if not angle > 0:
+            break
+        R = RotationMatrix(AngleAxis(angle, omega / angle)).multiply(R)
+    return RigidTransform(R, p)
+
+
+def solve_approach_start(diagram: Diagram, root_context: Context, systems: HybridSystems, start_pose: RigidTransform,
+                         joint_guess: ArrayLike, gap: float = 0.005, tolerance: float = 1e-3) -> np.ndarray:
+    """Put your diagram at rest with the pad ``gap`` (m) above ``start_pose`` for the contact supervisor's
+    guarded approach, and set every state around the plant. Returns the arm's joint positions.
+
+    ``start_pose``: the end-effector frame E's pose (world) with its point P on the surface C = 0, where the
+    approach lands; the pad is put ``gap`` back from it against the pressing direction (-sum_i F_d,i
+    grad_p C_i, F_d the command source's at t = 0: along a surface's outward normal), turned about its point
+    as the constraint's held (kinematic) rows want it there, holding only gravity. ``joint_guess``: the arm's
+    joint positions near it (the inverse kinematics' seed). The path job's own is ``solve_path_start``.
+
+    Typed errors before the first step: ``systems`` without a contact supervisor that starts in APPROACH or
+    TARE (ArgumentError: ``add_hybrid_controller(..., supervision=SupervisionConfig(),
+    initial_phase=ContactPhase.APPROACH)``; without one, a start off the surface is refused), a start pose
+    off C = 0 beyond ``tolerance`` or on the wrong branch, a pulling or zero F_d (no direction to approach
+    along), a link of the arm through the scene, the inverse kinematics failing (UnreachablePoseError),
+    and the argument errors of ``solve_contact_start``."""
+    owner = "solve_approach_start"
+    check_root_context(diagram, root_context, systems, owner)
+    instance(start_pose, "start_pose", owner, RigidTransform)
+    supervisor = systems.supervisor
+    if supervisor is None or supervisor.initial_phase == ContactPhase.CONTACT:
+        raise ArgumentError(f"{owner}: systems has no contact supervisor that starts in APPROACH (or TARE): build it "
+                            "with add_hybrid_controller(..., supervision=SupervisionConfig(), "
+                            "initial_phase=ContactPhase.APPROACH), or start pressing with solve_contact_start")
+    check_start_sensor(systems, owner)
+    space, kinematics = systems.constraint_space, systems.controller.kinematics
+    joint_guess = joint_vector(joint_guess, "joint_guess", owner, kinematics.plant)
+    gap = positive(gap, "gap", owner, unit="m")
+    tolerance = positive(tolerance, "tolerance", owner)
+    desired = _desired_force(systems, root_context, None, owner)
+    _check_start_pose(space, start_pose, tolerance, owner)
+    mask = np.array([0.0 if i in space.constraint.kinematic_rows else 1.0 for i in range(space.force_size)])
+    check_pushing_force(desired, force_controlled=mask, where=f"{owner} (the command source's desired_force)")
+    if not np.linalg.norm(desired) > 0:
+        raise ArgumentError(f"{owner}: the command source's desired force at t = 0 is zero: the approach goes along "
+                            "the direction it presses in; command the force the pad should press with")
+    direction = _pressing_direction(space, start_pose, desired)
+    pose = _held_pose(space, RigidTransform(start_pose.rotation(), start_pose.translation() - gap * direction))
+    q0 = _positions_at(kinematics, kinematics.plant.CreateDefaultContext(), pose, joint_guess, 0.0, owner,
+                       f"start_pose moved {gap:g} m back from the surface")
+    _rest_at(diagram, root_context, systems, q0, np.zeros_like(desired), owner)
+    return q0
+
+
+def _check_start_pose(space, start_pose, tolerance, owner):
+    """OffConstraintError (naming ``owner`` and start_pose) for a ``start_pose`` whose point is off C = 0 beyond
+    ``tolerance``, or whose orientation is off the held rows by more; BranchError on the wrong branch."""
+    x = space.chart.configuration(start_pose.rotation().matrix(), start_pose.translation())
+    try:
+        space.constraint.check_satisfied(x, tolerance)
+    except OffConstraintError as error:
+        raise OffConstraintError(f"{owner}: start_pose: {error}") from None
+    space.constraint.check_branch(x)
 
 
 def _desired_force(systems, root_context, desired_force, owner):

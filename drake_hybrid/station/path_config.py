@@ -117,10 +117,11 @@ class PathConfig:
         """PathError naming the first field that is not allowed (every field, also of an inactive path:
         a misspelt value is refused wherever it is); the types first (``core.schema.check_types``)."""
         check_types(self, PathConfig, prefix.rstrip("."), error=PathError)
+        field = prefix.rsplit(": ", 1)[-1]            # the field's name without a task file's "file: "
         if self.waypoints and self.pattern.kind:
-            raise PathError(f"{prefix}waypoints and {prefix}pattern (kind '{self.pattern.kind}'): give waypoints or a "
-                            f"pattern, not both; a pattern you did not write is the task's default path: clear it with "
-                            f"{prefix}pattern.kind: '' to follow the waypoints")
+            raise PathError(f"{prefix}waypoints and pattern (kind '{self.pattern.kind}'): give waypoints or a pattern, "
+                            f"not both; a pattern you did not write is the task's default path: clear it with "
+                            f"{field}pattern.kind: '' to follow the waypoints")
         if self.pattern.kind not in PATTERN_KINDS:
             raise PathError(f"{prefix}pattern.kind must be one of raster, spiral (or empty), got "
                             f"'{self.pattern.kind}'")
@@ -151,7 +152,7 @@ class PathConfig:
             raise PathError(f"{prefix}waypoints: give a force at every waypoint or at none, got {forces}")
         if any(f > 0 for f in forces) and self.force_by_arc_length:
             table = [[point.arc_length, point.force] for point in self.force_by_arc_length]
-            raise PathError(f"{prefix}waypoints[].force and {prefix}force_by_arc_length both give the path's force "
+            raise PathError(f"{prefix}waypoints[].force and {field}force_by_arc_length both give the path's force "
                             f"(per waypoint {forces} N, by arc length {table}): give one of them")
         for name in ("origin", "axis_u", "axis_v"):
             if len(getattr(self.view, name)) not in (0, 3):

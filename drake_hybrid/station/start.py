@@ -21,6 +21,15 @@ from drake_hybrid.station.sensing import WrenchSensor
 PRIMING_STEPS = 20
 
 
+def _contact_error(error: RuntimeError, owner: str) -> ConfigError:
+    """Drake's refusal of a contact at the start (two geometries touching without a hydroelastic
+    representation: the arm's links with each other or with the workpiece) as a ConfigError saying what to do."""
+    return ConfigError(f"{owner}: {str(error).strip().splitlines()[0]} -- the start's contact is computed with "
+                       "hydroelastic contact: give the workpiece a rigid hydroelastic geometry "
+                       "(station.workpieces.add_rigid_workpiece) and let only the tool touch it (only_tool_touches "
+                       "after plant.Finalize())")
+
+
 def prime_start(systems: HybridSystems, root_context: Context, held_torque: ArrayLike,
                 integrals: Optional[ArrayLike] = None) -> None:
     """Set the states of the systems around the plant for a start at the plant's present state (set it
@@ -62,13 +71,20 @@ def prime_start(systems: HybridSystems, root_context: Context, held_torque: Arra
         # first step they are empty. Take steps from the initial state (with the held static torque)
         # and put the state back, so the sensors read the start's contact wrench at t = 0.
         # Several steps let compliant constraints (e.g. a SAP weld) build up the static force.
-        for _ in range(PRIMING_STEPS):
-            plant.ExecuteForcedEvents(plant_context, publish=False)
+        try:
+            for _ in range(PRIMING_STEPS):
+                plant.ExecuteForcedEvents(plant_context, publish=False)
+        except RuntimeError as error:          # a touching pair without a hydroelastic representation
+            plant.SetPositionsAndVelocities(plant_context, environment)
+            raise _contact_error(error, owner) from None
         plant.SetPositionsAndVelocities(plant_context, environment)
     sensor = cast(WrenchSensor, systems.sensor)    # a simulated station's (a real arm's has none)
     if getattr(sensor, "samples_point", False):        # the contact sensor on those sampled results
         sensor.set_sampled_point(sensor.GetMyMutableContextFromRoot(root_context))
-    reading = sensor.get_output_port(0).Eval(sensor.GetMyContextFromRoot(root_context))
+    try:
+        reading = sensor.get_output_port(0).Eval(sensor.GetMyContextFromRoot(root_context))
+    except RuntimeError as error:
+        raise _contact_error(error, owner) from None
     if systems.fault_injector is not None:
         injector = systems.fault_injector
         injector.set_initial_sample(injector.GetMyMutableContextFromRoot(root_context), reading)

@@ -158,6 +158,11 @@ class CustomTask(Task):
                               "position direction of C; set a nonzero desired force on a position row")
         return direction / norm
 
+    def start_field(self) -> Tuple[str, str]:
+        """(where, field): what a start's error names: the task and its ``start_pose`` argument (a task file:
+        the file and its field)."""
+        return f"task '{self.name}'", "start_pose"
+
     def check_start_pose(self, config: ScenarioConfig, X_WP: RigidTransform, direction: Array) -> None:
         """OffConstraintError if the start pose's controlled point (X_WP) is not on C = 0 within
         ``start.tolerance``, naming the gap or penetration along the pressing direction."""
@@ -173,9 +178,10 @@ class CustomTask(Task):
                  if distance > 0 else
                  f"a penetration: the pad centre is {-distance * 1000:.1f} mm beyond the surface along the pressing "
                  "direction")
+        owner, field = self.start_field()
         raise OffConstraintError(
-            f"task '{self.name}': the start pose is off the constraint, |C| = {residual:.4g} > start.tolerance = "
-            f"{config.start.tolerance:g} ({where} {np.round(direction, 3).tolist()}); give a start_pose with the "
+            f"{owner}: {field} is off the constraint, |C| = {residual:.4g} > start.tolerance = "
+            f"{config.start.tolerance:g} ({where} {np.round(direction, 3).tolist()}); give a {field} with the "
             "controlled point on C = 0, or set start.in_contact: false to approach from a gap")
 
     def start_positions(self, scenario: Scenario) -> Array:

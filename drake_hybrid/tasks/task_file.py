@@ -130,6 +130,10 @@ class DataTask(CustomTask):
     def run_events(self, scenario: Scenario, log: Mapping[str, Array]) -> List[Dict[str, Any]]:
         return (self._hook("run_events") or super().run_events)(scenario, log)
 
+    def start_field(self) -> Tuple[str, str]:
+        """(the file, ``start.pose`` or ``start.configuration``: the field the start came from)."""
+        return str(self.path), "start.configuration" if self.spec.start.configuration else "start.pose"
+
     def start_pose_of(self, config: ScenarioConfig) -> RigidTransform:
         values = list(config.start.configuration)
         if len(values) == self.space.chart.configuration_size:

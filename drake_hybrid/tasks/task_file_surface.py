@@ -94,9 +94,12 @@ def surface_of(spec, path, where):
             if not spec.file:
                 raise ConfigError(f"{what}.file: give the height map's .csv, .npy or .npz file")
             spacing = _numbers(spec.spacing, 2, f"{what}.spacing") if spec.spacing else None
+            X_WM = spec.X_WM.GetDeterministicValue()
+            if not np.all(np.isfinite(X_WM.GetAsMatrix4())):
+                raise ConfigError(f"{what}.X_WM must be a transform of finite numbers (translation in m, rotation in "
+                                  f"deg), got translation {X_WM.translation().tolist()}")
             heights = HeightMap.from_file(file, spacing, _numbers(spec.origin, 2, f"{what}.origin"))
-            return HeightMapSurface(heights, spec.X_WM.GetDeterministicValue(), name=f"height map '{file.name}'"), \
-                spec.offset
+            return HeightMapSurface(heights, X_WM, name=f"height map '{file.name}'"), spec.offset
         center = _numbers(spec.center, 3, f"{what}.center")
         if spec.kind == "plane":
             return PlaneSurface(center, _numbers(spec.normal, 3, f"{what}.normal"), name="plane"), spec.offset

@@ -102,8 +102,9 @@ class WindowWashing(Task):
         X_last_flange = RigidTransform(RotationMatrix.MakeYRotation(math.pi / 2),
                                        [lengths[-1] - PAD_CENTER_IN_TOOL, 0, 0])
         tool, weld, pad = add_pad_tool(plant, parser, plant.GetFrameByName(f"link{joints}", arm), X_last_flange)
+        # Only the pad touches (the links' collision rods are for the start's clearance check).
         return RobotModel(arm=arm, model_instances=[arm, tool], end_effector_frame="tip",
-                          end_effector_point=np.zeros(3), tool_weld=weld, pad_geometries=pad)
+                          end_effector_point=np.zeros(3), tool_weld=weld, pad_geometries=pad, only_pad_contact=True)
 
     def add_workpiece(self, plant, config):
         parser = Parser(plant)
