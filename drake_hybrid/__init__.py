@@ -8,8 +8,8 @@ The names a user starts with, importable from here (each lives in the module nam
 * the law: ``HybridController``, ``HybridGains``, ``ControlMode``, ``SupervisionConfig``, ``ContactPhase``;
 * your own station: ``default_plant_config``, ``mount_tool``, ``robot_plant``, ``add_rigid_workpiece``,
   ``apply_contact_defaults``, ``only_tool_touches``, ``add_hybrid_controller``, ``add_loggers``,
-  ``read_log``, ``solve_contact_start``, ``solve_approach_start``, a path job (``PathConfig``, ``PatternConfig``, ``path_job``,
-  ``solve_path_start``) and ``linearize_at_contact``;
+  ``read_log``, ``solve_contact_start``, ``solve_approach_start``, a path job (``PathConfig``,
+  ``PatternConfig``, ``path_job``, ``solve_path_start``) and ``linearize_at_contact``;
 * the package's tasks: ``get_task``, ``simulate``, ``linearize_continuous``, ``load_task_file``, ``CustomTask``,
   ``register_task``, ``load_arm``;
 * the typed errors (``DrakeHybridError`` and its subclasses).

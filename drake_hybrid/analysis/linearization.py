@@ -206,8 +206,8 @@ def check_equilibrium(diagram: Diagram, root_context: Context, systems: HybridSy
     """max |x-dot| of the continuous state at ``root_context``; NotAtEquilibriumError if it is above
     EQUILIBRIUM_RATE (1/s) times the state's size max(1, max |x|), naming the subsystem where it is
     largest and the likely cause: a desired velocity that is not zero, a wrist force/torque sensor on
-    a continuous plant, the constraint's held rows not zero (the tool turned off them), or else the start not solved (``solve_contact_start`` / ``prime_start`` not
-    called, or the state changed after it). ArgumentError (naming ``owner``) for a ``diagram``,
+    a continuous plant, the constraint's held rows not zero (the tool turned off them), or else the start
+    not solved (``solve_contact_start`` / ``prime_start`` not called, or the state changed after it). ArgumentError (naming ``owner``) for a ``diagram``,
     ``root_context`` and ``systems`` that do not belong together (``station.root_context``)."""
     where = f"{owner}({text(what, 'what', owner)})"
     check_root_context(diagram, root_context, systems, where)

@@ -148,6 +148,8 @@ def solve_contact_start(diagram: Diagram, root_context: Context, systems: Hybrid
     max_depth = positive(max_depth, "max_depth", owner, unit="m")
     tolerance = positive(tolerance, "tolerance", owner)
     desired = _desired_force(systems, root_context, desired_force, owner)
+    _positions_at(kinematics, kinematics.plant.CreateDefaultContext(), start_pose, joint_guess, 0.0, owner,
+                  "start_pose")                # reachable (UnreachablePoseError first), then on C = 0 as given
     _check_start_pose(space, start_pose, tolerance, owner)
     direction = _pressing_direction(space, start_pose, desired) if np.linalg.norm(desired) > 0 else np.zeros(3)
 
@@ -269,6 +271,8 @@ def solve_approach_start(diagram: Diagram, root_context: Context, systems: Hybri
     gap = positive(gap, "gap", owner, unit="m")
     tolerance = positive(tolerance, "tolerance", owner)
     desired = _desired_force(systems, root_context, None, owner)
+    _positions_at(kinematics, kinematics.plant.CreateDefaultContext(), start_pose, joint_guess, 0.0, owner,
+                  "start_pose")
     _check_start_pose(space, start_pose, tolerance, owner)
     mask = np.array([0.0 if i in space.constraint.kinematic_rows else 1.0 for i in range(space.force_size)])
     check_pushing_force(desired, force_controlled=mask, where=f"{owner} (the command source's desired_force)")
