@@ -13,6 +13,7 @@ from pydrake.math import RigidTransform, RollPitchYaw, RotationMatrix
 
 from drake_hybrid.core.charts import PoseChart
 from drake_hybrid.core.errors import PathError
+from drake_hybrid.core.height_field import REACH
 from drake_hybrid.core.height_map import HeightMap, HeightMapSurface
 
 RADIUS, PAD = 0.15, 0.02
@@ -38,15 +39,26 @@ def constraint(surface):
 
 
 def exact_value(x):
-    """The same rows as the constraint, written from the exact offset sphere (rho = R + r), in numpy."""
+    """The same rows as the constraint, written from the exact offset sphere (rho = R + r), in numpy: the first
+    the signed distance to second order (core.height_field), the others the held rows."""
     A = X_WM.rotation().inverse().matrix()
     X, Y, Z = A @ (x[:3] - X_WM.translation())
     rho2 = (RADIUS + PAD) ** 2
     H = math.sqrt(rho2 - X * X - Y * Y)
     H_X, H_Y = -X / H, -Y / H
+    H_XX, H_XY, H_YY = -(rho2 - Y * Y) / H ** 3, -X * Y / H ** 3, -(rho2 - X * X) / H ** 3
+    slope = math.sqrt(1 + H_X ** 2 + H_Y ** 2)
+    first = (Z - H) / slope
+    kappa = (H_X ** 2 * H_XX + 2 * H_X * H_Y * H_XY + H_Y ** 2 * H_YY) / slope ** 3
     gradient = A.T @ np.array([-H_X, -H_Y, 1.0])
     R = x[3:].reshape(3, 3)
-    return np.array([(Z - H) / math.sqrt(1 + H_X ** 2 + H_Y ** 2), gradient @ R[:, 0], gradient @ R[:, 1]])
+    return np.array([first - kappa / 2 * first ** 2 / (1 + (first / REACH) ** 2), gradient @ R[:, 0],
+                     gradient @ R[:, 1]])
+
+
+def signed_distance(x):
+    """The pad centre's signed distance from the exact offset sphere."""
+    return float(np.linalg.norm(X_WM.inverse().multiply(x[:3]))) - (RADIUS + PAD)
 
 
 def configurations(chart, rng, count=4):
@@ -153,6 +165,18 @@ def test_the_constraint_matches_the_analytic_surface(constraint, rng):
     # On the surface the first row's gradient is the unit normal: its force is the normal force in N.
     x = chart.configuration(np.eye(3), X_WM.multiply([0.0, 0.0, RADIUS + PAD]))
     assert np.linalg.norm(constraint.force_projection(x)[0, :3]) == pytest.approx(1.0, abs=1e-9)
+    # Off it (the pad pressed in or lifted, up to 3 mm) the first row is the signed distance to second order: its
+    # remainder is third order, below |f|^3 / rho^2 (at most 9.3e-7 here; the first-order distance alone was off
+    # by up to 2.8e-6), and its gradient the unit normal to second order.
+    for depth in (-0.003, -0.001, 0.002):
+        for X, Y in ((0.0, 0.0), (0.03, -0.02), (-0.04, 0.035)):
+            on = np.array([X, Y, math.sqrt((RADIUS + PAD) ** 2 - X * X - Y * Y)])
+            p = X_WM.multiply(on * (1 + depth / (RADIUS + PAD)))
+            x = chart.configuration(np.eye(3), p)
+            assert constraint.value(x)[0] == pytest.approx(signed_distance(x), abs=abs(depth) ** 3 / (RADIUS + PAD) ** 2)
+            gradient = constraint.force_projection(x)[0, :3]
+            normal = X_WM.rotation().multiply(on / np.linalg.norm(on))
+            np.testing.assert_allclose(gradient, normal, atol=(depth / (RADIUS + PAD)) ** 2)
 
 
 def test_the_constraints_derivatives_are_those_of_its_value_along_a_motion(constraint, rng):
