@@ -118,7 +118,8 @@ def measured_normal_force(log, plant, robot, surface):
     n = plant.num_positions()
     wrench = np.asarray(log["true_wrench"] if "true_wrench" in log else log["wrench"])
     force = np.empty(len(log["t"]))
-    for i, q in enumerate(np.asarray(log["state"])[:, :n]):
+    positions = np.asarray(log["q"]) if "q" in log else np.asarray(log["state"])[:, :n]   # simulate's, read_log's
+    for i, q in enumerate(positions):
         plant.SetPositions(context, q)
         centre = frame.CalcPoseInWorld(context).multiply(point)
         force[i] = wrench[i, 3:] @ surface.closest_point(centre)[1]
@@ -131,6 +132,8 @@ def force_figures(log, report, measured):
     rows = []
     for segment in report.segments:
         window = (t >= segment.start + report.settle_time_per_segment_s) & (t <= segment.end)
+        if not np.any(window):             # a segment shorter than five time constants (the step between lines)
+            continue
         error = 100.0 * np.max(np.abs(measured[window] - desired[window]) / desired[window])
         rows.append({"segment": segment.segment, "measured_percent": float(error),
                      "report_percent": segment.max_force_error_percent,
@@ -308,7 +311,7 @@ def table(results):
         segments, holds = r["segments"], r["holds"]
         rows.append(
             f"| {r['route']} | {r['surface']} | {'completed' if r['completed'] else 'NOT completed'}, "
-            f"{len(segments)} segments | {_joined([s['measured_percent'] for s in segments], 3)} | "
+            f"{len(r['report']['segments'])} segments ({', '.join(str(s['segment']) for s in segments)} settled) | {_joined([s['measured_percent'] for s in segments], 3)} | "
             f"{_joined([s['report_percent'] for s in segments], 3)} | "
             f"{_joined([s['mean_normal_force'] for s in segments], 3)} | "
             f"{_joined([h['worst_percent'] for h in holds], 2)} | "

@@ -8,13 +8,18 @@
   ``linearize_continuous``) against the design.
 
 * a sweep of the line spacing on the local Dask cluster (``docs/sweeps/raster_spacing.yaml``, two
-  workers): each point the whole job and its linearizations.
+  workers): each point the whole job and its linearizations;
+* every surface kind (a tilted plane, a sphere, a cylinder off its top line, a height map) from a task file
+  (the UR10 of example-robot-data) and from a user's own diagram (the Franka Panda of example-robot-data):
+  the normal force from the logged wrench along the true normal, and the loop held at five points of a path
+  whose force changes along it (``docs/path_surfaces.py``).
 
 Writes docs/paths.json, docs/paths.md and the figures docs/figures/paths_*.png.
 
-    python docs/paths.py            # all, about 20 minutes on a quiet machine
-    python docs/paths.py --sweep    # the sweep only (about 4 minutes), into docs/paths.json and the page
-    python docs/paths.py --page     # the page again from docs/paths.json
+    python docs/paths.py              # all, about 45 minutes on a quiet machine
+    python docs/paths.py --sweep      # the sweep only (about 4 minutes), into docs/paths.json and the page
+    python docs/paths.py --surfaces   # every surface kind only (about 25 minutes), into docs/paths.json and the page
+    python docs/paths.py --page       # the page again from docs/paths.json
 """
 
 import dataclasses
@@ -29,6 +34,8 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "docs"))
 from report_format import significant  # noqa: E402
+
+import path_surfaces  # noqa: E402
 
 from drake_hybrid.analysis.linearization import linearize_continuous  # noqa: E402
 from drake_hybrid.experiments.simulation import simulate  # noqa: E402
@@ -119,7 +126,7 @@ def run():
     results.append(job("bump", "models/tasks/raster_bump.yaml", bump_config))
     results.append(job("saddle", "surface-polishing --option workpiece=saddle",
                        task.default_config(options={"workpiece": "saddle"})))
-    return {"jobs": results, "step_halved": step_halved(), "sweep": sweep()}
+    return {"jobs": results, "step_halved": step_halved(), "sweep": sweep(), "surfaces": path_surfaces.run()}
 
 
 def _mm(value):
@@ -159,7 +166,9 @@ def page(everything):
         f"{r['path_force_error_percent']:.3f} | {r['path_time_off_surface']:.3f} | {r['path_fraction_run']:.2f} | "
         f"{r['worst_continuous_real']:.2f} / {r['worst_discrete_real']:.2f} | {r['wall_time']:.0f} |"
         for r in everything.get("sweep", []))
-    return PAGE.format(table="\n".join(rows), changes="\n".join(changes), halving=halving, swept=swept)
+    return PAGE.format(table="\n".join(rows), changes="\n".join(changes), halving=halving, swept=swept,
+                       surfaces=path_surfaces.table(everything.get("surfaces", [])),
+                       surfaces_note=SURFACES_NOTE)
 
 
 PAGE = """# Jobs over a surface: a path at a force from the first touch to the last
@@ -174,7 +183,9 @@ lines 2 cm apart, at most 5 cm/s and 0.5 m/s^2 (Drake's Toppra), the normal forc
 Drake's discrete SAP hydroelastic contact at 1 kHz, the controller sampled at 1 kHz.
 
 "Settled": over every segment (a raster line or the step to the next) from its start + five design time
-constants to its end. "Path error": the distance of the pad centre from its reference point on C = 0; "along
+constants to its end. "Force error": the normal force the sensor measured (its wrench along the surface's
+normal) against the command, not the controller's own force row. "Path error": the distance of the pad centre
+from its reference point on C = 0; "along
 the surface" is its part in the tangent plane (where on the workpiece the pad is), "along the normal" the rest,
 which is the compliant pad's compression at 10 N (the reference lies on C = 0, the pressed pad inside it; the
 force loop sets the compression, it is not tracked). "At the line changes": the same over each segment's first
@@ -235,7 +246,32 @@ the simulation's verdict and the sampled loop's; the continuous one in brackets)
 The settled path figures agree at every spacing to the digits shown: the lines are as long at every
 spacing, and a line's largest settled error along the surface is the half-step lag its deceleration builds
 (above), which the spacing does not change.
+
+## Every surface kind, from a task file and from your own diagram
+
+`python docs/paths.py --surfaces` (`docs/path_surfaces.py`): the same job, short (two 3 cm raster lines 1.5 cm
+apart: three segments, the step between the lines too short for a settled part), on arms the package does not
+ship and on surfaces it does not demo: a plane tilted by 15 degrees, a sphere (radius 15 cm), a cylinder lying
+along y (radius 10 cm) with the lines 13 to 22 degrees off its top line, and the 3 cm bump as a height map,
+with the path on its flank. From a task file (written by the script: the UR10 of example-robot-data by
+`robot.loader`, `workpiece.surface`, run by `simulate`) and from a user's own diagram (the Franka Panda of
+example-robot-data by `load_arm`, the blocks of `drake_hybrid.station`, `solve_path_start`, Drake's
+Simulator). The normal force is computed from the logged wrench (the sensor's own) along the true normal at
+the pad centre: the part's normal at its closest point to the pad centre, found from the logged joint
+positions; beside it, the path report's figure (the same wrench along the reference's normal). The
+eigenvalues: the continuous loop held at h = 0, 0.25, 0.5, 0.75 and 1 of the same path with the force
+changing along it by arc length from 6 N to 14 N (`path.hold_at`, `force_by_arc_length`): `linearize_continuous`
+for the task file, `solve_path_start` and `linearize_at_contact` for the own diagram; the worst relative
+distance of a designed eigenvalue from its linearized partner at each h, the modes with a positive real part
+and the largest equilibrium residual.
+
+{surfaces}
+
+{surfaces_note}
 """
+
+
+SURFACES_NOTE = ""
 
 
 def write(results):
@@ -249,6 +285,10 @@ if __name__ == "__main__":
     elif "--sweep" in sys.argv:
         everything = json.loads((ROOT / "docs" / "paths.json").read_text())
         everything["sweep"] = sweep()
+        write(everything)
+    elif "--surfaces" in sys.argv:
+        everything = json.loads((ROOT / "docs" / "paths.json").read_text())
+        everything["surfaces"] = path_surfaces.run()
         write(everything)
     else:
         write(run())
