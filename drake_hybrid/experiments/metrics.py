@@ -178,10 +178,11 @@ def run_scale(desired: ArrayLike) -> float:
     return float(np.max(np.linalg.norm(desired, axis=1))) if desired.size else 0.0
 
 
-# A row's command below this fraction of the run's scale is rounding, not a command (a path's spin row
-# commanded about 1e-7 rad/s beside 0.05 m/s along the surface): its % figures are of what a row commanded to
-# zero is judged by, not of the rounding, against which an error of a few 1e-5 reads tens of thousands of %.
-COMMAND_FLOOR = 1e-4
+# A row's command below this fraction of the run's scale is the path's numerical noise, not a command (measured:
+# a job along the sphere's meridian commands its spin row 3.1e-5 rad/s beside 0.05 m/s, which made the row's
+# settled error read 37.5 % of it; a raster's cross row about 1e-7 m/s, tens of thousands of %): its % figures
+# are of what a row commanded to zero is judged by.
+COMMAND_FLOOR = 1e-3
 
 
 def row_scales(desired: ArrayLike, units: Optional[Sequence[str]] = None,
