@@ -221,7 +221,7 @@ def add_hybrid_controller(builder: DiagramBuilder, plant: MultibodyPlant, robot:
             (default then ``CONTINUOUS_LOOP_BANDWIDTH``): its actuation feeds through to the wrench.
         supervision: a SupervisionConfig: a ContactSupervisor (guarded approach, contact loss, a job's
             lift-off) starting in ``initial_phase`` (a ContactPhase; default CONTACT; APPROACH for a
-            start above the surface, ``station.start.solve_path_start``).
+            start above the surface: ``station.contact_start.solve_path_start``, ``solve_approach_start``).
         sensor_faults: a SensorFaultConfig: its injector between the sensor and the wrench path.
         controller: a controller system of your own with the HybridController's ports (e.g. a baseline
             of ``control.baselines``) instead of building one.

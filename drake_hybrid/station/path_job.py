@@ -12,10 +12,11 @@ then wired in one call (``station.loop.connect_hybrid_loop``)::
     PathSource ─path_done─► ContactSupervisor         (lift-off: leave the surface at the end)
 
 and ``station.loggers.add_loggers`` logs the path's reference, error and progress and the
-supervisor's lift-off. A job with a supervisor that starts in APPROACH (``station.start.solve_path_start``
-puts the pad ``gap`` above the first point) lands on the path's first point, presses there for
-``settings.dwell`` s, follows the path and lifts off ``supervision.lift_height`` at its end; a job that
-starts in contact presses at the first point at t = 0 and starts the path after the dwell.
+supervisor's lift-off. A job with a supervisor that starts in APPROACH
+(``station.contact_start.solve_path_start`` puts the pad ``gap`` above the first point) lands on the path's
+first point, presses there for ``settings.dwell`` s, follows the path and lifts off
+``supervision.lift_height`` at its end; a job that starts in contact presses at the first point at t = 0 and
+starts the path after the dwell.
 """
 
 import math
