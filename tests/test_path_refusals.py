@@ -144,6 +144,9 @@ def test_a_task_files_start_off_its_constraint_names_the_file_and_the_field(tmp_
     with pytest.raises(OffConstraintError, match=r"window-start-off\.yaml: start\.configuration is off the constraint, "
                                                  r"\|C\| = 0\.01 > start\.tolerance .*give a start\.configuration with"):
         set_initial_conditions(scenario, scenario.diagram.CreateDefaultContext())
+    # A file that gives its start as start.pose is named by that field.
+    plate, _ = load_task_file(TASKS / "ur10_plate.yaml", register=False)
+    assert plate.start_field() == (str(TASKS / "ur10_plate.yaml"), "start.pose")
 
 
 def test_a_planar_arm_through_the_pane_at_its_start_is_refused(tmp_path):
