@@ -13,8 +13,9 @@ surface, so paths and patterns work on it as on the analytic ones:
   splined like h. A ball that would touch the part twice (a concave radius below r, a valley
   narrower than the pad) is refused (PathError naming where);
 * the constraint: ``core.height_field.HeightFieldConstraint`` of H_r (the distance to the offset
-  surface to first order, its force the normal force in N, and two kinematic rows holding the
-  approach vector along the normal), exact to the second derivative in float and AutoDiffXd;
+  surface to second order, its force the normal force in N where the pad is pressed in too, and two
+  kinematic rows holding the approach vector along the normal), exact to the second derivative in float
+  and AutoDiffXd;
 * the workpiece's geometry: ``mesh`` gives a closed triangle mesh of the part (the surface sampled
   from the same spline, sides and a bottom), for a rigid hydroelastic Mesh.
 
