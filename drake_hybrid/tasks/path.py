@@ -23,7 +23,7 @@ from drake_hybrid.tasks.config import ScenarioConfig, check_scenario_config
 from drake_hybrid.tasks.pressing import pressing_positions
 from drake_hybrid.tasks.task import Scenario, Task
 
-_JOBS: Dict[Tuple[str, str, str, str], PathJob] = {}
+_JOBS: Dict[Tuple[str, ...], PathJob] = {}
 
 
 def workpiece_surface(task: Task, config: ScenarioConfig) -> Tuple[Surface, float]:
@@ -39,7 +39,7 @@ def task_path_job(task: Task, config: ScenarioConfig) -> PathJob:
     """The PathJob of ``config.path`` on the task's workpiece (``station.path_job.path_job``; cached per
     task and config): what ``build_scenario`` runs. PathError (one line) for a path the job cannot follow."""
     key = (task.name, repr(config.path), repr(sorted(config.task_parameters.items())),
-           repr(sorted(config.task_options.items())))
+           repr(sorted(config.task_options.items())), repr(config.tool), repr(config.model_error))
     if key not in _JOBS:
         surface, offset = workpiece_surface(task, config)
         _JOBS[key] = path_job(surface, offset, config.path)
@@ -91,6 +91,13 @@ def with_path_commands(config: ScenarioConfig, constraint_space: ConstraintSpace
     force_row = next(i for i in range(constraint_space.force_size) if i not in kinematic)
     force = [0.0] * constraint_space.force_size
     force[force_row] = config.path.initial_force()
+    moment_rows = [i for i in range(constraint_space.force_size) if i not in kinematic and i != force_row]
+    if config.path.moments and len(config.path.moments) != len(moment_rows):
+        raise ConfigError(f"path.moments: {len(config.path.moments)} given, but the constraint has "
+                          f"{len(moment_rows)} force-controlled rows besides the normal force (its orientation rows "
+                          "are held: tool.orientation)")
+    for row, moment in zip(moment_rows, config.path.moments):
+        force[row] = float(moment)
     return dataclasses.replace(config, desired_velocity=Profile(kind="constant",
                                                                 value=[0.0] * constraint_space.velocity_size),
                                desired_force=Profile(kind="constant", value=force))
