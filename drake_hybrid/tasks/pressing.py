@@ -18,9 +18,14 @@ def pressing_positions(scenario, positions_at_depth, max_depth=0.01):
     the workpiece along the task's normal (s = 0: touching). A static probe (a
     continuous copy of the plant, the same contact properties, and the ideal
     contact sensor) measures F at q(s) in the controller's E_f coordinates, and
-    s is found by root finding so that F . F_d / |F_d| = |F_d|.
+    s is found by root finding so that F . F_d / |F_d| = |F_d|. A disc tool is probed down to half its
+    thickness at most: pushed through it, the workpiece's surface would leave the disc's volume and its
+    hydroelastic contact with it (``station.tools``).
     """
     config, task = scenario.config, scenario.task
+    tool = scenario.robot.tool
+    if tool is not None and tool.is_disc:
+        max_depth = min(max_depth, 0.5 * float(tool.thickness))
     config.desired_force.check_keeps_sign("desired_force")      # pushing at t = 0 (below), and on every row after
     desired = np.asarray(config.desired_force.evaluate(0.0)[0], dtype=float)
     magnitude = float(np.linalg.norm(desired))
