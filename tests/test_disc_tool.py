@@ -154,7 +154,7 @@ def test_a_tilted_disc_digs_in_with_its_rim_and_its_pressure_moves_off_the_axis(
     assert figures[COLUMN["area_fraction"]] == pytest.approx(0.84, abs=0.03)
     # The centre of pressure lies toward the rim that digs in: turned about +x, the face's -y side is the lower one.
     assert figures[COLUMN["cop_offset"]] > 0.005
-    assert figures[COLUMN["cop_y"]] == pytest.approx(-figures[COLUMN["cop_offset"]], rel=1e-3)
+    assert figures[COLUMN["cop_y"]] == pytest.approx(-figures[COLUMN["cop_offset"]], rel=1e-2)
 
 
 def test_no_contact_is_nan_and_zeros():
