@@ -20,7 +20,7 @@ from drake_hybrid.station.path_config import PathConfig
 from drake_hybrid.station.path_job import PathJob, path_job
 from drake_hybrid.systems.sources import Profile
 from drake_hybrid.tasks.config import ScenarioConfig, check_scenario_config
-from drake_hybrid.tasks.pressing import pressing_positions
+from drake_hybrid.tasks.pressing import balanced_pressing_positions, moment_rows, pressing_positions
 from drake_hybrid.tasks.task import Scenario, Task
 
 _JOBS: Dict[Tuple[str, ...], PathJob] = {}
@@ -73,6 +73,9 @@ def path_start_positions(task: Task, scenario: Scenario, joint_guess: ArrayLike)
 
     if not config.start.in_contact:
         return positions_at_depth(-config.start.gap)
+    if moment_rows(scenario):        # a flat tool's moment rows: turned until they read their F_d too
+        return balanced_pressing_positions(scenario, job.pose_at_depth,
+                                           lambda X: inverse_kinematics(kinematics, context, X, seed[0]))
     return pressing_positions(scenario, positions_at_depth)
 
 
