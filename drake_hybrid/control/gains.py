@@ -259,7 +259,8 @@ class ValidatedGains:
         assert self.impedance_mass is not None          # set by __post_init__
         return {"velocity": self.velocity.tolist(), "position": self.position.tolist(),
                 "force_proportional": self.force_proportional.tolist(), "force_integral": self.force_integral.tolist(),
-                "impedance_mass": self.impedance_mass.tolist(), "force_damping": np.asarray(self.force_damping).tolist()}
+                "impedance_mass": self.impedance_mass.tolist(),
+                "force_damping": np.asarray(self.force_damping).tolist()}
 
     def check_sizes(self, velocity_size: int, force_size: int, owner: str) -> "ValidatedGains":
         """ArgumentError naming ``owner`` unless K_v is k x k and K_fi m x m (matrices validated for other sizes)."""

@@ -117,10 +117,12 @@ def patch_text(report: PatchReport) -> List[str]:
     lines = [f"contact patch at the end: centre of pressure {number(report.final_cop_offset_mm, ' mm')} from the "
              f"tool's axis, tilt {number(report.final_tilt_deg, ' deg')} against the real surface, "
              f"{percent(report.final_area_fraction)} of the face in contact, pressure peak "
-             f"{number(report.final_peak_pressure_kpa, ' kPa', 1)} / mean {number(report.final_mean_pressure_kpa, ' kPa', 1)}"
-             f", normal force {number(report.final_normal_force, ' N')}",
+             f"{number(report.final_peak_pressure_kpa, ' kPa', 1)} / mean "
+             f"{number(report.final_mean_pressure_kpa, ' kPa', 1)}, normal force "
+             f"{number(report.final_normal_force, ' N')}",
              f"  settled (from t = {number(report.settled_from, ' s', 2)}): centre of pressure within "
-             f"{number(report.max_cop_offset_mm_settled, ' mm')}, tilt within {number(report.max_tilt_deg_settled, ' deg')}, "
+             f"{number(report.max_cop_offset_mm_settled, ' mm')}, tilt within "
+             f"{number(report.max_tilt_deg_settled, ' deg')}, "
              f"at least {percent(report.min_area_fraction_settled)} of the face, normal force within "
              f"{number(report.max_normal_force_error_percent_settled, ' %', 2)}"]
     if report.path_max_cop_offset_mm is not None or report.path_min_area_fraction is not None:

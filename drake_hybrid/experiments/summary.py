@@ -3,8 +3,8 @@ and ``SimulationResult.summary`` holds; ``summary.json`` is its ``to_json()``.
 
 Read its figures as attributes (``result.summary.max_force_error_percent_after_5_time_constants``, each
 row's ``result.summary.force_rows[0].final_error``); ``as_dict()`` is the same figures as the plain dict
-summary.json holds (the same keys, in the same order; the rows, the impedance's check and the path's
-report and the contact patch's as dicts), for code that picks figures by name (``summary.as_dict()[key]``) or hands them to a
+summary.json holds (the same keys, in the same order; the rows, the impedance's check, the path's report
+and the contact patch's as dicts), for code that picks figures by name (``summary.as_dict()[key]``) or hands them to a
 function that takes the file's dict; ``RunSummary.from_dict`` reads such a dict, or a ``summary.json``
 loaded with ``json.load``, back. docs/reference/outputs.md says what each field means.
 

@@ -44,7 +44,8 @@ class HybridSystems:
     sensor's own output) and ``kinematics`` (EndEffectorKinematics on ``plant``); the optional parts
     ``source`` (the command source, None when you wire the desired_* ports yourself),
     ``wrench_filter``, ``conditioner``, ``fault_injector``, ``supervisor`` (ContactSupervisor) and
-    ``path`` (the PathJob the source runs), ``patch`` (the pad's ``ContactPatchSensor``); ``loggers`` ({key: logger} of ``add_loggers``) and
+    ``path`` (the PathJob the source runs), ``patch`` (the pad's ``ContactPatchSensor``); ``loggers``
+    ({key: logger} of ``add_loggers``) and
     ``diagram`` (set once built, by the functions that take the built diagram)."""
 
     robot: RobotModel

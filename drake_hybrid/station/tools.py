@@ -110,7 +110,8 @@ def disc_tool_sdf(tool: ToolConfig, name: str = "pad_tool", center_frame: str = 
       <inertial>
         <pose>0 0 0.03 0 0 0</pose>
         <mass>{mass}</mass>
-        <inertia><ixx>{lateral!r}</ixx><iyy>{lateral!r}</iyy><izz>{axial!r}</izz><ixy>0</ixy><ixz>0</ixz><iyz>0</iyz></inertia>
+        <inertia><ixx>{lateral!r}</ixx><iyy>{lateral!r}</iyy><izz>{axial!r}</izz>
+          <ixy>0</ixy><ixz>0</ixz><iyz>0</iyz></inertia>
       </inertial>
       <visual name="stem">
         <pose>0 0 0.015 0 0 0</pose>

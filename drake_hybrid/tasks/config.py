@@ -177,7 +177,8 @@ class ModelErrorConfig:
             raise ConfigError(f"{prefix}workpiece_pivot must be [x, y, z] (world, m) or empty (the path's first "
                               f"point), got {self.workpiece_pivot}")
         if not sum(v * v for v in self.workpiece_tilt_axis) > 0:
-            raise ConfigError(f"{prefix}workpiece_tilt_axis must be a nonzero direction, got {self.workpiece_tilt_axis}")
+            raise ConfigError(f"{prefix}workpiece_tilt_axis must be a nonzero direction, got "
+                              f"{self.workpiece_tilt_axis}")
         if not abs(self.workpiece_tilt) <= 90:
             raise ConfigError(f"{prefix}workpiece_tilt must be within [-90, 90] deg, got {self.workpiece_tilt}")
         return check_fields(self, prefix, positive=("payload_mass_scale", "link_mass_scale", "link_inertia_scale",

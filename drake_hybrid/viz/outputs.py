@@ -12,8 +12,9 @@ from drake_hybrid.viz.run_plots import save_run_plots, save_tracking_plots
 
 
 def write_run(result, out_dir, plots=True, html_path=None):
-    """Write log.npz, summary.json, config.yaml and the plots (tracking, constraint residual,
-    torques; a job's path; a disc's contact patch) to ``out_dir``, and the recorded animation (``result.html``, if any) to ``html_path``
+    """Write log.npz, summary.json, config.yaml and the plots (tracking, constraint residual, torques;
+    a job's path; a disc's contact patch) to ``out_dir``, and the recorded animation (``result.html``, if any)
+    to ``html_path``
     when one is given (``--html FILE``; the animation's only copy). Returns the paths written."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
