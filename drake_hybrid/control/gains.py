@@ -183,7 +183,7 @@ class HybridGains:
     position: List[float] = field(default_factory=lambda: [21.0])
     force_proportional: List[float] = field(default_factory=lambda: [0.5])
     force_integral: List[float] = field(default_factory=lambda: [15.0])
-    force_damping: List[float] = field(default_factory=lambda: [0.0])     # K_fd, not the paper's (default 0)
+    force_damping: List[float] = field(default_factory=lambda: [0.0])    # K_fd (1/s): a_f = -K_fd C-dot; 0: paper
     null_space_damping: float = 10.0
     constraint_frequency: float = 15.0
     impedance_mass: List[float] = field(default_factory=lambda: [1.0])   # M_d, impedance mode; 1: the paper's

@@ -95,7 +95,7 @@ class PathConfig:
     dwell: float = 0.2                       # s pressing at the first point before moving
     lift_off: bool = True                    # leave the surface at the end (supervision.lift_height)
     hold_at: float = -1.0                    # >= 0: hold at this fraction of the path's length instead
-    moments: List[float] = field(default_factory=list)   # N m: the moment rows' F_d (a flat tool's; empty: zero)
+    moments: List[float] = field(default_factory=list)   # N m, a flat tool's moment rows' F_d (empty: zero)
 
     @property
     def active(self) -> bool:

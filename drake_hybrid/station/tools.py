@@ -37,22 +37,19 @@ BALL_RADIUS = 0.02            # m, models/pad_tool.sdf's pad
 @dataclass
 class ToolConfig:
     """The pad tool (module docstring): ``kind`` ball (``models/pad_tool.sdf``, 20 mm, its material from
-    ``ContactConfig``) or disc (the fields below, read for a disc only).
+    ``ContactConfig``) or disc (radius, thickness, modulus and resolution: read for a disc only).
 
-    radius: m, the disc's face radius. thickness: m, the disc's (at most the stem's 0.05 m).
-    modulus: Pa, the disc's hydroelastic modulus (the ball's is ``contact.pad_modulus``).
-    resolution: m, the disc's mesh resolution hint (the ball's is ``contact.pad_resolution``).
     orientation: the constraint's orientation rows, "held" (kinematic rows, the controller holds the approach
         vector along the surface's normal) or "force" (force-controlled, zero moment: the tool lies flat on the
         real surface); "" is the tool's own: held for the ball, force for the disc.
     """
 
-    kind: str = "ball"
-    radius: float = 0.025
-    thickness: float = 0.01
-    modulus: float = 3.0e5
-    resolution: float = 0.003
-    orientation: str = ""
+    kind: str = "ball"                 # ball (models/pad_tool.sdf) or disc (a flat compliant disc)
+    radius: float = 0.025              # m, the disc's face radius
+    thickness: float = 0.01            # m, the disc's thickness (at most the stem's 0.05 m)
+    modulus: float = 3.0e5             # Pa, the disc's hydroelastic modulus (the ball's: contact.pad_modulus)
+    resolution: float = 0.003          # m, the disc's mesh resolution hint (the ball's: contact.pad_resolution)
+    orientation: str = ""              # the orientation rows: held | force ("": held for the ball, force for a disc)
 
     @property
     def is_disc(self) -> bool:

@@ -23,7 +23,7 @@ pressure over the disc.
 """
 
 import math
-from typing import Dict, Iterable, List, Optional, Tuple
+from typing import Any, Dict, Iterable, List, Optional, Tuple, cast
 
 import numpy as np
 
@@ -32,7 +32,7 @@ from pydrake.common.value import AbstractValue, Value
 from pydrake.geometry import ContactSurface, GeometryId
 from pydrake.math import RigidTransform
 from pydrake.multibody.plant import ContactResults, MultibodyPlant
-from pydrake.systems.framework import LeafSystem
+from pydrake.systems.framework import Context, LeafSystem
 
 from drake_hybrid.core.arguments import instance, positive, vector
 from drake_hybrid.core.errors import ArgumentError
@@ -54,17 +54,20 @@ PATCH_FIELDS = {
     "cop_z": "the centre of pressure, world z (m)",
 }
 PATCH_SIZE = len(PATCH_FIELDS)
+CENTROID: Array = np.full(3, 1.0 / 3.0)                # a triangle's centroid, barycentric
 NO_PATCH: Array = np.array([math.nan, 0.0, 0.0, 0.0, 0.0, math.nan, 0.0, math.nan, math.nan, math.nan])
 
 
 def _faces(surface: ContactSurface) -> Tuple[Array, Array, Array, Array, Array]:
     """(centroids N x 3, areas N, unit normals N x 3 out of N into M, pressures at the centroids N, the field's
     vertex values) of a contact surface, polygons or triangles."""
+    mesh: Any
+    field: Any
     if surface.is_triangle():
         mesh, field = surface.tri_mesh_W(), surface.tri_e_MN()
         count = mesh.num_triangles()
         centroids = np.array([mesh.element_centroid(i) for i in range(count)])
-        pressures = np.array([field.Evaluate(i, np.full(3, 1.0 / 3.0)) for i in range(count)])
+        pressures = np.array([field.Evaluate(i, CENTROID) for i in range(count)])
     else:
         mesh, field = surface.poly_mesh_W(), surface.poly_e_MN()
         count = mesh.num_elements()
@@ -201,13 +204,14 @@ class ContactPatchSensor(LeafSystem):
         self.DeclareInitializationDiscreteUpdateEvent(self._update)
         self.DeclareStateOutputPort("patch", self._state)
 
-    def tool_pose(self, context) -> RigidTransform:
+    def tool_pose(self, context: Context) -> RigidTransform:
         """X_WT: the tool frame at the controlled point (z the approach vector) in ``context`` (this system's)."""
-        return self._poses.Eval(context)[self._body_slot].multiply(self._X_BT)
+        poses = cast(List[RigidTransform], self._poses.Eval(context))
+        return poses[self._body_slot].multiply(self._X_BT)
 
-    def figures(self, context) -> Array:
+    def figures(self, context: Context) -> Array:
         """The ``PATCH_FIELDS`` of the contact results the inputs hold now (what the update stores)."""
-        results = self._results.Eval(context)
+        results = cast(ContactResults, self._results.Eval(context))
         X_WT = self.tool_pose(context)
         surfaces = [results.hydroelastic_contact_info(i).contact_surface()
                     for i in range(results.num_hydroelastic_contacts())]

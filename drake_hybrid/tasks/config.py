@@ -158,10 +158,10 @@ class ModelErrorConfig:
     joint_damping: float = 0.0
     joint_friction: float = 0.0
     friction_speed: float = 0.05
-    workpiece_tilt: float = 0.0                  # deg
-    workpiece_tilt_axis: List[float] = field(default_factory=lambda: [1.0, 0.0, 0.0])   # world direction
-    workpiece_pivot: List[float] = field(default_factory=list)        # world point (m); empty: the path's first
-    workpiece_shift: List[float] = field(default_factory=lambda: [0.0, 0.0, 0.0])      # world (m)
+    workpiece_tilt: float = 0.0                  # deg: the real workpiece turned against the controller's model
+    workpiece_tilt_axis: List[float] = field(default_factory=lambda: [1.0, 0.0, 0.0])   # world direction (dimensionless)
+    workpiece_pivot: List[float] = field(default_factory=list)        # m, world; empty: the path's first point
+    workpiece_shift: List[float] = field(default_factory=lambda: [0.0, 0.0, 0.0])      # m, world: then moved by it
 
     @property
     def workpiece_moved(self) -> bool:
