@@ -4,9 +4,11 @@ The names a user starts with, importable from here (each lives in the module nam
 
 * the geometry: charts (``PoseChart``, ``EulerZXZChart``, ``PlanarChart``), ``Constraint`` and the
   constraint space (``ConstraintSpace``, E_p), workpiece surfaces (``PlaneSurface``, ``SphereSurface``,
-  ``CylinderSurface``, ``HeightMapSurface``) and ``view_projection``;
+  ``CylinderSurface``, ``HeightMapSurface``), ``view_projection``, a flat tool's moment rows
+  (``with_force_rows``) and a workpiece off its model (``surface_error_pose``, ``moved_surface``);
 * the law: ``HybridController``, ``HybridGains``, ``ControlMode``, ``SupervisionConfig``, ``ContactPhase``;
-* your own station: ``default_plant_config``, ``mount_tool``, ``robot_plant``, ``add_rigid_workpiece``,
+* your own station: ``default_plant_config``, ``mount_tool`` (the ball pad or a disc: ``ToolConfig``),
+  ``robot_plant``, ``add_rigid_workpiece``, ``add_contact_patch``,
   ``apply_contact_defaults``, ``only_tool_touches``, ``add_hybrid_controller``, ``add_loggers``,
   ``read_log``, ``solve_contact_start``, ``solve_approach_start``, a path job (``PathConfig``,
   ``PatternConfig``, ``path_job``, ``solve_path_start``) and ``linearize_at_contact``;
@@ -23,7 +25,7 @@ import importlib
 _EXPORTS = {
     "drake_hybrid.core.charts": ["EulerZXZChart", "PlanarChart", "PoseChart"],
     "drake_hybrid.core.constraints": ["Constraint", "SelectingConstraint", "crank_constraint", "sphere_constraint",
-                                      "surface_constraint", "window_constraint"],
+                                      "surface_constraint", "window_constraint", "with_force_rows"],
     "drake_hybrid.core.errors": ["ArgumentError", "BranchError", "ChartSingularityError", "ConfigError",
                                  "ConstraintRankError", "DimensionError", "DrakeHybridError", "ForceSignError",
                                  "GainError", "KinematicSingularityWarning", "OffConstraintError", "PathError",
@@ -34,6 +36,7 @@ _EXPORTS = {
                                       "sphere_paper_projection", "sphere_true_velocity_projection"],
     "drake_hybrid.core.surfaces": ["CylinderSurface", "PlaneSurface", "SphereSurface", "view_projection"],
     "drake_hybrid.core.height_map": ["HeightMap", "HeightMapSurface"],
+    "drake_hybrid.core.surface_moves": ["moved_surface", "surface_error_pose"],
     "drake_hybrid.control.controller": ["HybridController"],
     "drake_hybrid.control.gains": ["ControlMode", "HybridGains"],
     "drake_hybrid.control.phases": ["ContactPhase"],
@@ -42,7 +45,8 @@ _EXPORTS = {
     "drake_hybrid.station.arm": ["mount_tool", "robot_plant"],
     "drake_hybrid.station.contact": ["apply_contact_defaults", "default_plant_config", "only_tool_touches"],
     "drake_hybrid.station.workpieces": ["add_rigid_workpiece"],
-    "drake_hybrid.station.sensing": ["ContactSensorConfig", "WristSensorConfig"],
+    "drake_hybrid.station.sensing": ["ContactSensorConfig", "WristSensorConfig", "add_contact_patch"],
+    "drake_hybrid.station.tools": ["ToolConfig"],
     "drake_hybrid.station.loop": ["add_hybrid_controller"],
     "drake_hybrid.station.handles": ["HybridSystems"],
     "drake_hybrid.station.loggers": ["LOG_KEYS", "add_loggers", "read_log"],

@@ -221,6 +221,9 @@ def test_the_valid_arguments_are_accepted(callee):
      r"velocity \(K_v\) designs a loop of rate 5 1/s, faster than 2 1/s \(the sampling rate 1/h of this "
      r"controller's control_period h = 0.5 s"),
     (lambda: ControlMode.parse("sideways"), "ArgumentError", r"unknown control mode 'sideways'"),
+    (lambda: gains(force_damping=-1.0), "GainError", r"force_damping \(K_fd\) must be positive semidefinite"),
+    (lambda: controller(gains=HybridGains(velocity=[5.0, 5.0], force_damping=[2000.0]), control_period=1e-3),
+     "GainError", r"force_damping \(K_fd\) has an eigenvalue of 2e\+03 1/s, faster than 1000 1/s"),
 ])
 def test_the_cases_of_the_issue(call, error, match):
     with pytest.raises(DrakeHybridError, match=match) as raised:

@@ -151,6 +151,40 @@ def test_closed_loop_is_the_designed_one_under_rigid_contact(mode, joints, rng):
                                        atol=1e-9)                                         # (3.1-14)
 
 
+@pytest.mark.parametrize("mode", MODES)
+def test_force_damping_leaves_the_rigid_contact_design_as_it_is(mode, rng):
+    """a_f = -K_fd C-dot (HybridGains.force_damping) acts only where the force rows move: under rigid contact,
+    at a velocity along the constraint (E_f r-dot = 0), the closed loop is still (3.1-14), (3.1-15); where
+    they move (E_f r-dot != 0, which rigid contact cannot hold) the contact's force answers for it."""
+    gains = HybridGains(velocity=[6.0, 4.0], position=[9.0, 5.0], force_proportional=0.5, force_integral=3.0,
+                        force_damping=40.0)
+    dut, plant, space = make_dut(mode, gains=gains)
+    plain, plain_plant, _ = make_dut(mode)
+    validated = dut.validated_gains()
+    model = dut.kinematics.plant
+    context = model.CreateDefaultContext()
+    for _ in range(3):
+        q = dut_random_positions(3, rng)
+        model.SetPositions(context, q)
+        task = dut.kinematics.evaluate(context)
+        E_f = space.evaluate(task.configuration, task.velocity).force_projection
+        along = np.linalg.svd(E_f @ task.jacobian)[2][1:].T          # joint velocities with C-dot = 0
+        v = along @ rng.normal(size=along.shape[1]) * 0.3
+        xi, e_p = rng.normal(size=1) * 0.2, rng.normal(size=2) * 0.05
+        desired = (rng.normal(size=2) * 0.1, rng.normal(size=2) * 0.2, np.array([-8.0]))
+        out = rigid_contact_closed_loop(dut, plant, space, q, v, xi, e_p, desired, rng)
+        reference = rigid_contact_closed_loop(plain, plain_plant, space, q, v, xi, e_p, desired, rng)
+        np.testing.assert_allclose(out["F"], reference["F"], atol=1e-9)
+        np.testing.assert_allclose(out["r_ddot_p"], reference["r_ddot_p"], atol=1e-9)
+        e_f = out["F"] - desired[2]
+        np.testing.assert_allclose((1 + validated.force_proportional) @ e_f + validated.force_integral @ xi, 0,
+                                   atol=1e-9)
+        across = v + 0.2 * np.linalg.pinv(E_f @ task.jacobian)[:, 0]          # C-dot != 0
+        moving = rigid_contact_closed_loop(dut, plant, space, q, across, xi, e_p, desired, rng)
+        still = rigid_contact_closed_loop(plain, plain_plant, space, q, across, xi, e_p, desired, rng)
+        assert abs(float(moving["F"][0] - still["F"][0])) > 1e-3         # K_fd acts where C-dot != 0
+
+
 def dut_random_positions(joints, rng):
     task, config, *_ = window_parts(joints)
     x, theta = rng.uniform(0.7, 1.3), rng.uniform(1.2, 1.9)

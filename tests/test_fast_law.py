@@ -266,6 +266,27 @@ def test_both_paths_agree_with_an_impedance_mass(task, rng):
     assert fast.fast_law.fallbacks == 0
 
 
+@pytest.mark.parametrize("mode", MODES)
+def test_both_paths_agree_with_a_force_damping(task, mode, rng):
+    """The force rows' damping a_f = -K_fd C-dot (HybridGains.force_damping, law.force_row_damping), a full
+    symmetric positive semidefinite K_fd: the compiled law reads it from its constants and equals the generic
+    law, in contact and off it (where the guarded move replaces it)."""
+    name, start = task
+    plant, frame, point, space, gains, q0 = start
+    m = space.force_size
+    root = rng.normal(size=(m, m))
+    damping = 20.0 * (root @ root.T) / m
+    damped = dataclasses.replace(gains, force_damping=damping)
+    fast, generic = _pair((plant, frame, point, space, damped, q0), mode, guarded_move=Guarded())
+    offset = fast.fast_law.ints[fast_kernels.I_OFFSET_KFD]
+    np.testing.assert_allclose(fast.fast_law.reals[offset:offset + m * m].reshape(m, m), damping, rtol=1e-12)
+    for i in range(6):
+        inputs = _random_inputs(fast, q0, rng, spread=0.02)
+        integrals = rng.normal(scale=0.05, size=fast.integral_state_slices()[1].stop)
+        _compare(fast, generic, inputs, integrals, f"{name} {mode} force damping state {i}")
+    assert fast.fast_law.fallbacks == 0
+
+
 def _first_tick(controller, start):
     context = controller.CreateDefaultContext()
     n = start[0].num_velocities()

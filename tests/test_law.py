@@ -6,9 +6,10 @@ import pytest
 from pydrake.autodiffutils import AutoDiffXd, ExtractGradient
 
 from drake_hybrid.control.gains import ControlMode, HybridGains
-from drake_hybrid.control.law import (force_command, force_error, guarded_acceleration, held_row_acceleration,
-                                      held_row_compensation, impedance_compensation, impedance_gain, integral_rates,
-                                      motion_acceleration, tangential_compensation, velocity_error)
+from drake_hybrid.control.law import (force_command, force_error, force_row_damping, guarded_acceleration,
+                                      held_row_acceleration, held_row_compensation, impedance_compensation,
+                                      impedance_gain, integral_rates, motion_acceleration, tangential_compensation,
+                                      velocity_error)
 from drake_hybrid.control.phases import ContactPhase
 from drake_hybrid.core.linalg import value
 
@@ -48,6 +49,19 @@ def test_force_command_and_its_integral_gain(gains):
                                   command * (1.0 - mask))
     derivative = ExtractGradient(force_command(desired, gains, error, _seeded(integral), mask, True))
     np.testing.assert_allclose(derivative, gains.force_integral, rtol=0, atol=1e-15)
+
+
+def test_force_row_damping_acts_on_the_force_rows_in_contact_only():
+    gains = HybridGains(force_proportional=[0.5], force_integral=[20.0],
+                        force_damping=[[30.0, 5.0], [5.0, 10.0]]).matrices(2, 2, ControlMode.VELOCITY_FORCE)
+    rate, mask = np.array([0.02, -0.01]), np.array([1.0, 0.0])             # row 1 kinematic
+    np.testing.assert_allclose(force_row_damping(rate, gains.force_damping, mask, in_contact=True),
+                               -(gains.force_damping @ rate) * mask, rtol=0, atol=1e-15)
+    np.testing.assert_array_equal(force_row_damping(rate, gains.force_damping, mask, in_contact=False), [0.0, 0.0])
+    derivative = ExtractGradient(force_row_damping(_seeded(rate), gains.force_damping, np.ones(2), True))
+    np.testing.assert_allclose(derivative, -gains.force_damping, rtol=0, atol=1e-15)
+    default = HybridGains().matrices(1, 1, ControlMode.VELOCITY_FORCE)      # the paper's a_f = 0
+    np.testing.assert_array_equal(default.force_damping, [[0.0]])
 
 
 def test_errors_and_integral_rates():

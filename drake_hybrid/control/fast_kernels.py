@@ -51,7 +51,8 @@ I_MECHANISM = 23              # 1: the mechanism force F_m = I_v a_p (law.mechan
 I_DAMPING = 24                # 1: a damped discrete step: h B a* and K_0's J (M + h B)^-1 J^T (control.damping)
 I_OFFSET_MECHANISM, I_OFFSET_DAMPING = 25, 26   # offsets of I_v (k x k) and h B (n) in ``reals``
 I_OFFSET_INVERSE_MASS = 27    # offset of M_d^-1 (k x k), the impedance's inverse mass (law.impedance_gain)
-INT_SIZE = 28
+I_OFFSET_KFD = 28             # offset of K_fd (m x m), the force rows' damping (law.force_row_damping)
+INT_SIZE = 29
 # -- scalars at the start of ``reals`` -------------------------------------------------------------
 (R_RANK_TOLERANCE, R_KERNEL_TOLERANCE, R_INVERTIBILITY_TOLERANCE, R_CHART_TOLERANCE, R_CONSTRAINT_FREQUENCY,
  R_NULL_SPACE_DAMPING, R_SINGULARITY_THRESHOLD, R_MAX_ACCELERATION, R_APPROACH_SPEED, R_APPROACH_GAIN,
@@ -644,6 +645,9 @@ def law_kernel(x, nu, J, bias, C, E_f, curvature, E_f_dot, E_p, E_p_dot_nu, v, d
     C_dot = matvec(E_f, nu)
     w_c = reals[R_CONSTRAINT_FREQUENCY]
     a_f = (-3.0 * w_c * C_dot - 2.0 * w_c * w_c * C) * (1.0 - mask)    # held (kinematic) rows
+    if in_contact:                                                     # - K_fd C-dot on the force rows
+        K_fd = reals[ints[I_OFFSET_KFD]:ints[I_OFFSET_KFD] + m * m].reshape((m, m))
+        a_f = a_f - matvec(K_fd, C_dot) * mask
     M_inverse = M
     mobility = M
     if ints[I_IMPEDANCE] != 0 or n > d:

@@ -42,18 +42,17 @@ import sympy
 
 from pydrake.multibody.tree import JacobianWrtVariable
 
+from drake_hybrid.control import fast_compile
+from drake_hybrid.control import fast_kernels as kernels
 from drake_hybrid.control.damping import damped_step
+from drake_hybrid.control.fast_compile import cache_folder
+from drake_hybrid.control.fast_kernels import DONE, NEEDS_BASE_TORQUE, NEEDS_INVERSE_DYNAMICS
 from drake_hybrid.control.gains import ControlMode
 from drake_hybrid.core.charts import EulerZXZChart, PlanarChart, PoseChart
 from drake_hybrid.core.constraints import SelectingConstraint
-from drake_hybrid.core.projections import GivenVelocityProjection, KernelVelocityProjection
 from drake_hybrid.core.oracle import check_against_sympy
+from drake_hybrid.core.projections import GivenVelocityProjection, KernelVelocityProjection
 from drake_hybrid.core.symbolic import ELEMENTARY_FUNCTIONS, SIGN_SOURCE, straight_line_program, time_derivative
-
-from drake_hybrid.control import fast_compile
-from drake_hybrid.control import fast_kernels as kernels
-from drake_hybrid.control.fast_compile import cache_folder
-from drake_hybrid.control.fast_kernels import DONE, NEEDS_BASE_TORQUE, NEEDS_INVERSE_DYNAMICS
 
 _WARNED = []
 _FUNCTIONS = ", ".join(ELEMENTARY_FUNCTIONS) + ", pi, pow, e as E"
@@ -233,7 +232,7 @@ def pack_constants(controller, law, space):
               projection.basis if kernel else np.zeros(0), projection._half_lower if kernel else np.zeros(0),
               law.velocity_row_inertia if mechanism else np.zeros(0),
               law.plant_time_step * np.asarray(law.joint_damping, dtype=float) if damped else np.zeros(0),
-              gains.impedance_inverse_mass]
+              gains.impedance_inverse_mass, gains.force_damping]
     reals, offsets, position = [scalars], [], scalars.size
     for block in blocks:
         block = np.ascontiguousarray(block, dtype=float).reshape(-1)
@@ -245,7 +244,8 @@ def pack_constants(controller, law, space):
                                     int(law.mode is ControlMode.IMPEDANCE_FORCE), int(kernel), int(law.anti_windup),
                                     int(law.approach_speed is not None)]
     ints[kernels.I_OFFSET_KV:kernels.I_OFFSET_HALF_LOWER + 1] = offsets[:11]
-    ints[kernels.I_OFFSET_MECHANISM], ints[kernels.I_OFFSET_DAMPING], ints[kernels.I_OFFSET_INVERSE_MASS] = offsets[11:]
+    (ints[kernels.I_OFFSET_MECHANISM], ints[kernels.I_OFFSET_DAMPING], ints[kernels.I_OFFSET_INVERSE_MASS],
+     ints[kernels.I_OFFSET_KFD]) = offsets[11:]
     ints[kernels.I_MECHANISM], ints[kernels.I_DAMPING] = int(mechanism), int(damped)
     ints[kernels.I_CONFIGURATION] = chart.configuration_size
     ints[kernels.I_COMPENSATE_TANGENTIAL] = int(law.compensate_tangential_force)

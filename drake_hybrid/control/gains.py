@@ -9,6 +9,7 @@ velocity              K_v         (d-m) x (d-m)           velocity loop, eigenva
 position              K_p         (d-m) x (d-m)           position/impedance modes (Remark 3, 3.2-6)
 force_proportional    K_fp        m x m                   force loop, (I + K_fp) xi-dot + K_fi xi = 0
 force_integral        K_fi        m x m                   force loop
+force_damping         K_fd        m x m                   force rows' motion on a compliant contact: a_f = -K_fd C-dot
 impedance_mass        M_d         (d-m) x (d-m)           impedance mode: M_d (e'' + K_v e' + K_p e) = F_v
 null_space_damping    K_n         scalar (1/s)            n > d only: q-ddot_0 = -K_n q-dot
 constraint_frequency  w_c         scalar (rad/s)          kinematic rows: C-ddot + 3 w_c C-dot + 2 w_c^2 C = 0
@@ -17,7 +18,7 @@ constraint_frequency  w_c         scalar (rad/s)          kinematic rows: C-ddot
 Each gain may be given as a scalar (times I), a vector (diagonal) or a matrix.
 ``HybridGains`` stores them as flat lists (YAML-friendly): one entry means a
 scalar times I, k entries a diagonal, k*k entries a full matrix (row-major).
-K_v, K_p, K_fi and M_d must be symmetric positive definite and K_fp symmetric
+K_v, K_p, K_fi and M_d must be symmetric positive definite and K_fp and K_fd symmetric
 positive semidefinite; anything else raises ``GainError`` naming the gain. Each loop the gains
 design must also be sane (``ValidatedGains.check_rates``, ``check_poles``): decay at ``MIN_RATE`` =
 1e-6 1/s or faster (a gain of 1e-300 is positive definite in name only), be no faster than
@@ -29,6 +30,17 @@ impedance (3.2-1) has unit mass, the default: e'' + K_v e' + K_p e = F_v. A heav
 the roots K_v and K_p design and divides the force the impedance yields to by M_d
 (K_0 = M_d^-1 - S, docs/theory.md §5): what keeps the roots where they are designed on a contact
 that drags (docs/drake_notes.md, "The simulated contact's drag and the impedance's roots").
+
+K_fd is not the paper's: its law commands no acceleration along the force rows (a_f = 0 in (3.0-11)),
+which rigid contact enforces (E_f r-ddot = -E_f-dot r-dot, (3.0-7)). On a compliant contact the force
+rows move, and with a_f = 0 nothing but the contact's own dissipation damps that motion: a row of
+inertia Lambda on a contact of stiffness k and damping c closes as
+Lambda s^3 + (Lambda K_fd + (1 + K_fp) c) s^2 + ((1 + K_fp) k + K_fi c) s + K_fi k = 0, whose fast pair
+is unstable for Lambda K_fi / (1 + K_fp) > (1 + K_fp) c + Lambda K_fd (a flat tool's moment rows:
+docs/disc.md). a_f = -K_fd C-dot (in contact) damps it and leaves the rigid-contact design as it is
+(C-dot = 0 there); its price is the slow root's shift, to first order
+s_0 Lambda s_0 (s_0 + K_fd) / ((1 + K_fp) k) with s_0 = -K_fi / (1 + K_fp): small where k is large.
+Default 0: the paper's law.
 """
 
 import enum
@@ -136,7 +148,7 @@ def _flat(gain):
     return [float(v) for v in np.asarray(gain, dtype=float).reshape(-1)]
 
 
-GAIN_LISTS = ("velocity", "position", "force_proportional", "force_integral", "impedance_mass")
+GAIN_LISTS = ("velocity", "position", "force_proportional", "force_integral", "impedance_mass", "force_damping")
 
 
 @dataclass
@@ -153,6 +165,9 @@ class HybridGains:
     force_proportional: K_fp (1, dimensionless), the force error's proportional gain.
     force_integral: K_fi (1/s), the force error's integral gain: each force row's eigenvalue is
         -K_fi / (1 + K_fp).
+    force_damping: K_fd (1/s), not the paper's: the force rows' commanded acceleration a_f = -K_fd C-dot in
+        contact (the module docstring), which damps a compliant contact's motion along them and leaves the
+        rigid-contact eigenvalues as they are; 0 (default) is the paper's a_f = 0.
     null_space_damping: K_n (1/s), only for a redundant arm (n joints > d chart coordinates): the law
         adds -N^T M K_n q-dot, so the self-motion the task leaves free (J's null space) decays as
         e^(-K_n t) instead of drifting; unused when n = d.
@@ -170,6 +185,7 @@ class HybridGains:
     position: List[float] = field(default_factory=lambda: [21.0])
     force_proportional: List[float] = field(default_factory=lambda: [0.5])
     force_integral: List[float] = field(default_factory=lambda: [15.0])
+    force_damping: List[float] = field(default_factory=lambda: [0.0])    # K_fd (1/s): a_f = -K_fd C-dot; 0: paper
     null_space_damping: float = 10.0
     constraint_frequency: float = 15.0
     impedance_mass: List[float] = field(default_factory=lambda: [1.0])   # M_d, impedance mode; 1: the paper's
@@ -209,8 +225,9 @@ class HybridGains:
         K_fi = self._matrix("force_integral", force_size, "force_integral (K_fi)")
         self._check_scalars()
         M_d = self._matrix("impedance_mass", velocity_size, "impedance_mass (M_d)")
+        K_fd = self._matrix("force_damping", force_size, "force_damping (K_fd)", semidefinite=True)
         gains = ValidatedGains(K_v, K_p, K_fp, K_fi, float(self.null_space_damping), float(self.constraint_frequency),
-                               M_d)
+                               M_d, K_fd)
         gains.check_rates(mode, control_period)
         return gains
 
@@ -228,6 +245,7 @@ class ValidatedGains:
     null_space_damping: float
     constraint_frequency: float
     impedance_mass: Optional[Array] = None     # M_d (k x k); None: the paper's unit mass (I once constructed)
+    force_damping: Optional[Array] = None      # K_fd (m x m); None: zero, the paper's law (I once constructed)
     force_rate: Array = field(init=False)
     impedance_inverse_mass: Array = field(init=False)     # M_d^-1, the law's and the analyses'
 
@@ -238,13 +256,16 @@ class ValidatedGains:
         # G = (I + K_fp)^-1 K_fi: the force loop's rate matrix (3.1-14).
         m = self.force_proportional.shape[0]
         self.force_rate = np.linalg.solve(np.eye(m) + self.force_proportional, self.force_integral)
+        if self.force_damping is None:
+            self.force_damping = np.zeros((m, m))
 
     def as_lists(self) -> Dict[str, Any]:
         """The matrices as nested lists (summary.json's ``gains``)."""
         assert self.impedance_mass is not None          # set by __post_init__
         return {"velocity": self.velocity.tolist(), "position": self.position.tolist(),
                 "force_proportional": self.force_proportional.tolist(), "force_integral": self.force_integral.tolist(),
-                "impedance_mass": self.impedance_mass.tolist()}
+                "impedance_mass": self.impedance_mass.tolist(),
+                "force_damping": np.asarray(self.force_damping).tolist()}
 
     def check_sizes(self, velocity_size: int, force_size: int, owner: str) -> "ValidatedGains":
         """ArgumentError naming ``owner`` unless K_v is k x k and K_fi m x m (matrices validated for other sizes)."""
@@ -275,11 +296,19 @@ class ValidatedGains:
         return poles
 
     def check_rates(self, mode: Union[ControlMode, str], control_period: Optional[float] = None) -> None:
-        """GainError naming the gain whose designed loop is too fast or too slow (``check_poles``), or whose
-        K_fp or M_d is beyond a factor MAX_RATIO of 1."""
-        assert self.impedance_mass is not None          # set by __post_init__
+        """GainError naming the gain whose designed loop is too fast or too slow (``check_poles``), whose
+        K_fp or M_d is beyond a factor MAX_RATIO of 1, or whose K_fd damps faster than the rates allow (it
+        designs no pole of the rigid-contact loop, but a rate beyond 1/h overshoots at every tick)."""
+        assert self.impedance_mass is not None and self.force_damping is not None     # set by __post_init__
         for name, poles in self.designed_poles(mode).items():
             check_poles(poles, name, control_period)
+        damping = np.linalg.eigvalsh(self.force_damping) if self.force_damping.size else np.zeros(0)
+        high = MAX_RATE if control_period is None else min(MAX_RATE, MAX_RATE_PERIOD / float(control_period))
+        if damping.size and not float(damping.max()) <= high:
+            raise GainError(f"gain force_damping (K_fd) has an eigenvalue of {float(damping.max()):.3g} 1/s, faster "
+                            f"than {high:.4g} 1/s" + ("" if control_period is None else
+                                                     f" (the sampling rate 1/h of control_period h = "
+                                                     f"{float(control_period):g} s)"))
         for name, matrix, low, unit in (("force_proportional (K_fp)", self.force_proportional, 0.0, "(dimensionless)"),
                                         ("impedance_mass (M_d)", self.impedance_mass, 1.0 / MAX_RATIO,
                                          "kg (the paper's unit mass is 1)")):

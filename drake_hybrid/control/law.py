@@ -18,6 +18,7 @@ force on the robot, §0; k = d - m velocity rows, m force rows)::
     F_c = -F_v                          (velocity and position modes)        tangential_compensation
     F_h = -F on the held rows           (velocity and position modes)        held_row_compensation
     a_f = -3 w_c C-dot - 2 w_c^2 C      (kinematic rows)             held_row_acceleration
+    a_f = -K_fd C-dot                   (force rows, in contact; not the paper's)   force_row_damping
     a_f = -2 K_a (C-dot - s n_C) - K_a^2 (C - C_r)   (off the surface)   guarded_acceleration
     r-ddot* = E^-1 ([a_p; a_f] - E-dot r-dot)             (3.0-11)   ConstraintSpace.task_acceleration
     u_f = -F_d + K_fp e_f + K_fi xi (+ F_h)               (3.1-12)   force_command
@@ -275,6 +276,19 @@ def held_row_acceleration(constraint_value, constraint_rate, constraint_frequenc
     return (-3.0 * w_c * constraint_rate - 2.0 * w_c * w_c * constraint_value) * (1.0 - force_controlled)
 
 
+def force_row_damping(constraint_rate, force_damping, force_controlled, in_contact):
+    """a_f = -K_fd C-dot on the force-controlled rows in contact (0 elsewhere, and with K_fd = 0: the
+    paper's a_f = 0).
+
+    Not the paper's line: rigid contact holds C-dot = 0 on the force rows, so it changes nothing the paper
+    designs, while on a compliant contact it damps the rows' motion, which the force loop alone leaves
+    undamped (``control.gains``, the module docstring: a flat tool's moment rows need it).
+    """
+    if not in_contact:
+        return constraint_rate * 0.0
+    return -(force_damping @ constraint_rate) * force_controlled
+
+
 def guarded_acceleration(constraint_value, constraint_rate, approach_reference, desired_force, force_controlled,
                          phase, approach_speed, approach_gain):
     """a_f = -2 K_a (C-dot - s n_C) - K_a^2 (C - C_r) on the force-controlled rows, off the surface
@@ -387,6 +401,7 @@ def evaluate_law(constants, space, kinematics, plant, plant_context, forces, int
     F_c = tangential_compensation(tangential_force, mode, constants.compensate_tangential_force)
     C_dot = values.force_projection @ nu
     a_f = held_row_acceleration(values.constraint_value, C_dot, gains.constraint_frequency, mask)
+    a_f = a_f + force_row_damping(C_dot, gains.force_damping, mask, in_contact)
     n, d = J.shape[1], J.shape[0]
     dynamics = None
     if mode is ControlMode.IMPEDANCE_FORCE or n > d:

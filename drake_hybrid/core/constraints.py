@@ -17,7 +17,8 @@ The paper's constraints are provided as functions with real geometry (SI
 units): ``window_constraint`` (2.2-1), ``crank_constraint`` (2.2-5),
 ``sphere_constraint`` (2.2-8, with the equator fix, or the p + a form) and
 ``surface_constraint`` for any user surface f(p) = 0 with the approach vector
-along its normal.
+along its normal. ``with_force_rows`` turns held (kinematic) rows into force-controlled ones: a flat
+tool's orientation rows, whose force is the moment about the controlled point.
 
 Writing your own::
 
@@ -27,13 +28,14 @@ Writing your own::
 """
 
 
+import copy
 from typing import Any, Callable, Iterable, Optional, Protocol, Sequence, Tuple, Union
 
 import numpy as np
 import sympy
 
 from drake_hybrid.core.charts import Chart, EulerZXZChart, PlanarChart, PoseChart
-from drake_hybrid.core.errors import BranchError, ConstraintRankError, DimensionError, OffConstraintError
+from drake_hybrid.core.errors import ArgumentError, BranchError, ConstraintRankError, DimensionError, OffConstraintError
 from drake_hybrid.core.hints import Array, VectorLike
 from drake_hybrid.core.linalg import rank_margin, value
 from drake_hybrid.core.symbolic import CompiledFunction, compiled_time_derivative, to_sympy_matrix
@@ -398,3 +400,37 @@ def surface_constraint(chart: Union[PlanarChart, EulerZXZChart, PoseChart], surf
     return Constraint(chart, rows, name=name, branch=gradient.dot(chart.approach),
                       branch_description="the approach vector pointing into the surface (a . grad f < 0)",
                       kinematic_rows=(1, 2))
+
+
+def with_force_rows(constraint: ConstraintLike, rows: Optional[Iterable[int]] = None) -> ConstraintLike:
+    """A copy of ``constraint`` whose kinematic rows ``rows`` (default: all of them) are force-controlled.
+
+    A constraint's orientation rows (``surface_constraint``'s grad f . o_1, grad f . o_2; the surfaces'
+    ``offset_constraint``) are held by the controller for a ball pad, which takes no moment. A flat tool
+    does: with them force-controlled, their force F = E^-T w is the moment on the tool about the controlled
+    point, about o_2 and -o_1 where a is along -grad f, in N m where |grad f| = 1 (the analytic surfaces'
+    rows on their offset surface), and a zero F_d on them turns the tool until the contact's pressure is
+    centred under the controlled point. The copy shares the compiled functions; only ``kinematic_rows``
+    (and its name) differ. ArgumentError for a row that is not a kinematic row of ``constraint``.
+    """
+    held = tuple(getattr(constraint, "kinematic_rows", ()))
+    if not hasattr(constraint, "force_projection") or not hasattr(constraint, "kinematic_rows"):
+        raise ArgumentError(f"with_force_rows: constraint must be a Constraint (core.constraints), got "
+                            f"{type(constraint).__name__}")
+    chosen = held if rows is None else tuple(rows)
+    stray = [row for row in chosen if row not in held]
+    if stray:
+        raise ArgumentError(f"with_force_rows: rows {stray} are not kinematic rows of constraint "
+                            f"'{constraint.name}' (its kinematic rows: {list(held)})")
+    kept = tuple(row for row in held if row not in chosen)
+
+    def released(piece):
+        twin = copy.copy(piece)
+        twin.kinematic_rows = kept
+        twin.name = f"{piece.name} (moments)" if chosen else piece.name
+        return twin
+
+    twin = released(constraint)
+    if isinstance(constraint, SelectingConstraint):
+        twin.pieces = [released(piece) for piece in constraint.pieces]
+    return twin

@@ -48,6 +48,7 @@ from drake_hybrid.core.hints import Array
 from drake_hybrid.core.progress import StagesLike, quiet
 from drake_hybrid.experiments.metrics import (ForceRowFigures, contact_time, impedance_check, invalid_samples,
                                               last_valid, max_after, row_errors, row_units, run_scale, worst)
+from drake_hybrid.experiments.patch_report import patch_report
 from drake_hybrid.experiments.path_report import before_lift_off, path_report
 from drake_hybrid.experiments.summary import RunSummary
 from drake_hybrid.scenario.builder import build_scenario
@@ -337,6 +338,9 @@ def summarize(scenario: Scenario, log: Mapping[str, Array], wall_time: float) ->
         # A job's path (station.path_job): path and force errors per segment, time off the surface.
         path=path_report(log, tau, path_source.path.duration, path_source.path.length,
                          path_source.force_row) if "path_progress" in log else None,
+        # A disc's contact patch (station.sensing.add_contact_patch): centred, flat, even, and the normal force.
+        patch=patch_report(log, tau, start, next(i for i in range(m) if i not in controller.kinematic_rows))
+        if "patch" in log else None,
     )
 
 

@@ -3,8 +3,8 @@ and ``SimulationResult.summary`` holds; ``summary.json`` is its ``to_json()``.
 
 Read its figures as attributes (``result.summary.max_force_error_percent_after_5_time_constants``, each
 row's ``result.summary.force_rows[0].final_error``); ``as_dict()`` is the same figures as the plain dict
-summary.json holds (the same keys, in the same order; the rows, the impedance's check and the path's
-report as dicts), for code that picks figures by name (``summary.as_dict()[key]``) or hands them to a
+summary.json holds (the same keys, in the same order; the rows, the impedance's check, the path's report
+and the contact patch's as dicts), for code that picks figures by name (``summary.as_dict()[key]``) or hands them to a
 function that takes the file's dict; ``RunSummary.from_dict`` reads such a dict, or a ``summary.json``
 loaded with ``json.load``, back. docs/reference/outputs.md says what each field means.
 
@@ -20,6 +20,7 @@ from dataclasses import dataclass
 from typing import Any, Dict, List, Mapping, Optional
 
 from drake_hybrid.experiments.metrics import ForceRowFigures, ImpedanceCheck, RowFigures
+from drake_hybrid.experiments.patch_report import PatchReport
 from drake_hybrid.experiments.path_report import PathReport
 
 
@@ -78,6 +79,7 @@ class RunSummary:
     start_in_contact: Optional[bool] = None
     start_force_command_step: Optional[List[float]] = None         # K_fi xi(0), per force row
     path: Optional[PathReport] = None                  # a path job's figures
+    patch: Optional[PatchReport] = None                # a disc's contact patch (experiments.patch_report)
     status: Optional[str] = None                       # simulate's: "completed", "fault", "error", "interrupted"
     stop_time: Optional[float] = None                  # s
     stop_reason: Optional[str] = None
@@ -104,4 +106,6 @@ class RunSummary:
             entries["impedance"] = ImpedanceCheck(**entries["impedance"])
         if entries.get("path") is not None:
             entries["path"] = PathReport.from_dict(entries["path"])
+        if entries.get("patch") is not None:
+            entries["patch"] = PatchReport.from_dict(entries["patch"])
         return cls(**entries)

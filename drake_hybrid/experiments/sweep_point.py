@@ -28,6 +28,9 @@ failure, the error text of every stage that failed (never dropped):
 * ``path_*``: a job's figures (``experiments.path_report``): the settled path error in all and along
   the surface (mm), the normal force error (%), the time off the surface (s) and the fraction of the
   path run; a job's steady window ends at its lift-off.
+* ``patch_*``: a disc's contact patch at the end of the run (``experiments.patch_report``): the centre of
+  pressure's distance from the tool's axis (mm), its tilt against the real surface (deg), the share of its face
+  in contact and the pressure's normal force (N); ``path_contact_losses``: how often the contact was lost.
 * ``stable_continuous``: every eigenvalue of the continuous closed loop,
   except the k = d - m marginal ones the law leaves (unregulated positions,
   ``analysis.predicted_eigenvalues``), has Re(s) < ``eigenvalue_margin``. The
@@ -82,7 +85,10 @@ METRIC_COLUMNS = [
     # A job's path (experiments.path_report; empty for other runs): settled path error in all and along
     # the surface (mm), normal force error (%), time off the surface (s), the fraction of the path run.
     "path_error_mm", "path_error_along_surface_mm", "path_force_error_percent", "path_time_off_surface",
-    "path_fraction_run",
+    "path_fraction_run", "path_contact_losses",
+    # A disc's contact patch (experiments.patch_report; empty for other runs): at the end, the centre of pressure
+    # from the axis (mm), the tilt against the real surface (deg), the face in contact (1), the normal force (N).
+    "patch_cop_offset_mm", "patch_tilt_deg", "patch_area_fraction", "patch_normal_force",
 ]
 TEXT_COLUMNS = ["steady_velocity_row", "steady_force_row", "peak_force_row", "discrete_step_check", "worker", "error"]
 RESULT_COLUMNS = VERDICT_COLUMNS + METRIC_COLUMNS + TEXT_COLUMNS
@@ -177,6 +183,7 @@ def simulation_metrics(result, criteria):
         "max_constraint_residual": summary.max_constraint_residual,
         "simulation_wall_time": summary.wall_time,
         **path_columns(summary.path),
+        **patch_columns(summary.patch),
     }
 
 
@@ -188,7 +195,16 @@ def path_columns(report):
             "path_error_along_surface_mm": report.max_path_error_along_surface_mm,
             "path_force_error_percent": report.max_force_error_percent,
             "path_time_off_surface": report.time_off_surface_s,
-            "path_fraction_run": report.arc_length_reached_m / report.length_m if report.length_m else None}
+            "path_fraction_run": report.arc_length_reached_m / report.length_m if report.length_m else None,
+            "path_contact_losses": report.contact_losses}
+
+
+def patch_columns(report):
+    """The patch columns of a disc's ``summary.patch`` (a ``PatchReport``; none for another run: None)."""
+    if report is None:
+        return {}
+    return {"patch_cop_offset_mm": report.final_cop_offset_mm, "patch_tilt_deg": report.final_tilt_deg,
+            "patch_area_fraction": report.final_area_fraction, "patch_normal_force": report.final_normal_force}
 
 
 def _stage_error(stage, error):

@@ -16,6 +16,7 @@ import numpy as np
 from drake_hybrid.analysis.design import designed_eigenvalues_by_row
 from drake_hybrid.control.controller import HybridController
 from drake_hybrid.experiments.metrics import ForceRowFigures, ImpedanceCheck, RowFigures, display_unit
+from drake_hybrid.experiments.patch_report import patch_text
 from drake_hybrid.experiments.path_report import path_text
 from drake_hybrid.experiments.simulation import SimulationResult
 from drake_hybrid.experiments.summary import RunSummary
@@ -162,6 +163,7 @@ def run_lines(result: SimulationResult) -> List[str]:
         lines.append(f"  {impedance_text(s.impedance)}")
     lines.append(f"  {residual_text(s)}")
     lines += [f"  {line}" for line in (path_text(s.path) if s.path is not None else ())]
+    lines += [f"  {line}" for line in (patch_text(s.patch) if s.patch is not None else ())]
     lines += [f"  note {n}: {note}" for n, note in enumerate(s.notes or [], start=1)]
     return lines
 

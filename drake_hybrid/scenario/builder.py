@@ -13,8 +13,9 @@ supervisor, all connected by ``connect_hybrid_loop``) and ``station.loggers.add_
     loggers ◄── every named output
 
 with, when the config asks for them, the fault injector, the conditioner, the contact supervisor
-(``supervision``), a path job (``path``), and the simulated plant's model error (``JointFriction``:
-``model_error.joint_friction``). The same config builds the same diagram in a test, a notebook, the
+(``supervision``), a path job (``path``), the simulated plant's model error (``JointFriction``:
+``model_error.joint_friction``), and a disc tool's contact patch (``station.sensing.add_contact_patch``,
+logged). The same config builds the same diagram in a test, a notebook, the
 CLI or a worker process.
 """
 
@@ -36,6 +37,7 @@ from drake_hybrid.station.loggers import add_loggers
 from drake_hybrid.station.loop import add_hybrid_controller
 from drake_hybrid.station.path_job import draw_path
 from drake_hybrid.station.robot_model import RobotModel
+from drake_hybrid.station.sensing import add_contact_patch
 from drake_hybrid.systems.faults import JointFriction
 from drake_hybrid.tasks.config import ScenarioConfig, check_scenario_config
 from drake_hybrid.tasks.path import task_path_job, with_path_commands
@@ -144,6 +146,8 @@ def build_scenario(config: ScenarioConfig, meshcat: Optional[Meshcat] = None, wi
         supervision=config.supervision if config.supervised else None,
         initial_phase=initial_phase(config) if config.supervised else None, **options)
     check_start_sizes(config, systems.controller)
+    if with_loggers and robot.tool is not None and robot.tool.is_disc:    # the disc's patch, measured and logged
+        systems.patch = add_contact_patch(builder, plant, robot, real_surface=task.real_workpiece_surface(config))
     if config.model_error.joint_friction > 0:
         friction = builder.AddNamedSystem("joint_friction", JointFriction(
             plant, robot.arm, config.model_error.joint_friction, config.model_error.friction_speed))

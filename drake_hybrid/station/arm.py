@@ -1,4 +1,5 @@
-"""The arm and its tool: a pad mounted on any arm's frame, a gripper welded or removed, actuators.
+"""The arm and its tool: a pad (the ball or a disc, ``station.tools``) mounted on any arm's frame, a gripper
+welded or removed, actuators.
 """
 
 import os
@@ -19,6 +20,7 @@ from drake_hybrid.core.errors import ArgumentError, ConfigError, DrakeHybridErro
 from drake_hybrid.station.parsing import ConfigureParser, add_model, models_directory
 from drake_hybrid.station.robot_model import (RobotModel, check_arm_moves_end_effector, check_model_instance,
                                               check_unfinalized_plant, get_frame)
+from drake_hybrid.station.tools import ToolConfig, disc_tool_sdf
 
 
 def weld_joints(plant: MultibodyPlant, joint_names: Union[str, Sequence[str]],
@@ -199,10 +201,11 @@ def _flange(plant, arm, flange_frame, owner):
 
 def mount_tool(plant: MultibodyPlant, arm: ModelInstanceIndex, flange_frame: Union[str, Frame],
                X_flange_tool: Optional[RigidTransform] = None, gripper_joints: Union[str, Sequence[str]] = (),
-               gripper: str = "weld", name: str = "pad_tool") -> RobotModel:
-    """Mount the compliant ball pad (``models/pad_tool.sdf``: a ball of radius 20 mm, its centre 0.05 m
-    along the tool's +z, the controlled point) on ``flange_frame`` of ``arm`` at ``X_flange_tool`` (default: the
-    identity), before ``Finalize``.
+               gripper: str = "weld", name: str = "pad_tool", tool: Optional[ToolConfig] = None) -> RobotModel:
+    """Mount the compliant pad tool on ``flange_frame`` of ``arm`` at ``X_flange_tool`` (default: the identity),
+    before ``Finalize``: the ball pad (``models/pad_tool.sdf``: a ball of radius 20 mm, its centre 0.05 m along
+    the tool's +z, the controlled point) or, with ``tool=ToolConfig(kind="disc", ...)``, a flat compliant disc
+    (``station.tools``: the centre of its face 0.05 m along +z, the controlled point).
 
     Args:
         plant: your MultibodyPlant (with or without a SceneGraph: the controller's own model too).
@@ -222,13 +225,16 @@ def mount_tool(plant: MultibodyPlant, arm: ModelInstanceIndex, flange_frame: Uni
         name: the tool's model instance name. The default ("pad_tool", end-effector frame
             ``pad_center``) is for one tool per plant; give each further tool a name of its own (two
             arms, each with its pad): its end-effector frame is then ``<name>_center``.
+        tool: a ``station.tools.ToolConfig`` (None: the ball); checked (ConfigError naming its field).
 
     Returns the RobotModel: the arm and tool instances, the end-effector frame (``pad_center``, or
     ``<name>_center``) and point (its origin), the wrist weld (where a wrist force/torque sensor sits),
-    the pad's geometries.
+    the pad's geometries and the tool (``RobotModel.tool``).
     """
     owner = "mount_tool"
     instance(X_flange_tool, "X_flange_tool", owner, RigidTransform, allow_none=True)
+    tool = (instance(tool, "tool", owner, ToolConfig, allow_none=True) or ToolConfig())
+    tool.validate(f"{owner}: tool.")
     if gripper not in GRIPPER_CHOICES:
         raise ConfigError(f"mount_tool: gripper must be one of {', '.join(GRIPPER_CHOICES)}, got {describe(gripper)}")
     if isinstance(gripper_joints, str):
@@ -255,11 +261,11 @@ def mount_tool(plant: MultibodyPlant, arm: ModelInstanceIndex, flange_frame: Uni
         removed = [geometry for body in carried_bodies(plant, arm, frame.body())
                    for geometry in plant.GetCollisionGeometriesForBody(body)]
     parser = ConfigureParser(Parser(plant))
-    tool, weld, pad = add_pad_tool(plant, parser, frame, X_flange_tool if X_flange_tool is not None
-                                   else RigidTransform(), name=name, center_frame=center)
-    return RobotModel(arm=arm, model_instances=[arm, tool], end_effector_frame=center,
+    tool_instance, weld, pad = add_pad_tool(plant, parser, frame, X_flange_tool if X_flange_tool is not None
+                                            else RigidTransform(), name=name, center_frame=center, tool=tool)
+    return RobotModel(arm=arm, model_instances=[arm, tool_instance], end_effector_frame=center,
                       end_effector_point=np.zeros(3), tool_weld=weld, pad_geometries=pad,
-                      passive_geometries=removed, only_pad_contact=True)
+                      passive_geometries=removed, only_pad_contact=True, tool=tool)
 
 
 def carried_bodies(plant: MultibodyPlant, model_instance: ModelInstanceIndex, body: RigidBody) -> List[RigidBody]:
@@ -308,21 +314,24 @@ PAD_CENTER_IN_TOOL = 0.05    # m along the tool's +z axis (frame "pad_center")
 
 
 def add_pad_tool(plant: MultibodyPlant, parser: Parser, wrist_frame: Frame, X_wrist_flange: RigidTransform,
-                 name: str = "pad_tool",
-                 center_frame: str = "pad_center") -> Tuple[ModelInstanceIndex, WeldJoint, List[GeometryId]]:
+                 name: str = "pad_tool", center_frame: str = "pad_center",
+                 tool: Optional[ToolConfig] = None) -> Tuple[ModelInstanceIndex, WeldJoint, List[GeometryId]]:
     """Parse the pad tool as model ``name`` with its pad centre frame called ``center_frame`` (the
     model's own names by default; others let a plant hold several tools) and weld its flange to
-    ``wrist_frame``. Returns (instance, weld, pad geometries)."""
-    if (name, center_frame) == ("pad_tool", "pad_center"):
-        tool = add_model(parser, "pad_tool.sdf")[0]
+    ``wrist_frame``: the ball of ``models/pad_tool.sdf``, or the disc of ``tool`` (a validated
+    ``station.tools.ToolConfig`` of kind disc). Returns (instance, weld, pad geometries)."""
+    if tool is not None and tool.is_disc:
+        tool_model = parser.AddModelsFromString(disc_tool_sdf(tool, name, center_frame), "sdf")[0]
+    elif (name, center_frame) == ("pad_tool", "pad_center"):
+        tool_model = add_model(parser, "pad_tool.sdf")[0]
     else:
         sdf = (models_directory() / "pad_tool.sdf").read_text()
         sdf = sdf.replace('<model name="pad_tool">', f'<model name="{name}">')
         sdf = sdf.replace('<frame name="pad_center"', f'<frame name="{center_frame}"')
-        tool = parser.AddModelsFromString(sdf, "sdf")[0]
-    tool_frame = plant.GetFrameByName("tool", tool)
+        tool_model = parser.AddModelsFromString(sdf, "sdf")[0]
+    tool_frame = plant.GetFrameByName("tool", tool_model)
     weld = plant.WeldFrames(wrist_frame, tool_frame, X_wrist_flange)
     geometries = []
     if plant.geometry_source_is_registered():
-        geometries = list(plant.GetCollisionGeometriesForBody(plant.GetBodyByName("tool", tool)))
-    return tool, weld, geometries
+        geometries = list(plant.GetCollisionGeometriesForBody(plant.GetBodyByName("tool", tool_model)))
+    return tool_model, weld, geometries

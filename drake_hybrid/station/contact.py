@@ -13,6 +13,7 @@ from drake_hybrid.core.arguments import describe, instance, nonnegative
 from drake_hybrid.core.errors import ArgumentError, ConfigError, check_fields, check_finite
 from drake_hybrid.core.schema import check_types
 from drake_hybrid.station.robot_model import RobotModel, check_unfinalized_plant
+from drake_hybrid.station.tools import tool_contact
 
 # The values Drake 1.51 accepts for the MultibodyPlantConfig fields checked here.
 CONTACT_MODELS = ("hydroelastic", "hydroelastic_with_fallback", "point")
@@ -44,7 +45,7 @@ def validate_plant_config(plant: MultibodyPlantConfig, prefix: str = "plant.") -
 class ContactConfig:
     """The pad's and the workpiece's contact material (the contact model itself is ``plant``)."""
 
-    pad_modulus: float = 5.0e6                   # Pa, the pad's hydroelastic modulus
+    pad_modulus: float = 5.0e6                   # Pa, the ball pad's hydroelastic modulus (a disc has its own: tool)
     pad_dissipation: float = 10.0                # s/m, Hunt-Crossley dissipation (continuous, similar, lagged)
     # SAP's linear dissipation (discrete plants): the pad's and the workpiece's relaxation times,
     # which SAP adds (< 0: the model's own, Drake's default 0.1 s each). The default pair, 0.03 s,
@@ -56,7 +57,7 @@ class ContactConfig:
     relaxation_time: float = 0.03                # s, the pad's (SAP); replaces the tool model's own; < 0 keeps it
     workpiece_relaxation_time: float = 0.0       # s, each workpiece geometry's, directives' too; < 0: the model's own
     friction: float = 0.0                        # Coulomb mu (static = dynamic) of pad and workpiece
-    pad_resolution: float = 0.003                # m, mesh resolution hint of the pad (see docs: tessellation torque)
+    pad_resolution: float = 0.003                # m, the ball pad's mesh resolution hint (a disc's: tool.resolution)
     workpiece_resolution: float = 0.0            # m, the hint of each workpiece geometry that has one; 0: the model's
     # (docs/contact_resolution.md measures both hints' accuracy against their cost)
 
@@ -89,7 +90,8 @@ def apply_contact_defaults(plant: MultibodyPlant, scene_graph: SceneGraph,
     """The package's contact material (``contact``: a ContactConfig, default its defaults) on your
     tool (``robot``: the RobotModel of ``mount_tool``, or the pad's geometry ids) and workpiece
     geometries: the pad's hydroelastic modulus, mesh and dissipation, SAP's relaxation times (0.03 s
-    for the pair: about critically damped), friction. Call it before ``plant.Finalize()``."""
+    for the pair: about critically damped), friction. A disc tool (``RobotModel.tool``, ``station.tools``) keeps
+    its own modulus and mesh resolution. Call it before ``plant.Finalize()``."""
     owner = "apply_contact_defaults"
     check_unfinalized_plant(plant, owner)
     instance(scene_graph, "scene_graph", owner, SceneGraph, what="the SceneGraph of the plant (AddMultibodyPlant's)")
@@ -100,6 +102,7 @@ def apply_contact_defaults(plant: MultibodyPlant, scene_graph: SceneGraph,
                              "the GeometryIds of add_rigid_workpiece (a list)")
     contact = instance(contact, "contact", owner, ContactConfig, allow_none=True) or ContactConfig()
     contact.validate(f"{owner}: contact.")
+    pad_contact = tool_contact(robot.tool if isinstance(robot, RobotModel) else None, contact)
     inspector, source = scene_graph.model_inspector(), plant.get_source_id()
     assert source is not None                   # the plant's geometry source is registered (above)
     if not inspector.SourceIsRegistered(source):
@@ -110,7 +113,7 @@ def apply_contact_defaults(plant: MultibodyPlant, scene_graph: SceneGraph,
             if geometry_id not in known or not inspector.BelongsToSource(geometry_id, source):
                 raise ArgumentError(f"{owner}: {name} holds a geometry ({geometry_id}) that is not the plant's in "
                                     f"scene_graph (another plant's or another SceneGraph's?)")
-    set_contact_properties(plant, scene_graph, tool, contact, pad=True)
+    set_contact_properties(plant, scene_graph, tool, pad_contact, pad=True)
     set_contact_properties(plant, scene_graph, workpiece, contact, pad=False)
 
 

@@ -21,6 +21,7 @@ from drake_hybrid.core.projections import ConstraintSpace
 from drake_hybrid.station.path_job import PathJob
 from drake_hybrid.station.robot_model import RobotModel
 from drake_hybrid.station.sensing import WrenchSensor
+from drake_hybrid.systems.contact_patch import ContactPatchSensor
 from drake_hybrid.systems.faults import SensorFaultInjector
 from drake_hybrid.systems.low_pass_filter import LowPassFilter
 from drake_hybrid.systems.wrench_conditioner import WrenchConditioner
@@ -43,7 +44,8 @@ class HybridSystems:
     sensor's own output) and ``kinematics`` (EndEffectorKinematics on ``plant``); the optional parts
     ``source`` (the command source, None when you wire the desired_* ports yourself),
     ``wrench_filter``, ``conditioner``, ``fault_injector``, ``supervisor`` (ContactSupervisor) and
-    ``path`` (the PathJob the source runs); ``loggers`` ({key: logger} of ``add_loggers``) and
+    ``path`` (the PathJob the source runs), ``patch`` (the pad's ``ContactPatchSensor``); ``loggers``
+    ({key: logger} of ``add_loggers``) and
     ``diagram`` (set once built, by the functions that take the built diagram)."""
 
     robot: RobotModel
@@ -63,6 +65,7 @@ class HybridSystems:
     fault_injector: Optional[SensorFaultInjector] = None
     supervisor: Optional[ContactSupervisor] = None
     path: Optional[PathJob] = None
+    patch: Optional[ContactPatchSensor] = None     # the pad's contact patch (station.sensing.add_contact_patch)
     loggers: Dict[str, Logger] = field(default_factory=dict)
     diagram: Optional[Diagram] = None
 

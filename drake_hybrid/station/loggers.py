@@ -39,6 +39,10 @@ LOG_KEYS = {
     "path_progress": "[segment, arc length (m), path time (s; < 0 before the path starts)] (3)",
     "path_done": "1 once the path has ended (1)",
     "lifting": "1 while the supervisor lifts the pad off at the path's end (1)",
+    # The pad's contact patch (HybridSystems.patch, station.sensing.add_contact_patch), held between its updates.
+    "patch": "the contact patch: [centre of pressure's distance from the tool's axis (m), area (m^2), area over "
+             "the tool's face (1), peak pressure (Pa), mean pressure (Pa), tilt against the patch's normal (rad), "
+             "normal force (N), centre of pressure (3, world, m)] (10; systems.contact_patch.PATCH_FIELDS)",
 }
 PATH_LOGS = ("reference_position", "reference_normal", "path_error", "path_progress", "path_done")
 
@@ -75,6 +79,8 @@ def add_loggers(builder: DiagramBuilder, systems: HybridSystems,
         loggers["true_wrench"] = LogVectorOutput(systems.true_wrench, builder, period)
     if systems.supervisor is not None:
         loggers["contact_phase"] = LogVectorOutput(systems.supervisor.GetOutputPort("contact_phase"), builder, period)
+    if systems.patch is not None:
+        loggers["patch"] = LogVectorOutput(systems.patch.GetOutputPort("patch"), builder, period)
     if systems.path is not None and systems.source is not None:
         for name in PATH_LOGS:
             loggers[name] = LogVectorOutput(systems.source.GetOutputPort(name), builder, period)

@@ -177,7 +177,8 @@ def path_source(job: PathJob, controller_plant: MultibodyPlant, robot: RobotMode
     return PathSource(controller_plant, robot.end_effector_frame, robot.end_effector_point, constraint_space,
                       job.path, heading=job.heading, force_row=force_row,
                       dwell=0.0 if job.holding else job.settings.dwell,
-                      wait_for_contact=supervised and not job.holding, period=control_period)
+                      wait_for_contact=supervised and not job.holding, period=control_period,
+                      moments=job.settings.moments)
 
 
 def add_hybrid_controller(builder: DiagramBuilder, plant: MultibodyPlant, robot: RobotModel,

@@ -13,6 +13,7 @@ first touch to the last::
       acceleration: 0.5                        # m/s^2, its acceleration limit (norm)
       force: 10.0                              # N, the normal force (unless per waypoint or by arc length)
       force_by_arc_length: []                  # [{arc_length: 0.0, force: 10.0}, ...] (m, N)
+      moments: []                              # N m on the force-controlled orientation rows (empty: zero)
       tolerance: 0.002                         # m, how far a waypoint may be off the surface
       heading: []                              # the tool's x axis, turned into the tangent plane (world)
       dwell: 0.2                               # s pressing at the first point before moving
@@ -94,6 +95,7 @@ class PathConfig:
     dwell: float = 0.2                       # s pressing at the first point before moving
     lift_off: bool = True                    # leave the surface at the end (supervision.lift_height)
     hold_at: float = -1.0                    # >= 0: hold at this fraction of the path's length instead
+    moments: List[float] = field(default_factory=list)   # N m, a flat tool's moment rows' F_d (empty: zero)
 
     @property
     def active(self) -> bool:
@@ -141,6 +143,9 @@ class PathConfig:
         if not (self.hold_at < 0 or 0 <= self.hold_at <= 1):
             raise PathError(f"{prefix}hold_at must be a fraction of the path's length in [0, 1] (or < 0: run the "
                             f"path), got {self.hold_at}")
+        if self.moments and (len(self.moments) != 2 or not all(math.isfinite(float(v)) for v in self.moments)):
+            raise PathError(f"{prefix}moments must be two finite numbers (N m, the moments about the tool's y and -x "
+                            f"axes commanded on the force-controlled orientation rows) or empty, got {self.moments}")
         for index, waypoint in enumerate(self.waypoints):
             if len(waypoint.point) != 3:
                 raise PathError(f"{prefix}waypoints[{index}].point must be [x, y, z] (m), got {waypoint.point}")

@@ -17,6 +17,7 @@ from pydrake.systems.framework import DiagramBuilder
 from drake_hybrid.core.arguments import describe, instance
 from drake_hybrid.core.errors import ArgumentError, ConfigError, UnknownFrameError
 from drake_hybrid.core.hints import Array
+from drake_hybrid.station.tools import ToolConfig
 
 
 @dataclass
@@ -31,6 +32,7 @@ class RobotModel:
     pad_geometries: List[GeometryId] = field(default_factory=list)
     passive_geometries: List[GeometryId] = field(default_factory=list)   # collision geometries to drop (arm links)
     only_pad_contact: bool = False               # filter every contact of the robot but the pad's
+    tool: Optional[ToolConfig] = None            # the pad tool mounted (mount_tool's; None: the ball, or unknown)
 
 
 def frame_names(plant: MultibodyPlant, model_instance: ModelInstanceIndex) -> List[str]:

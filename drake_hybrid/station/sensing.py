@@ -1,6 +1,8 @@
-"""The wrench the controller reads: a sensor on the plant, faults, a filter or a conditioner.
+"""The wrench the controller reads: a sensor on the plant, faults, a filter or a conditioner; and the pad's
+contact patch measured (``add_contact_patch``: not read by the controller, logged).
 """
 
+import math
 from dataclasses import dataclass
 from typing import List, Optional, Tuple, Union
 
@@ -11,8 +13,10 @@ from pydrake.systems.framework import DiagramBuilder, OutputPort
 from drake_hybrid.core.arguments import instance
 from drake_hybrid.core.errors import ConfigError, check_fields, check_finite
 from drake_hybrid.core.schema import check_types
+from drake_hybrid.core.surfaces import Surface
 from drake_hybrid.station.ports import add_named, guarded_connect
 from drake_hybrid.station.robot_model import RobotModel, arm_model_name, check_station_parts
+from drake_hybrid.systems.contact_patch import ContactPatchSensor
 from drake_hybrid.systems.contact_wrench_sensor import ContactWrenchSensor, sampled_reading_age
 from drake_hybrid.systems.faults import SensorFaultConfig, SensorFaultInjector
 from drake_hybrid.systems.low_pass_filter import LowPassFilter, low_pass_lag
@@ -189,4 +193,27 @@ def check_sensor_config(sensor: SensorConfig, owner: str) -> SensorConfig:
     """``sensor`` (a ContactSensorConfig or WristSensorConfig) with its fields checked, naming ``owner``."""
     instance(sensor, "sensor", owner, (ContactSensorConfig, WristSensorConfig))
     sensor.validate(f"{owner}: sensor.")
+    return sensor
+
+
+PATCH_PERIOD = 0.01           # s between the contact patch's measurements (its pressure integrated in Python)
+
+
+def add_contact_patch(builder: DiagramBuilder, plant: MultibodyPlant, robot: RobotModel,
+                      period: float = PATCH_PERIOD, real_surface: Optional[Surface] = None) -> ContactPatchSensor:
+    """A ``systems.contact_patch.ContactPatchSensor`` on ``plant``'s contact results for ``robot``'s pad (its
+    centre of pressure, area, pressures and tilt, every ``period`` s), wired to the plant and named
+    ``contact_patch`` (with the arm's model name for a second arm). The face of a disc tool
+    (``RobotModel.tool``) gives its area fraction; the workpiece's ``real_surface`` (a ``core.surfaces.Surface``:
+    where its geometry is, not the controller's model of it) the tilt's reference normal. Not part of the loop:
+    ``station.loggers.add_loggers`` logs it (``patch``) when the loop's ``HybridSystems.patch`` holds it."""
+    owner = "add_contact_patch"
+    check_station_parts(builder, plant, robot, owner)
+    tool = robot.tool
+    face = math.pi * float(tool.radius) ** 2 if tool is not None and tool.is_disc else None
+    sensor = add_named(builder, "contact_patch", ContactPatchSensor(
+        plant, robot.pad_geometries, robot.end_effector_frame, robot.end_effector_point, face, period, real_surface),
+        arm_model_name(plant, robot))
+    guarded_connect(builder, plant.get_contact_results_output_port(), sensor.GetInputPort("contact_results"), owner)
+    guarded_connect(builder, plant.get_body_poses_output_port(), sensor.GetInputPort("body_poses"), owner)
     return sensor

@@ -16,7 +16,8 @@ twist nu (docs/theory.md §4.2)::
     r-dot_pd  = E_p(x) nu_r                                   the velocity rows' command
     r-ddot_pd = E_p-dot(x, nu) nu_r + E_p(x) nu-dot_r          its derivative along the actual motion
     e_p       = E_p(x) (P (c - c_r), vee(R R_d^T - R_d R^T) / 2)   the position error against the path
-    F_d       = F(s) on the force row (the normal force, N), 0 on the others
+    F_d       = F(s) on the force row (the normal force, N), ``moments`` on the force-controlled
+                orientation rows (a flat tool's, N m; zero by default), 0 on the others
 
 with P = I - n n^T, so that d/dt e_p = e_p' = E_p nu - r-dot_pd to first order. (delta is the
 pad's distance from C = 0: exact for the signed distances of ``core.surfaces``; P removes any normal
@@ -140,7 +141,7 @@ def PathSource_(T):
         contact_phase         1     phases.ContactPhase (the supervisor's), read at the ticks
         desired_velocity      k     r-dot_pd = E_p(x) nu_r
         desired_acceleration  k     r-ddot_pd = E_p-dot nu_r + E_p nu-dot_r
-        desired_force         m     F_d: F(s) on ``force_row``, 0 elsewhere
+        desired_force         m     F_d: F(s) on ``force_row``, ``moments`` on the other force rows, 0 elsewhere
         path_position_error   k     e_p = E_p(x) (P (c - c_r), rotation error) (the controller's input)
         reference_position    3     c_d, the reference point on C = 0 (world, m)
         reference_normal      3     the surface's outward normal there
@@ -162,16 +163,18 @@ def PathSource_(T):
             wait_for_contact: True or False: start the path's clock at the first CONTACT on ``contact_phase``.
             period: the control period (s, positive and finite) at which ``contact_phase`` is read (needed
                 with wait_for_contact; else None or ignored).
+            moments: the F_d of the force-controlled rows other than ``force_row`` (a flat tool's orientation
+                rows: the moments about the controlled point, N m), one per such row, in row order; empty: zero.
 
         Every argument is checked here (``core.arguments``): a bad one is a one-line ArgumentError naming it.
         """
 
         def _construct(self, plant, end_effector_frame, end_effector_point, constraint_space, path,
                        heading=(1.0, 0.0, 0.0), force_row=0, dwell=0.0, wait_for_contact=False, period=None,
-                       converter=None):
+                       moments=(), converter=None):
             LeafSystem_[T].__init__(self, converter)
             self._arguments = (plant, end_effector_frame, end_effector_point, constraint_space, path, heading,
-                               force_row, dwell, wait_for_contact, period)
+                               force_row, dwell, wait_for_contact, period, moments)
             owner = "PathSource"
             instance(plant, "plant", owner, MultibodyPlant, what="a MultibodyPlant (float, finalized)")
             if not plant.is_finalized():
@@ -192,6 +195,14 @@ def PathSource_(T):
             if self.force_row in kinematic:
                 raise ArgumentError(f"{owner}: force_row must be a force-controlled row of C (0..{m - 1}, not "
                                     f"kinematic {kinematic}), got {self.force_row}")
+            self.moment_rows = [i for i in range(m) if i not in kinematic and i != self.force_row]
+            moments = list(moments)
+            if moments and len(moments) != len(self.moment_rows):
+                raise ArgumentError(f"{owner}: moments must have one entry per force-controlled row besides force_row "
+                                    f"(rows {self.moment_rows}; the orientation rows held: {kinematic}), got "
+                                    f"{describe(moments)}")
+            self.moments = (vector(moments, "moments", owner, len(moments), unit="N m") if moments
+                            else np.zeros(len(self.moment_rows)))
             self.dwell = nonnegative(dwell, "dwell", owner, unit="s")
             reference_rotation(path.first_point()[1], self.heading, owner)        # the heading is usable
             self.wait_for_contact = boolean(wait_for_contact, "wait_for_contact", owner)
@@ -263,6 +274,7 @@ def PathSource_(T):
                                     f"{str(error).split(': ', 1)[-1]}") from None
             force = np.zeros(self.constraint_space.force_size)
             force[self.force_row] = sample.force
+            force[self.moment_rows] = self.moments
             return {"sample": sample, "R_d": R_d, "omega": omega_d, "omega_dot": omega_dot, "c": sample.position,
                     "n": sample.normal, "force": force, "done": 1.0 if t > self.path.duration else 0.0,
                     "progress": np.array([sample.segment, sample.arc_length, t])}

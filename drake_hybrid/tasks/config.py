@@ -39,6 +39,7 @@ from drake_hybrid.core.schema import check_types, check_yaml_against_schema, rea
 from drake_hybrid.station.contact import ContactConfig, default_plant_config, validate_plant_config
 from drake_hybrid.station.path_config import PathConfig
 from drake_hybrid.station.sensing import ContactSensorConfig, SensorConfig, WristSensorConfig
+from drake_hybrid.station.tools import ToolConfig
 from drake_hybrid.systems.faults import SensorFaultConfig
 from drake_hybrid.systems.sources import Profile
 
@@ -142,6 +143,13 @@ class ModelErrorConfig:
     joint_friction: Coulomb friction tau_c (N m) in every arm joint (``faults.JointFriction``),
         regularized over ``friction_speed`` (rad/s).
     friction_speed: rad/s, the joint speed over which the Coulomb friction rises to tau_c.
+    workpiece_tilt, workpiece_tilt_axis, workpiece_pivot, workpiece_shift: where the real workpiece is
+        against the surface the controller is given (a task whose workpiece names its surface,
+        ``Task.workpiece_surface``): the real one is the model turned by ``workpiece_tilt`` (deg) about
+        ``workpiece_tilt_axis`` (a world direction) through ``workpiece_pivot`` (world, m; empty: the path's
+        first point on the real surface), then moved by ``workpiece_shift`` (world, m). The simulated
+        geometry stays the task's; the controller's constraint, view and path are laid on the model
+        (``core.surface_moves``, ``tasks.surface_model``).
     """
 
     payload_mass_scale: float = 1.0
@@ -150,8 +158,29 @@ class ModelErrorConfig:
     joint_damping: float = 0.0
     joint_friction: float = 0.0
     friction_speed: float = 0.05
+    workpiece_tilt: float = 0.0                  # deg: the real workpiece turned against the controller's model
+    workpiece_tilt_axis: List[float] = field(default_factory=lambda: [1.0, 0.0, 0.0])   # world direction (dimensionless)
+    workpiece_pivot: List[float] = field(default_factory=list)        # m, world; empty: the path's first point
+    workpiece_shift: List[float] = field(default_factory=lambda: [0.0, 0.0, 0.0])      # m, world: then moved by it
+
+    @property
+    def workpiece_moved(self) -> bool:
+        """True if the real workpiece is not where the controller's model of it is."""
+        return self.workpiece_tilt != 0 or any(value != 0 for value in self.workpiece_shift)
 
     def validate(self, prefix: str = "model_error.") -> "ModelErrorConfig":
+        for name, size in (("workpiece_tilt_axis", 3), ("workpiece_shift", 3)):
+            values = getattr(self, name)
+            if len(values) != size:
+                raise ConfigError(f"{prefix}{name} must be [x, y, z] (world), got {values}")
+        if self.workpiece_pivot and len(self.workpiece_pivot) != 3:
+            raise ConfigError(f"{prefix}workpiece_pivot must be [x, y, z] (world, m) or empty (the path's first "
+                              f"point), got {self.workpiece_pivot}")
+        if not sum(v * v for v in self.workpiece_tilt_axis) > 0:
+            raise ConfigError(f"{prefix}workpiece_tilt_axis must be a nonzero direction, got "
+                              f"{self.workpiece_tilt_axis}")
+        if not abs(self.workpiece_tilt) <= 90:
+            raise ConfigError(f"{prefix}workpiece_tilt must be within [-90, 90] deg, got {self.workpiece_tilt}")
         return check_fields(self, prefix, positive=("payload_mass_scale", "link_mass_scale", "link_inertia_scale",
                                              "friction_speed"),
                             nonnegative=("joint_damping", "joint_friction"))
@@ -179,6 +208,9 @@ class ScenarioConfig:
     task_options: a task's own words by name (``--option KEY=VALUE``).
     controller: the law closing the loop, li-sastry (HybridController) or a baseline of
         control.baselines: raibert-craig, fisher-mujtaba, pd-open-loop-force.
+    tool: the pad tool (``station.tools.ToolConfig``): the ball (default) or a flat disc, and how the
+        constraint's orientation rows are controlled with it; read by the tasks that mount the tool they are
+        given (surface-polishing, a task file's robot).
     """
 
     task: str = "window-washing"
@@ -191,6 +223,7 @@ class ScenarioConfig:
     log_period: float = 1.0e-3
     gains: HybridGains = field(default_factory=HybridGains)
     contact: ContactConfig = field(default_factory=ContactConfig)
+    tool: ToolConfig = field(default_factory=ToolConfig)
     sensor: SensorConfig = field(default_factory=ContactSensorConfig)
     desired_velocity: Profile = field(default_factory=Profile)
     desired_force: Profile = field(default_factory=Profile)
@@ -258,6 +291,11 @@ class ScenarioConfig:
         validate_plant_config(self.plant)
         validate_simulator_config(self.simulator)
         self.contact.validate()
+        self.tool.validate()
+        if self.tool.is_disc and (self.contact.pad_modulus != ContactConfig.pad_modulus
+                                  or self.contact.pad_resolution != ContactConfig.pad_resolution):
+            raise ConfigError("contact.pad_modulus and contact.pad_resolution are the ball pad's; a disc has its own: "
+                              "tool.modulus, tool.resolution")
         self.sensor.validate()
         if (self.compensate_tangential_force and isinstance(self.sensor, WristSensorConfig)
                 and not self.sensor.compensate_tool_inertia and self.controller == "li-sastry"):

@@ -118,7 +118,7 @@ class _UR5eWithPad:
         pass
 
     def add_robot(self, plant, config):
-        return add_ur5e_with_pad(plant)
+        return add_ur5e_with_pad(plant, tool=config.tool if config is not None else None)
 
 
 CRANK_PARAMETERS = ("crank_center_x", "crank_center_y", "crank_radius", "crank_height", "start_angle")

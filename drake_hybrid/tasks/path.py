@@ -20,10 +20,10 @@ from drake_hybrid.station.path_config import PathConfig
 from drake_hybrid.station.path_job import PathJob, path_job
 from drake_hybrid.systems.sources import Profile
 from drake_hybrid.tasks.config import ScenarioConfig, check_scenario_config
-from drake_hybrid.tasks.pressing import pressing_positions
+from drake_hybrid.tasks.pressing import balanced_pressing_positions, moment_rows, pressing_positions
 from drake_hybrid.tasks.task import Scenario, Task
 
-_JOBS: Dict[Tuple[str, str, str, str], PathJob] = {}
+_JOBS: Dict[Tuple[str, ...], PathJob] = {}
 
 
 def workpiece_surface(task: Task, config: ScenarioConfig) -> Tuple[Surface, float]:
@@ -39,7 +39,7 @@ def task_path_job(task: Task, config: ScenarioConfig) -> PathJob:
     """The PathJob of ``config.path`` on the task's workpiece (``station.path_job.path_job``; cached per
     task and config): what ``build_scenario`` runs. PathError (one line) for a path the job cannot follow."""
     key = (task.name, repr(config.path), repr(sorted(config.task_parameters.items())),
-           repr(sorted(config.task_options.items())))
+           repr(sorted(config.task_options.items())), repr(config.tool), repr(config.model_error))
     if key not in _JOBS:
         surface, offset = workpiece_surface(task, config)
         _JOBS[key] = path_job(surface, offset, config.path)
@@ -73,6 +73,9 @@ def path_start_positions(task: Task, scenario: Scenario, joint_guess: ArrayLike)
 
     if not config.start.in_contact:
         return positions_at_depth(-config.start.gap)
+    if moment_rows(scenario):        # a flat tool's moment rows: turned until they read their F_d too
+        return balanced_pressing_positions(scenario, job.pose_at_depth,
+                                           lambda X: inverse_kinematics(kinematics, context, X, seed[0]))
     return pressing_positions(scenario, positions_at_depth)
 
 
@@ -93,6 +96,13 @@ def with_path_commands(config: ScenarioConfig, constraint_space: ConstraintSpace
     force_row = next(i for i in range(constraint_space.force_size) if i not in kinematic)
     force = [0.0] * constraint_space.force_size
     force[force_row] = float(job.path.force(0.0))
+    moment_row_indices = [i for i in range(constraint_space.force_size) if i not in kinematic and i != force_row]
+    if config.path.moments and len(config.path.moments) != len(moment_row_indices):
+        raise ConfigError(f"path.moments: {len(config.path.moments)} given, but the constraint has "
+                          f"{len(moment_row_indices)} force-controlled rows besides the normal force "
+                          "(its orientation rows are held: tool.orientation)")
+    for row, moment in zip(moment_row_indices, config.path.moments):
+        force[row] = float(moment)
     return dataclasses.replace(config, desired_velocity=Profile(kind="constant",
                                                                 value=[0.0] * constraint_space.velocity_size),
                                desired_force=Profile(kind="constant", value=force))

@@ -11,6 +11,7 @@ from pydrake.multibody.tree import SpatialInertia
 
 from drake_hybrid.core.errors import ConfigError
 from drake_hybrid.station.contact import only_tool_touches, set_contact_properties
+from drake_hybrid.station.tools import tool_contact
 
 
 def build_plant(task, config, builder, time_step=None, sampled_outputs=None):
@@ -32,6 +33,7 @@ def build_plant(task, config, builder, time_step=None, sampled_outputs=None):
     plant_config.use_sampled_output_ports = sampled_outputs
     plant, scene_graph = AddMultibodyPlant(plant_config, builder)
     robot = task.add_robot(plant, config)
+    check_mounted_tool(task, config, robot)
     if config.model_error.joint_damping > 0:
         for index in plant.GetJointIndices(robot.arm):
             joint = plant.get_joint(index)
@@ -40,12 +42,22 @@ def build_plant(task, config, builder, time_step=None, sampled_outputs=None):
     workpiece_geometries = task.add_workpiece(plant, config)
     for geometry_id in robot.passive_geometries:
         scene_graph.RemoveRole(plant.get_source_id(), geometry_id, Role.kProximity)
-    set_contact_properties(plant, scene_graph, robot.pad_geometries, config.contact, pad=True)
+    set_contact_properties(plant, scene_graph, robot.pad_geometries, tool_contact(robot.tool, config.contact), pad=True)
     set_contact_properties(plant, scene_graph, workpiece_geometries, config.contact, pad=False)
     plant.Finalize()
     if robot.only_pad_contact:
         only_tool_touches(plant, scene_graph, robot, workpiece_geometries)
     return plant, scene_graph, robot
+
+
+def check_mounted_tool(task, config, robot):
+    """ConfigError if ``config.tool`` asks for a disc and the task's robot mounts another tool (a task that
+    mounts its own: the paper's tasks, a Python ``CustomTask``; surface-polishing and a task file's robot mount
+    ``config.tool``)."""
+    if config.tool.is_disc and not (robot.tool is not None and robot.tool.is_disc):
+        raise ConfigError(f"tool.kind: task '{task.name}' mounts its own tool (the ball pad), not the disc of "
+                          "config.tool; a disc needs a task that mounts config.tool (surface-polishing, a task file's "
+                          "robot) or your own add_robot with mount_tool(..., tool=ToolConfig(kind='disc'))")
 
 
 def build_controller_plant(task, config):

@@ -42,6 +42,7 @@ from drake_hybrid.core.errors import ConfigError, UnreachablePoseError
 from drake_hybrid.core.hints import Array
 from drake_hybrid.station.arm import mount_tool
 from drake_hybrid.station.robot_model import RobotModel
+from drake_hybrid.station.tools import ToolConfig
 from drake_hybrid.tasks.arm_chain import fix_arm
 from drake_hybrid.tasks.model_files import LoadReport, model_effort_limits, prepare_model
 
@@ -76,15 +77,18 @@ class LoadedArm:
         self.name = name
         self._plant: Optional[MultibodyPlant] = None
 
-    def add_robot(self, plant: MultibodyPlant, report: Optional[LoadReport] = None) -> RobotModel:
-        """Parse the arm into ``plant`` (before Finalize), fix it and attach the pad tool; returns the
-        RobotModel that ``CustomTask``'s ``add_robot`` returns."""
+    def add_robot(self, plant: MultibodyPlant, report: Optional[LoadReport] = None,
+                  tool: Optional[ToolConfig] = None) -> RobotModel:
+        """Parse the arm into ``plant`` (before Finalize), fix it and attach the pad tool (the ball, or
+        ``tool``: a ``station.tools.ToolConfig``); returns the RobotModel that ``CustomTask``'s ``add_robot``
+        returns."""
         parser = Parser(plant)
         parser.SetAutoRenaming(True)
         arm = parser.AddModels(Path(self.report.model))[0]
-        flange, tool = fix_arm(plant, arm, self.flange, self.tool_frame, self.base_pose, self.effort_limits, report)
+        flange, tool_frame = fix_arm(plant, arm, self.flange, self.tool_frame, self.base_pose, self.effort_limits,
+                                     report)
         origin: Array = np.zeros(3)
-        return mount_tool(plant, arm, tool, RigidTransform(TOOL_AXES[self.tool_axis], origin))
+        return mount_tool(plant, arm, tool_frame, RigidTransform(TOOL_AXES[self.tool_axis], origin), tool=tool)
 
     @property
     def plant(self) -> MultibodyPlant:

@@ -244,8 +244,16 @@ class Task(abc.ABC):
     def workpiece_surface(self, config: ScenarioConfig) -> Optional[Tuple[Surface, float]]:
         """(surface, pad offset): the workpiece's surface (a ``core.surfaces.Surface``) and how far the
         controlled point is held off it along the normal (a ball pad's radius), for a job's path
-        (``config.path``, ``station.path_job``). Default: None (the task has no path over a surface)."""
+        (``config.path``, ``station.path_job``). Default: None (the task has no path over a surface).
+        A task that honours ``config.model_error``'s workpiece error returns the surface the controller is
+        given (``tasks.surface_model.model_surface``) and its real one from ``real_workpiece_surface``."""
         return None
+
+    def real_workpiece_surface(self, config: ScenarioConfig) -> Optional[Surface]:
+        """The surface of the workpiece's simulated geometry (where it really is; what a disc's contact patch
+        is measured against). Default: ``workpiece_surface``'s (a task without a workpiece error), or None."""
+        surface = self.workpiece_surface(config)
+        return surface[0] if surface is not None else None
 
     def make_source(self, config: ScenarioConfig, controller_plant: MultibodyPlant, robot: RobotModel,
                     constraint_space: ConstraintSpace) -> System:

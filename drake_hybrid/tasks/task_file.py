@@ -43,6 +43,7 @@ from drake_hybrid.tasks.custom import CustomTask
 from drake_hybrid.tasks.hooks import make_hooks
 from drake_hybrid.tasks.path import path_start_positions
 from drake_hybrid.tasks.registry import register_task
+from drake_hybrid.tasks.surface_model import model_surface, surface_constraint_space
 from drake_hybrid.tasks.task import EigenvalueShift, Scenario
 from drake_hybrid.tasks.task_file_models import _robot_adder, _workpiece_adder, model_packages
 from drake_hybrid.tasks.task_file_schema import CHARTS, MAX_FILE_SIZE, ChartSpec, TaskFile, read_task_file
@@ -96,11 +97,45 @@ class DataTask(CustomTask):
         return dataclasses.replace(self._config, start=dataclasses.replace(self._config.start))
 
     # -- the Task methods a hook may provide (the CustomTask's otherwise) --------------------------
+    def add_robot(self, plant: MultibodyPlant, config: ScenarioConfig) -> RobotModel:
+        robot = self._add_robot(plant, config)              # the file's robot with config.tool, or a hook's
+        if not isinstance(robot, RobotModel):
+            raise TypeError(f"task '{self.name}': add_robot must return a RobotModel (see mount_tool), "
+                            f"got {type(robot).__name__}")
+        return robot
+
     def add_workpiece(self, plant: MultibodyPlant, config: ScenarioConfig) -> List[GeometryId]:
         return list(self._add_workpiece(plant, config))     # the file's workpiece, then a hook's
 
     def workpiece_surface(self, config: ScenarioConfig) -> Optional[Tuple[Surface, float]]:
-        return self.surface
+        """The surface the controller is given (the file's, moved by ``config.model_error``'s workpiece error)
+        and the tool's offset (``workpiece.surface.offset``; 0 for a disc, whose face is the controlled point)."""
+        if self.surface is None:
+            return None
+        surface, offset = self.surface
+        if config.tool.is_disc and offset != 0:
+            raise ConfigError(f"{self.path}: workpiece.surface.offset is {offset:g} m; a disc's controlled point is "
+                              "the centre of its face, on the surface: give offset: 0.0 with tool.kind: disc")
+        return model_surface(surface, offset, config), offset
+
+    def real_workpiece_surface(self, config: ScenarioConfig) -> Optional[Surface]:
+        return self.surface[0] if self.surface is not None else None
+
+    def constraint_space(self, config: ScenarioConfig) -> ConstraintSpace:
+        """The file's constraint space; one laid on the model surface (``tasks.surface_model``) where the
+        constraint comes from ``workpiece.surface`` and the config moves the model or force-controls the
+        orientation rows (``tool``)."""
+        from_surface = (self.surface is not None and not self.spec.constraint.rows and "constraint" not in self.hooks
+                        and not self.spec.velocity_projection.rows)
+        if config.tool.orientation == "force" and not from_surface:
+            raise ConfigError(f"{self.path}: tool.orientation: force needs the constraint of workpiece.surface (no "
+                              "constraint.rows, no constraint hook, no velocity_projection.rows); with rows of your "
+                              "own, leave out the orientation rows from constraint.kinematic_rows instead")
+        if not from_surface or not (config.tool.orientation_rows == "force" or config.model_error.workpiece_moved):
+            return self.space
+        surface = self.workpiece_surface(config)
+        assert surface is not None                 # from_surface
+        return surface_constraint_space(surface[0], surface[1], config, view_of(self.spec.config.path, surface[0]))
 
     def make_source(self, config: ScenarioConfig, controller_plant: MultibodyPlant, robot: RobotModel,
                     constraint_space: ConstraintSpace) -> System:

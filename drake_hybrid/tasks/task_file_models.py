@@ -82,7 +82,7 @@ def _robot_adder(spec, path, where, hooks, packages):
         if robot.directives or robot.loader.path:
             raise ConfigError(f"{where}robot: a hook adds the robot; give neither directives nor loader")
         add_by_hook = hooks["add_robot"]
-        return _with_end_effector(lambda plant: add_by_hook(plant, None), robot, where)
+        return _with_end_effector(lambda plant, config=None: add_by_hook(plant, config), robot, where)
     if robot.loader.path:
         if robot.directives:
             raise ConfigError(f"{where}robot: give either directives or loader, not both")
@@ -94,12 +94,13 @@ def _robot_adder(spec, path, where, hooks, packages):
                           base_pose=robot.loader.base_pose.GetDeterministicValue(),
                           tool_axis=robot.loader.tool_axis, collision=robot.loader.collision,
                           packages=packages)
-        return _with_end_effector(loaded.add_robot, robot, where)
+        return _with_end_effector(lambda plant, config=None: loaded.add_robot(plant, tool=_tool(config)), robot,
+                                  where)
     if not robot.directives:
         raise ConfigError(f"{where}robot: give directives (with arm and tool) or loader.path")
     add_models = _directives_adder(robot.directives, f"{where}robot", path, packages)
 
-    def add_robot(plant):
+    def add_robot(plant, config=None):
         add_models(plant)
         if not robot.arm or not plant.HasModelInstanceNamed(robot.arm):
             names = _instance_names(plant)
@@ -110,23 +111,29 @@ def _robot_adder(spec, path, where, hooks, packages):
             raise ConfigError(f"{where}robot.tool.flange_frame: the frame of '{robot.arm}' the pad tool is welded "
                               "to must be given")
         try:
-            model = mount_tool(plant, arm, robot.tool.flange_frame,
-                                    robot.tool.X_flange_tool.GetDeterministicValue())
+            model = mount_tool(plant, arm, robot.tool.flange_frame, robot.tool.X_flange_tool.GetDeterministicValue(),
+                               tool=_tool(config))
         except UnknownFrameError as error:
             raise ConfigError(f"{where}robot.tool.flange_frame: {error}") from None
         return model
     return _with_end_effector(add_robot, robot, where)
 
 
+def _tool(config):
+    """The pad tool of a run's config (``config.tool``; None without a config: the ball)."""
+    return config.tool if config is not None else None
+
+
 def _with_end_effector(add_robot, robot, where):
-    """``add_robot`` whose RobotModel has the file's end-effector frame and point and contact filter."""
+    """``add_robot(plant, config=None)`` whose RobotModel has the file's end-effector frame and point and
+    contact filter (the tool mounted is ``config.tool``, where the robot's section mounts one)."""
     point = np.asarray(robot.end_effector_point, dtype=float)
     if point.shape != (3,) or not np.all(np.isfinite(point)):
         raise ConfigError(f"{where}robot.end_effector_point must be 3 finite numbers (m), got "
                           f"{robot.end_effector_point}")
 
-    def add(plant):
-        model = add_robot(plant)
+    def add(plant, config=None):
+        model = add_robot(plant, config)
         if not plant.HasFrameNamed(robot.end_effector_frame):
             raise ConfigError(f"{where}robot.end_effector_frame: no frame '{robot.end_effector_frame}' in the plant")
         return dataclasses.replace(model, end_effector_frame=robot.end_effector_frame, end_effector_point=point,

@@ -17,13 +17,15 @@ from drake_hybrid.core.arguments import joint_rows
 from drake_hybrid.station.arm import add_pad_tool
 from drake_hybrid.station.parsing import ConfigureParser
 from drake_hybrid.station.robot_model import RobotModel
+from drake_hybrid.station.tools import ToolConfig
 
 # A comfortable UR5e posture (elbow up, tool pointing forward-down), used as IK seed.
 UR5E_SEED = np.array([0.0, -1.9, 1.9, -1.6, -1.57, 0.0])
 
 
-def add_ur5e_with_pad(plant, X_WBase=None):
-    """The UR5e (airo-models) with its base welded at ``X_WBase`` and the pad tool at tool0.
+def add_ur5e_with_pad(plant, X_WBase=None, tool=None):
+    """The UR5e (airo-models) with its base welded at ``X_WBase`` and the pad tool at tool0: the ball, or
+    ``tool`` (a ``station.tools.ToolConfig``, e.g. a disc).
 
     Returns a RobotModel whose end effector is the pad centre. The arm's own
     collision geometries are listed as ``passive_geometries``: the scenario
@@ -38,14 +40,16 @@ def add_ur5e_with_pad(plant, X_WBase=None):
     arm = parser.AddModels(airo_models.get_urdf_path("ur5e"))[0]
     plant.WeldFrames(plant.world_frame(), plant.GetFrameByName("base_link", arm),
                      X_WBase if X_WBase is not None else RigidTransform())
-    tool, weld, pad = add_pad_tool(plant, parser, plant.GetFrameByName("tool0", arm), RigidTransform())
+    tool = (tool or ToolConfig()).validate()
+    tool_instance, weld, pad = add_pad_tool(plant, parser, plant.GetFrameByName("tool0", arm), RigidTransform(),
+                                            tool=tool)
     passive = []
     if plant.geometry_source_is_registered():
         for body_index in plant.GetBodyIndices(arm):
             passive += list(plant.GetCollisionGeometriesForBody(plant.get_body(body_index)))
-    return RobotModel(arm=arm, model_instances=[arm, tool], end_effector_frame="pad_center",
+    return RobotModel(arm=arm, model_instances=[arm, tool_instance], end_effector_frame="pad_center",
                       end_effector_point=np.zeros(3), tool_weld=weld, pad_geometries=pad,
-                      passive_geometries=passive)
+                      passive_geometries=passive, tool=tool)
 
 
 def worst_condition_number(kinematics, plant, positions):

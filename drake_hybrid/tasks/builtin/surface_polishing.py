@@ -19,6 +19,11 @@ The constraint is the surface offset by the pad's radius (``Surface.offset_const
 distance to it, whose force is the normal force in N, and two kinematic rows holding the approach
 vector along the normal); E_p the view's rows (``core.surfaces.view_projection``): the spin about a
 and the pad centre's velocity along the world x and y (m/s), whose position errors are exact.
+
+The tool is ``config.tool``: the ball pad, or a flat disc (``station.tools``), whose controlled point is the
+centre of its face (the constraint then on the surface itself) and whose orientation rows are
+force-controlled with zero moment (``tool.orientation``). ``model_error.workpiece_*`` moves the real
+workpiece away from the surface the controller is given (``tasks.surface_model``).
 """
 
 
@@ -29,17 +34,15 @@ from pydrake.multibody.parsing import Parser
 
 from drake_hybrid.control.gains import HybridGains
 from drake_hybrid.control.supervision import SupervisionConfig
-from drake_hybrid.core.charts import PoseChart
 from drake_hybrid.core.height_map import HeightMap, HeightMapSurface
-from drake_hybrid.core.projections import ConstraintSpace
-from drake_hybrid.core.surfaces import SphereSurface, view_projection
-from drake_hybrid.station.arm import PAD_RADIUS
+from drake_hybrid.core.surfaces import SphereSurface
 from drake_hybrid.station.parsing import ConfigureParser, model_url
 from drake_hybrid.station.path_config import PathConfig, PatternConfig
 from drake_hybrid.station.workpieces import add_rigid_workpiece, mesh_shape
 from drake_hybrid.tasks.builtin.robots import UR5E_SEED, add_ur5e_with_pad
 from drake_hybrid.tasks.config import ScenarioConfig, StartConfig
 from drake_hybrid.tasks.path import job_duration, path_start_positions
+from drake_hybrid.tasks.surface_model import model_surface, orientation_labels, surface_constraint_space
 from drake_hybrid.tasks.task import Task
 from drake_hybrid.tasks.task_options import SurfacePolishingOptions
 
@@ -68,7 +71,7 @@ class SurfacePolishing(Task):
     camera = ((0.85, -0.6, 0.6), (0.45, 0.0, 0.2))
 
     def __init__(self):
-        self._surfaces, self._spaces = {}, {}
+        self._surfaces = {}
 
     def base_config(self, options):
         config = ScenarioConfig(
@@ -89,25 +92,30 @@ class SurfacePolishing(Task):
 
     def labels(self, config=None):
         return {"velocity": ["spin about a", "x . c-dot", "y . c-dot"], "velocity_units": "rad/s | m/s | m/s",
-                "force": ["normal force", "orientation row 1", "orientation row 2"], "force_units": "N | N m | N m",
-                "constraint_units": "m | 1 | 1",
-                "constraint_note": "C_1: the distance of the pad centre from the offset surface (the compliant "
-                                   "contact's compression while it presses); C_2, C_3: the approach vector's "
-                                   "orientation rows, held by the controller"}
+                **orientation_labels(config if config is not None else self.base_config({}))}
 
     # -- the workpiece ---------------------------------------------------------------------------------
     def _workpiece(self, config):
         return self.options(config).workpiece
 
-    def workpiece_surface(self, config):
+    def _real_surface(self, config):
+        """The workpiece's own surface (where its geometry is)."""
         kind = self._workpiece(config)
         if kind not in self._surfaces:
             self._surfaces[kind] = (SphereSurface(SPHERE_CENTER, SPHERE_RADIUS) if kind == "sphere" else
                                     HeightMapSurface(height_map(kind), RigidTransform(MAP_CENTER)))
-        return self._surfaces[kind], PAD_RADIUS
+        return self._surfaces[kind]
+
+    def workpiece_surface(self, config):
+        """The surface the controller is given (the real one moved by the model error) and the tool's offset."""
+        offset = config.tool.offset
+        return model_surface(self._real_surface(config), offset, config), offset
+
+    def real_workpiece_surface(self, config):
+        return self._real_surface(config)
 
     def add_robot(self, plant, config):
-        return add_ur5e_with_pad(plant)
+        return add_ur5e_with_pad(plant, tool=config.tool)
 
     def add_workpiece(self, plant, config):
         if self._workpiece(config) == "sphere":
@@ -115,19 +123,14 @@ class SurfacePolishing(Task):
             sphere = parser.AddModelsFromUrl(model_url("sphere_workpiece.sdf"))[0]
             plant.WeldFrames(plant.world_frame(), plant.GetFrameByName("sphere", sphere), RigidTransform(SPHERE_CENTER))
             return list(plant.GetCollisionGeometriesForBody(plant.GetBodyByName("sphere", sphere)))
-        surface, _ = self.workpiece_surface(config)
+        surface = self._real_surface(config)
         return add_rigid_workpiece(plant, mesh_shape(surface, self._workpiece(config)), surface.X_WM,
                                    name=f"{self._workpiece(config)}_part", resolution_hint=0.002)
 
     # -- the law's task ----------------------------------------------------------------------------------
     def constraint_space(self, config):
-        kind = self._workpiece(config)
-        if kind not in self._spaces:                  # compiled once per workpiece
-            chart = PoseChart()
-            surface, offset = self.workpiece_surface(config)
-            constraint = surface.offset_constraint(chart, offset)
-            self._spaces[kind] = ConstraintSpace(constraint, view_projection(chart, surface.default_view()))
-        return self._spaces[kind]
+        surface, offset = self.workpiece_surface(config)     # compiled once per surface and tool
+        return surface_constraint_space(surface, offset, config)
 
     def start_positions(self, scenario):
         return path_start_positions(self, scenario, UR5E_SEED)
