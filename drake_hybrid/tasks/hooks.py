@@ -112,7 +112,7 @@ def _parameter(spec, name):
 # ------------------------------------------------------------------------------------------------
 
 class _UR5eWithPad:
-    """The UR5e of airo-models, base at the world origin, the pad tool at tool0 (tasks/robots.py)."""
+    """The UR5e of airo-models, base at the world origin, the pad tool at tool0 (tasks/builtin/robots.py)."""
 
     def __init__(self, spec):
         pass
