@@ -4,12 +4,12 @@
 ``build_controller_station(config, lcm, hardware)`` returns a ``ControllerStation`` whose
 ``diagram`` is::
 
-    (input) lcmt_panda_status ──► MessageWatchdog ──estimated_state───────────────────────────────┬──► HybridController
+    (input) lcmt_panda_status ──► MessageWatchdog ──estimated_state──────────────────────┬──► HybridController
     (input) lcmt_force_torque ──►      │  ──sensor_wrench──► ForceTorqueConditioning ─►[filter]─┘   │
                                        │  (or torque_external ──► ExternalTorqueWrench)              │
-    ProfileSource / the task's source ──desired_*──────────────────────────────────────► (controller)  │
-                                   [with gain_changes: a HybridController per gain set ─► GainSelector ─► actuation]
-                                       └──watchdog_status──► TorqueCommandSafety ◄── DriverGravityCompensation ◄── actuation
+    ProfileSource / the task's source ──desired_*─────────────────────────────────► (controller)    │
+                        [with gain_changes: a HybridController per gain set ─► GainSelector ─► actuation]
+                                       └─watchdog_status─► TorqueCommandSafety ◄─ DriverGravityCompensation ◄─ actuation
                                                                   │ torque
                                              PandaCommandSender(kTorque) ──► LcmPublisherSystem (forced only)
 
@@ -106,16 +106,18 @@ class ControllerStation(HybridSystems):
 
     def enabled(self, root_context: Context) -> bool:
         """True once a command may be published (a valid status has arrived)."""
-        enabled = cast(Array, self.safety.GetOutputPort("enabled").Eval(self.safety.GetMyContextFromRoot(root_context)))
+        enabled = cast(Array, self.safety.get_enabled_output_port().Eval(self.safety.GetMyContextFromRoot(root_context)))
         return enabled[0] > 0.5
 
-    def publish_command(self, root_context: Context, utime: Optional[int] = None) -> bool:
+    def publish_command(self, root_context: Context, utime: Optional[int] = None,
+                        enabled: Optional[bool] = None) -> bool:
         """Publish the command of this tick if ``enabled``; returns whether it did.
 
         ``utime`` (int us) stamps the message with another clock than the diagram's: a real
         drake-franka-driver drops commands whose utime is more than --expire_sec from its
-        wall clock (epoch us), so ``run_controller(wall_clock_stamps=True)`` passes it."""
-        if not self.enabled(root_context):
+        wall clock (epoch us), so ``run_controller(wall_clock_stamps=True)`` passes it.
+        ``enabled``: ``self.enabled`` as already evaluated in this tick (None: evaluated here)."""
+        if not (self.enabled(root_context) if enabled is None else enabled):
             return False
         if utime is None:
             self.command_publisher.ForcedPublish(self.command_publisher.GetMyContextFromRoot(root_context))

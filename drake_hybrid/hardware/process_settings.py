@@ -5,8 +5,9 @@ and undone after it.
 
 * the garbage collector is frozen and paused (``gc.freeze()``: the objects made so far are left out
   of every later collection; ``gc.disable()``: no collection starts in a tick). The tick still makes
-  and frees small Python objects (floats, small arrays), from the interpreter's own pools, with no
-  system call; what it makes and keeps shows as ``allocated_blocks_growth`` in the report;
+  and frees small Python objects (floats, small arrays) from the interpreter's own pools, with no
+  system call; with the collector paused, whatever a tick kept would pile up, so the runner reports
+  the interpreter's allocated blocks kept per tick (``realtime.run_controller``);
 * the loop's thread runs under the real-time scheduler (``SCHED_FIFO`` at ``priority``, as ros2_control's
   controller_manager does at 50, below libfranka's control thread at 99 if the driver runs on the same
   machine), so that no ordinary process preempts it;
@@ -121,17 +122,12 @@ def _collector(settings: RealTimeSettings, report: Dict[str, object], undo: cont
 @contextlib.contextmanager
 def real_time(settings: Optional[RealTimeSettings] = None) -> Iterator[Dict[str, object]]:
     """Apply ``settings`` (default ``RealTimeSettings()``) for the ``with`` block; yields the report
-    {"scheduler", "cpu", "collector": what was applied or refused, in words}; on exit (the previous
-    state restored) it adds "allocated_blocks_growth": the interpreter's allocated blocks at the end
-    minus at the start (objects the run kept)."""
+    {"collector", "scheduler", "cpu": what was applied or refused, in words}. On exit, also after an
+    error, the previous collector state, scheduler and affinity are restored."""
     settings = (RealTimeSettings() if settings is None else settings).validate()
     report: Dict[str, object] = {}
     with contextlib.ExitStack() as undo:
         _collector(settings, report, undo)
         _scheduler(settings, report, undo)
         _affinity(settings, report, undo)
-        blocks = sys.getallocatedblocks()
-        try:
-            yield report
-        finally:
-            report["allocated_blocks_growth"] = sys.getallocatedblocks() - blocks
+        yield report

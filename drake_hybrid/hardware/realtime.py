@@ -28,6 +28,8 @@ lock-step run, ``loop.run_hardware_loop(record=True)``) at their wall-clock inst
 controller sees the stream and the states a closed loop produced.
 """
 
+import os
+import sys
 import time
 from dataclasses import dataclass, field
 from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple
@@ -185,8 +187,9 @@ def run_controller(station: ControllerStation, lcm: DrakeLcmInterface, duration:
     ticks = int(round(duration / period))
     due, arrivals, published, cost, cpu = (np.full(ticks + 1, np.nan) for _ in range(5))
     parts = np.zeros((ticks + 1, len(PARTS)))
-    missed = 0
+    missed, blocks = 0, sys.getallocatedblocks()
     clock, thread_clock = time.perf_counter, time.thread_time
+    load_at_start = os.getloadavg()[0]
     with real_time(settings) as applied:
         for k in range(ticks + 1):
             seen = tick.statuses
@@ -198,7 +201,6 @@ def run_controller(station: ControllerStation, lcm: DrakeLcmInterface, duration:
             missed += not got
             while lcm.HandleSubscriptions(0) > 0:       # what else is queued (the F/T reading of the tick)
                 pass
-            tick.parts[:] = 0.0
             received = clock() - start
             if k == 0:
                 previous = fast_compile.set_policy("foreground")     # the compiled law now, not in a background job
@@ -214,12 +216,16 @@ def run_controller(station: ControllerStation, lcm: DrakeLcmInterface, duration:
             cost[k] = clock() - start
             cpu[k] = thread_clock() - cpu_start
             parts[k] = tick.parts
+            if k == 0:
+                blocks = sys.getallocatedblocks()            # after the start (the law's load makes many)
+    kept = (sys.getallocatedblocks() - blocks) / max(ticks, 1)
     tick.close()
     due = np.where(np.isnan(due), arrivals, due)
     stop_vector = station.safety.GetOutputPort("stop").Eval(station.safety.GetMyContextFromRoot(context))
     timing = TickTiming(period=period, ticks=ticks, due=due, arrivals=arrivals, published=published,
                         controller_cost=cost, cpu=cpu, parts=parts, missed_status=missed,
                         stop=station.stop_reason(context) if stop_vector[0] > 0 else None)
+    applied.update(allocated_blocks_kept_per_tick=kept, load_average=[load_at_start, os.getloadavg()[0]])
     timing.summary = summarize(timing, applied, paced=pacer is not None, law=_law_report(station), wake_up=wake_up,
                                stepping=stepping)
     return timing
@@ -233,7 +239,7 @@ def summarize(timing: TickTiming, applied: Dict[str, object], paced: bool, law: 
     cost, cpu = timing.controller_cost[rate], timing.cpu[rate]
     causes = miss_causes(period, due, arrivals, published, cost, cpu)
     return {
-        "ticks": timing.ticks + 1, "period_s": period, "rate_hz": 1.0 / period,
+        "ticks": timing.ticks + 1, "ticks_at_rate": timing.ticks, "period_s": period, "rate_hz": 1.0 / period,
         "wall_s": float(timing.arrivals[-1] - timing.arrivals[0]),
         "start_s": float(timing.controller_cost[0]),
         "controller_cost_s": statistics(cost),

@@ -128,6 +128,7 @@ class ControllerTick:
         self._simulator: Optional[Simulator] = Simulator(diagram, context) if stepping == "simulator" else None
         self._timings = self._collect_timings() if stepping == "direct" else []
         self._time = 0.0
+        self._enabled: Optional[bool] = None        # the tick's ``enabled``, when decided with the safety's update
         self._lead = SAMPLE_LEAD * self.period
         watchdog_context = station.watchdog.GetMyContextFromRoot(context)
         wrench_port = "sensor_wrench" if station.watchdog.use_force_torque else "torque_external"
@@ -236,6 +237,13 @@ class ControllerTick:
                 for system, leaf_context, buffer, part in updates:
                     leaf_context.get_mutable_discrete_state().SetFrom(buffer)
                 parts[_FRAMEWORK] += clock() - start
+                if any(part == _COMMAND for _, _, _, part in updates):
+                    # Whether the command may go out, decided now: the watchdog's status at this time is
+                    # already computed, and until the publish nothing but the time (not a status's being
+                    # seen, which is all ``enabled`` reads) changes.
+                    start = clock()
+                    self._enabled = self.station.enabled(context)
+                    parts[_PUBLISH] += clock() - start
             for timing in due:
                 timing.step()
         start = clock()
@@ -311,7 +319,8 @@ class ControllerTick:
     def publish(self, utime: Optional[int] = None) -> bool:
         """Publish the tick's command if the safety enables it (``ControllerStation.publish_command``)."""
         start = self._clock()
-        published = self.station.publish_command(self.context, utime)
+        published = self.station.publish_command(self.context, utime, self._enabled)
+        self._enabled = None
         self.parts[_PUBLISH] += self._clock() - start
         return published
 

@@ -40,9 +40,10 @@ def status_fields(message, n):
         return None
     if message.num_joints != n or len(message.joint_position) != n:
         return message.utime * 1e-6, None, Rejection.WRONG_SIZE
-    values = np.concatenate([message.joint_position, message.joint_velocity, message.joint_torque_external])
-    if values.shape != (3 * n,):
+    values = list(message.joint_position) + list(message.joint_velocity) + list(message.joint_torque_external)
+    if len(values) != 3 * n:
         return message.utime * 1e-6, None, Rejection.WRONG_SIZE
+    values = np.array(values, dtype=float)
     if not all_finite(values):
         return message.utime * 1e-6, None, Rejection.NON_FINITE
     return message.utime * 1e-6, values, Rejection.NONE
@@ -138,14 +139,23 @@ class MessageWatchdog(LeafSystem):
         self.DeclareDiscreteState(VALUES + 6)
         self.DeclarePeriodicDiscreteUpdateEvent(self.period, tick_offset(self.period), self._update)
         self.DeclareInitializationDiscreteUpdateEvent(self._update)
-        # The records as of now (state + what is on the inputs), computed once per change of either.
+        # The messages on the inputs parsed (status_fields, force_torque_fields): once per message.
+        self._parsed = declare_cached_value(self, "parsed messages", self._parse, {self.all_input_ports_ticket()})
+        # The records as of now (state + what is on the inputs), computed once per change of either: what
+        # the update stores and the ages are measured from.
         self._records = declare_cached_value(
-            self, "records", lambda context: (self._status_record_now(context), self._force_torque_record_now(context)),
+            self, "records", lambda context: self._records_at(context, context.get_time()),
             {self.time_ticket(), self.xd_ticket(), self.all_input_ports_ticket()})
-        self.DeclareVectorOutputPort("estimated_state", 2 * n, self._calc_state)
-        self.DeclareVectorOutputPort("torque_external", n, self._calc_torque_external)
-        self.DeclareVectorOutputPort("sensor_wrench", 6, self._calc_sensor_wrench)
-        self.DeclareVectorOutputPort("watchdog_status", len(STATUS_FIELDS), self._calc_status)
+        # The same records' SEEN and values, which do not depend on the time (the arrival does): what the
+        # outputs but the status give, not computed again when only the time moves.
+        self._accepted = declare_cached_value(self, "accepted values", lambda context: self._records_at(context, 0.0),
+                                              {self.xd_ticket(), self.all_input_ports_ticket()})
+        accepted = {self._accepted.ticket()}
+        self.DeclareVectorOutputPort("estimated_state", 2 * n, self._calc_state, prerequisites_of_calc=accepted)
+        self.DeclareVectorOutputPort("torque_external", n, self._calc_torque_external, prerequisites_of_calc=accepted)
+        self.DeclareVectorOutputPort("sensor_wrench", 6, self._calc_sensor_wrench, prerequisites_of_calc=accepted)
+        self.DeclareVectorOutputPort("watchdog_status", len(STATUS_FIELDS), self._calc_status,
+                                     prerequisites_of_calc={self._records.ticket()})
 
     def get_status_input_port(self):
         return self._status_port
@@ -154,21 +164,17 @@ class MessageWatchdog(LeafSystem):
         return self._force_torque_port
 
     # -- the records as of now (state + what is on the inputs) -----------------------------------
-    def _status_record(self, context):
-        return self._records.Eval(context)[0]
-
-    def _force_torque_record(self, context):
-        return self._records.Eval(context)[1]
-
-    def _status_record_now(self, context):
-        fields = status_fields(self._status_port.Eval(context), self.num_joints)
-        return accept(context.get_discrete_state(0).CopyToVector(), fields, context.get_time())
-
-    def _force_torque_record_now(self, context):
-        record = context.get_discrete_state(1).CopyToVector()
+    def _parse(self, context):
+        status = status_fields(self._status_port.Eval(context), self.num_joints)
         if self._force_torque_port is None:
-            return record
-        return accept(record, force_torque_fields(self._force_torque_port.Eval(context)), context.get_time())
+            return status, None
+        return status, force_torque_fields(self._force_torque_port.Eval(context))
+
+    def _records_at(self, context, now):
+        """(status record, F/T record) after the messages on the inputs arrived at ``now``."""
+        status, force_torque = self._parsed.Eval(context)
+        return (accept(context.get_discrete_state(0).CopyToVector(), status, now),
+                accept(context.get_discrete_state(1).CopyToVector(), force_torque, now))
 
     def status(self, context):
         """{name: value} of ``watchdog_status`` at ``context`` (fault as a HardwareFault)."""
@@ -178,20 +184,20 @@ class MessageWatchdog(LeafSystem):
         return status
 
     def _calc_state(self, context, output):
-        record = self._status_record(context)
+        record = self._accepted.Eval(context)[0]
         n = self.num_joints
         output.SetFromVector(record[VALUES:VALUES + 2 * n] if record[SEEN] > 0 else self._initial_state)
 
     def _calc_torque_external(self, context, output):
         n = self.num_joints
-        output.SetFromVector(self._status_record(context)[VALUES + 2 * n:])
+        output.SetFromVector(self._accepted.Eval(context)[0][VALUES + 2 * n:])
 
     def _calc_sensor_wrench(self, context, output):
-        output.SetFromVector(self._force_torque_record(context)[VALUES:])
+        output.SetFromVector(self._accepted.Eval(context)[1][VALUES:])
 
     def _calc_status(self, context, output):
         now = context.get_time()
-        status, force_torque = self._status_record(context), self._force_torque_record(context)
+        status, force_torque = self._records.Eval(context)
         status_age, force_torque_age = age(status, now), age(force_torque, now)
         fault = HardwareFault.NONE
         if status[SEEN] <= 0:
