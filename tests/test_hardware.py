@@ -331,7 +331,8 @@ def _timing_summary(stop=None):
     timing = _timing([5e-3, 3e-4, 3e-4, 1.5e-3, 3e-4, 3e-4, 3e-4, 1.2e-3, 3e-4, 3e-4, 3e-4], [2e-5] * 11)
     timing.stop = stop
     applied = {"collector": "frozen (1000 objects) and paused for the run", "scheduler": "SCHED_FIFO, priority 50",
-               "cpu": "pinned to core 1 (of [0, 1])", "allocated_blocks_kept_per_tick": 0.0, "load_average": [0.1, 0.2]}
+               "cpu": "pinned to core 1 (of [0, 1])", "idle_states": "wake-up latency held to 0 us (/dev/cpu_dma_latency)",
+               "allocated_blocks_kept_per_tick": 0.0, "load_average": [0.1, 0.2]}
     summary = summarize(timing, applied, paced=True, law="compiled (numba)", wake_up="poll", stepping="direct")
     summary["commands_published"] = 11 if stop is None else 4
     return summary

@@ -76,7 +76,8 @@ def test_a_real_time_run_reports_its_tick_by_part_and_restores_the_process(drum)
     assert np.all(timing.parts.sum(axis=1) <= timing.controller_cost)
     assert summary["deadline_misses"] == (summary["late_wake_up"] + summary["long_tick"])
     settings = summary["real_time"]
-    assert set(settings) >= {"collector", "scheduler", "cpu", "law", "wake_up", "allocated_blocks_kept_per_tick"}
+    assert set(settings) >= {"collector", "scheduler", "cpu", "idle_states", "law", "wake_up",
+                             "allocated_blocks_kept_per_tick"}
     assert settings["law"].startswith("compiled")
 
 
@@ -114,11 +115,13 @@ def test_real_time_settings_are_refused_politely_and_undone(monkeypatch):
         raise PermissionError(1, "Operation not permitted")
 
     monkeypatch.setattr(process_settings.os, "sched_setscheduler", refuse)
+    monkeypatch.setattr(process_settings.os, "open", refuse)
     enabled, frozen, affinity = gc.isenabled(), gc.get_freeze_count(), os.sched_getaffinity(0)
     with real_time(RealTimeSettings(priority=50, cpu=max(affinity) + 1)) as report:
         assert "refused" in report["scheduler"] and "CAP_SYS_NICE" in report["scheduler"]
         assert report["scheduler"].endswith("running at normal priority")
         assert report["cpu"].startswith("not pinned: core") and os.sched_getaffinity(0) == affinity
+        assert report["idle_states"].startswith("left as they are: /dev/cpu_dma_latency refused")
         assert report["collector"].startswith("frozen") and not gc.isenabled()
     assert gc.isenabled() == enabled and gc.get_freeze_count() == frozen
     with pytest.raises(RuntimeError, match="inside"):
@@ -134,7 +137,8 @@ def test_real_time_settings_are_refused_politely_and_undone(monkeypatch):
 @pytest.mark.parametrize("settings, field", [(RealTimeSettings(priority=0), "priority"),
                                              (RealTimeSettings(priority=True), "priority"),
                                              (RealTimeSettings(cpu=-2), "cpu"),
-                                             (RealTimeSettings(pause_collector=1), "pause_collector")])
+                                             (RealTimeSettings(pause_collector=1), "pause_collector"),
+                                             (RealTimeSettings(idle_latency_us=-1), "idle_latency_us")])
 def test_real_time_settings_are_checked(settings, field):
     with pytest.raises(ArgumentError, match=f"RealTimeSettings.{field}"):
         with real_time(settings):

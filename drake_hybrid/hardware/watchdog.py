@@ -141,21 +141,15 @@ class MessageWatchdog(LeafSystem):
         self.DeclareInitializationDiscreteUpdateEvent(self._update)
         # The messages on the inputs parsed (status_fields, force_torque_fields): once per message.
         self._parsed = declare_cached_value(self, "parsed messages", self._parse, {self.all_input_ports_ticket()})
-        # The records as of now (state + what is on the inputs), computed once per change of either: what
-        # the update stores and the ages are measured from.
-        self._records = declare_cached_value(
-            self, "records", lambda context: self._records_at(context, context.get_time()),
-            {self.time_ticket(), self.xd_ticket(), self.all_input_ports_ticket()})
-        # The same records' SEEN and values, which do not depend on the time (the arrival does): what the
-        # outputs but the status give, not computed again when only the time moves.
-        self._accepted = declare_cached_value(self, "accepted values", lambda context: self._records_at(context, 0.0),
-                                              {self.xd_ticket(), self.all_input_ports_ticket()})
-        accepted = {self._accepted.ticket()}
-        self.DeclareVectorOutputPort("estimated_state", 2 * n, self._calc_state, prerequisites_of_calc=accepted)
-        self.DeclareVectorOutputPort("torque_external", n, self._calc_torque_external, prerequisites_of_calc=accepted)
-        self.DeclareVectorOutputPort("sensor_wrench", 6, self._calc_sensor_wrench, prerequisites_of_calc=accepted)
+        # The records as of now (state + what is on the inputs), computed once per change of either.
+        self._records = declare_cached_value(self, "records", self._records_now,
+                                             {self.time_ticket(), self.xd_ticket(), self.all_input_ports_ticket()})
+        records = {self._records.ticket()}
+        self.DeclareVectorOutputPort("estimated_state", 2 * n, self._calc_state, prerequisites_of_calc=records)
+        self.DeclareVectorOutputPort("torque_external", n, self._calc_torque_external, prerequisites_of_calc=records)
+        self.DeclareVectorOutputPort("sensor_wrench", 6, self._calc_sensor_wrench, prerequisites_of_calc=records)
         self.DeclareVectorOutputPort("watchdog_status", len(STATUS_FIELDS), self._calc_status,
-                                     prerequisites_of_calc={self._records.ticket()})
+                                     prerequisites_of_calc=records)
 
     def get_status_input_port(self):
         return self._status_port
@@ -170,9 +164,10 @@ class MessageWatchdog(LeafSystem):
             return status, None
         return status, force_torque_fields(self._force_torque_port.Eval(context))
 
-    def _records_at(self, context, now):
-        """(status record, F/T record) after the messages on the inputs arrived at ``now``."""
+    def _records_now(self, context):
+        """(status record, F/T record) after the messages on the inputs arrived now."""
         status, force_torque = self._parsed.Eval(context)
+        now = context.get_time()
         return (accept(context.get_discrete_state(0).CopyToVector(), status, now),
                 accept(context.get_discrete_state(1).CopyToVector(), force_torque, now))
 
@@ -184,16 +179,16 @@ class MessageWatchdog(LeafSystem):
         return status
 
     def _calc_state(self, context, output):
-        record = self._accepted.Eval(context)[0]
+        record = self._records.Eval(context)[0]
         n = self.num_joints
         output.SetFromVector(record[VALUES:VALUES + 2 * n] if record[SEEN] > 0 else self._initial_state)
 
     def _calc_torque_external(self, context, output):
         n = self.num_joints
-        output.SetFromVector(self._accepted.Eval(context)[0][VALUES + 2 * n:])
+        output.SetFromVector(self._records.Eval(context)[0][VALUES + 2 * n:])
 
     def _calc_sensor_wrench(self, context, output):
-        output.SetFromVector(self._accepted.Eval(context)[1][VALUES:])
+        output.SetFromVector(self._records.Eval(context)[1][VALUES:])
 
     def _calc_status(self, context, output):
         now = context.get_time()

@@ -69,8 +69,9 @@ def timing_lines(figures: Mapping[str, Any]) -> List[str]:
     period, ticks = figures["period_s"], figures["ticks_at_rate"]
     settings: Dict[str, Any] = figures["real_time"]
     misses = figures["deadline_misses"]
-    lines = [f"  real-time settings: scheduler {settings['scheduler']}; {settings['cpu']}; collector "
-             f"{settings['collector']}; law {settings['law']}; wake-up by {settings['wake_up']}",
+    lines = [f"  real-time settings: scheduler {settings['scheduler']}; {settings['cpu']}; idle states "
+             f"{settings['idle_states']}; collector {settings['collector']}; law {settings['law']}; wake-up by "
+             f"{settings['wake_up']}",
              f"  start (tick 0: initialization, the compiled law loaded): {figures['start_s']:.2f} s; then "
              f"{ticks} ticks at rate",
              f"  controller cost per tick (status in to command out): {milliseconds(figures['controller_cost_s'])} "
@@ -95,6 +96,7 @@ def timing_advice(figures: Mapping[str, Any]) -> List[str]:
     settings: Dict[str, Any] = figures["real_time"]
     fifo = str(settings["scheduler"]).startswith("SCHED_FIFO")
     pinned = str(settings["cpu"]).startswith("pinned")
+    idle = str(settings.get("idle_states", "")).startswith("wake-up latency held")
     load = settings.get("load_average") or [float("nan"), float("nan")]
     advice = []
     if figures["deadline_misses"] == 0:
@@ -104,6 +106,7 @@ def timing_advice(figures: Mapping[str, Any]) -> List[str]:
         if woke_late:
             advice.append(f"{woke_late} late wake-ups: " + (
                 "run at real-time priority (the scheduler was not set: see above)" if not fifo else
+                "hold the cores' idle states off (/dev/cpu_dma_latency was not set: see above)" if not idle else
                 "the loop woke late although at real-time priority: give it a core of its own (isolcpus= and "
                 "irqaffinity= on the kernel's command line, nothing else pinned there), a PREEMPT_RT kernel, and "
                 f"less load on the machine (load average {load[0]:.1f} at the start, {load[1]:.1f} at the end)"))
