@@ -32,12 +32,12 @@ import os
 import sys
 import time
 from dataclasses import dataclass, field
-from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple
+from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple, cast
 
 import numpy as np
 
 from pydrake.lcm import DrakeLcm, DrakeLcmInterface
-from pydrake.systems.framework import Context
+from pydrake.systems.framework import Context, Diagram
 
 from drake_hybrid.control import fast_compile
 from drake_hybrid.control.controller import HybridController
@@ -180,7 +180,7 @@ def run_controller(station: ControllerStation, lcm: DrakeLcmInterface, duration:
         raise ArgumentError(f"run_controller: wake_up must be one of {', '.join(WAKE_UPS)}, got {wake_up!r}")
     period = float(station.config.control_period)
     max_wait = float(station.hardware.max_status_age if max_wait is None else max_wait)
-    context = station.diagram.CreateDefaultContext()
+    context = cast(Diagram, station.diagram).CreateDefaultContext()
     if initial_state is not None:
         initial_state(station, context)
     tick = ControllerTick(station, context, stepping)
@@ -221,7 +221,7 @@ def run_controller(station: ControllerStation, lcm: DrakeLcmInterface, duration:
     kept = (sys.getallocatedblocks() - blocks) / max(ticks, 1)
     tick.close()
     due = np.where(np.isnan(due), arrivals, due)
-    stop_vector = station.safety.GetOutputPort("stop").Eval(station.safety.GetMyContextFromRoot(context))
+    stop_vector = cast(Array, station.safety.GetOutputPort("stop").Eval(station.safety.GetMyContextFromRoot(context)))
     timing = TickTiming(period=period, ticks=ticks, due=due, arrivals=arrivals, published=published,
                         controller_cost=cost, cpu=cpu, parts=parts, missed_status=missed,
                         stop=station.stop_reason(context) if stop_vector[0] > 0 else None)
@@ -270,7 +270,7 @@ def start_controller_state(config: ScenarioConfig, start: StartState
         plant_context = station.controller_plant.CreateDefaultContext()
         q = joint_vector(q0, "start's q0", "start_controller_state", station.controller_plant)
         station.controller_plant.SetPositions(plant_context, q)
-        gravity = -station.controller_plant.CalcGravityGeneralizedForces(plant_context)
+        gravity = np.negative(station.controller_plant.CalcGravityGeneralizedForces(plant_context))
         command = held - gravity if station.hardware.driver_compensates_gravity else held
         station.safety.set_initial_command(station.safety.GetMyMutableContextFromRoot(context), command)
         for part in (station.wrench_filter, station.conditioner):

@@ -35,14 +35,15 @@ stepping needs a diagram whose timed events are periodic discrete updates and th
 """
 
 import time
-from typing import Dict, List, Optional, Tuple
+from typing import Dict, List, Optional, Sequence, Tuple, Union, cast
 
 import numpy as np
 from drake import lcmt_force_torque, lcmt_panda_status
 
 from pydrake.common.value import AbstractValue
 from pydrake.systems.analysis import Simulator
-from pydrake.systems.framework import Context, FixedInputPortValue, OutputPort, System
+from pydrake.systems.framework import (Context, Diagram, DiscreteValues, FixedInputPortValue, InputPort, OutputPort,
+                                       System)
 from pydrake.systems.primitives import VectorLogSink
 
 from drake_hybrid.control.controller import HybridController
@@ -78,7 +79,7 @@ class _Timing:
 
     def __init__(self, period: float, offset: float) -> None:
         self.period, self.offset = period, offset
-        self.updates: List[Tuple[System, Context, object, int]] = []
+        self.updates: List[Tuple[System, Context, DiscreteValues, int]] = []
         self.loggers: List[Tuple[System, Context]] = []
         self.index, self.next_time = 0, offset
 
@@ -111,12 +112,13 @@ class ControllerTick:
         if station.diagram is None or station.lcm is None:
             raise ArgumentError("ControllerTick: the station must be built (build_controller_station)")
         self.station, self.context, self.stepping = station, context, stepping
+        self.diagram: Diagram = station.diagram
         self.period = float(station.config.control_period)
         self.parts = np.zeros(len(PARTS))
         self.statuses = 0
         self._clock = time.perf_counter
         self._latest: Dict[str, object] = {}
-        diagram, lcm, hardware = station.diagram, station.lcm, station.hardware
+        diagram, lcm, hardware = self.diagram, station.lcm, station.hardware
         # The message inputs, fixed to the empty messages the watchdog reads as "none yet".
         self._inputs: Dict[str, FixedInputPortValue] = {
             STATUS_INPUT: diagram.GetInputPort(STATUS_INPUT).FixValue(context, AbstractValue.Make(lcmt_panda_status()))}
@@ -158,7 +160,7 @@ class ControllerTick:
 
     # -- the events -------------------------------------------------------------------------------
     def _port_and_context(self, port: OutputPort) -> Tuple[OutputPort, Context]:
-        return port, port.get_system().GetMyContextFromRoot(self.context)
+        return port, cast(System, port.get_system()).GetMyContextFromRoot(self.context)
 
     def _part_of(self, system: System) -> int:
         station = self.station
@@ -185,7 +187,7 @@ class ControllerTick:
         def timing(kind: str, period: float, offset: float) -> _Timing:
             return timings.setdefault((kind, period, offset), _Timing(period, offset))
 
-        for system in station.diagram.GetSystems():
+        for system in self.diagram.GetSystems():
             leaf_context = system.GetMyMutableContextFromRoot(context)
             if leaf_context.num_continuous_states() or leaf_context.num_abstract_states():
                 raise ArgumentError(f"ControllerTick: system '{system.get_name()}' has continuous or abstract state; "
@@ -205,7 +207,7 @@ class ControllerTick:
             timing("publish", log_period, 0.0).loggers.append((sink, sink.GetMyContextFromRoot(context)))
         return list(timings.values())
 
-    def _warm(self, ports: List[Tuple[OutputPort, Context]], part: int) -> None:
+    def _warm(self, ports: Sequence[Tuple[Union[InputPort, OutputPort], Context]], part: int) -> None:
         start = self._clock()
         for port, port_context in ports:
             port.Eval(port_context)
@@ -246,12 +248,14 @@ class ControllerTick:
                     parts[_PUBLISH] += clock() - start
             for timing in due:
                 timing.step()
-        start = clock()
-        context.SetTime(end)
-        self._time = end
-        parts[_FRAMEWORK] += clock() - start
+            self._time = now
+        if end != self._time:
+            start = clock()
+            context.SetTime(end)
+            self._time = end
+            parts[_FRAMEWORK] += clock() - start
 
-    def _warm_parts(self, updates: List[Tuple[System, Context, object, int]]) -> None:
+    def _warm_parts(self, updates: List[Tuple[System, Context, DiscreteValues, int]]) -> None:
         """Evaluate, in the parts' order, what the updates at this time read (module docstring)."""
         parts_due = {part for _, _, _, part in updates}
         if _LAW in parts_due:
@@ -277,7 +281,7 @@ class ControllerTick:
             self._time = self.context.get_time()
         else:
             time_now = self.context.get_time()
-            self.station.diagram.ExecuteInitializationEvents(self.context)
+            self.diagram.ExecuteInitializationEvents(self.context)
             for timing in self._timings:
                 timing.start(time_now)
                 if timing.next_time == time_now and timing.loggers:      # the Simulator publishes at t0 here
@@ -303,7 +307,7 @@ class ControllerTick:
             start = self._clock()
             self._simulator.AdvanceTo(self._time)
             self.parts[_FRAMEWORK] += self._clock() - start
-        else:
+        elif any(timing.next_time <= self._time for timing in self._timings):
             self._run_events_until(self._time)
         start = self._clock()
         self._take_messages()

@@ -31,6 +31,9 @@ from drake_hybrid.hardware.messages import HardwareFault, Rejection
 SEEN, STAMP, ARRIVAL, LATENCY, OFFSET, REJECTION, VALUES = range(7)
 # Layout of the ``watchdog_status`` output.
 STATUS_FIELDS = ("fault", "status_age", "force_torque_age", "status_rejection", "force_torque_rejection")
+# The faults as the floats the status output carries.
+_NONE, _WAITING_FOR_STATUS, _STATUS_STALE, _FORCE_TORQUE_STALE = (float(fault) for fault in (
+    HardwareFault.NONE, HardwareFault.WAITING_FOR_STATUS, HardwareFault.STATUS_STALE, HardwareFault.FORCE_TORQUE_STALE))
 
 
 def status_fields(message, n):
@@ -194,14 +197,14 @@ class MessageWatchdog(LeafSystem):
         now = context.get_time()
         status, force_torque = self._records.Eval(context)
         status_age, force_torque_age = age(status, now), age(force_torque, now)
-        fault = HardwareFault.NONE
+        fault = _NONE
         if status[SEEN] <= 0:
-            fault = HardwareFault.WAITING_FOR_STATUS
+            fault = _WAITING_FOR_STATUS
         elif status_age > self.max_status_age:
-            fault = HardwareFault.STATUS_STALE
+            fault = _STATUS_STALE
         elif self.use_force_torque and force_torque_age > self.max_force_torque_age:
-            fault = HardwareFault.FORCE_TORQUE_STALE
-        output.SetFromVector([float(fault), status_age, force_torque_age if self.use_force_torque else 0.0,
+            fault = _FORCE_TORQUE_STALE
+        output.SetFromVector([fault, status_age, force_torque_age if self.use_force_torque else 0.0,
                               status[REJECTION], force_torque[REJECTION]])
 
     def _update(self, context, discrete_state):
