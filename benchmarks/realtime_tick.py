@@ -62,7 +62,8 @@ def measure(task="panda-table", seconds=10.0, compare=False, log=print):
     load_before = os.getloadavg()
     started = time.perf_counter()
     recorded = run_hardware_loop(config, None, duration=seconds, record=True).timing["recorded"]
-    log(f"recorded {seconds:g} s of {task} in {time.perf_counter() - started:.0f} s (load average {load_before[0]:.2f})")
+    log(f"recorded {seconds:g} s of {task} in {time.perf_counter() - started:.0f} s "
+        f"(load average {load_before[0]:.2f})")
     runs = {}
     for index, (label, (settings, stepping)) in enumerate(RUNS.items()):
         if index and not compare:
@@ -89,7 +90,8 @@ def markdown_lines(result):
     machine = result["machine"]
     lines = [SECTION, "",
              f"{result['seconds']:g} s of `{result['task']}` at 1 kHz, the replayed Panda over memq:// "
-             f"(`drake-hybrid hardware timing`), {result['date']}; load average {machine['load_average_before'][0]:.2f} "
+             f"(`drake-hybrid hardware timing`), {result['date']}; load average "
+             f"{machine['load_average_before'][0]:.2f} "
              f"before, {machine['load_average_after'][0]:.2f} after, on {machine['cores']} shared cores.", "",
              "| run | cost per tick ms (p50 / p99 / max) | deadline misses | late wake-up (after a long tick) | "
              "long tick (preempted) |", "|---|---:|---:|---:|---:|"]

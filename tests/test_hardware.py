@@ -331,7 +331,8 @@ def _timing_summary(stop=None):
     timing = _timing([5e-3, 3e-4, 3e-4, 1.5e-3, 3e-4, 3e-4, 3e-4, 1.2e-3, 3e-4, 3e-4, 3e-4], [2e-5] * 11)
     timing.stop = stop
     applied = {"collector": "frozen (1000 objects) and paused for the run", "scheduler": "SCHED_FIFO, priority 50",
-               "cpu": "pinned to core 1 (of [0, 1])", "idle_states": "wake-up latency held to 0 us (/dev/cpu_dma_latency)",
+               "cpu": "pinned to core 1 (of [0, 1])",
+               "idle_states": "wake-up latency held to 0 us (/dev/cpu_dma_latency)",
                "allocated_blocks_kept_per_tick": 0.0, "load_average": [0.1, 0.2]}
     summary = summarize(timing, applied, paced=True, law="compiled (numba)", wake_up="poll", stepping="direct")
     summary["commands_published"] = 11 if stop is None else 4
@@ -348,7 +349,8 @@ def test_hardware_prints_a_summary_and_json_only_with_json(tmp_path, capsys, mon
             "0 (after a long tick: 0), long tick 2 (preempted: 0)") in out
     assert "controller cost per tick (status in to command out): p50 0.3 ms, p99 1.47 ms, max 1.5 ms" in out
     assert "real-time settings: scheduler SCHED_FIFO, priority 50; pinned to core 1 (of [0, 1])" in out
-    assert "by part, p50 / p99 / max in us: receive 0 / 0 / 0; watchdog 0 / 0 / 0; wrench 0 / 0 / 0; source 0 / 0 / 0; " \
+    assert "by part, p50 / p99 / max in us: receive 0 / 0 / 0; watchdog 0 / 0 / 0; wrench 0 / 0 / 0; " \
+           "source 0 / 0 / 0; " \
            "law 300 / 1473 / 1500; command 0 / 0 / 0; publish 0 / 0 / 0; framework 0 / 0 / 0" in out
     assert "advice: 2 long ticks were the tick's own work" in out
     assert "no fault" in out

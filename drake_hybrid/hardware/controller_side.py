@@ -106,7 +106,8 @@ class ControllerStation(HybridSystems):
 
     def enabled(self, root_context: Context) -> bool:
         """True once a command may be published (a valid status has arrived)."""
-        enabled = cast(Array, self.safety.get_enabled_output_port().Eval(self.safety.GetMyContextFromRoot(root_context)))
+        safety_context = self.safety.GetMyContextFromRoot(root_context)
+        enabled = cast(Array, self.safety.get_enabled_output_port().Eval(safety_context))
         return enabled[0] > 0.5
 
     def publish_command(self, root_context: Context, utime: Optional[int] = None,
