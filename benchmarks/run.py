@@ -26,7 +26,9 @@ Measures, in one process (and the fresh processes and venv some parts need), and
    scheduler on 127.0.0.1; a point's time by stage; a fresh worker's cost (sweep_throughput.py;
    part ``sweep``);
 8. contact meshes and plant step, accuracy against cost per task (contact_resolution.py; part
-   ``resolution``, which also rewrites docs/contact_resolution.md's table).
+   ``resolution``, which also rewrites docs/contact_resolution.md's table);
+9. the controller side's tick at 1 kHz on the replayed Panda: cost per tick by part, deadline misses by
+   cause, with and without the real-time settings (realtime_tick.py; part ``realtime``, about 5 minutes).
 
 Targets (docs/performance.md): tick <= 4x the InverseDynamicsController on the UR5e,
 the Panda and the planar 3R; closed-loop RTF >= 0.8x plant alone for every task with every accuracy
@@ -54,6 +56,7 @@ import contact_resolution  # noqa: E402
 import first_run  # noqa: E402
 import in_simulation  # noqa: E402
 import python_floor  # noqa: E402
+import realtime_tick  # noqa: E402
 import sweep_throughput  # noqa: E402
 import tick  # noqa: E402
 
@@ -65,7 +68,7 @@ SCALING_ROWS = (1, 2, 3, 4, 5)
 TARGETS = {"tick_ratio": 4.0, "rtf_ratio": 0.8, "accuracy_percent_planar": 1.0,
            "accuracy_percent_6dof": 2.0, "eigenvalue_deviation_percent": 5.0, "first_run_s": 30.0,
            "warm_beyond_simulated_work_s": 5.0, "help_s": 1.0}
-PARTS = ("floor", "compile", "first_run", "sweep", "resolution")
+PARTS = ("floor", "compile", "first_run", "sweep", "resolution", "realtime")
 # Tasks whose tracking errors are the point of the task, not a defect: friction makes velocity/force
 # stall and impedance/force yield by its impedance (docs/impedance.md measures them).
 ACCURACY_NOT_APPLICABLE = {"grinding": "friction task: velocity/force stalls, impedance/force yields by design "
@@ -116,6 +119,9 @@ def targets(results):
             "value": beyond, "met": beyond <= TARGETS["warm_beyond_simulated_work_s"]}
         for key, command in (("help_s", "drake-hybrid --help"), ("simulate help_s", "drake-hybrid simulate --help")):
             verdict[f"{command}, s < 1"] = {"value": first[key], "met": first[key] < TARGETS["help_s"]}
+    for name, target in (results.get("realtime") or {}).get("targets", {}).items():
+        verdict[f"controller side's tick at 1 kHz (replayed Panda), {name}"] = {"value": target["value"] * 1e3,
+                                                                              "met": target["met"]}
     for name, r in results["robots"].items():
         ratio = r["tick_ratio"]["median"]
         verdict[f"{name}: tick <= 4x IDC (median)"] = {"value": ratio, "met": ratio <= TARGETS["tick_ratio"]}
@@ -324,6 +330,8 @@ def markdown(results):
         lines.append(f"| {name} | {k['joints']} | {k['force_rows']} | {k['controller_tick_us']:.1f} | "
                      f"{k['idc_tick_us']:.1f} | {k['tick_ratio']:.1f} |")
     lines += _floor_lines(results) + _first_run_lines(results) + _sweep_lines(results)
+    if results.get("realtime"):
+        lines += [""] + realtime_tick.markdown_lines(results["realtime"])
     lines += ["", "## Targets", "", "| target | this run | met |", "|---|---:|---|"]
     for name, v in results["targets"].items():
         met = v["met"] if v["met"] != "n/a" else f"n/a: {v['why']}"
@@ -396,6 +404,10 @@ def main(argv=None):
     if "sweep" not in args.skip:
         print("sweep throughput")
         results["sweep"] = sweep_throughput.measure(0.5, HERE / "results")
+    if "realtime" not in args.skip:
+        print("real-time tick")
+        results["realtime"] = realtime_tick.measure(seconds=2.0 if args.quick else 10.0, compare=True)
+        _save(results["realtime"], "realtime_tick.json")
     if "resolution" not in args.skip:
         print("contact meshes and plant step")
         results["resolution"] = contact_resolution.measure(args.tasks, quick=args.quick)

@@ -19,6 +19,7 @@ from pydrake.multibody.tree import MultibodyForces
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
 
+import realtime_tick  # noqa: E402
 from robots import make_robot  # noqa: E402
 from tick import hybrid_evaluation, inverse_dynamics_evaluation, sampled_update_evaluation  # noqa: E402
 
@@ -135,3 +136,21 @@ def test_the_in_simulation_profile_times_one_law_evaluation_and_one_contact_read
     assert parts["contact results"]["per_step_calls"] == 1.0
     assert result["rest_per_step_us"] > 0
     assert HybridController_[float].__dict__["_calc_solution"] is original
+
+
+def test_the_real_time_benchmark_writes_its_section(tmp_path):
+    """realtime_tick.py on a short replay: every run it compares is there with its figures, and its
+    section of RESULTS.md is replaced, not repeated, when it runs again."""
+    pytest.importorskip("cmeel")      # the Panda
+    result = realtime_tick.measure(seconds=0.03, compare=True, log=lambda line: None)
+    assert set(result["runs"]) == set(realtime_tick.RUNS)
+    for run in result["runs"].values():
+        assert run["ticks_at_rate"] == 30 and run["commands_published"] == 31 and run["stop"] is None
+        assert set(run["tick_parts_s"]) == set(realtime_tick.PARTS)
+    path = tmp_path / "RESULTS.md"
+    path.write_text("# drake_hybrid performance benchmarks\n\n## Targets\n\n| a | b |\n")
+    realtime_tick.write_results_md(result, path)
+    realtime_tick.write_results_md(result, path)
+    text = path.read_text()
+    assert text.count(realtime_tick.SECTION) == 1 and text.index("## Targets") < text.index(realtime_tick.SECTION)
+    assert "| real-time settings |" in text and "| stepped by a Simulator |" in text

@@ -291,6 +291,7 @@ def command_hardware(args):
         from drake_hybrid.hardware.controller_side import build_controller_station
         from drake_hybrid.hardware.loop import compare_with_direct
         from drake_hybrid.hardware.messages import HardwareConfig
+        from drake_hybrid.hardware.process_settings import NO_SETTINGS, RealTimeSettings
         from drake_hybrid.hardware.realtime import replay_timing, run_controller
         from drake_hybrid.report.hardware import hardware_fault_text, hardware_lines
     wait = getattr(args, "wait", None)
@@ -308,20 +309,22 @@ def command_hardware(args):
                                 wrist_sensor=args.wrench_source == "force_torque",
                                 speed=speed if args.speed is None else args.speed)
     hardware = HardwareConfig(wrench_source=args.wrench_source).validate()
+    settings = NO_SETTINGS if getattr(args, "no_realtime", False) else RealTimeSettings()
     if args.mode == "hil":
         figures = compare_with_direct(config, hardware)[0]
     elif args.mode == "timing":
         if not args.lcm_url.startswith("memq://"):
             raise UsageError(f"--lcm-url: the timing run replays the robot in this process over memq://, got "
                              f"{args.lcm_url!r}; use 'run' with a real driver")
-        timing, _ = replay_timing(config, hardware, seconds=config.duration, lcm_url=args.lcm_url)
+        timing, _ = replay_timing(config, hardware, seconds=config.duration, lcm_url=args.lcm_url, settings=settings)
         figures = timing.summary
     else:
         lcm = DrakeLcm(args.lcm_url)
         station = build_controller_station(config, lcm, hardware, initial_positions=task.joint_guess,
                                            with_loggers=False)
         print(f"waiting up to {wait:g} s for {hardware.status_channel} on {args.lcm_url} ...", file=sys.stderr)
-        timing = run_controller(station, lcm, config.duration, first_wait=wait, wall_clock_stamps=True)
+        timing = run_controller(station, lcm, config.duration, first_wait=wait, wall_clock_stamps=True,
+                                settings=settings)
         if timing.summary["commands_published"] == 0:
             print(f"drake-hybrid hardware: no valid status on {hardware.status_channel}; nothing was commanded",
                   file=sys.stderr)

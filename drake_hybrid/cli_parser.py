@@ -116,8 +116,9 @@ def build_parser(commands):
              "five design time constants and their difference."),
             ("timing", "real-time run at 1 kHz over memq:// (replayed robot): cost, jitter, deadline misses",
              "Record what the robot side sends in a lock-step run, replay it at wall-clock rate to a fresh "
-             "controller side over memq:// in this process; print the controller's cost per tick, the period "
-             "jitter and the deadline misses."),
+             "controller side over memq:// in this process; print the real-time settings applied, the controller's "
+             "cost per tick in all and by part, the period jitter, the deadline misses by cause and what to do "
+             "about each."),
             ("run", "the controller side against a real driver at --lcm-url",
              "Wait up to --wait seconds for the driver's first status at --lcm-url, then tick on each status for "
              "--duration seconds, sending torque commands; exit 1 without commanding if no valid status came. "
@@ -141,6 +142,11 @@ def build_parser(commands):
         parser_.add_argument("--speed", type=float, metavar="M/S",
                              help=f"commanded speed along the surface in m/s, any finite number (negative: the "
                                   f"other way; default {HARDWARE_DEFAULTS[mode][1]:g})")
+        if mode != "hil":
+            parser_.add_argument("--no-realtime", action="store_true",
+                                 help="leave the scheduler, the core and the garbage collector as they are (default: "
+                                      "SCHED_FIFO priority 50, pinned to the last core, collector paused, each where "
+                                      "the process may; the summary says what was applied)")
         parser_.add_argument("--json", metavar="FILE", help="also write the figures to this JSON file")
         parser_.set_defaults(func=commands["hardware"])
     tasks = sub.add_parser("tasks", parents=[common], help=COMMAND_HELP["tasks"],

@@ -34,7 +34,10 @@ from drake_hybrid.hardware.controller_side import build_controller_station
 from drake_hybrid.hardware.loop import run_hardware_loop, start_state
 from drake_hybrid.hardware.messages import HardwareConfig, HardwareFault, Rejection
 from drake_hybrid.hardware.panda import panda_config, panda_drum_task, panda_table_task, panda_urdf
-from drake_hybrid.hardware.realtime import ReplayPacer, replay_timing, run_controller, start_controller_state
+from drake_hybrid.hardware.process_settings import NO_SETTINGS
+from drake_hybrid.hardware.realtime import (ReplayPacer, TickTiming, replay_timing, run_controller,
+                                            start_controller_state, summarize)
+from drake_hybrid.hardware.tick import PARTS
 from drake_hybrid.hardware.watchdog import accept, age, force_torque_fields
 
 pytest.importorskip("cmeel")      # example-robot-data (the Panda) is a test extra
@@ -254,7 +257,7 @@ def test_a_real_time_run_paced_by_replayed_status_reports_its_timing(drum):
     """A short real-time run on memq: every tick gets its status, a command goes out for each; the
     timing figures are there (their values depend on the machine's load: not asserted)."""
     config = panda_config(drum, duration=0.2, speed=0.02)
-    timing, _ = replay_timing(config, seconds=0.2)
+    timing, _ = replay_timing(config, seconds=0.2, settings=NO_SETTINGS)
     summary = timing.summary
     assert summary["ticks"] == 201 and summary["commands_published"] == 201
     assert summary["ticks_without_new_status"] == 0 and summary["stop"] is None
@@ -276,7 +279,7 @@ def test_wall_clock_stamps_for_a_real_driver(drum):
                                  lambda data: stamps.append(lcmt_panda_command.decode(data).utime))
     before = time.time()
     run_controller(station, lcm, 0.02, pacer=ReplayPacer(lcm, recorded, 1e-3),
-                   initial_state=start_controller_state(config, start), wall_clock_stamps=True)
+                   initial_state=start_controller_state(config, start), wall_clock_stamps=True, settings=NO_SETTINGS)
     while lcm.HandleSubscriptions(0) > 0:
         pass
     del subscription
@@ -310,11 +313,30 @@ def test_hardware_modes_take_only_their_options(capsys):
         assert exit_info.value.code == 2 and option in capsys.readouterr().err
 
 
+def _timing(costs, waits, cpu=None, period=1e-3):
+    """A TickTiming of ticks 0..N: each status due at k h, handled ``waits[k]`` s later, its tick taking
+    ``costs[k]`` s of wall time (``cpu[k]`` of CPU time, default all of it), the command out at its end."""
+    costs, waits = np.asarray(costs, dtype=float), np.asarray(waits, dtype=float)
+    due = np.arange(costs.size) * period
+    arrivals = due + waits
+    published = arrivals + costs
+    parts = np.zeros((costs.size, len(PARTS)))
+    parts[:, PARTS.index("law")] = costs
+    return TickTiming(period=period, ticks=costs.size - 1, due=due, arrivals=arrivals, published=published,
+                      controller_cost=costs, cpu=costs if cpu is None else np.asarray(cpu, dtype=float), parts=parts)
+
+
 def _timing_summary(stop=None):
-    stats = {"p50": 7.5e-4, "p99": 5.1e-3, "max": 9.2e-3}
-    return {"ticks": 11, "period_s": 1e-3, "rate_hz": 1000.0, "wall_s": 0.0102, "period_jitter_s": stats,
-            "controller_cost_s": stats, "status_to_command_s": stats, "deadline_misses": 2,
-            "ticks_without_new_status": 0, "commands_published": 11 if stop is None else 4, "stop": stop}
+    """A real-time run's figures as ``run_controller`` gives them: 10 ticks at rate, two of them too long."""
+    timing = _timing([5e-3, 3e-4, 3e-4, 1.5e-3, 3e-4, 3e-4, 3e-4, 1.2e-3, 3e-4, 3e-4, 3e-4], [2e-5] * 11)
+    timing.stop = stop
+    applied = {"collector": "frozen (1000 objects) and paused for the run", "scheduler": "SCHED_FIFO, priority 50",
+               "cpu": "pinned to core 1 (of [0, 1])",
+               "idle_states": "wake-up latency held to 0 us (/dev/cpu_dma_latency)",
+               "allocated_blocks_kept_per_tick": 0.0, "load_average": [0.1, 0.2]}
+    summary = summarize(timing, applied, paced=True, law="compiled (numba)", wake_up="poll", stepping="direct")
+    summary["commands_published"] = 11 if stop is None else 4
+    return summary
 
 
 def test_hardware_prints_a_summary_and_json_only_with_json(tmp_path, capsys, monkeypatch):
@@ -323,8 +345,14 @@ def test_hardware_prints_a_summary_and_json_only_with_json(tmp_path, capsys, mon
     assert main(["hardware", "timing", "--duration", "0.01"]) == 0
     out = capsys.readouterr().out
     assert "{" not in out and "11 ticks at 1000 Hz" in out
-    assert "deadline misses (command more than 1 ms after its status was sent): 2 of 11 ticks (18.2 %)" in out
-    assert "controller cost per tick (status in to command out): p50 0.75 ms, p99 5.1 ms, max 9.2 ms" in out
+    assert ("deadline misses (command more than 1 ms after its status was due): 2 of 10 ticks (20.00 %): late wake-up "
+            "0 (after a long tick: 0), long tick 2 (preempted: 0)") in out
+    assert "controller cost per tick (status in to command out): p50 0.3 ms, p99 1.47 ms, max 1.5 ms" in out
+    assert "real-time settings: scheduler SCHED_FIFO, priority 50; pinned to core 1 (of [0, 1])" in out
+    assert "by part, p50 / p99 / max in us: receive 0 / 0 / 0; watchdog 0 / 0 / 0; wrench 0 / 0 / 0; " \
+           "source 0 / 0 / 0; " \
+           "law 300 / 1473 / 1500; command 0 / 0 / 0; publish 0 / 0 / 0; framework 0 / 0 / 0" in out
+    assert "advice: 2 long ticks were the tick's own work" in out
     assert "no fault" in out
     path = tmp_path / "timing.json"
     assert main(["hardware", "timing", "--duration", "0.01", "--json", str(path)]) == 0
@@ -332,6 +360,7 @@ def test_hardware_prints_a_summary_and_json_only_with_json(tmp_path, capsys, mon
     assert "{" not in out and f"wrote {path}" in out
     figures = json.loads(path.read_text())
     assert figures["ticks"] == 11 and figures["deadline_misses"] == 2 and figures["stop"] is None
+    assert figures["long_tick"] == 2 and set(figures["tick_parts_s"]) == set(PARTS)
 
 
 def test_a_watchdog_stop_is_reported_as_a_fault_with_exit_1(tmp_path, capsys, monkeypatch):

@@ -57,12 +57,18 @@ def value(array: Union[AutoDiffXd, ArrayLike]) -> Union[float, Array]:
     return array
 
 
+_SHORT = 64          # entries up to which all_finite sums Python floats
+
+
 def all_finite(array):
     """True if every entry (float or AutoDiffXd value) is finite. For floats one reduction: NaN and
-    inf propagate through the sum (which overflows only for entries near 1e308)."""
+    inf propagate through the sum (which overflows only for entries near 1e308); a short array is
+    summed as Python floats (a third of numpy's reduction's cost for a robot's state)."""
     array = np.asarray(array)
     if array.dtype == object:
         return bool(np.all(np.isfinite(value(array))))
+    if array.size <= _SHORT:
+        return math.isfinite(sum(array.ravel().tolist()))
     return math.isfinite(array.sum())
 
 

@@ -24,10 +24,12 @@ from pydrake.systems.framework import LeafSystem
 
 from drake_hybrid.control.sampling import tick_offset
 from drake_hybrid.core.kinematics import declare_plant_context_cache
+from drake_hybrid.core.linalg import all_finite
 from drake_hybrid.hardware.messages import HardwareFault, Rejection
 from drake_hybrid.hardware.watchdog import STATUS_FIELDS
 
 LOGGER = logging.getLogger("drake_hybrid.hardware")
+_STOPS = (HardwareFault.STATUS_STALE, HardwareFault.FORCE_TORQUE_STALE)
 
 
 class DriverGravityCompensation(LeafSystem):
@@ -56,16 +58,21 @@ class DriverGravityCompensation(LeafSystem):
         self._torque_port = self.DeclareVectorInputPort("torque", n)
         self._state_port = self.DeclareVectorInputPort("estimated_state", plant.num_multibody_states())
         self._context_cache = declare_plant_context_cache(self, plant, self._state_port)
-        self._actuation_from_torque = np.linalg.inv(plant.MakeActuationMatrix())
+        actuation_from_torque = np.linalg.inv(plant.MakeActuationMatrix())
+        # None for an identity actuation matrix (one actuator per joint, in joint order): B^-1 g = g exactly.
+        self._actuation_from_torque = (None if np.array_equal(actuation_from_torque, np.eye(n))
+                                       else actuation_from_torque)
         self.DeclareVectorOutputPort("torque", n, self._calc)
 
     def gravity(self, context):
         """g(q) at the state on ``estimated_state``, in actuation order."""
         plant_context = self._context_cache.Eval(context)
-        return self._actuation_from_torque @ -self._plant.CalcGravityGeneralizedForces(plant_context)
+        torque = -self._plant.CalcGravityGeneralizedForces(plant_context)
+        return torque if self._actuation_from_torque is None else self._actuation_from_torque @ torque
 
     def _calc(self, context, output):
-        output.SetFromVector(self._torque_port.Eval(context) + self._sign * self.gravity(context))
+        torque, gravity = self._torque_port.Eval(context), self.gravity(context)
+        output.SetFromVector(torque + gravity if self._sign > 0 else torque - gravity)
 
 
 class TorqueCommandSafety(LeafSystem):
@@ -123,8 +130,11 @@ class TorqueCommandSafety(LeafSystem):
         offset = tick_offset(self.period) + 0.5 * (self.period - tick_offset(self.period))
         self.DeclarePeriodicDiscreteUpdateEvent(self.period, offset, self._update)
         self.DeclareVectorOutputPort("torque", n, self._calc_torque, prerequisites_of_calc={self.xd_ticket()})
-        self.DeclareVectorOutputPort("enabled", 1, self._calc_enabled)
+        self._enabled_port = self.DeclareVectorOutputPort("enabled", 1, self._calc_enabled)
         self.DeclareVectorOutputPort("stop", 2, self._calc_stop, prerequisites_of_calc={self.xd_ticket()})
+
+    def get_enabled_output_port(self):
+        return self._enabled_port
 
     def set_initial_command(self, context, command):
         """The command the first one is rate-limited against (e.g. what the driver holds at the start)."""
@@ -149,12 +159,11 @@ class TorqueCommandSafety(LeafSystem):
         """(state after this tick, the reason of a stop that starts now or None)."""
         state = context.get_discrete_state(0).CopyToVector()
         status = self._status_port.Eval(context)
-        current = HardwareFault(int(status[0]))
-        latched = HardwareFault(int(state[self._layout["fault"]]))
+        # HardwareFault values as ints (an IntEnum compares equal to its value; making one costs more).
+        current, latched = int(status[0]), int(state[self._layout["fault"]])
         reason = None
-        stops = (HardwareFault.STATUS_STALE, HardwareFault.FORCE_TORQUE_STALE)
         escalate = latched == HardwareFault.FORCE_TORQUE_STALE and current == HardwareFault.STATUS_STALE
-        if current in stops and (latched == HardwareFault.NONE or escalate):
+        if current in _STOPS and (latched == HardwareFault.NONE or escalate):
             state[self._layout["fault"]] = float(current)
             state[self._layout["time"]] = context.get_time()
             state[self._layout["details"]] = status[1:5]
@@ -177,16 +186,17 @@ class TorqueCommandSafety(LeafSystem):
         else:                                              # FORCE_TORQUE_STALE: hold the joints at the stop
             x = self._state_port.Eval(context)
             wanted = self.hold_stiffness * (state[self._layout["hold"]] - x[:n]) - self.hold_damping * x[n:]
-        if not np.all(np.isfinite(wanted)):
+        if not all_finite(wanted):
             wanted = np.zeros(n)
-        wanted = np.clip(wanted, -self.torque_limits, self.torque_limits)
-        return np.clip(wanted, previous - self.max_step, previous + self.max_step)
+        # np.clip, twice, written out (np.clip's dispatch costs more than the two comparisons).
+        wanted = np.minimum(np.maximum(wanted, -self.torque_limits), self.torque_limits)
+        return np.minimum(np.maximum(wanted, previous - self.max_step), previous + self.max_step)
 
     def _calc_torque(self, context, output):
         output.SetFromVector(context.get_discrete_state(0).get_value()[self._layout["command"]])
 
     def _calc_enabled(self, context, output):
-        waiting = HardwareFault(int(self._status_port.Eval(context)[0])) == HardwareFault.WAITING_FOR_STATUS
+        waiting = int(self._status_port.Eval(context)[0]) == HardwareFault.WAITING_FOR_STATUS
         output.SetFromVector([0.0 if waiting else 1.0])
 
     def _calc_stop(self, context, output):

@@ -4,18 +4,23 @@
 ``build_controller_station(config, lcm, hardware)`` returns a ``ControllerStation`` whose
 ``diagram`` is::
 
-    LcmSubscriberSystem(lcmt_panda_status) ──► MessageWatchdog ──estimated_state──────────────┬──► HybridController
-    LcmSubscriberSystem(lcmt_force_torque) ──►      │  ──sensor_wrench──► ForceTorqueConditioning ─►[filter]─┘   │
-                                                    │  (or torque_external ──► ExternalTorqueWrench)              │
-    ProfileSource / the task's source ──desired_*───┼────────────────────────────────────────────► (controller)  │
-                                   [with gain_changes: a HybridController per gain set ─► GainSelector ─► actuation]
-                                                    └──watchdog_status──► TorqueCommandSafety ◄── DriverGravityCompensation ◄── actuation
-                                                                               │ torque
-                                                          PandaCommandSender(kTorque) ──► LcmPublisherSystem (forced only)
+    (input) lcmt_panda_status ──► MessageWatchdog ──estimated_state──────────────────────┬──► HybridController
+    (input) lcmt_force_torque ──►      │  ──sensor_wrench──► ForceTorqueConditioning ─►[filter]─┘   │
+                                       │  (or torque_external ──► ExternalTorqueWrench)              │
+    ProfileSource / the task's source ──desired_*─────────────────────────────────► (controller)    │
+                        [with gain_changes: a HybridController per gain set ─► GainSelector ─► actuation]
+                                       └─watchdog_status─► TorqueCommandSafety ◄─ DriverGravityCompensation ◄─ actuation
+                                                                  │ torque
+                                             PandaCommandSender(kTorque) ──► LcmPublisherSystem (forced only)
 
-The command publisher publishes only when the runner asks (``ControllerStation.publish_command``),
-and the runner asks only while ``TorqueCommandSafety``'s ``enabled`` output is 1: nothing is sent
-before the first valid status. Loggers carry the same names as the directly wired scenario's, so
+The messages come in on the diagram's input ports ``lcmt_panda_status`` and (with an F/T sensor)
+``lcmt_force_torque``, as decoded ``drake.lcmt_*`` objects: ``hardware.tick.ControllerTick``
+subscribes to the channels on ``lcm``, decodes each message once and sets the newest on the ports
+(an LcmSubscriberSystem would copy the Python message into its state and again into its output:
+three deep copies of a Panda status, 28 us each). The command publisher publishes only when the
+runner asks (``ControllerStation.publish_command``), and the runner asks only while
+``TorqueCommandSafety``'s ``enabled`` output is 1: nothing is sent before the first valid status.
+Loggers carry the same names as the directly wired scenario's, so
 ``experiments.simulation.collect_log`` and ``summarize`` read them unchanged ("state" is the
 *measured* state here).
 """
@@ -32,7 +37,7 @@ from numpy.typing import ArrayLike
 from pydrake.lcm import DrakeLcmInterface
 from pydrake.manipulation import PandaCommandSender, PandaControlMode
 from pydrake.systems.framework import Context, DiagramBuilder, TriggerType
-from pydrake.systems.lcm import LcmPublisherSystem, LcmSubscriberSystem
+from pydrake.systems.lcm import LcmPublisherSystem
 from pydrake.systems.primitives import LogVectorOutput
 
 from drake_hybrid.control.controller import HybridController
@@ -52,6 +57,9 @@ from drake_hybrid.station.sensing import add_wrench_path
 from drake_hybrid.tasks.config import ScenarioConfig
 from drake_hybrid.tasks.plant import build_controller_plant
 from drake_hybrid.tasks.task import Task
+
+# The diagram's input ports the messages come in on (decoded drake.lcmt_* objects).
+STATUS_INPUT, FORCE_TORQUE_INPUT = "lcmt_panda_status", "lcmt_force_torque"
 
 
 @dataclass(kw_only=True)
@@ -98,16 +106,19 @@ class ControllerStation(HybridSystems):
 
     def enabled(self, root_context: Context) -> bool:
         """True once a command may be published (a valid status has arrived)."""
-        enabled = cast(Array, self.safety.GetOutputPort("enabled").Eval(self.safety.GetMyContextFromRoot(root_context)))
+        safety_context = self.safety.GetMyContextFromRoot(root_context)
+        enabled = cast(Array, self.safety.get_enabled_output_port().Eval(safety_context))
         return enabled[0] > 0.5
 
-    def publish_command(self, root_context: Context, utime: Optional[int] = None) -> bool:
+    def publish_command(self, root_context: Context, utime: Optional[int] = None,
+                        enabled: Optional[bool] = None) -> bool:
         """Publish the command of this tick if ``enabled``; returns whether it did.
 
         ``utime`` (int us) stamps the message with another clock than the diagram's: a real
         drake-franka-driver drops commands whose utime is more than --expire_sec from its
-        wall clock (epoch us), so ``run_controller(wall_clock_stamps=True)`` passes it."""
-        if not self.enabled(root_context):
+        wall clock (epoch us), so ``run_controller(wall_clock_stamps=True)`` passes it.
+        ``enabled``: ``self.enabled`` as already evaluated in this tick (None: evaluated here)."""
+        if not (self.enabled(root_context) if enabled is None else enabled):
             return False
         if utime is None:
             self.command_publisher.ForcedPublish(self.command_publisher.GetMyContextFromRoot(root_context))
@@ -181,19 +192,15 @@ def build_controller_station(config: ScenarioConfig, lcm: DrakeLcmInterface, har
         raise ConfigError(f"hardware.torque_limits must have {n} entries (one per joint), got {len(limits)}")
 
     builder = DiagramBuilder()
-    # The arm's messages: its state and the wrench the law reads.
-    status_subscriber = builder.AddNamedSystem("status_subscriber", LcmSubscriberSystem.Make(
-        hardware.status_channel, lcmt_panda_status, lcm))
+    # The arm's messages (the diagram's inputs): its state and the wrench the law reads.
     watchdog = MessageWatchdog(n, period, hardware.max_status_age, hardware.max_force_torque_age, use_force_torque,
                                initial_positions=initial_positions, status_type=lcmt_panda_status,
                                force_torque_type=lcmt_force_torque)
     builder.AddNamedSystem("watchdog", watchdog)
-    builder.Connect(status_subscriber.get_output_port(), watchdog.get_status_input_port())
+    builder.ExportInput(watchdog.get_status_input_port(), STATUS_INPUT)
     state = watchdog.GetOutputPort("estimated_state")
     if use_force_torque:
-        force_torque_subscriber = builder.AddNamedSystem("force_torque_subscriber", LcmSubscriberSystem.Make(
-            hardware.force_torque_channel, lcmt_force_torque, lcm))
-        builder.Connect(force_torque_subscriber.get_output_port(), watchdog.get_force_torque_input_port())
+        builder.ExportInput(watchdog.get_force_torque_input_port(), FORCE_TORQUE_INPUT)
         wrench = builder.AddNamedSystem("force_torque_conditioning", ForceTorqueConditioning(
             plant, robot.tool_weld, robot.end_effector_frame, robot.end_effector_point, hardware.force_torque_bias))
         builder.Connect(watchdog.GetOutputPort("sensor_wrench"), wrench.GetInputPort("sensor_wrench"))

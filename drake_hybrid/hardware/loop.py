@@ -25,7 +25,7 @@ each phase of a tick took).
 import dataclasses
 import time
 from dataclasses import dataclass, field
-from typing import Dict, Optional
+from typing import Dict, Optional, Tuple
 
 import numpy as np
 from drake import lcmt_force_torque, lcmt_panda_command, lcmt_panda_status
@@ -34,11 +34,13 @@ from pydrake.lcm import DrakeLcm
 from pydrake.systems.analysis import ApplySimulatorConfig, Simulator
 
 from drake_hybrid.control.sampling import SAMPLE_LEAD
+from drake_hybrid.core.hints import Array
 from drake_hybrid.experiments.simulation import collect_log, simulate, summarize
 from drake_hybrid.experiments.summary import RunSummary
 from drake_hybrid.hardware.controller_side import build_controller_station, check_hardware_config
 from drake_hybrid.hardware.messages import HardwareConfig, HardwareFault
 from drake_hybrid.hardware.robot_side import build_robot_station
+from drake_hybrid.hardware.tick import ControllerTick
 from drake_hybrid.hardware.watchdog import ARRIVAL, LATENCY
 from drake_hybrid.scenario.builder import build_scenario
 from drake_hybrid.scenario.start import set_initial_conditions, static_torque
@@ -98,6 +100,10 @@ class HardwareRun:
     timing: Dict[str, object] = field(default_factory=dict)
 
 
+# (plant state, arm q0, static torque, first wrench reading, controller integrals): ``start_state``'s.
+StartState = Tuple[Array, Array, Array, Array, Array]
+
+
 def start_state(config):
     """What the directly wired scenario starts from: (plant state, arm q0, static torque, first
     wrench reading, controller integrals) -- the same start for the hardware loop."""
@@ -115,12 +121,15 @@ def start_state(config):
 
 
 def run_hardware_loop(config, hardware=None, duration=None, lcm_url="memq://drake_hybrid_hil", fault=None,
-                      robot_hardware=None, connect_robot=True, record=False, sensor_bias=None, gain_changes=()):
+                      robot_hardware=None, connect_robot=True, record=False, sensor_bias=None, gain_changes=(),
+                      stepping="direct"):
     """Run ``config`` as controller side + simulated robot over LCM in lock step (module docstring).
 
     ``fault`` (kind, message, time) -> message or None puts a ``MessageFaultRelay`` between the
     robot's channels (``robot_hardware``, default: the controller's names + "_ROBOT") and the
     controller's. ``connect_robot=False`` runs the controller side alone (no status ever arrives).
+    The controller side ticks as it does at real-time rate (``tick.ControllerTick``, ``stepping``
+    "direct"; "simulator": advanced by a Simulator, the reference the direct stepping equals).
     """
     if not lcm_url.startswith("memq://"):
         raise ValueError(f"run_hardware_loop runs in one process over memq:// only, got {lcm_url!r}")
@@ -171,7 +180,7 @@ def run_hardware_loop(config, hardware=None, duration=None, lcm_url="memq://drak
 
     robot_simulator = Simulator(robot.diagram, robot_context)
     ApplySimulatorConfig(config.simulator, robot_simulator)
-    controller_simulator = Simulator(controller.diagram, controller_context)
+    tick = ControllerTick(controller, controller_context, stepping)
     published, first_command = 0, None
     wall = {"robot": [], "controller": [], "messages": []}
     status_delay = []
@@ -180,9 +189,8 @@ def run_hardware_loop(config, hardware=None, duration=None, lcm_url="memq://drak
         robot.diagram.ForcedPublish(robot_context)
     pump(lcm)
     recorded.append(bucket[:]), bucket.clear()
-    controller_simulator.Initialize()
-    controller.safety.initialize_command(controller.safety.GetMyMutableContextFromRoot(controller_context))
-    if controller.publish_command(controller_context):
+    tick.initialize()
+    if tick.publish():
         published, first_command = 1, 0.0
     pump(lcm)
     robot_simulator.Initialize()
@@ -198,9 +206,8 @@ def run_hardware_loop(config, hardware=None, duration=None, lcm_url="memq://drak
         pump(lcm)
         t2 = time.perf_counter()
         recorded.append(bucket[:]), bucket.clear()
-        controller.before_tick(controller_context, k)
-        controller_simulator.AdvanceTo(k * period + 0.5 * lead)
-        if controller.publish_command(controller_context):
+        tick.advance(k)
+        if tick.publish():
             published += 1
             first_command = k * period if first_command is None else first_command
         t3 = time.perf_counter()
@@ -228,6 +235,7 @@ def run_hardware_loop(config, hardware=None, duration=None, lcm_url="memq://drak
               "wall_message_delivery_s": percentiles(wall["messages"]), "wall_total_s": elapsed,
               "relay": None if relay is None else {"forwarded": relay.forwarded, "dropped": relay.dropped}}
     del listener, recorders
+    tick.close()
     if record:
         timing["recorded"] = recorded
     log["wire_t"] = np.array([stamp for stamp, _ in wire])

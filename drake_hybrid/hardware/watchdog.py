@@ -31,6 +31,9 @@ from drake_hybrid.hardware.messages import HardwareFault, Rejection
 SEEN, STAMP, ARRIVAL, LATENCY, OFFSET, REJECTION, VALUES = range(7)
 # Layout of the ``watchdog_status`` output.
 STATUS_FIELDS = ("fault", "status_age", "force_torque_age", "status_rejection", "force_torque_rejection")
+# The faults as the floats the status output carries.
+_NONE, _WAITING_FOR_STATUS, _STATUS_STALE, _FORCE_TORQUE_STALE = (float(fault) for fault in (
+    HardwareFault.NONE, HardwareFault.WAITING_FOR_STATUS, HardwareFault.STATUS_STALE, HardwareFault.FORCE_TORQUE_STALE))
 
 
 def status_fields(message, n):
@@ -40,9 +43,10 @@ def status_fields(message, n):
         return None
     if message.num_joints != n or len(message.joint_position) != n:
         return message.utime * 1e-6, None, Rejection.WRONG_SIZE
-    values = np.concatenate([message.joint_position, message.joint_velocity, message.joint_torque_external])
-    if values.shape != (3 * n,):
+    values = list(message.joint_position) + list(message.joint_velocity) + list(message.joint_torque_external)
+    if len(values) != 3 * n:
         return message.utime * 1e-6, None, Rejection.WRONG_SIZE
+    values = np.array(values, dtype=float)
     if not all_finite(values):
         return message.utime * 1e-6, None, Rejection.NON_FINITE
     return message.utime * 1e-6, values, Rejection.NONE
@@ -138,14 +142,17 @@ class MessageWatchdog(LeafSystem):
         self.DeclareDiscreteState(VALUES + 6)
         self.DeclarePeriodicDiscreteUpdateEvent(self.period, tick_offset(self.period), self._update)
         self.DeclareInitializationDiscreteUpdateEvent(self._update)
+        # The messages on the inputs parsed (status_fields, force_torque_fields): once per message.
+        self._parsed = declare_cached_value(self, "parsed messages", self._parse, {self.all_input_ports_ticket()})
         # The records as of now (state + what is on the inputs), computed once per change of either.
-        self._records = declare_cached_value(
-            self, "records", lambda context: (self._status_record_now(context), self._force_torque_record_now(context)),
-            {self.time_ticket(), self.xd_ticket(), self.all_input_ports_ticket()})
-        self.DeclareVectorOutputPort("estimated_state", 2 * n, self._calc_state)
-        self.DeclareVectorOutputPort("torque_external", n, self._calc_torque_external)
-        self.DeclareVectorOutputPort("sensor_wrench", 6, self._calc_sensor_wrench)
-        self.DeclareVectorOutputPort("watchdog_status", len(STATUS_FIELDS), self._calc_status)
+        self._records = declare_cached_value(self, "records", self._records_now,
+                                             {self.time_ticket(), self.xd_ticket(), self.all_input_ports_ticket()})
+        records = {self._records.ticket()}
+        self.DeclareVectorOutputPort("estimated_state", 2 * n, self._calc_state, prerequisites_of_calc=records)
+        self.DeclareVectorOutputPort("torque_external", n, self._calc_torque_external, prerequisites_of_calc=records)
+        self.DeclareVectorOutputPort("sensor_wrench", 6, self._calc_sensor_wrench, prerequisites_of_calc=records)
+        self.DeclareVectorOutputPort("watchdog_status", len(STATUS_FIELDS), self._calc_status,
+                                     prerequisites_of_calc=records)
 
     def get_status_input_port(self):
         return self._status_port
@@ -154,21 +161,18 @@ class MessageWatchdog(LeafSystem):
         return self._force_torque_port
 
     # -- the records as of now (state + what is on the inputs) -----------------------------------
-    def _status_record(self, context):
-        return self._records.Eval(context)[0]
-
-    def _force_torque_record(self, context):
-        return self._records.Eval(context)[1]
-
-    def _status_record_now(self, context):
-        fields = status_fields(self._status_port.Eval(context), self.num_joints)
-        return accept(context.get_discrete_state(0).CopyToVector(), fields, context.get_time())
-
-    def _force_torque_record_now(self, context):
-        record = context.get_discrete_state(1).CopyToVector()
+    def _parse(self, context):
+        status = status_fields(self._status_port.Eval(context), self.num_joints)
         if self._force_torque_port is None:
-            return record
-        return accept(record, force_torque_fields(self._force_torque_port.Eval(context)), context.get_time())
+            return status, None
+        return status, force_torque_fields(self._force_torque_port.Eval(context))
+
+    def _records_now(self, context):
+        """(status record, F/T record) after the messages on the inputs arrived now."""
+        status, force_torque = self._parsed.Eval(context)
+        now = context.get_time()
+        return (accept(context.get_discrete_state(0).CopyToVector(), status, now),
+                accept(context.get_discrete_state(1).CopyToVector(), force_torque, now))
 
     def status(self, context):
         """{name: value} of ``watchdog_status`` at ``context`` (fault as a HardwareFault)."""
@@ -178,29 +182,29 @@ class MessageWatchdog(LeafSystem):
         return status
 
     def _calc_state(self, context, output):
-        record = self._status_record(context)
+        record = self._records.Eval(context)[0]
         n = self.num_joints
         output.SetFromVector(record[VALUES:VALUES + 2 * n] if record[SEEN] > 0 else self._initial_state)
 
     def _calc_torque_external(self, context, output):
         n = self.num_joints
-        output.SetFromVector(self._status_record(context)[VALUES + 2 * n:])
+        output.SetFromVector(self._records.Eval(context)[0][VALUES + 2 * n:])
 
     def _calc_sensor_wrench(self, context, output):
-        output.SetFromVector(self._force_torque_record(context)[VALUES:])
+        output.SetFromVector(self._records.Eval(context)[1][VALUES:])
 
     def _calc_status(self, context, output):
         now = context.get_time()
-        status, force_torque = self._status_record(context), self._force_torque_record(context)
+        status, force_torque = self._records.Eval(context)
         status_age, force_torque_age = age(status, now), age(force_torque, now)
-        fault = HardwareFault.NONE
+        fault = _NONE
         if status[SEEN] <= 0:
-            fault = HardwareFault.WAITING_FOR_STATUS
+            fault = _WAITING_FOR_STATUS
         elif status_age > self.max_status_age:
-            fault = HardwareFault.STATUS_STALE
+            fault = _STATUS_STALE
         elif self.use_force_torque and force_torque_age > self.max_force_torque_age:
-            fault = HardwareFault.FORCE_TORQUE_STALE
-        output.SetFromVector([float(fault), status_age, force_torque_age if self.use_force_torque else 0.0,
+            fault = _FORCE_TORQUE_STALE
+        output.SetFromVector([fault, status_age, force_torque_age if self.use_force_torque else 0.0,
                               status[REJECTION], force_torque[REJECTION]])
 
     def _update(self, context, discrete_state):

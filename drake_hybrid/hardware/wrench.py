@@ -24,11 +24,6 @@ from pydrake.systems.framework import LeafSystem
 from drake_hybrid.core.kinematics import declare_plant_context_cache, resolve_frame
 
 
-def shift(F, p_from_to_W):
-    """A spatial force [n; f] at A shifted to B (p_from_to = p_AB): n_B = n_A - p_AB x f."""
-    return np.concatenate([F[:3] - np.cross(p_from_to_W, F[3:]), F[3:]])
-
-
 class ForceTorqueConditioning(LeafSystem):
     """The contact wrench at P from an F/T reading in the wrist weld.
 
@@ -57,6 +52,7 @@ class ForceTorqueConditioning(LeafSystem):
         self._gravity = plant.gravity_field().gravity_vector()
         self._frame = resolve_frame(plant, end_effector_frame)
         self._point = np.asarray(end_effector_point, dtype=float)
+        self._weight = (self._tool_mass * self._gravity).tolist()
         self.bias = np.zeros(6) if bias is None else np.asarray(bias, dtype=float)
         self._wrench_port = self.DeclareVectorInputPort("sensor_wrench", 6)
         self._state_port = self.DeclareVectorInputPort("estimated_state", plant.num_multibody_states())
@@ -64,16 +60,27 @@ class ForceTorqueConditioning(LeafSystem):
         self.DeclareVectorOutputPort("wrench", 6, self._calc)
 
     def _calc(self, context, output):
+        # The formula of the module docstring in floats: np.cross and np.concatenate cost more than the
+        # arithmetic on three-vectors (the same operations in the same order: the same result; a point's
+        # position from CalcPointsPositions is X_WF p as RigidTransform.multiply computes it).
         plant_context = self._context_cache.Eval(context)
         X_WS = self._sensor_frame.CalcPoseInWorld(plant_context)
-        X_WT = self._tool_frame.CalcPoseInWorld(plant_context)
-        p_WP = self._frame.CalcPoseInWorld(plant_context).multiply(self._point)
+        p_WS = X_WS.translation()
         R_WS = X_WS.rotation().matrix()
+        world = self._plant.world_frame()
+        p_WP = self._plant.CalcPointsPositions(plant_context, self._frame, self._point, world).ravel()
+        p_Wcom = self._plant.CalcPointsPositions(plant_context, self._tool_frame, self._tool_com, world).ravel()
         reading = self._wrench_port.Eval(context) - self.bias
-        reading_W = np.concatenate([R_WS @ reading[:3], R_WS @ reading[3:]])
-        p_Wcom = X_WT.multiply(self._tool_com)
-        weight = np.concatenate([np.zeros(3), self._tool_mass * self._gravity])
-        output.SetFromVector(shift(reading_W, p_WP - X_WS.translation()) - shift(weight, p_WP - p_Wcom))
+        tx, ty, tz = (R_WS @ reading[:3]).tolist()
+        fx, fy, fz = (R_WS @ reading[3:]).tolist()
+        ax, ay, az = (p_WP - p_WS).tolist()                 # S -> P
+        bx, by, bz = (p_WP - p_Wcom).tolist()               # com -> P
+        wx, wy, wz = self._weight                           # m_t g
+        # shift(reading_W, a) - shift([0; w], b): n = t - a x f - (0 - b x w), f = f - w
+        output.SetFromVector([tx - (ay * fz - az * fy) - (0.0 - (by * wz - bz * wy)),
+                              ty - (az * fx - ax * fz) - (0.0 - (bz * wx - bx * wz)),
+                              tz - (ax * fy - ay * fx) - (0.0 - (bx * wy - by * wx)),
+                              fx - wx, fy - wy, fz - wz])
 
 
 class ExternalTorqueWrench(LeafSystem):
