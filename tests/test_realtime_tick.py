@@ -57,6 +57,17 @@ def test_the_direct_tick_is_the_simulators_to_the_bit(drum, variant):
     assert len(direct["wire_command"]) == 61
 
 
+def assert_collector_restored(enabled, frozen):
+    """The collector as it was before a run: enabled or not as before, and nothing frozen if nothing was.
+    A process that had frozen objects already (``cli.main`` freezes its imports) keeps the ones frozen for
+    the run too: Python cannot unfreeze a part of them (``process_settings``)."""
+    assert gc.isenabled() == enabled
+    if frozen == 0:
+        assert gc.get_freeze_count() == 0
+    else:
+        assert gc.get_freeze_count() >= frozen
+
+
 def test_a_real_time_run_reports_its_tick_by_part_and_restores_the_process(drum):
     """A short replayed run with the default real-time settings: the tick's parts are there for every
     tick and lie within it; the collector, the scheduler and the core are as they were afterwards."""
@@ -64,7 +75,7 @@ def test_a_real_time_run_reports_its_tick_by_part_and_restores_the_process(drum)
     enabled, frozen = gc.isenabled(), gc.get_freeze_count()
     scheduler, affinity = os.sched_getscheduler(0), os.sched_getaffinity(0)
     timing, _ = replay_timing(config, seconds=0.05)
-    assert gc.isenabled() == enabled and gc.get_freeze_count() == frozen
+    assert_collector_restored(enabled, frozen)
     assert os.sched_getscheduler(0) == scheduler and os.sched_getaffinity(0) == affinity
     summary = timing.summary
     assert summary["ticks"] == 51 and summary["commands_published"] == 51 and summary["stop"] is None
@@ -123,7 +134,7 @@ def test_real_time_settings_are_refused_politely_and_undone(monkeypatch):
         assert report["cpu"].startswith("not pinned: core") and os.sched_getaffinity(0) == affinity
         assert report["idle_states"].startswith("left as they are: /dev/cpu_dma_latency refused")
         assert report["collector"].startswith("frozen") and not gc.isenabled()
-    assert gc.isenabled() == enabled and gc.get_freeze_count() == frozen
+    assert_collector_restored(enabled, frozen)
     with pytest.raises(RuntimeError, match="inside"):
         with real_time(RealTimeSettings(priority=None, cpu=-1)) as report:
             assert report["scheduler"].startswith("left as it is")

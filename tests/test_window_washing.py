@@ -106,7 +106,8 @@ def test_cli_simulate_and_analyze_write_the_documented_files(tmp_path, capsys):
     assert log["torque"].shape == (n, 3)
     summary = json.loads((out / "summary.json").read_text())
     assert summary["mode"] == "velocity-force"
-    assert set(summary["gains"]) == {"velocity", "position", "force_proportional", "force_integral", "impedance_mass"}
+    assert set(summary["gains"]) == {"velocity", "position", "force_proportional", "force_integral", "force_damping",
+                                     "impedance_mass"}
     assert summary["gains"]["velocity"] == [[10.0, 0.0], [0.0, 8.0]]
     assert summary["predicted_eigenvalues"] == [[-10.0, 0.0], [-8.0, 0.0], [-10.0, 0.0]]
     assert (out / "velocity_tracking.png").stat().st_size > 10_000

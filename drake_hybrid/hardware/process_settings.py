@@ -140,6 +140,8 @@ def _collector(settings: RealTimeSettings, report: Dict[str, object], undo: cont
     report["collector"] = f"frozen ({gc.get_freeze_count()} objects) and paused for the run"
 
     def restore() -> None:
+        # A process frozen before (cli.main freezes its imports) keeps the run's objects frozen too: gc can
+        # only unfreeze all of them, which would hand the caller's frozen objects back to the collector.
         if not was_frozen:
             gc.unfreeze()
         if was_enabled:
