@@ -119,6 +119,8 @@ def sweep():
 
 
 def run():
+    """Every part, each written to docs/paths.json (and the page) as soon as it is measured: a part that fails
+    leaves the ones before it."""
     results = []
     task = get_task("surface-polishing")
     results.append(job("sphere", "surface-polishing", task.default_config()))
@@ -126,7 +128,12 @@ def run():
     results.append(job("bump", "models/tasks/raster_bump.yaml", bump_config))
     results.append(job("saddle", "surface-polishing --option workpiece=saddle",
                        task.default_config(options={"workpiece": "saddle"})))
-    return {"jobs": results, "step_halved": step_halved(), "sweep": sweep(), "surfaces": path_surfaces.run()}
+    everything = json.loads((ROOT / "docs" / "paths.json").read_text())
+    everything["jobs"] = results
+    for part, measure in (("step_halved", step_halved), ("sweep", sweep), ("surfaces", path_surfaces.run)):
+        write(everything)
+        everything[part] = measure()
+    return everything
 
 
 def _mm(value):

@@ -37,7 +37,8 @@ from drake_hybrid.station.contact import apply_contact_defaults, default_plant_c
 from drake_hybrid.station.contact_start import solve_approach_start, solve_contact_start
 from drake_hybrid.station.loggers import add_loggers, read_log
 from drake_hybrid.station.loop import add_hybrid_controller
-from drake_hybrid.station.path_config import ForcePointConfig, WaypointConfig
+from drake_hybrid.station.path_config import ForcePointConfig, PathConfig, PatternConfig, ViewConfig, WaypointConfig
+from drake_hybrid.station.path_job import path_job
 from drake_hybrid.station.start import prime_start
 from drake_hybrid.station.workpieces import add_rigid_workpiece
 from drake_hybrid.systems.path_source import reference_rotation
@@ -107,6 +108,28 @@ def test_a_held_path_presses_with_the_force_it_commands_where_it_is_held():
               for a, f in ((0.0, 9.0), (0.1, 12.0), (0.2, 15.0))]
     held = with_path(config, pattern=type(config.path.pattern)(), waypoints=points, hold_at=1.0)
     assert prepare_config(held).config.desired_force.evaluate(0.0)[0][0] == pytest.approx(15.0)
+
+
+@pytest.mark.parametrize("hold_at", [0.0, 0.5, 1.0])
+@pytest.mark.parametrize("name", SURFACES)
+def test_a_held_paths_start_pose_is_at_rest_against_the_path_reference(name, hold_at):
+    """``PathJob.pose_at_depth``: the approach vector where the held rows want it (along -held_normal) and no
+    turn about it against the path's reference (``PathSource``'s spin row reads zero). On the height map the
+    held normal (its second-order distance's gradient at the pad centre) is a few mrad off the map's normal;
+    building the frame again from the heading turned it up to 0.7 mrad about the approach vector, which K_p
+    pulled on: the UR10's held raster on the bump was refused as no equilibrium at h = 1 (max |x-dot| 0.143)."""
+    surface = SURFACES[name]()
+    settings = PathConfig(pattern=PatternConfig(kind="raster", size=[0.03, 0.015], spacing=0.015, center=[0.02, 0.01]),
+                          force=10.0, view=ViewConfig(), hold_at=hold_at)
+    job = path_job(surface, PAD, settings)
+    X_WP, normal = job.start_pose()
+    for depth in (-0.005, 0.0, 0.001):
+        R = job.pose_at_depth(depth).rotation().matrix()
+        held = surface.held_normal(job.pose_at_depth(depth).translation(), PAD)
+        np.testing.assert_allclose(R[:, 2], -held, atol=1e-12)
+        turn = R @ np.asarray(reference_rotation(normal, job.heading)).T
+        spin = 0.5 * np.array([turn[2, 1] - turn[1, 2], turn[0, 2] - turn[2, 0], turn[1, 0] - turn[0, 1]]) @ R[:, 2]
+        assert abs(spin) < 1e-12, spin
 
 
 @pytest.mark.slow

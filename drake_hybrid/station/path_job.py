@@ -34,6 +34,7 @@ from drake_hybrid.control.supervision import SupervisionConfig
 from drake_hybrid.core.arguments import instance, vector
 from drake_hybrid.core.errors import PathError
 from drake_hybrid.core.height_map import HeightMapSurface
+from drake_hybrid.core.hints import Array
 from drake_hybrid.core.paths import PathLimits, SurfacePath, path_from_strokes, path_from_waypoints
 from drake_hybrid.core.patterns import raster, spiral
 from drake_hybrid.core.surfaces import Surface, ViewPlane, check_offset
@@ -75,11 +76,18 @@ class PathJob:
     def pose_at_depth(self, depth: float) -> RigidTransform:
         """The pad centre's pose ``depth`` (m) beyond the path's first point along its inward normal
         (negative: above it), turned as the constraint's held rows want it there
-        (``Surface.held_normal``), not as the surface point's normal."""
+        (``Surface.held_normal``), not as the surface point's normal: the path's reference orientation
+        there (``reference_rotation`` of the surface normal and the heading) turned by the smallest rotation
+        that takes its approach vector onto the held one. That turn has no part about the approach vector, so
+        the spin row's position error (``PathSource``) is zero there too: a held path is at rest where the
+        held normal is not the surface point's (a height map's rows, a distance to second order, differ from
+        the map's normal by a few mrad; building the frame again from the heading turned it 0.7 mrad about
+        the approach vector, which K_p pulled on)."""
         X_WP, normal = self.start_pose()
         centre = X_WP.translation() - float(depth) * normal
-        rotation = RotationMatrix(reference_rotation(self.surface.held_normal(centre, self.offset), self.heading))
-        return RigidTransform(rotation, centre)
+        reference = np.asarray(reference_rotation(normal, self.heading))
+        rotation = _smallest_turn(-normal, -self.surface.held_normal(centre, self.offset)) @ reference
+        return RigidTransform(RotationMatrix(rotation), centre)
 
     def duration(self, supervision: Optional[SupervisionConfig] = None, gap: Optional[float] = None) -> float:
         """The simulated time the job needs (s, rounded up to 0.1 s): the guarded approach from ``gap``
@@ -90,6 +98,18 @@ class PathJob:
         lift = (supervision.lift_height / supervision.approach_speed + 0.3
                 if supervision is not None and self.lifts_off(True) else 0.0)
         return math.ceil(10 * (approach + self.settings.dwell + self.path.duration + lift)) / 10
+
+
+def _smallest_turn(a_from: Array, a_to: Array) -> Array:
+    """The rotation matrix of the smallest turn taking the unit vector ``a_from`` onto ``a_to`` (about their
+    cross product; Rodrigues' formula)."""
+    axis = np.cross(a_from, a_to)
+    sine, cosine = float(np.linalg.norm(axis)), float(a_from @ a_to)
+    if sine < 1e-15:
+        return np.eye(3)
+    k = axis / sine
+    K = np.array([[0.0, -k[2], k[1]], [k[2], 0.0, -k[0]], [-k[1], k[0], 0.0]])
+    return np.eye(3) + sine * K + (1.0 - cosine) * (K @ K)
 
 
 def path_job(surface: Surface, offset: float, settings: PathConfig) -> PathJob:
