@@ -16,6 +16,7 @@ force-controlled with zero moment, on surfaces the controller is given 8 deg and
 Writes docs/disc.json, docs/disc.md and the figures docs/figures/disc_*.png.
 
     python docs/disc.py            # all, about 30 minutes on a quiet machine
+    python docs/disc.py press sweep  # those parts again (press, raster, eigenvalues, sweep, other_arms), the rest kept
     python docs/disc.py --page     # the page again from docs/disc.json
 """
 
@@ -302,16 +303,30 @@ def ur10():
     return row
 
 
-def run():
-    results = {"press": [press(name, orientation) for name in ("plane", "cylinder") for orientation in
-                         ("force", "held")]}
-    results["raster"] = [raster("30 mm disc, moments", BUMP_DISC),
-                         raster("30 mm disc, held", BUMP_DISC, orientation="held"),
-                         raster("50 mm disc, moments", ToolConfig(kind="disc"))]
-    results["eigenvalues"] = eigenvalues()
-    results["sweep"] = tilt_sweep()
-    results["other_arms"] = [ur10(), z1_on_an_ellipsoid()]
+PARTS = {
+    "press": lambda: [press(name, orientation) for name in ("plane", "cylinder") for orientation in ("force", "held")],
+    "raster": lambda: [raster("30 mm disc, moments", BUMP_DISC), raster("30 mm disc, held", BUMP_DISC, orientation="held"),
+                       raster("50 mm disc, moments", ToolConfig(kind="disc"))],
+    "eigenvalues": lambda: eigenvalues(),
+    "sweep": lambda: tilt_sweep(),
+    "other_arms": lambda: [ur10(), z1_on_an_ellipsoid()],
+}
+
+
+def run(parts=tuple(PARTS)):
+    """The parts ``parts`` measured again, the others kept from docs/disc.json; each part written to it (and
+    the page) as soon as it is measured."""
+    path = ROOT / "docs" / "disc.json"
+    results = json.loads(path.read_text()) if path.exists() else {}
+    for part in parts:
+        results[part] = PARTS[part]()
+        if all(name in results for name in PARTS):
+            write(results)
     return results
+
+
+def _percent(fraction):
+    return None if fraction is None else 100 * fraction
 
 
 def _fmt(value, digits=3):
@@ -386,7 +401,7 @@ def page(results):
     for r in results["press"]:
         lines.append(f"| {r['surface']} | {r['orientation']} | {_fmt(r['cop_offset_mm'])} / "
                      f"{_fmt(r['max_cop_offset_mm_settled'])} | {_fmt(r['tilt_deg'])} / "
-                     f"{_fmt(r['max_tilt_deg_settled'])} | {_fmt(100 * r['area_fraction'])} | "
+                     f"{_fmt(r['max_tilt_deg_settled'])} | {_fmt(_percent(r['area_fraction']))} | "
                      f"{_fmt(r['peak_pressure_kpa'])} / {_fmt(r['mean_pressure_kpa'])} | {_fmt(r['force_row'], 5)} / "
                      f"{_fmt(r['force_row_error_percent'])} | {_fmt(r['contact_force'], 4)} / "
                      f"{_fmt(r['contact_force_error_percent'])} |")
@@ -437,7 +452,7 @@ def page(results):
         surface = r.get("surface", "plate (a plane), 8 deg and 5 mm off" if "arm" in r else "")
         error = r.get("error", "8 deg, 5 mm")
         lines.append(f"| {r['arm']} | {surface} | {error} | {1e3 * 2 * r.get('disc_radius', 0.03):.0f} mm | "
-                     f"{_fmt(r['cop_offset_mm'])} | {_fmt(r['tilt_deg'])} | {_fmt(100 * r['area_fraction'])} | "
+                     f"{_fmt(r['cop_offset_mm'])} | {_fmt(r['tilt_deg'])} | {_fmt(_percent(r['area_fraction']))} | "
                      f"{_fmt(r['force_row'], 5)} (command {_fmt(r['command'])}) | {_fmt(r['contact_force'], 4)} | "
                      + (f"{_fmt(r['sliding_max_cop_offset_mm'])} mm / {_fmt(r['sliding_max_tilt_deg'])} deg / "
                         f"{_fmt(r['sliding_max_force_row_error_percent'])} % |" if "sliding_max_cop_offset_mm" in r
@@ -558,6 +573,10 @@ if __name__ == "__main__":
     if "--page" in sys.argv:
         results = json.loads((ROOT / "docs" / "disc.json").read_text())
     else:
-        results = run()
+        chosen = [name for name in sys.argv[1:] if name in PARTS]
+        unknown = [name for name in sys.argv[1:] if name not in PARTS and name.startswith("-") is False]
+        if unknown:
+            raise SystemExit(f"unknown parts {unknown}; choose from {sorted(PARTS)}")
+        results = run(tuple(chosen) or tuple(PARTS))
         figures(results)
     write(results)

@@ -307,3 +307,30 @@ def test_path_moments_go_to_the_moment_rows_and_are_checked():
     config.tool = ToolConfig(kind="disc", orientation="held")
     with pytest.raises(ConfigError, match=r"path.moments: 2 given, but the constraint has 0 force-controlled rows"):
         build_scenario(config, with_loggers=False)
+
+
+def test_a_held_jobs_patch_is_reported_at_its_end_and_a_lifted_one_before_the_lift():
+    """``patch_report`` on logs shaped as a run's: a held path's ``path_done`` is 1 from its start (the
+    disc's press jobs are held paths), which must not hide the whole run (every figure was None); the
+    lift-off's samples (``lifting``) are left out of the end."""
+    from drake_hybrid.experiments.patch_report import patch_report
+    from drake_hybrid.systems.contact_patch import PATCH_FIELDS
+
+    t = np.arange(0.0, 2.0, 0.01)
+    patch = np.zeros((t.size, len(PATCH_FIELDS)))
+    column = {name: i for i, name in enumerate(PATCH_FIELDS)}
+    patch[:, column["normal_force"]] = 20.0
+    patch[:, column["cop_offset"]] = np.where(t < 1.0, 2e-3, 1e-4)
+    patch[:, column["area_fraction"]] = 0.97
+    log = {"t": t, "patch": patch, "desired_force": np.full((t.size, 3), [20.0, 0.0, 0.0]),
+           "force": np.full((t.size, 3), [20.0, 0.0, 0.0]), "path_done": np.ones((t.size, 1)),
+           "path_progress": np.zeros((t.size, 3))}
+    report = patch_report(log, design_time_constant=0.1, contact_time=0.2)
+    assert report.final_cop_offset_mm == pytest.approx(0.1)
+    assert report.max_cop_offset_mm_settled == pytest.approx(2.0)          # settled from 0.2 + 5 x 0.1 s
+    assert report.final_area_fraction == pytest.approx(0.97) and report.final_normal_force == pytest.approx(20.0)
+    lifting = (t >= 1.5).astype(float)[:, None]
+    patch[t >= 1.5, column["cop_offset"]] = 9e-3
+    report = patch_report(dict(log, patch=patch, lifting=lifting), design_time_constant=0.1, contact_time=0.2)
+    assert report.final_cop_offset_mm == pytest.approx(0.1)
+    assert report.max_cop_offset_mm_settled == pytest.approx(2.0)

@@ -66,7 +66,8 @@ def _last(values: Array, mask: Array, scale: float = 1.0) -> Optional[float]:
 def patch_report(log: Mapping[str, Array], design_time_constant: float, contact_time: float,
                  force_row: int = 0) -> Optional[PatchReport]:
     """The ``PatchReport`` of a run's ``log`` (its ``patch``, ``force``, ``desired_force`` and ``t``; a job's
-    ``path_progress``, ``path_done`` and ``lifting``), settled from ``contact_time`` + 5 ``design_time_constant``;
+    ``path_progress`` and ``lifting``: a held path's ``path_done`` is 1 from the start, so the end is the
+    lift-off's start, not the path's end), settled from ``contact_time`` + 5 ``design_time_constant``;
     ``force_row`` the row of the normal force. None without a ``patch`` log."""
     if "patch" not in log:
         return None
@@ -75,8 +76,6 @@ def patch_report(log: Mapping[str, Array], design_time_constant: float, contact_
     before_lift = np.ones(len(t), dtype=bool)
     if "lifting" in log:
         before_lift = np.asarray(log["lifting"])[:, 0] < 0.5
-    if "path_done" in log:
-        before_lift &= np.asarray(log["path_done"])[:, 0] < 0.5
     settled_from = contact_time + 5 * design_time_constant if math.isfinite(contact_time) else math.inf
     settled = (t >= settled_from) & before_lift
     command = np.asarray(log["desired_force"])[:, force_row]
