@@ -332,7 +332,7 @@ def _percent(fraction):
 def _fmt(value, digits=3):
     if value is None or (isinstance(value, float) and not math.isfinite(value)):
         return "n/a"
-    return significant(value, digits) if isinstance(value, float) else str(value)
+    return f"{significant(value, digits):g}" if isinstance(value, float) else str(value)
 
 
 def figures(results):
