@@ -325,6 +325,13 @@ def run(parts=tuple(PARTS)):
     return results
 
 
+def _stopped(error):
+    """A sweep point's error on the page: its first line up to the configuration it names, as code."""
+    if not error:
+        return ""
+    return "`" + error.splitlines()[0].split(" at {")[0].split(" (rank margin")[0].replace("`", "'") + "`"
+
+
 def _percent(fraction):
     return None if fraction is None else 100 * fraction
 
@@ -441,8 +448,8 @@ def page(results):
         lines.append(f"| {float(r['model_error.workpiece_tilt']):g} | {r['tool.orientation']} | "
                      f"{_fmt(_num(r['patch_cop_offset_mm']))} | {_fmt(_num(r['patch_tilt_deg']))} | "
                      f"{_fmt(100 * _num(area) if _num(area) is not None else None)} | "
-                     f"{_fmt(_num(r['patch_normal_force']))} | {r['path_contact_losses']} | "
-                     f"{_fmt(_num(r['path_time_off_surface']))} | {r['error'] or ''} |")
+                     f"{_fmt(_num(r['patch_normal_force']))} | {_count(r['path_contact_losses'])} | "
+                     f"{_fmt(_num(r['path_time_off_surface']))} | {_stopped(r['error'])} |")
     lines += ["", "![The tilt sweep](figures/disc_tilt_sweep.png)", "", PAGE_OTHERS, "",
               "| arm | surface | the model off the real one | disc | centre of pressure from the axis (mm) | tilt "
               "against the real surface (deg) | face in contact (%) | force row F_1 (N) | contact force (N) | sliding: "
@@ -459,6 +466,10 @@ def page(results):
                         else "(pressing only) |"))
     lines += ["", PAGE_TAIL]
     return "\n".join(lines) + "\n"
+
+
+def _count(value):
+    return "n/a" if _num(value) is None else f"{int(_num(value))}"
 
 
 def _num(value):
