@@ -17,7 +17,7 @@ Targets (the issue of a real arm at 1 kHz): p50 <= 0.2 ms and p99 <= 0.5 ms on t
 
 Results: printed, written to ``results/realtime_tick.json`` (or ``--json``) and, unless
 ``--no-results-md``, into RESULTS.md's section "Real-time tick" (``benchmarks/run.py`` writes the same
-section when it runs this part, ``realtime``). PROFILE.md section 0e discusses them.
+section when it runs this part, ``realtime``). docs/hardware.md, "At the arm's rate", discusses them.
 """
 
 import argparse
