@@ -142,15 +142,10 @@ def solve_contact_start(diagram: Diagram, root_context: Context, systems: Hybrid
     owner = "solve_contact_start"
     check_root_context(diagram, root_context, systems, owner)
     instance(start_pose, "start_pose", owner, RigidTransform)
-    check_start_sensor(systems, owner)
-    space, kinematics = systems.constraint_space, systems.controller.kinematics
-    joint_guess = joint_vector(joint_guess, "joint_guess", owner, kinematics.plant)
     max_depth = positive(max_depth, "max_depth", owner, unit="m")
-    tolerance = positive(tolerance, "tolerance", owner)
+    space, kinematics, joint_guess, tolerance = _checked_start_pose(systems, start_pose, joint_guess, tolerance,
+                                                                    owner)
     desired = _desired_force(systems, root_context, desired_force, owner)
-    _positions_at(kinematics, kinematics.plant.CreateDefaultContext(), start_pose, joint_guess, 0.0, owner,
-                  "start_pose")                # reachable (UnreachablePoseError first), then on C = 0 as given
-    _check_start_pose(space, start_pose, tolerance, owner)
     direction = _pressing_direction(space, start_pose, desired) if np.linalg.norm(desired) > 0 else np.zeros(3)
 
     def pose_at_depth(depth):
@@ -265,15 +260,10 @@ def solve_approach_start(diagram: Diagram, root_context: Context, systems: Hybri
         raise ArgumentError(f"{owner}: systems has no contact supervisor that starts in APPROACH (or TARE): build it "
                             "with add_hybrid_controller(..., supervision=SupervisionConfig(), "
                             "initial_phase=ContactPhase.APPROACH), or start pressing with solve_contact_start")
-    check_start_sensor(systems, owner)
-    space, kinematics = systems.constraint_space, systems.controller.kinematics
-    joint_guess = joint_vector(joint_guess, "joint_guess", owner, kinematics.plant)
     gap = positive(gap, "gap", owner, unit="m")
-    tolerance = positive(tolerance, "tolerance", owner)
+    space, kinematics, joint_guess, tolerance = _checked_start_pose(systems, start_pose, joint_guess, tolerance,
+                                                                    owner)
     desired = _desired_force(systems, root_context, None, owner)
-    _positions_at(kinematics, kinematics.plant.CreateDefaultContext(), start_pose, joint_guess, 0.0, owner,
-                  "start_pose")
-    _check_start_pose(space, start_pose, tolerance, owner)
     mask = np.array([0.0 if i in space.constraint.kinematic_rows else 1.0 for i in range(space.force_size)])
     check_pushing_force(desired, force_controlled=mask, where=f"{owner} (the command source's desired_force)")
     if not np.linalg.norm(desired) > 0:
@@ -285,6 +275,19 @@ def solve_approach_start(diagram: Diagram, root_context: Context, systems: Hybri
                        f"start_pose moved {gap:g} m back from the surface")
     _rest_at(diagram, root_context, systems, q0, np.zeros_like(desired), owner)
     return q0
+
+
+def _checked_start_pose(systems, start_pose, joint_guess, tolerance, owner):
+    """(space, kinematics, joint_guess, tolerance) of a start at ``start_pose``, checked: the sensor, the joint
+    guess and the tolerance, the pose reachable (UnreachablePoseError first) and then on C = 0 as given."""
+    check_start_sensor(systems, owner)
+    space, kinematics = systems.constraint_space, systems.controller.kinematics
+    joint_guess = joint_vector(joint_guess, "joint_guess", owner, kinematics.plant)
+    tolerance = positive(tolerance, "tolerance", owner)
+    _positions_at(kinematics, kinematics.plant.CreateDefaultContext(), start_pose, joint_guess, 0.0, owner,
+                  "start_pose")
+    _check_start_pose(space, start_pose, tolerance, owner)
+    return space, kinematics, joint_guess, tolerance
 
 
 def _check_start_pose(space, start_pose, tolerance, owner):
