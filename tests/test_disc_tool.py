@@ -249,6 +249,7 @@ def test_a_task_that_mounts_its_own_ball_refuses_a_disc():
         build_scenario(config, with_loggers=False)
 
 
+@pytest.mark.slow                # builds the bump's disc station (its constraint compiled): tens of seconds
 def test_surface_polishing_mounts_the_disc_its_moment_rows_and_the_model_off_the_real_part():
     task = get_task("surface-polishing")
     config = task.default_config({"workpiece": "bump"})
@@ -291,6 +292,7 @@ def test_a_disc_on_a_surface_offset_by_a_balls_radius_is_refused(tmp_path):
         task.constraint_space(config)
 
 
+@pytest.mark.slow                # builds the bump's disc station (its constraint compiled): tens of seconds
 def test_path_moments_go_to_the_moment_rows_and_are_checked():
     with pytest.raises(PathError, match=r"path.moments must be two finite numbers"):
         PathConfig(moments=[0.1]).validate()
