@@ -256,6 +256,7 @@ def test_surface_polishing_mounts_the_disc_its_moment_rows_and_the_model_off_the
     config.tool = DISC
     config.model_error.workpiece_tilt = 5.0
     config.model_error.workpiece_shift = [0.0, 0.0, -0.003]
+    config.path.moments = [0.05, -0.02]
     space = task.constraint_space(config)
     assert space.constraint.kinematic_rows == ()
     assert task.labels(config)["force"] == ["normal force", "moment about o_2", "moment about -o_1"]
@@ -265,6 +266,12 @@ def test_surface_polishing_mounts_the_disc_its_moment_rows_and_the_model_off_the
     assert model.X_WM.rotation().ToAngleAxis().angle() == pytest.approx(math.radians(5.0))
     scenario = build_scenario(config)
     assert scenario.robot.tool.is_disc and scenario.patch is not None and "patch" in scenario.loggers
+    # path.moments go to the moment rows of the path's force command (its first row the normal force).
+    context = scenario.source.CreateDefaultContext()
+    scenario.source.get_input_port(0).FixValue(context, np.zeros(12))
+    scenario.source.get_contact_phase_input_port().FixValue(context, [2.0])
+    force = scenario.source.GetOutputPort("desired_force").Eval(context)
+    assert force[1:] == pytest.approx([0.05, -0.02])
     config.tool = ToolConfig(kind="disc", orientation="held")
     assert task.constraint_space(config).constraint.kinematic_rows == (1, 2)
 
@@ -292,20 +299,15 @@ def test_a_disc_on_a_surface_offset_by_a_balls_radius_is_refused(tmp_path):
         task.constraint_space(config)
 
 
-@pytest.mark.slow                # builds the bump's disc station (its constraint compiled): tens of seconds
-def test_path_moments_go_to_the_moment_rows_and_are_checked():
+@pytest.mark.slow                # builds the bump's station up to the refusal: about 10 s
+def test_path_moments_are_checked():
+    """Two finite numbers, and only where the constraint has moment rows (their flow to the force command:
+    ``test_surface_polishing_mounts_the_disc_its_moment_rows_and_the_model_off_the_real_part``)."""
     with pytest.raises(PathError, match=r"path.moments must be two finite numbers"):
         PathConfig(moments=[0.1]).validate()
     task = get_task("surface-polishing")
     config = task.default_config({"workpiece": "bump"})
-    config.tool = DISC
     config.path.moments = [0.05, -0.02]
-    scenario = build_scenario(config, with_loggers=False)
-    context = scenario.source.CreateDefaultContext()
-    scenario.source.get_input_port(0).FixValue(context, np.zeros(12))
-    scenario.source.get_contact_phase_input_port().FixValue(context, [2.0])
-    force = scenario.source.GetOutputPort("desired_force").Eval(context)
-    assert force[1:] == pytest.approx([0.05, -0.02])
     config.tool = ToolConfig(kind="disc", orientation="held")
     with pytest.raises(ConfigError, match=r"path.moments: 2 given, but the constraint has 0 force-controlled rows"):
         build_scenario(config, with_loggers=False)
