@@ -26,6 +26,7 @@ from typing import Any, Dict, List, Mapping, Optional, Tuple, cast
 import numpy as np
 from numpy.typing import ArrayLike
 
+from pydrake.common.eigen_geometry import AngleAxis
 from pydrake.geometry import Meshcat, Rgba
 from pydrake.math import RigidTransform, RotationMatrix
 
@@ -85,9 +86,9 @@ class PathJob:
         the approach vector, which K_p pulled on)."""
         X_WP, normal = self.start_pose()
         centre = X_WP.translation() - float(depth) * normal
-        reference = np.asarray(reference_rotation(normal, self.heading))
-        rotation = _smallest_turn(-normal, -self.surface.held_normal(centre, self.offset)) @ reference
-        return RigidTransform(RotationMatrix(rotation), centre)
+        reference = RotationMatrix(reference_rotation(normal, self.heading))
+        turn = _smallest_turn(-normal, -self.surface.held_normal(centre, self.offset))
+        return RigidTransform(turn.multiply(reference), centre)
 
     def duration(self, supervision: Optional[SupervisionConfig] = None, gap: Optional[float] = None) -> float:
         """The simulated time the job needs (s, rounded up to 0.1 s): the guarded approach from ``gap``
@@ -100,16 +101,13 @@ class PathJob:
         return math.ceil(10 * (approach + self.settings.dwell + self.path.duration + lift)) / 10
 
 
-def _smallest_turn(a_from: Array, a_to: Array) -> Array:
-    """The rotation matrix of the smallest turn taking the unit vector ``a_from`` onto ``a_to`` (about their
-    cross product; Rodrigues' formula)."""
+def _smallest_turn(a_from: Array, a_to: Array) -> RotationMatrix:
+    """The smallest turn taking the unit vector ``a_from`` onto ``a_to`` (about their cross product)."""
     axis = np.cross(a_from, a_to)
-    sine, cosine = float(np.linalg.norm(axis)), float(a_from @ a_to)
+    sine = float(np.linalg.norm(axis))
     if sine < 1e-15:
-        return np.eye(3)
-    k = axis / sine
-    K = np.array([[0.0, -k[2], k[1]], [k[2], 0.0, -k[0]], [-k[1], k[0], 0.0]])
-    return np.eye(3) + sine * K + (1.0 - cosine) * (K @ K)
+        return RotationMatrix()
+    return RotationMatrix(AngleAxis(math.atan2(sine, float(a_from @ a_to)), axis / sine))
 
 
 def path_job(surface: Surface, offset: float, settings: PathConfig) -> PathJob:
