@@ -17,6 +17,7 @@ from typing import Any, Dict, List, Mapping, Optional
 import numpy as np
 
 from drake_hybrid.core.hints import Array
+from drake_hybrid.experiments.path_report import lift_off_time
 from drake_hybrid.systems.contact_patch import PATCH_FIELDS
 
 _COLUMN = {name: index for index, name in enumerate(PATCH_FIELDS)}
@@ -73,9 +74,8 @@ def patch_report(log: Mapping[str, Array], design_time_constant: float, contact_
         return None
     t, patch = np.asarray(log["t"]), np.asarray(log["patch"])
     touching = patch[:, _COLUMN["normal_force"]] > 0
-    before_lift = np.ones(len(t), dtype=bool)
-    if "lifting" in log:
-        before_lift = np.asarray(log["lifting"])[:, 0] < 0.5
+    lift = lift_off_time(log)
+    before_lift = np.ones(len(t), dtype=bool) if lift is None else t < lift
     settled_from = contact_time + 5 * design_time_constant if math.isfinite(contact_time) else math.inf
     settled = (t >= settled_from) & before_lift
     command = np.asarray(log["desired_force"])[:, force_row]
