@@ -107,7 +107,8 @@ def _smallest_turn(a_from: Array, a_to: Array) -> RotationMatrix:
     sine = float(np.linalg.norm(axis))
     if sine < 1e-15:
         return RotationMatrix()
-    return RotationMatrix(AngleAxis(math.atan2(sine, float(a_from @ a_to)), axis / sine))
+    direction: Array = axis / sine
+    return RotationMatrix(AngleAxis(math.atan2(sine, float(a_from @ a_to)), direction))
 
 
 def path_job(surface: Surface, offset: float, settings: PathConfig) -> PathJob:
