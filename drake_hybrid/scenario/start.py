@@ -84,7 +84,7 @@ def check_start(scenario: Scenario, q: ArrayLike) -> None:
     if scenario.config.start.in_contact:
         # A flat tool's force-controlled orientation rows read its tilt against the model's normal, which its
         # balanced start turns as the contact's pressure wants (tasks.pressing): not a residual to bound.
-        free = moment_rows(scenario)
+        free = moment_rows(scenario.constraint_space)
         residual = np.delete(np.atleast_1d(np.asarray(value(constraint.value(x)), dtype=float)), free)
         try:
             if free and residual.size and float(np.max(np.abs(residual))) > scenario.config.start.tolerance:

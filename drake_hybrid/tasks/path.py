@@ -73,7 +73,7 @@ def path_start_positions(task: Task, scenario: Scenario, joint_guess: ArrayLike)
 
     if not config.start.in_contact:
         return positions_at_depth(-config.start.gap)
-    if moment_rows(scenario):        # a flat tool's moment rows: turned until they read their F_d too
+    if moment_rows(scenario.constraint_space):        # a flat tool's moment rows: turned until they read their F_d too
         return balanced_pressing_positions(scenario, job.pose_at_depth,
                                            lambda X: inverse_kinematics(kinematics, context, X, seed[0]))
     return pressing_positions(scenario, positions_at_depth)
@@ -96,7 +96,7 @@ def with_path_commands(config: ScenarioConfig, constraint_space: ConstraintSpace
     force_row = next(i for i in range(constraint_space.force_size) if i not in kinematic)
     force = [0.0] * constraint_space.force_size
     force[force_row] = float(job.path.force(0.0))
-    moment_row_indices = [i for i in range(constraint_space.force_size) if i not in kinematic and i != force_row]
+    moment_row_indices = moment_rows(constraint_space)
     if config.path.moments and len(config.path.moments) != len(moment_row_indices):
         raise ConfigError(f"path.moments: {len(config.path.moments)} given, but the constraint has "
                           f"{len(moment_row_indices)} force-controlled rows besides the normal force "

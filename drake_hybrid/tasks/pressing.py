@@ -81,11 +81,10 @@ def pressing_positions(scenario, positions_at_depth, max_depth=0.01):
     return positions_at_depth(pressing_depth(pressing_force, desired, max_depth, f"task '{task.name}'"))
 
 
-def moment_rows(scenario):
-    """The force-controlled rows of the task's constraint besides its first (the normal force's): a flat
-    tool's orientation rows when they are force-controlled (``ToolConfig.orientation``); empty otherwise."""
-    constraint = scenario.constraint_space.constraint
-    controlled = [i for i in range(scenario.constraint_space.force_size) if i not in constraint.kinematic_rows]
+def moment_rows(space):
+    """The force-controlled rows of the constraint space ``space`` besides its first (the normal force's): a
+    flat tool's orientation rows when they are force-controlled (``ToolConfig.orientation``); empty otherwise."""
+    controlled = [i for i in range(space.force_size) if i not in space.constraint.kinematic_rows]
     return controlled[1:]
 
 
@@ -98,7 +97,7 @@ def balanced_pressing_positions(scenario, pose_at_depth, positions_of, max_depth
     arm's q there (inverse kinematics). The tool is turned about
     its controlled point, about its own x and y axes, by Newton's method on the moments (the depth solved
     again at each turn), to within ``MOMENT_TOLERANCE`` N m; OffConstraintError if it does not get there."""
-    rows = moment_rows(scenario)
+    rows = moment_rows(scenario.constraint_space)
     desired = np.asarray(scenario.config.desired_force.evaluate(0.0)[0], dtype=float)
     force_at = _row_force_probe(scenario)
     magnitude = float(np.linalg.norm(desired))
