@@ -1,8 +1,9 @@
 """A flat compliant disc (station.tools): mounted from Python and from a task file, its contact material, the
 constraint's orientation rows force-controlled (core.constraints.with_force_rows), the real workpiece off the
 model (core.surface_moves, ModelErrorConfig.workpiece_*), and the contact patch measured against its
-hydroelastic pressure (systems.contact_patch): each against its geometry, fast. The disc's runs and their
-linearizations are in tests/test_disc_runs.py (slow)."""
+hydroelastic pressure (systems.contact_patch): each against its geometry, fast. The disc's press on a plane
+the model gets wrong is tests/test_disc_runs.py (slow); its other runs and the linearizations are
+docs/disc.py's (docs/disc.md)."""
 
 import math
 from pathlib import Path

@@ -37,6 +37,7 @@ from drake_hybrid.control.fast_law import FastLaw
 from drake_hybrid.control.gains import ControlMode, HybridGains, ValidatedGains, check_poles
 from drake_hybrid.control.law import LawConstants, evaluate_law
 from drake_hybrid.control.law_system import LawSystemParts, declare_diagnostic_outputs, reported_diagnostics_vector
+from drake_hybrid.control.normal_force import NORMAL_FORCE_AXES, force_along_tool_axis, model_normal, normal_row
 from drake_hybrid.control.phases import ContactPhase
 from drake_hybrid.control.safety import SafetyConfig, warn_singularity
 from drake_hybrid.control.sampling import SAMPLE_LEAD
@@ -259,6 +260,10 @@ def HybridController_(T):
                 impedance-force mode the law's e_p is that input (a position error measured against a
                 path, which does not drift as an integral does) instead of the integral of e_p' (still
                 integrated in the state, unused). Default False.
+            normal_force_axis: "model" (default): the normal row (the first force-controlled one) reads the
+                force along the model's normal, in E's dual basis; "tool": along the tool's axis (the
+                end-effector frame's z), the real normal once a flat tool lies flat on a surface the model
+                gets wrong (``control.normal_force``).
             fast_law: for T = float, evaluate the law through its compiled
                 float path (``fast_law``; the same law, equal to 1e-12) when
                 numba is available; False = the generic ``law.evaluate_law``.
@@ -268,7 +273,7 @@ def HybridController_(T):
                        mode=ControlMode.VELOCITY_FORCE, control_period=None, sample_lead=True, safety=None,
                        guarded_move=None, sampled_diagnostics=False, velocity_row_inertia=None,
                        plant_time_step=0.0, compensate_tangential_force=True, wrench_lag=0.0, fast_law=True,
-                       path_position_error=False, converter=None):
+                       path_position_error=False, normal_force_axis="model", converter=None):
             # Every argument as given, for scalar conversion (_construct_copy): one added later cannot
             # be forgotten there.
             arguments = locals()
@@ -313,6 +318,10 @@ def HybridController_(T):
                 raise ArgumentError(f"{owner}: sampled_diagnostics needs a control_period (a sampled controller)")
             compensate_tangential_force = boolean(compensate_tangential_force, "compensate_tangential_force", owner)
             fast_law = boolean(fast_law, "fast_law", owner)
+            if normal_force_axis not in NORMAL_FORCE_AXES:
+                raise ArgumentError(f"{owner}: normal_force_axis must be one of {', '.join(NORMAL_FORCE_AXES)}, got "
+                                    f"{normal_force_axis!r}")
+            self.normal_force_axis = normal_force_axis
             if isinstance(self.gains, ValidatedGains):
                 self._gains = self.gains.check_sizes(k, m, owner)
             else:
@@ -527,6 +536,8 @@ def HybridController_(T):
             desired_force = self._force_port.Eval(context)
             integrals = self._law_integrals(context)
             wrench = self._wrench_port.Eval(context)
+            if self.normal_force_axis == "tool":
+                wrench = self._force_along_tool_axis(plant_context, wrench)
             phase = self._contact_phase(context)
             # C_r, read off the surface only (in CONTACT the law does not use it).
             reference = (self._reference_port.Eval(context) if phase is not ContactPhase.CONTACT
@@ -548,6 +559,16 @@ def HybridController_(T):
 
         def _solution(self, context):
             return self._solution_cache.Eval(context).solution
+
+        def _force_along_tool_axis(self, plant_context, wrench):
+            """The measured wrench as the normal row reads it with normal_force_axis="tool" (control.normal_force)."""
+            kinematics = self.kinematics
+            X_WE = self._plant.CalcRelativeTransform(plant_context, self._plant.world_frame(), kinematics.frame)
+            R_WE = X_WE.rotation().matrix()
+            x = kinematics.chart.configuration(R_WE, X_WE.translation() + R_WE @ kinematics.point_in_frame)
+            row = normal_row(self.force_size, self.kinematic_rows)
+            normal = model_normal(kinematics.chart, self.constraint_space.constraint.force_projection(x), x, row)
+            return force_along_tool_axis(np.asarray(wrench), normal, R_WE[:, 2])
 
         def _calc_actuation(self, context, output):
             output.SetFromVector(self._solution(context).actuation)

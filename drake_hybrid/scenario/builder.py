@@ -99,7 +99,8 @@ def controller_options(prepared: PreparedConfig, plant: MultibodyPlant, controll
     return dict(gains=prepared.gains, mode=prepared.mode, safety=config.safety, sample_lead=sample_lead,
                 sampled_diagnostics=with_loggers and control_period is not None,
                 velocity_row_inertia=velocity_row_inertia(config, task, plant, space),
-                compensate_tangential_force=config.compensate_tangential_force)
+                compensate_tangential_force=config.compensate_tangential_force,
+                normal_force_axis=config.tool.normal_force_axis)
 
 
 def velocity_row_inertia(config: ScenarioConfig, task: Task, plant: MultibodyPlant,

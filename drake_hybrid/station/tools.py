@@ -30,6 +30,7 @@ from drake_hybrid.core.schema import check_types
 
 TOOL_KINDS = ("ball", "disc")
 ORIENTATIONS = ("", "held", "force")
+NORMAL_FORCES = ("", "model", "tool")
 STEM_LENGTH = 0.05            # m along the tool's +z: the controlled point (the ball's centre, the disc's face)
 BALL_RADIUS = 0.02            # m, models/pad_tool.sdf's pad
 
@@ -42,6 +43,10 @@ class ToolConfig:
     orientation: the constraint's orientation rows, "held" (kinematic rows, the controller holds the approach
         vector along the surface's normal) or "force" (force-controlled, zero moment: the tool lies flat on the
         real surface); "" is the tool's own: held for the ball, force for the disc.
+    normal_force: which force the normal row holds at the command, "model" (along the model's normal) or
+        "tool" (along the tool's axis: the real normal once the tool lies flat on a surface the model gets
+        wrong; ``control.normal_force``); "" is the tool's own: tool for a disc with its orientation rows
+        force-controlled, model otherwise.
     """
 
     kind: str = "ball"                 # ball (models/pad_tool.sdf) or disc (a flat compliant disc)
@@ -50,6 +55,7 @@ class ToolConfig:
     modulus: float = 3.0e5             # Pa, the disc's hydroelastic modulus (the ball's: contact.pad_modulus)
     resolution: float = 0.003          # m, the disc's mesh resolution hint (the ball's: contact.pad_resolution)
     orientation: str = ""              # the orientation rows: held | force ("": held for the ball, force for a disc)
+    normal_force: str = ""             # the normal row's force: model | tool ("": tool for a disc with force rows)
 
     @property
     def is_disc(self) -> bool:
@@ -59,6 +65,11 @@ class ToolConfig:
     def orientation_rows(self) -> str:
         """"held" or "force": how the constraint's orientation rows are controlled with this tool."""
         return self.orientation or ("force" if self.is_disc else "held")
+
+    @property
+    def normal_force_axis(self) -> str:
+        """"model" or "tool": along which the normal row holds the commanded force with this tool."""
+        return self.normal_force or ("tool" if self.is_disc and self.orientation_rows == "force" else "model")
 
     @property
     def offset(self) -> float:
@@ -74,6 +85,9 @@ class ToolConfig:
         if self.orientation not in ORIENTATIONS:
             raise ConfigError(f"{prefix}orientation must be held or force (or empty: the tool's own), got "
                               f"'{self.orientation}'")
+        if self.normal_force not in NORMAL_FORCES:
+            raise ConfigError(f"{prefix}normal_force must be model or tool (or empty: the tool's own), got "
+                              f"'{self.normal_force}'")
         default = ToolConfig()
         if not self.is_disc:
             given = [name for name in ("radius", "thickness", "modulus", "resolution")

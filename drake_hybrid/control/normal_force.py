@@ -1,0 +1,56 @@
+"""Which force the normal row reads: along the model's normal, or along the tool's own axis.
+
+The constraint's force row of the surface (its first force-controlled row, C_1 = the distance to the
+model's surface) reads, in E's dual basis, the force along the **model's** normal n. On a surface the
+model gets wrong, a flat tool whose orientation rows are force-controlled (zero moment) lies flat on the
+**real** surface; its axis a (the end-effector frame's z, the approach vector) is then the real normal, and
+the normal force the user commands is the force along a, not along n: with the model 8 deg off, F . n
+= 20 N is F . a = 20 / cos 8 deg = 20.2 N.
+
+With ``normal_force_axis="tool"`` the law reads the measured force with its component along n replaced
+by its component along the tool's axis (a signed towards n)::
+
+    f' = f + ((a_n - n) . f) n        a_n = sign(a . n) a,  n the unit model normal
+
+so that n . f' = a_n . f: the normal row holds the force along the tool's axis, and nothing else changes
+(the tangential components along the model's tangents and the moments stay as measured). At a tool
+aligned with a frictionless contact (f along a) a small tilt changes a_n . f only to second order, so
+the loop's linearization is the model's. "model" (the default) reads f as measured.
+"""
+
+from typing import Any, Tuple
+
+import numpy as np
+
+from pydrake.math import sqrt
+
+from drake_hybrid.core.hints import Array
+
+NORMAL_FORCE_AXES = ("model", "tool")
+
+
+def normal_row(force_size: int, kinematic_rows: Tuple[int, ...]) -> int:
+    """The normal row: the constraint's first force-controlled (not kinematic) row."""
+    return next(i for i in range(force_size) if i not in kinematic_rows)
+
+
+def model_normal(chart: Any, force_projection: Array, x: Array, row: int) -> Array:
+    """The unit direction in world of the force that row ``row`` of E_f reads at chart configuration ``x``:
+    the translational part of the row as a covector on the spatial velocity [w; v]
+    (E_f nu = E_f L V, L = ``chart.task_jacobian(x, I)``). ValueError if the row has no translational part."""
+    covector = force_projection[row] @ chart.task_jacobian(x, np.eye(6))
+    direction = covector[3:]
+    length_squared = direction @ direction
+    if not length_squared > 1e-24:
+        raise ValueError(f"HybridController: normal_force_axis='tool' needs the normal row {row} of E_f to read a "
+                         "force (a translational part); at this configuration it reads moments only")
+    return direction / sqrt(length_squared)
+
+
+def force_along_tool_axis(wrench: Array, normal: Array, axis: Array) -> Array:
+    """The wrench [n; f] with the force's component along ``normal`` (unit) replaced by its component along
+    ``axis`` (unit, the tool's; signed towards ``normal``): the module docstring's f'. Float or AutoDiffXd."""
+    force = wrench[3:]
+    signed = axis if axis @ normal >= 0 else -axis
+    replaced = force + ((signed - normal) @ force) * normal
+    return np.concatenate([wrench[:3], replaced])

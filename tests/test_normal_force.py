@@ -1,0 +1,150 @@
+"""The normal row's force along the tool's axis (control.normal_force, HybridController(normal_force_axis=...),
+ToolConfig.normal_force): the formula on random input against its definition, float against AutoDiffXd,
+and the controller's force row on a tilted disc against the force along its axis and the model's normal."""
+
+import dataclasses
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from pydrake.autodiffutils import AutoDiffXd, ExtractGradient, ExtractValue, InitializeAutoDiff
+
+from drake_hybrid.control.controller import HybridController
+from drake_hybrid.control.normal_force import force_along_tool_axis, model_normal, normal_row
+from drake_hybrid.core.charts import PoseChart
+from drake_hybrid.core.errors import ArgumentError, ConfigError
+from drake_hybrid.scenario.builder import build_scenario
+from drake_hybrid.scenario.start import set_initial_conditions
+from drake_hybrid.station.tools import ToolConfig
+from drake_hybrid.tasks.task_file import load_task_file
+
+MODELS = Path(__file__).resolve().parents[1] / "models" / "tasks"
+finite = st.floats(-50.0, 50.0, allow_nan=False)
+vectors = st.lists(finite, min_size=3, max_size=3).map(np.array).filter(lambda v: np.linalg.norm(v) > 1e-3)
+
+
+def _unit(v):
+    return v / np.linalg.norm(v)
+
+
+@settings(max_examples=200, deadline=None)
+@given(moment=st.lists(finite, min_size=3, max_size=3), force=st.lists(finite, min_size=3, max_size=3),
+       normal=vectors, axis=vectors)
+def test_the_normal_component_becomes_the_component_along_the_axis_and_nothing_else_changes(moment, force, normal,
+                                                                                          axis):
+    n, a = _unit(normal), _unit(axis)
+    wrench = np.concatenate([moment, force])
+    read = force_along_tool_axis(wrench, n, a)
+    signed = a if a @ n >= 0 else -a                  # the axis turned towards the model's normal
+    assert read[:3] == pytest.approx(moment, abs=1e-12)                     # the moments as measured
+    assert read[3:] @ n == pytest.approx(signed @ np.asarray(force), abs=1e-9)   # the normal row: along the axis
+    tangential = np.asarray(force) - (np.asarray(force) @ n) * n                 # along the model's tangents
+    assert read[3:] - (read[3:] @ n) * n == pytest.approx(tangential, abs=1e-9)
+
+
+@settings(max_examples=30, deadline=None)
+@given(force=vectors, normal=vectors, axis=vectors)
+def test_autodiff_values_are_the_floats_and_its_derivatives_the_finite_differences(force, normal, axis):
+    n, a = _unit(normal), _unit(axis)
+    assume_not_perpendicular = abs(a @ n) > 1e-3           # the sign flips there: the map is not smooth
+    if not assume_not_perpendicular:
+        return
+    wrench = np.concatenate([np.zeros(3), force])
+    a_ad = InitializeAutoDiff(a).ravel()
+    read = force_along_tool_axis(wrench.astype(object) + AutoDiffXd(0.0), n, a_ad)
+    assert ExtractValue(read).ravel() == pytest.approx(force_along_tool_axis(wrench, n, a), abs=1e-12)
+    step = 1e-6
+    columns = [(force_along_tool_axis(wrench, n, a + step * e) - force_along_tool_axis(wrench, n, a - step * e))
+               / (2 * step) for e in np.eye(3)]
+    assert ExtractGradient(read) == pytest.approx(np.array(columns).T, abs=1e-6)
+
+
+def test_the_model_normal_of_a_plane_row_is_the_planes_normal():
+    task, config = load_task_file(MODELS / "disc_plane.yaml", register=False)
+    space = task.constraint_space(config)
+    model, _ = task.workpiece_surface(config)
+    chart = PoseChart()
+    x = chart.configuration(np.diag([1.0, -1.0, -1.0]), np.array([0.45, 0.0, 0.1]))
+    row = normal_row(space.force_size, space.constraint.kinematic_rows)
+    normal = model_normal(chart, space.constraint.force_projection(x), x, row)
+    assert row == 0 and abs(normal @ model.unit_normal) == pytest.approx(1.0, abs=1e-12)
+
+
+def test_the_tool_config_resolves_and_checks_the_normal_force():
+    assert ToolConfig().normal_force_axis == "model"
+    assert ToolConfig(kind="disc").normal_force_axis == "tool"
+    assert ToolConfig(kind="disc", orientation="held").normal_force_axis == "model"
+    assert ToolConfig(kind="disc", normal_force="model").normal_force_axis == "model"
+    with pytest.raises(ConfigError, match=r"^tool.normal_force must be model or tool") as raised:
+        ToolConfig(normal_force="sideways").validate()
+    assert "\n" not in str(raised.value)
+
+
+@pytest.fixture(scope="module")
+def tilted_disc():
+    """The disc-plane job's controller (its normal row along the tool's axis, the disc's default), a copy along
+    the model's normal, and a state with the disc turned 6 deg off the model's plane."""
+    _, config = load_task_file(MODELS / "disc_plane.yaml")
+    scenario = build_scenario(config, with_loggers=False)
+    root = scenario.diagram.CreateDefaultContext()
+    set_initial_conditions(scenario, root)
+    state = scenario.plant.get_state_output_port(scenario.robot.arm).Eval(
+        scenario.plant.GetMyContextFromRoot(root)).copy()
+    state[4] += math.radians(6.0)                                   # the second wrist joint: the disc tilts
+    tool = scenario.controller
+    model = HybridController(**{**tool._arguments, "normal_force_axis": "model"})
+    return config, tool, model, state
+
+
+def _force_row(controller, state, wrench):
+    context = controller.CreateDefaultContext()
+    controller.GetInputPort("estimated_state").FixValue(context, state)
+    controller.GetInputPort("measured_wrench").FixValue(context, wrench)
+    for name, size in (("desired_velocity", controller.velocity_size), ("desired_acceleration",
+                                                                          controller.velocity_size),
+                       ("desired_force", controller.force_size)):
+        controller.GetInputPort(name).FixValue(context, np.zeros(size))
+    for name in ("contact_phase", "approach_reference", "path_position_error"):
+        if controller.HasInputPort(name):
+            port = controller.GetInputPort(name)
+            port.FixValue(context, [2.0] if name == "contact_phase" else np.zeros(port.size()))
+    plant = controller.kinematics.plant
+    plant_context = plant.CreateDefaultContext()
+    plant.SetPositionsAndVelocities(plant_context, state)
+    kinematics = controller.kinematics.evaluate(plant_context, check=False)
+    return controller.GetOutputPort("force").Eval(context), kinematics
+
+
+def test_the_normal_row_reads_the_force_along_the_tools_axis_or_along_the_models_normal(tilted_disc):
+    config, tool, model, state = tilted_disc
+    assert tool.normal_force_axis == "tool" and config.tool.normal_force_axis == "tool"
+    _, kinematics = _force_row(tool, state, np.zeros(6))
+    axis = kinematics.rotation[:, 2]                       # the approach vector, into the surface
+    space = tool.constraint_space
+    normal = model_normal(space.chart, space.constraint.force_projection(kinematics.configuration),
+                          kinematics.configuration, 0)
+    tilt = math.degrees(math.acos(min(1.0, abs(axis @ normal))))
+    assert tilt > 3.0                                      # the disc is off the model's plane
+    # 20 N pressing along the disc's axis (on the robot: against the approach vector).
+    wrench = np.concatenate([np.zeros(3), -20.0 * axis])
+    along_axis, _ = _force_row(tool, state, wrench)
+    along_normal, _ = _force_row(model, state, wrench)
+    assert abs(along_axis[0]) == pytest.approx(20.0, rel=1e-9)
+    assert abs(along_normal[0]) == pytest.approx(20.0 * abs(axis @ normal), rel=1e-9)
+    assert along_axis[1:] == pytest.approx(along_normal[1:], abs=1e-12)       # the moment rows as measured
+
+
+def test_a_bad_normal_force_axis_is_refused_naming_it(tilted_disc):
+    _, tool, _, _ = tilted_disc
+    with pytest.raises(ArgumentError, match=r"normal_force_axis must be one of model, tool, got 'wrist'"):
+        HybridController(**{**tool._arguments, "normal_force_axis": "wrist"})
+
+
+def test_a_disc_held_by_position_keeps_the_models_normal():
+    _, config = load_task_file(MODELS / "disc_plane.yaml", register=False)
+    config.tool = dataclasses.replace(config.tool, orientation="held")
+    assert config.tool.normal_force_axis == "model"
