@@ -268,7 +268,7 @@ def z1_on_an_ellipsoid(error_tilt=5.0, error_shift=-0.003, duration=7.0, slide_f
                                                             duration=0.5),
                                    desired_force=Profile(value=[8.0, 0.0, 0.0]),
                                    supervision=SupervisionConfig(enabled=True, approach_speed=0.02),
-                                   initial_phase=ContactPhase.APPROACH)
+                                   initial_phase=ContactPhase.APPROACH, normal_force_axis="tool")
     hybrid.patch = add_contact_patch(builder, plant, robot)
     loggers = add_loggers(builder, hybrid)
     diagram = builder.Build()
@@ -501,8 +501,9 @@ approach lands the disc from 5 mm above the model's point; the job then holds th
 Position-force mode, the velocity rows at -10 and -20, the normal force row at -10 (K_fp = 0.5, K_fi = 15), the
 moment rows at -1.5 1/s (K_fp = 1, K_fi = 3), the force rows' damping K_fd = 10 1/s (below). Five design time
 constants are 3.3 s; "settled" is from the first contact + 3.3 s to the end (6 s). "Force row F_1" is what the
-law controls, the force along the model's normal in E's dual basis; "contact force" is the measured contact
-force, which, frictionless, lies along the real normal.
+law controls: with the orientation force-controlled the force along the disc's axis (`tool.normal_force: tool`,
+the disc's default, below), held by position the force along the model's normal in E's dual basis; "contact
+force" is the measured contact force, which, frictionless, lies along the real normal.
 """
 
 PAGE_PRESS = """With the moment rows force-controlled the disc lies flat on the real surface wherever the model puts it: the
