@@ -148,3 +148,23 @@ def test_a_disc_held_by_position_keeps_the_models_normal():
     _, config = load_task_file(MODELS / "disc_plane.yaml", register=False)
     config.tool = dataclasses.replace(config.tool, orientation="held")
     assert config.tool.normal_force_axis == "model"
+
+
+def test_the_autodiff_controller_reads_the_same_normal_force(tilted_disc):
+    """Both scalar types: the AutoDiffXd copy of the controller (its generic law) reads the force along the tool's
+    axis as the float one (its compiled law) does."""
+    _, tool, _, state = tilted_disc
+    _, kinematics = _force_row(tool, state, np.zeros(6))
+    wrench = np.concatenate([[0.1, -0.2, 0.05], -20.0 * kinematics.rotation[:, 2] + [0.5, -0.3, 0.0]])
+    along_axis, _ = _force_row(tool, state, wrench)
+    autodiff = tool.ToAutoDiffXd()
+    context = autodiff.CreateDefaultContext()
+    autodiff.GetInputPort("estimated_state").FixValue(context, InitializeAutoDiff(state).ravel())
+    autodiff.GetInputPort("measured_wrench").FixValue(context, wrench.astype(object) + AutoDiffXd(0.0))
+    for index in range(autodiff.num_input_ports()):
+        port = autodiff.get_input_port(index)
+        if not port.HasValue(context):
+            value = [2.0] if port.get_name() == "contact_phase" else np.zeros(port.size())
+            port.FixValue(context, np.asarray(value, dtype=object) + AutoDiffXd(0.0))
+    read = autodiff.GetOutputPort("force").Eval(context)
+    assert ExtractValue(read).ravel() == pytest.approx(along_axis, rel=1e-9, abs=1e-9)
