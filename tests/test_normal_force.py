@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from hypothesis import given, settings
+from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
 from pydrake.autodiffutils import AutoDiffXd, ExtractGradient, ExtractValue, InitializeAutoDiff
@@ -44,6 +44,29 @@ def test_the_normal_component_becomes_the_component_along_the_axis_and_nothing_e
     assert read[3:] @ n == pytest.approx(signed @ np.asarray(force), abs=1e-9)   # the normal row: along the axis
     tangential = np.asarray(force) - (np.asarray(force) @ n) * n                 # along the model's tangents
     assert read[3:] - (read[3:] @ n) * n == pytest.approx(tangential, abs=1e-9)
+
+
+@settings(max_examples=200, deadline=None)
+@given(wrench=st.lists(finite, min_size=6, max_size=6).map(np.array), covector=st.lists(finite, min_size=6,
+       max_size=6).map(np.array), normal=vectors, axis=vectors)
+def test_the_rows_reading_in_any_dual_basis_becomes_the_force_along_the_axis(wrench, covector, normal, axis):
+    """A row that reads a wrench W as d . W (its dual vector d; E's dual basis): after the change, d . W' is the
+    force along the axis, whatever d (but one that does not see the normal), and W' - W lies along the normal."""
+    n, a = _unit(normal), _unit(axis)
+    assume(abs(covector @ np.concatenate([np.zeros(3), n])) > 1e-2)
+    read = force_along_tool_axis(wrench, n, a, lambda W: covector @ W)
+    signed = a if a @ n >= 0 else -a
+    assert covector @ read == pytest.approx(signed @ wrench[3:], rel=1e-9, abs=1e-7)
+    change = read - wrench
+    assert change[:3] == pytest.approx(np.zeros(3), abs=1e-12)
+    assert np.linalg.norm(np.cross(change[3:], n)) <= 1e-9 * (1 + np.linalg.norm(change))
+
+
+def test_a_row_that_does_not_see_the_normal_is_refused():
+    blind = np.array([0.0, 0.0, 0.0, 1.0, 0.0, 0.0])          # reads f_x; the normal is z
+    with pytest.raises(ValueError, match="does not read the force along the model's normal"):
+        force_along_tool_axis(np.ones(6), np.array([0.0, 0.0, 1.0]), np.array([0.0, 0.0, 1.0]),
+                              lambda W: blind @ W)
 
 
 @settings(max_examples=30, deadline=None)

@@ -7,18 +7,20 @@ model gets wrong, a flat tool whose orientation rows are force-controlled (zero 
 the normal force the user commands is the force along a, not along n: with the model 8 deg off, F . n
 = 20 N is F . a = 20 / cos 8 deg = 20.2 N.
 
-With ``normal_force_axis="tool"`` the law reads the measured force with its component along n replaced
-by its component along the tool's axis (a signed towards n)::
+With ``normal_force_axis="tool"`` the law reads the measured force changed along n only, so that the
+normal row reads the force along the tool's axis (a signed towards n)::
 
-    f' = f + ((a_n - n) . f) n        a_n = sign(a . n) a,  n the unit model normal
+    f' = f + ((a_n . f - F_1(f)) / F_1(n)) n        a_n = sign(a . n) a,  n the unit model normal
 
-so that n . f' = a_n . f: the normal row holds the force along the tool's axis, and nothing else changes
-(the tangential components along the model's tangents and the moments stay as measured). At a tool
-aligned with a frictionless contact (f along a) a small tilt changes a_n . f only to second order, so
-the loop's linearization is the model's. "model" (the default) reads f as measured.
+F_1 the row's reading in E's dual basis (``control.law.measured_forces``; where E_p's rows are orthogonal to
+n, F_1(f) = n . f and f' = f + ((a_n - n) . f) n). The normal row then holds a_n . f. The other rows' readings
+do not change: their dual vectors are orthogonal to the normal row's direction n (E E^-1 = I, the normal row
+a distance, with no moment part). At a tool aligned with a frictionless contact (f along a) a small tilt
+changes a_n . f only to second order, so the loop's linearization is the model's. "model" (the default)
+reads f as measured.
 """
 
-from typing import Any, Tuple
+from typing import Any, Callable, Optional, Tuple
 
 import numpy as np
 
@@ -47,10 +49,20 @@ def model_normal(chart: Any, force_projection: Array, x: Array, row: int) -> Arr
     return direction / sqrt(length_squared)
 
 
-def force_along_tool_axis(wrench: Array, normal: Array, axis: Array) -> Array:
-    """The wrench [n; f] with the force's component along ``normal`` (unit) replaced by its component along
-    ``axis`` (unit, the tool's; signed towards ``normal``): the module docstring's f'. Float or AutoDiffXd."""
+def force_along_tool_axis(wrench: Array, normal: Array, axis: Array,
+                          reading: Optional[Callable[[Array], Any]] = None) -> Array:
+    """The wrench [n; f] changed along ``normal`` (unit) so that the normal row's ``reading`` of it (a linear
+    function of a wrench; default the force's component along ``normal``) is the force along ``axis`` (unit, the
+    tool's, signed towards ``normal``): the module docstring's f', W' = W + ((a_n . f - reading(W)) /
+    reading([0; n])) [0; n]. Float or AutoDiffXd."""
     force = wrench[3:]
     signed = axis if axis @ normal >= 0 else -axis
-    replaced = force + ((signed - normal) @ force) * normal
-    return np.concatenate([wrench[:3], replaced])
+    along_normal = np.concatenate([np.zeros(3), normal])
+    if reading is None:
+        shortfall, unit_reading = (signed - normal) @ force, 1.0
+    else:
+        shortfall, unit_reading = signed @ force - reading(wrench), reading(along_normal)
+        if not abs(unit_reading) > 1e-9:
+            raise ValueError("HybridController: normal_force_axis='tool': the normal row does not read the force "
+                             "along the model's normal at this configuration")
+    return wrench + (shortfall / unit_reading) * along_normal
