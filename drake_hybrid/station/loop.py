@@ -228,7 +228,8 @@ def add_hybrid_controller(builder: DiagramBuilder, plant: MultibodyPlant, robot:
             of ``control.baselines``) instead of building one.
         controller_options: further HybridController arguments (``CONTROLLER_OPTIONS``: safety,
             velocity_row_inertia, compensate_tangential_force, sample_lead, sampled_diagnostics,
-            plant_time_step, fast_law, ...); only when ``controller`` is None.
+            plant_time_step, fast_law, normal_force_axis ("tool" for a flat tool whose orientation rows are
+            force rows: its normal force along its own axis), ...); only when ``controller`` is None.
 
     Returns the HybridSystems of the loop. Every port stays reachable by name for wiring by hand.
     """
