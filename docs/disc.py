@@ -513,15 +513,17 @@ on the cylinder a strip along its axis (a flat disc on a convex surface). Held b
 8 deg off the plane's real normal: it digs in with its rim, a quarter of its face in contact, the pressure's
 centre 18 mm off its axis.
 
-**The normal force.** The law holds its force row at the command to a few hundredths of a percent. The real
-normal force is another matter: the force row is the model's normal in the dual basis of E = [E_p; E_f], and
-with the model 8 deg off, the real normal force is F_1 (n_model . w) / (n_real . w) (w the view's normal, the
-force's tangential part cancelled by the law as it is measured): on the plane 1 / cos 8 deg = +0.98 %, and the
-settled contact force reads +1.04 % (the row's own 0.06 % on top): just over the 1 % target; on the cylinder
-+0.94 %, within it. The disc's own axis, once aligned, is the real normal; a force row along it is not what
-the constraint's first row gives, and is left as a finding. (The pressure integrated over the patch,
-`patch`'s normal force, reads 0.4 % above the contact force Drake applies on the plane: SAP's discrete
-contact is not the pressure field's integral exactly.)SAP's discrete contact is not the pressure field's integral exactly.)"""
+**The normal force.** With the orientation force-controlled the normal row reads the force along the disc's own
+axis (`tool.normal_force: tool`, the disc's default; `control.normal_force`): the measured wrench is changed along
+the model's normal so that the row's reading in E's dual basis is the force along the axis. Once the disc lies flat
+on the real surface its axis is the real normal, so the contact force Drake applies is the command: on the plane
+20.00 N, -0.065 % at most once settled (the row's own error; before this reading the row held the force along the
+model's normal, and the disc pressed 1 / cos 8 deg = +0.98 % too hard, +1.04 % measured), on the cylinder 20.00 N
+to the row's accuracy. Held by position, the disc's row is the model's normal (`normal_force: model`, a held
+disc's default: its axis is the model's normal anyway), and its contact force, along the real normal, reads
++0.98 % on the plane (1 / cos 8 deg). (The pressure integrated over the patch, `patch`'s normal force,
+reads 0.35 % above the contact force Drake applies on the plane: SAP's discrete contact is not the pressure
+field's integral exactly.)"""
 
 PAGE_RASTER = """## A raster over the height-map part
 
@@ -529,12 +531,14 @@ The surface-polishing raster over the bump (`surface-polishing --option workpiec
 high, sigma 3 cm; 10 cm x 10 cm at 5 cm/s and 10 N, 11 segments, approach to lift-off) with a disc, the model
 exact. The bump's top is convex with a 3 cm radius and its flanks concave: a flat disc bridges the curvature,
 so only part of its face touches. The 30 mm disc keeps its centre of pressure within the 2 mm target along the
-whole path (1.09 mm) and its force row within 2 % (1.54 %); the contact force Drake applies, which a disc
-resting across a curved surface does not take along the surface's normal under its centre, strays up to 2.7 %
-(the ball pad on the same raster: 0.24 %, docs/paths.md); the 50 mm disc, wider than the bump's curvature allows, does not (its rim
-rests across the flanks' hollows, and the zero-moment orientation changes faster than its moment loop follows
-at 5 cm/s). The tilt here is against the surface's normal under the disc's centre, which a disc resting on its
-rim across a curved surface does not share: no target."""
+whole path (1.08 mm), its force row (the force along its axis) within 2 % (1.78 %) and the contact force Drake
+applies within 2 % too (1.75 %; read along the model's normal in E's dual basis, as before the axis reading,
+it strayed to 2.74 %: on the flanks E_p's rows are not orthogonal to the normal, and the row then mixes in a
+share of the tangential force, `control.normal_force`). The ball pad on the same raster: 0.24 %
+(docs/paths.md). The 50 mm disc, wider than the bump's curvature allows, does not (its rim rests across the
+flanks' hollows, and the zero-moment orientation changes faster than its moment loop follows at 5 cm/s). The
+tilt here is against the surface's normal under the disc's centre, which a disc resting on its rim across a
+curved surface does not share: no target."""
 
 PAGE_EIGEN = """## The linearized loop at those points
 

@@ -37,7 +37,7 @@ from drake_hybrid.control.fast_law import FastLaw
 from drake_hybrid.control.gains import ControlMode, HybridGains, ValidatedGains, check_poles
 from drake_hybrid.control.law import LawConstants, evaluate_law
 from drake_hybrid.control.law_system import LawSystemParts, declare_diagnostic_outputs, reported_diagnostics_vector
-from drake_hybrid.control.normal_force import NORMAL_FORCE_AXES, force_along_tool_axis, model_normal, normal_row
+from drake_hybrid.control.normal_force import NORMAL_FORCE_AXES, tool_axis_wrench
 from drake_hybrid.control.phases import ContactPhase
 from drake_hybrid.control.safety import SafetyConfig, warn_singularity
 from drake_hybrid.control.sampling import SAMPLE_LEAD
@@ -561,22 +561,12 @@ def HybridController_(T):
             return self._solution_cache.Eval(context).solution
 
         def _force_along_tool_axis(self, plant_context, wrench):
-            """The measured wrench as the normal row reads it with normal_force_axis="tool" (control.normal_force):
-            changed along the model's normal so that the row's reading in E's dual basis is the force along the
-            tool's axis."""
-            kinematics, space = self.kinematics, self.constraint_space
-            chart = kinematics.chart
+            """The measured wrench as the normal row reads it with normal_force_axis="tool" (control.normal_force)."""
+            kinematics = self.kinematics
             X_WE = self._plant.CalcRelativeTransform(plant_context, self._plant.world_frame(), kinematics.frame)
             R_WE = X_WE.rotation().matrix()
-            x = chart.configuration(R_WE, X_WE.translation() + R_WE @ kinematics.point_in_frame)
-            values = space.evaluate(x, np.zeros(chart.velocity_size), check=False)
-            row = normal_row(self.force_size, self.kinematic_rows)
-            normal = model_normal(chart, values.force_projection, x, row)
-
-            def reading(spatial_wrench):
-                return space.split_wrench(values, chart.generalized_force(x, spatial_wrench))[1][row]
-
-            return force_along_tool_axis(np.asarray(wrench), normal, R_WE[:, 2], reading)
+            x = kinematics.chart.configuration(R_WE, X_WE.translation() + R_WE @ kinematics.point_in_frame)
+            return tool_axis_wrench(self.constraint_space, x, R_WE, wrench)
 
         def _calc_actuation(self, context, output):
             output.SetFromVector(self._solution(context).actuation)

@@ -66,3 +66,20 @@ def force_along_tool_axis(wrench: Array, normal: Array, axis: Array,
             raise ValueError("HybridController: normal_force_axis='tool': the normal row does not read the force "
                              "along the model's normal at this configuration")
     return wrench + (shortfall / unit_reading) * along_normal
+
+
+def tool_axis_wrench(space: Any, configuration: Array, rotation: Array, wrench: Array, values: Any = None) -> Array:
+    """The measured spatial ``wrench`` as the normal row reads it with ``normal_force_axis="tool"``: changed along
+    the model's normal so that the row's reading in E's dual basis (``space.split_wrench``) is the force along the
+    tool's axis (``rotation``'s z, R_WE of the end-effector frame), at chart ``configuration`` x. ``values``:
+    ``space.evaluate`` at x, if already computed. Float or AutoDiffXd."""
+    chart = space.chart
+    if values is None:
+        values = space.evaluate(configuration, np.zeros(chart.velocity_size), check=False)
+    row = normal_row(space.force_size, tuple(space.constraint.kinematic_rows))
+    normal = model_normal(chart, values.force_projection, configuration, row)
+
+    def reading(spatial_wrench: Array) -> Any:
+        return space.split_wrench(values, chart.generalized_force(configuration, spatial_wrench))[1][row]
+
+    return force_along_tool_axis(np.asarray(wrench), normal, rotation[:, 2], reading)

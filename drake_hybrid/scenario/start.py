@@ -28,7 +28,7 @@ from drake_hybrid.station.root_context import check_systems
 from drake_hybrid.station.start import holding_torque, prime_start
 from drake_hybrid.tasks.config import ScenarioConfig
 from drake_hybrid.tasks.plant import apply_model_error
-from drake_hybrid.tasks.pressing import moment_rows
+from drake_hybrid.tasks.pressing import held_force_integral, moment_rows
 from drake_hybrid.tasks.task import Scenario
 
 
@@ -65,8 +65,13 @@ def set_initial_conditions(scenario: Scenario, root_context: Context) -> None:
     if config.start.position_error and e_p_slice.stop > e_p_slice.start:
         integrals[e_p_slice] = config.start.position_error
     desired = np.asarray(config.desired_force.evaluate(0.0)[0], dtype=float)
-    prime_start(scenario, root_context, holding_torque(scenario, q0, desired if config.start.in_contact else 0 * desired),
-                integrals)
+    if config.start.in_contact:
+        # What the arm holds and the force integral that holds it (a normal row read along a turned tool's axis).
+        held, xi = held_force_integral(scenario, q0, desired)
+        integrals[xi_slice] = integrals[xi_slice] + xi
+    else:
+        held = 0 * desired
+    prime_start(scenario, root_context, holding_torque(scenario, q0, held), integrals)
 
 
 def check_start(scenario: Scenario, q: ArrayLike) -> None:

@@ -8,7 +8,8 @@ from pydrake.common.eigen_geometry import AngleAxis
 from pydrake.math import RigidTransform, RotationMatrix
 from pydrake.systems.framework import DiagramBuilder
 
-from drake_hybrid.core.errors import OffConstraintError
+from drake_hybrid.control.normal_force import tool_axis_wrench
+from drake_hybrid.core.errors import ConfigError, OffConstraintError
 from drake_hybrid.core.kinematics import EndEffectorKinematics
 from drake_hybrid.station.start import pressing_depth
 from drake_hybrid.systems.contact_wrench_sensor import ContactWrenchSensor
@@ -21,8 +22,10 @@ TILT_STEP = 1e-4          # rad, the finite differences of the moments' Jacobian
 
 
 def _row_force_probe(scenario):
-    """force_at(q) -> F: the rows' force [F_v; F] = E^-T w's F at the arm's positions q, on a static probe (a
-    continuous copy of the plant, the same contact properties, and the ideal contact sensor)."""
+    """force_at(q, as_read=True) -> F: the rows' force [F_v; F] = E^-T w's F at the arm's positions q, on a static
+    probe (a continuous copy of the plant, the same contact properties, and the ideal contact sensor), read as the
+    scenario's controller reads it (its normal row along the tool's axis with ``normal_force_axis="tool"``), or,
+    ``as_read=False``, the force the contact exerts in E's dual basis."""
     config, task = scenario.config, scenario.task
     builder = DiagramBuilder()
     plant, _, robot = build_plant(task, config, builder, time_step=0.0)
@@ -39,14 +42,46 @@ def _row_force_probe(scenario):
                                        scenario.constraint_space.chart)
     space = scenario.constraint_space
 
-    def force_at(q):
+    along_tool_axis = reads_along_tool_axis(scenario)
+
+    def force_at(q, as_read=True):
         plant.SetPositions(plant_context, robot.arm, q)
         task_kinematics = kinematics.evaluate(plant_context)
-        values = space.evaluate(task_kinematics.configuration, task_kinematics.velocity)
-        wrench = space.chart.generalized_force(task_kinematics.configuration,
-                                               sensor.get_output_port(0).Eval(sensor_context))
-        return space.split_wrench(values, wrench)[1]
+        x = task_kinematics.configuration
+        values = space.evaluate(x, task_kinematics.velocity)
+        spatial_wrench = sensor.get_output_port(0).Eval(sensor_context)
+        if along_tool_axis and as_read:        # the normal row as the controller reads it (control.normal_force)
+            spatial_wrench = tool_axis_wrench(space, x, task_kinematics.rotation, spatial_wrench, values)
+        return space.split_wrench(values, space.chart.generalized_force(x, spatial_wrench))[1]
     return force_at
+
+
+def reads_along_tool_axis(scenario):
+    """Whether the scenario's controller reads its normal row along the tool's axis (control.normal_force)."""
+    return getattr(scenario.controller, "normal_force_axis", "model") == "tool"
+
+
+def held_force_integral(scenario, q, desired):
+    """(F_h, xi) of an in-contact start at ``q`` pressing with ``desired`` (F_d(0)) as its controller reads it: the
+    force the arm must hold in E_f's coordinates, and the force integral that makes the law hold it with a zero
+    force error. Read along the model's normal they are F_d and 0. Read along the tool's axis (a flat tool turned
+    off the model's normal, ``balanced_pressing_positions``), the contact's own normal-row force F_r differs
+    from the F_d the row reads; the law's u_f = -F_d + K_fi xi (3.1-12, e_f = 0) holds -F_r when
+    K_fi xi = F_d - F_r. ConfigError if no force integral can (a normal row without K_fi)."""
+    desired = np.asarray(desired, dtype=float)
+    if not reads_along_tool_axis(scenario):
+        return desired, np.zeros(len(desired))
+    contact = np.asarray(_row_force_probe(scenario)(q, as_read=False), dtype=float)
+    held = desired.copy()
+    row = next(i for i in range(len(desired)) if i not in scenario.constraint_space.constraint.kinematic_rows)
+    held[row] = contact[row]
+    gain = scenario.controller.validated_gains().force_integral
+    shortfall = desired - held
+    if shortfall[row] != 0 and not abs(gain[row, row]) > 0:
+        raise ConfigError(f"task '{scenario.task.name}': the normal row reads the force along the tool's axis "
+                          f"(tool.normal_force: tool), {desired[row]:.4g} N there being {held[row]:.4g} N in E's "
+                          "dual basis at the start; holding it needs gains.force_integral > 0 on the normal row")
+    return held, np.linalg.lstsq(gain, shortfall, rcond=None)[0]
 
 
 def _max_depth(scenario, max_depth):
