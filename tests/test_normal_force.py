@@ -20,6 +20,7 @@ from drake_hybrid.core.errors import ArgumentError, ConfigError
 from drake_hybrid.scenario.builder import build_scenario
 from drake_hybrid.scenario.start import set_initial_conditions
 from drake_hybrid.station.tools import ToolConfig
+from drake_hybrid.tasks.pressing import held_force_integral
 from drake_hybrid.tasks.task_file import load_task_file
 
 MODELS = Path(__file__).resolve().parents[1] / "models" / "tasks"
@@ -191,3 +192,9 @@ def test_the_autodiff_controller_reads_the_same_normal_force(tilted_disc):
             port.FixValue(context, np.asarray(value, dtype=object) + AutoDiffXd(0.0))
     read = autodiff.GetOutputPort("force").Eval(context)
     assert ExtractValue(read).ravel() == pytest.approx(along_axis, rel=1e-9, abs=1e-9)
+
+
+def test_a_start_read_along_the_models_normal_holds_the_desired_force_with_no_integral():
+    scenario = type("Scenario", (), {"controller": type("Controller", (), {"normal_force_axis": "model"})()})()
+    held, xi = held_force_integral(scenario, np.zeros(6), [20.0, 0.0, 0.0])
+    assert held.tolist() == [20.0, 0.0, 0.0] and xi.tolist() == [0.0, 0.0, 0.0]
