@@ -51,6 +51,7 @@ from pydrake.systems.framework import DiagramBuilder, InputPort, OutputPort, Sys
 
 from drake_hybrid.control.controller import HybridController
 from drake_hybrid.control.gains import ControlMode, HybridGains, ValidatedGains
+from drake_hybrid.control.normal_force import normal_row
 from drake_hybrid.control.phases import ContactPhase
 from drake_hybrid.control.supervision import ContactSupervisor, SupervisionConfig
 from drake_hybrid.core.arguments import describe, instance, vector
@@ -172,8 +173,7 @@ def path_source(job: PathJob, controller_plant: MultibodyPlant, robot: RobotMode
                 control_period: Optional[float], supervised: bool) -> PathSource:
     """The PathSource that runs ``job`` for a controller on ``controller_plant`` (it waits for the first
     contact when ``supervised``, unless the job holds one point)."""
-    kinematic = constraint_space.constraint.kinematic_rows
-    force_row = next(i for i in range(constraint_space.force_size) if i not in kinematic)
+    force_row = normal_row(constraint_space.force_size, tuple(constraint_space.constraint.kinematic_rows))
     return PathSource(controller_plant, robot.end_effector_frame, robot.end_effector_point, constraint_space,
                       job.path, heading=job.heading, force_row=force_row,
                       dwell=0.0 if job.holding else job.settings.dwell,

@@ -9,6 +9,7 @@ from numpy.typing import ArrayLike
 
 from pydrake.math import RigidTransform
 
+from drake_hybrid.control.normal_force import normal_row
 from drake_hybrid.core.errors import ConfigError
 from drake_hybrid.core.hints import Array
 from drake_hybrid.core.kinematics import inverse_kinematics
@@ -92,8 +93,7 @@ def with_path_commands(config: ScenarioConfig, constraint_space: ConstraintSpace
     point it holds (``path.hold_at``: per waypoint or by arc length, the force there). What the start
     (pressing with that force), the static torque and the summaries read; the run's commands come from
     the path."""
-    kinematic = constraint_space.constraint.kinematic_rows
-    force_row = next(i for i in range(constraint_space.force_size) if i not in kinematic)
+    force_row = normal_row(constraint_space.force_size, tuple(constraint_space.constraint.kinematic_rows))
     force = [0.0] * constraint_space.force_size
     force[force_row] = float(job.path.force(0.0))
     moment_row_indices = moment_rows(constraint_space)

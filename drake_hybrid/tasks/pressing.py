@@ -8,7 +8,7 @@ from pydrake.common.eigen_geometry import AngleAxis
 from pydrake.math import RigidTransform, RotationMatrix
 from pydrake.systems.framework import DiagramBuilder
 
-from drake_hybrid.control.normal_force import tool_axis_wrench
+from drake_hybrid.control.normal_force import normal_row, tool_axis_wrench
 from drake_hybrid.core.errors import ConfigError, OffConstraintError
 from drake_hybrid.core.kinematics import EndEffectorKinematics
 from drake_hybrid.station.start import pressing_depth
@@ -73,7 +73,7 @@ def held_force_integral(scenario, q, desired):
         return desired, np.zeros(len(desired))
     contact = np.asarray(_row_force_probe(scenario)(q, as_read=False), dtype=float)
     held = desired.copy()
-    row = next(i for i in range(len(desired)) if i not in scenario.constraint_space.constraint.kinematic_rows)
+    row = normal_row(len(desired), tuple(scenario.constraint_space.constraint.kinematic_rows))
     held[row] = contact[row]
     gain = scenario.controller.validated_gains().force_integral
     shortfall = desired - held
