@@ -39,7 +39,7 @@ def test_the_normal_component_becomes_the_component_along_the_axis_and_nothing_e
                                                                                           axis):
     n, a = _unit(normal), _unit(axis)
     wrench = np.concatenate([moment, force])
-    read = force_along_tool_axis(wrench, n, a)
+    read = force_along_tool_axis(wrench, n, a, lambda W: n @ W[3:])     # E_p's rows orthogonal to n
     signed = a if a @ n >= 0 else -a                  # the axis turned towards the model's normal
     assert read[:3] == pytest.approx(moment, abs=1e-12)                     # the moments as measured
     assert read[3:] @ n == pytest.approx(signed @ np.asarray(force), abs=1e-9)   # the normal row: along the axis
@@ -79,10 +79,12 @@ def test_autodiff_values_are_the_floats_and_its_derivatives_the_finite_differenc
         return
     wrench = np.concatenate([np.zeros(3), force])
     a_ad = InitializeAutoDiff(a).ravel()
-    read = force_along_tool_axis(wrench.astype(object) + AutoDiffXd(0.0), n, a_ad)
-    assert ExtractValue(read).ravel() == pytest.approx(force_along_tool_axis(wrench, n, a), abs=1e-12)
+    along_normal = lambda W: n @ W[3:]                   # noqa: E731
+    read = force_along_tool_axis(wrench.astype(object) + AutoDiffXd(0.0), n, a_ad, along_normal)
+    assert ExtractValue(read).ravel() == pytest.approx(force_along_tool_axis(wrench, n, a, along_normal), abs=1e-12)
     step = 1e-6
-    columns = [(force_along_tool_axis(wrench, n, a + step * e) - force_along_tool_axis(wrench, n, a - step * e))
+    columns = [(force_along_tool_axis(wrench, n, a + step * e, along_normal)
+                - force_along_tool_axis(wrench, n, a - step * e, along_normal))
                / (2 * step) for e in np.eye(3)]
     assert ExtractGradient(read) == pytest.approx(np.array(columns).T, abs=1e-6)
 

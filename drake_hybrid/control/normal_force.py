@@ -20,7 +20,7 @@ changes a_n . f only to second order, so the loop's linearization is the model's
 reads f as measured.
 """
 
-from typing import Any, Callable, Optional, Tuple
+from typing import Any, Callable, Tuple
 
 import numpy as np
 
@@ -49,23 +49,18 @@ def model_normal(chart: Any, force_projection: Array, x: Array, row: int) -> Arr
     return direction / sqrt(length_squared)
 
 
-def force_along_tool_axis(wrench: Array, normal: Array, axis: Array,
-                          reading: Optional[Callable[[Array], Any]] = None) -> Array:
+def force_along_tool_axis(wrench: Array, normal: Array, axis: Array, reading: Callable[[Array], Any]) -> Array:
     """The wrench [n; f] changed along ``normal`` (unit) so that the normal row's ``reading`` of it (a linear
-    function of a wrench; default the force's component along ``normal``) is the force along ``axis`` (unit, the
-    tool's, signed towards ``normal``): the module docstring's f', W' = W + ((a_n . f - reading(W)) /
-    reading([0; n])) [0; n]. Float or AutoDiffXd."""
-    force = wrench[3:]
+    function of a wrench: the row's dual vector in E's dual basis) is the force along ``axis`` (unit, the tool's,
+    signed towards ``normal``): the module docstring's f', W' = W + ((a_n . f - reading(W)) / reading([0; n]))
+    [0; n]. Float or AutoDiffXd."""
     signed = axis if axis @ normal >= 0 else -axis
     along_normal = np.concatenate([np.zeros(3), normal])
-    if reading is None:
-        shortfall, unit_reading = (signed - normal) @ force, 1.0
-    else:
-        shortfall, unit_reading = signed @ force - reading(wrench), reading(along_normal)
-        if not abs(unit_reading) > 1e-9:
-            raise ValueError("HybridController: normal_force_axis='tool': the normal row does not read the force "
-                             "along the model's normal at this configuration")
-    return wrench + (shortfall / unit_reading) * along_normal
+    unit_reading = reading(along_normal)
+    if not abs(unit_reading) > 1e-9:
+        raise ValueError("HybridController: normal_force_axis='tool': the normal row does not read the force "
+                         "along the model's normal at this configuration")
+    return wrench + ((signed @ wrench[3:] - reading(wrench)) / unit_reading) * along_normal
 
 
 def tool_axis_wrench(space: Any, configuration: Array, rotation: Array, wrench: Array, values: Any = None) -> Array:
