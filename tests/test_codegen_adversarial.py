@@ -14,12 +14,12 @@ from fractions import Fraction
 
 import mpmath
 import numpy as np
-import pydrake.symbolic as drake_symbolic
 import pytest
 import sympy
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+import pydrake.symbolic as drake_symbolic
 from pydrake.autodiffutils import AutoDiffXd
 
 from drake_hybrid.control import fast_law

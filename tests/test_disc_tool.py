@@ -27,8 +27,7 @@ from drake_hybrid.core.surface_moves import moved_surface, surface_error_pose
 from drake_hybrid.core.surfaces import CylinderSurface, PlaneSurface, SphereSurface
 from drake_hybrid.scenario.builder import build_scenario
 from drake_hybrid.station.arm import mount_tool
-from drake_hybrid.station.contact import (ContactConfig, apply_contact_defaults, default_plant_config,
-                                          only_tool_touches)
+from drake_hybrid.station.contact import ContactConfig, apply_contact_defaults, default_plant_config, only_tool_touches
 from drake_hybrid.station.path_config import PathConfig
 from drake_hybrid.station.tools import STEM_LENGTH, ToolConfig
 from drake_hybrid.station.workpieces import add_rigid_workpiece

@@ -20,8 +20,8 @@ off the surface); these checks say it first, in one line:
 
 import numpy as np
 
-from pydrake.math import RigidTransform, RotationMatrix
 from pydrake.common.eigen_geometry import Quaternion
+from pydrake.math import RigidTransform, RotationMatrix
 
 from drake_hybrid.core.errors import ConstraintRankError, DrakeHybridError, ForceSignError, OffConstraintError
 from drake_hybrid.core.linalg import rank_margin, value

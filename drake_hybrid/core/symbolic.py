@@ -39,6 +39,7 @@ from pydrake.autodiffutils import AutoDiffXd
 from drake_hybrid.core.errors import DimensionError, ExpressionError, UnknownVariableError
 from drake_hybrid.core.oracle import check_against_sympy, check_gradients, describe, to_autodiff
 
+
 class RealAbs(sympy.Function):
     """|u| of a real u. sympy's Abs differentiates as a complex function (re, im and arg of u appear
     where sympy cannot prove u real, e.g. |x**x|); every generated path computes in real numbers, where

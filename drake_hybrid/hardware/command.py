@@ -20,10 +20,11 @@ import logging
 
 import numpy as np
 
-from pydrake.systems.framework import LeafSystem
+from pydrake.systems.controllers import InverseDynamics
+from pydrake.systems.framework import Diagram, DiagramBuilder, LeafSystem
+from pydrake.systems.primitives import Adder, Gain, MatrixGain
 
 from drake_hybrid.control.sampling import tick_offset
-from drake_hybrid.core.kinematics import declare_plant_context_cache
 from drake_hybrid.core.linalg import all_finite
 from drake_hybrid.hardware.messages import HardwareFault, Rejection
 from drake_hybrid.hardware.watchdog import STATUS_FIELDS
@@ -32,7 +33,7 @@ LOGGER = logging.getLogger("drake_hybrid.hardware")
 _STOPS = (HardwareFault.STATUS_STALE, HardwareFault.FORCE_TORQUE_STALE)
 
 
-class DriverGravityCompensation(LeafSystem):
+class DriverGravityCompensation(Diagram):
     """tau_out = tau_in + sign g(q).
 
     .. pydrake_system::
@@ -47,32 +48,41 @@ class DriverGravityCompensation(LeafSystem):
     g(q) = -CalcGravityGeneralizedForces (the torque that holds the arm still) of ``plant``, a
     plant of the arm and tool only (its state is the arm's [q; v]): the controller's plant on both
     sides (the simulated driver's own model of the arm, as the real driver has one).
+
+    Made of Drake's own systems, so the tick pays no Python for it: the ``InverseDynamics``
+    controller in its gravity-compensation mode (which outputs -CalcGravityGeneralizedForces at the
+    positions of ``estimated_state``), mapped to actuation order and signed by a ``Gain`` (an identity
+    actuation matrix) or a ``MatrixGain`` (sign B^-1), and an ``Adder``::
+
+        estimated_state ──► InverseDynamics (gravity) ──► sign [B^-1] ──┐
+        torque ────────────────────────────────────────────────────────Adder──► torque
     """
 
     def __init__(self, plant, sign):
-        LeafSystem.__init__(self)
+        Diagram.__init__(self)
         if sign not in (-1, 1):
             raise ValueError(f"DriverGravityCompensation: sign must be -1 or +1, got {sign}")
-        self._plant, self._sign = plant, float(sign)
+        self._sign = float(sign)
         n = plant.num_actuated_dofs()
-        self._torque_port = self.DeclareVectorInputPort("torque", n)
-        self._state_port = self.DeclareVectorInputPort("estimated_state", plant.num_multibody_states())
-        self._context_cache = declare_plant_context_cache(self, plant, self._state_port)
         actuation_from_torque = np.linalg.inv(plant.MakeActuationMatrix())
-        # None for an identity actuation matrix (one actuator per joint, in joint order): B^-1 g = g exactly.
-        self._actuation_from_torque = (None if np.array_equal(actuation_from_torque, np.eye(n))
-                                       else actuation_from_torque)
-        self.DeclareVectorOutputPort("torque", n, self._calc)
+        builder = DiagramBuilder()
+        gravity = builder.AddNamedSystem("gravity", InverseDynamics(
+            plant, InverseDynamics.InverseDynamicsMode.kGravityCompensation))
+        # An identity actuation matrix (one actuator per joint, in joint order): sign g exactly.
+        signed = builder.AddNamedSystem("signed_gravity", Gain(self._sign, n) if np.array_equal(
+            actuation_from_torque, np.eye(n)) else MatrixGain(self._sign * actuation_from_torque))
+        adder = builder.AddNamedSystem("sum", Adder(2, n))
+        builder.Connect(gravity.get_output_port_generalized_force(), signed.get_input_port())
+        builder.Connect(signed.get_output_port(), adder.get_input_port(1))
+        builder.ExportInput(adder.get_input_port(0), "torque")
+        builder.ExportInput(gravity.get_input_port_estimated_state(), "estimated_state")
+        builder.ExportOutput(adder.get_output_port(), "torque")
+        builder.BuildInto(self)
+        self._signed = signed
 
     def gravity(self, context):
-        """g(q) at the state on ``estimated_state``, in actuation order."""
-        plant_context = self._context_cache.Eval(context)
-        torque = -self._plant.CalcGravityGeneralizedForces(plant_context)
-        return torque if self._actuation_from_torque is None else self._actuation_from_torque @ torque
-
-    def _calc(self, context, output):
-        torque, gravity = self._torque_port.Eval(context), self.gravity(context)
-        output.SetFromVector(torque + gravity if self._sign > 0 else torque - gravity)
+        """g(q) at the state on ``estimated_state`` (``context``: this system's), in actuation order."""
+        return self._sign * self._signed.get_output_port().Eval(self.GetSubsystemContext(self._signed, context))
 
 
 class TorqueCommandSafety(LeafSystem):

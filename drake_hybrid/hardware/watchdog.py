@@ -41,15 +41,13 @@ def status_fields(message, n):
     empty message a subscriber holds before the first one arrives."""
     if message.num_joints == 0 and message.utime == 0:
         return None
-    if message.num_joints != n or len(message.joint_position) != n:
+    values = [*message.joint_position, *message.joint_velocity, *message.joint_torque_external]
+    if message.num_joints != n or len(message.joint_position) != n or len(values) != 3 * n:
         return message.utime * 1e-6, None, Rejection.WRONG_SIZE
-    values = list(message.joint_position) + list(message.joint_velocity) + list(message.joint_torque_external)
-    if len(values) != 3 * n:
-        return message.utime * 1e-6, None, Rejection.WRONG_SIZE
-    values = np.array(values, dtype=float)
-    if not all_finite(values):
+    # One sum of the Python floats: NaN and inf propagate through it (as in core.linalg.all_finite).
+    if not math.isfinite(sum(values)):
         return message.utime * 1e-6, None, Rejection.NON_FINITE
-    return message.utime * 1e-6, values, Rejection.NONE
+    return message.utime * 1e-6, np.array(values, dtype=float), Rejection.NONE
 
 
 def force_torque_fields(message):
@@ -171,8 +169,9 @@ class MessageWatchdog(LeafSystem):
         """(status record, F/T record) after the messages on the inputs arrived now."""
         status, force_torque = self._parsed.Eval(context)
         now = context.get_time()
-        return (accept(context.get_discrete_state(0).CopyToVector(), status, now),
-                accept(context.get_discrete_state(1).CopyToVector(), force_torque, now))
+        # The held records read in place (accept copies one only to change it).
+        return (accept(context.get_discrete_state(0).get_value(), status, now),
+                accept(context.get_discrete_state(1).get_value(), force_torque, now))
 
     def status(self, context):
         """{name: value} of ``watchdog_status`` at ``context`` (fault as a HardwareFault)."""

@@ -47,34 +47,34 @@ class ForceTorqueConditioning(LeafSystem):
         self._plant = plant
         self._sensor_frame = weld_joint.frame_on_child()
         tool = weld_joint.child_body()
-        self._tool_frame = tool.body_frame()
-        self._tool_mass, self._tool_com = tool.default_mass(), tool.default_com()
+        frame = resolve_frame(plant, end_effector_frame)
+        if frame.body() not in plant.GetBodiesWeldedTo(tool):
+            raise ValueError(f"ForceTorqueConditioning: the end-effector frame '{frame.name()}' is on body "
+                             f"'{frame.body().name()}', which is not welded to the sensor's tool '{tool.name()}'; "
+                             "a wrist F/T sensor measures the wrench at a point of its tool")
         self._gravity = plant.gravity_field().gravity_vector()
-        self._frame = resolve_frame(plant, end_effector_frame)
-        self._point = np.asarray(end_effector_point, dtype=float)
-        self._weight = (self._tool_mass * self._gravity).tolist()
+        self._weight = (tool.default_mass() * self._gravity).tolist()
         self.bias = np.zeros(6) if bias is None else np.asarray(bias, dtype=float)
+        # P and the tool's centre of mass are fixed in S (their bodies are welded to the sensor), so the
+        # two shifts are S's rotation of constant vectors: a = p_SP, b = p_SP - p_Scom (in S).
+        context = plant.CreateDefaultContext()
+        p_SP = plant.CalcPointsPositions(context, frame, np.asarray(end_effector_point, dtype=float),
+                                         self._sensor_frame).ravel()
+        p_Scom = plant.CalcPointsPositions(context, tool.body_frame(), tool.default_com(), self._sensor_frame).ravel()
+        # Rows [t; f; a_S; b_S]: the reading's two rows are written per evaluation (scratch, no state).
+        self._rows_S = np.vstack([np.zeros((2, 3)), p_SP, p_SP - p_Scom])
         self._wrench_port = self.DeclareVectorInputPort("sensor_wrench", 6)
         self._state_port = self.DeclareVectorInputPort("estimated_state", plant.num_multibody_states())
         self._context_cache = declare_plant_context_cache(self, plant, self._state_port)
         self.DeclareVectorOutputPort("wrench", 6, self._calc)
 
     def _calc(self, context, output):
-        # The formula of the module docstring in floats: np.cross and np.concatenate cost more than the
-        # arithmetic on three-vectors (the same operations in the same order: the same result; a point's
-        # position from CalcPointsPositions is X_WF p as RigidTransform.multiply computes it).
-        plant_context = self._context_cache.Eval(context)
-        X_WS = self._sensor_frame.CalcPoseInWorld(plant_context)
-        p_WS = X_WS.translation()
-        R_WS = X_WS.rotation().matrix()
-        world = self._plant.world_frame()
-        p_WP = self._plant.CalcPointsPositions(plant_context, self._frame, self._point, world).ravel()
-        p_Wcom = self._plant.CalcPointsPositions(plant_context, self._tool_frame, self._tool_com, world).ravel()
-        reading = self._wrench_port.Eval(context) - self.bias
-        tx, ty, tz = (R_WS @ reading[:3]).tolist()
-        fx, fy, fz = (R_WS @ reading[3:]).tolist()
-        ax, ay, az = (p_WP - p_WS).tolist()                 # S -> P
-        bx, by, bz = (p_WP - p_Wcom).tolist()               # com -> P
+        # The formula of the module docstring, rotated to world in one product: [t; f; a_S; b_S] R_WS^T;
+        # the cross products written out (np.cross and np.concatenate cost more than the arithmetic).
+        R_WS = self._sensor_frame.CalcRotationMatrixInWorld(self._context_cache.Eval(context)).matrix()
+        rows = self._rows_S
+        rows[:2] = (self._wrench_port.Eval(context) - self.bias).reshape(2, 3)
+        (tx, ty, tz), (fx, fy, fz), (ax, ay, az), (bx, by, bz) = np.dot(rows, R_WS.T).tolist()
         wx, wy, wz = self._weight                           # m_t g
         # shift(reading_W, a) - shift([0; w], b): n = t - a x f - (0 - b x w), f = f - w
         output.SetFromVector([tx - (ay * fz - az * fy) - (0.0 - (by * wz - bz * wy)),
