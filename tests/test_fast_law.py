@@ -358,3 +358,64 @@ def test_the_compile_job_compiles_in_its_own_process_records_and_releases_its_lo
     assert not (folder / "compiling.lock").exists() and not list(folder.glob("request-*"))
     assert "compiled drake_hybrid.control.fast_kernels.all_finite" in (folder / "compile.log").read_text()
     assert list((tmp_path / "numba").rglob("*.nbi"))                 # numba's own cache, written by the job
+
+
+def _agree_or_raise_alike(fast, generic, inputs, integrals, what):
+    """_compare, or the same ValueError from both paths (the compiled law hands a row that reads no force
+    along the model's normal to the generic law, which names it)."""
+    try:
+        _compare(fast, generic, inputs, integrals, what)
+        return True
+    except ValueError as error:
+        context = generic.CreateDefaultContext()
+        for name, value in inputs.items():
+            generic.GetInputPort(name).FixValue(context, value)
+        context.SetContinuousState(integrals)
+        with pytest.raises(ValueError, match="normal_force_axis='tool'") as generic_error:
+            generic.GetOutputPort("actuation").Eval(context)
+        assert str(error) == str(generic_error.value), what
+        return False
+
+
+@pytest.mark.slow                # several seconds: not in the fast loop (-m 'not slow')
+@pytest.mark.parametrize("mode", MODES)
+def test_both_paths_read_the_normal_row_along_the_tools_axis_alike(task, mode, rng):
+    """normal_force_axis="tool" (control.normal_force): the compiled law changes the wrench along the model's
+    normal itself (fast_kernels.wrench_along_tool_axis, the normal from the chart's own layout) and equals the
+    generic law, which does it with the chart's task Jacobian (normal_force.model_normal), on every chart."""
+    name, start = task
+    plant, frame, point, space, gains, q0 = start
+    fast, generic = _pair(start, mode, guarded_move=Guarded(), normal_force_axis="tool")
+    assert fast.fast_law.reads_tool_axis
+    agreed = 0
+    for i in range(8):
+        inputs = _random_inputs(fast, q0, rng, spread=0.02)
+        integrals = rng.normal(scale=0.05, size=fast.integral_state_slices()[1].stop)
+        agreed += _agree_or_raise_alike(fast, generic, inputs, integrals, f"{name} {mode} tool axis state {i}")
+    assert agreed > 0 or name == "crank-turning", f"{name}: the normal row never read a force"
+
+
+def test_the_disc_reads_its_axis_in_the_compiled_law_as_the_generic_law_does(rng):
+    """The disc pressing a plane modelled 8 deg off (its normal row along the tool's axis, the disc's
+    default), turned further off at random: the compiled law's wrench change equals the generic law's to
+    1e-12 on every output, and the compiled law ran it (no fallback)."""
+    from pathlib import Path
+
+    from drake_hybrid.tasks.task_file import load_task_file
+    _, config = load_task_file(Path(__file__).resolve().parents[1] / "models" / "tasks" / "disc_plane.yaml")
+    scenario = build_scenario(config, with_loggers=False)
+    tool = scenario.controller
+    assert tool.normal_force_axis == "tool"
+    arguments = {**tool._arguments, "control_period": None}
+    fast = HybridController(**arguments)
+    generic = HybridController(**{**arguments, "fast_law": False})
+    assert fast.fast_law.reads_tool_axis and generic.fast_law is None
+    q0 = np.asarray(scenario.task.start_positions(scenario), dtype=float)
+    for i in range(12):
+        inputs = _random_inputs(fast, q0, rng, spread=0.1)
+        inputs["measured_wrench"][3:] += rng.normal(scale=20.0) * rng.normal(size=3)
+        if fast.HasInputPort("path_position_error"):
+            inputs["path_position_error"] = rng.normal(scale=1e-3, size=fast.velocity_size)
+        integrals = rng.normal(scale=0.05, size=fast.integral_state_slices()[1].stop)
+        _compare(fast, generic, inputs, integrals, f"disc state {i}")
+    assert fast.fast_law.fallbacks == 0

@@ -536,18 +536,19 @@ def HybridController_(T):
             desired_force = self._force_port.Eval(context)
             integrals = self._law_integrals(context)
             wrench = self._wrench_port.Eval(context)
-            if self.normal_force_axis == "tool":
-                wrench = self._force_along_tool_axis(plant_context, wrench)
             phase = self._contact_phase(context)
             # C_r, read off the surface only (in CONTACT the law does not use it).
             reference = (self._reference_port.Eval(context) if phase is not ContactPhase.CONTACT
                          else np.zeros(self.force_size))
             solution = None
             if self.fast_law is not None:              # None: a check failed, the generic law raises (or copes)
+                # The compiled law reads the normal row along the tool's axis itself (fast_kernels).
                 solution = self.fast_law.evaluate(plant_context, forces, state[self.num_joints:], integrals,
                                                   desired_velocity, desired_acceleration, desired_force, wrench,
                                                   phase, reference)
             if solution is None:
+                if self.normal_force_axis == "tool":
+                    wrench = self._force_along_tool_axis(plant_context, wrench)
                 self._check_finite_commands(desired_velocity, desired_acceleration, desired_force)
                 solution = evaluate_law(
                     self._law, self.constraint_space, self.kinematics.evaluate(plant_context), self._plant,

@@ -52,7 +52,8 @@ I_DAMPING = 24                # 1: a damped discrete step: h B a* and K_0's J (M
 I_OFFSET_MECHANISM, I_OFFSET_DAMPING = 25, 26   # offsets of I_v (k x k) and h B (n) in ``reals``
 I_OFFSET_INVERSE_MASS = 27    # offset of M_d^-1 (k x k), the impedance's inverse mass (law.impedance_gain)
 I_OFFSET_KFD = 28             # offset of K_fd (m x m), the force rows' damping (law.force_row_damping)
-INT_SIZE = 29
+I_TOOL_AXIS_ROW = 29          # the normal row read along the tool's axis (control.normal_force); -1: as E reads it
+INT_SIZE = 30
 # -- scalars at the start of ``reals`` -------------------------------------------------------------
 (R_RANK_TOLERANCE, R_KERNEL_TOLERANCE, R_INVERTIBILITY_TOLERANCE, R_CHART_TOLERANCE, R_CONSTRAINT_FREQUENCY,
  R_NULL_SPACE_DAMPING, R_SINGULARITY_THRESHOLD, R_MAX_ACCELERATION, R_APPROACH_SPEED, R_APPROACH_GAIN,
@@ -583,16 +584,58 @@ def finish_inverse_dynamics(out, inverse_dynamics, base_torque, reals, ints):
 
 
 # ------------------------------------------------------------------------------------------------
+# The normal row read along the tool's axis (control/normal_force.tool_axis_wrench)
+# ------------------------------------------------------------------------------------------------
+
+@compiled
+def model_normal(E_f_row, reals, ints):
+    """(ok, n): the unit direction in world of the force the E_f row reads (normal_force.model_normal): the
+    translational part of the row as a covector on the spatial velocity [w; v]. The 6-D charts' task
+    velocity starts with v (so that part is the row's first three entries); the planar chart's is
+    (e_1 . v, e_2 . v, n . w)."""
+    if ints[I_CHART] == CHART_PLANAR:
+        c = ints[I_OFFSET_CHART]
+        direction = E_f_row[0] * reals[c + 3:c + 6] + E_f_row[1] * reals[c + 6:c + 9]
+    else:
+        direction = E_f_row[:3].copy()
+    length_squared = direction @ direction
+    if not length_squared > 1e-24:
+        return False, direction
+    return True, direction / math.sqrt(length_squared)
+
+
+@compiled
+def wrench_along_tool_axis(x, E_f, LU, pivots, wrench, tool_axis, reals, ints):
+    """(ok, W'): the measured wrench changed along the model's normal n so that the normal row's reading
+    in E's dual basis is the force along the tool's axis (normal_force.force_along_tool_axis):
+    W' = W + ((a_n . f - r(W)) / r([0; n])) [0; n], r(W) = (E^-T w(W))_row, a_n the axis signed towards n.
+    Not ok where the row reads no force or not along n: the generic law raises the controller's error."""
+    k, row = ints[I_K], ints[I_TOOL_AXIS_ROW]
+    ok, normal = model_normal(E_f[row], reals, ints)
+    if not ok:
+        return False, wrench
+    signed = tool_axis if tool_axis @ normal >= 0 else -tool_axis
+    along_normal = np.zeros(6)
+    along_normal[3:] = normal
+    unit_reading = lu_solve_transpose(LU, pivots, generalized_force(x, along_normal, reals, ints))[k + row]
+    if not abs(unit_reading) > 1e-9:
+        return False, wrench
+    reading = lu_solve_transpose(LU, pivots, generalized_force(x, wrench, reals, ints))[k + row]
+    return True, wrench + ((signed @ wrench[3:] - reading) / unit_reading) * along_normal
+
+
+# ------------------------------------------------------------------------------------------------
 # The law (control/law.evaluate_law), from the chart quantities and the constraint terms
 # ------------------------------------------------------------------------------------------------
 
 @compiled
 def law_kernel(x, nu, J, bias, C, E_f, curvature, E_f_dot, E_p, E_p_dot_nu, v, desired_velocity,
-               desired_acceleration, desired_force, wrench, integrals, phase, approach_reference, M, base_torque,
-               reals, ints):
+               desired_acceleration, desired_force, wrench, tool_axis, integrals, phase, approach_reference, M,
+               base_torque, reals, ints):
     """(status, out): DONE (``out`` complete), FALLBACK (run the generic law: it raises or handles the
     case) or NEEDS_INVERSE_DYNAMICS (n = d: q-ddot and tau_f are at the end of ``out``; call
-    ``finish_inverse_dynamics`` with ID(q, q-dot, q-ddot))."""
+    ``finish_inverse_dynamics`` with ID(q, q-dot, q-ddot)). ``tool_axis``: the end-effector frame's z in
+    world, read where ``ints[I_TOOL_AXIS_ROW]`` names the normal row."""
     n, d, m, k = ints[I_N], ints[I_D], ints[I_M], ints[I_K]
     out = np.zeros(output_size(n, k, m))
     mask = reals[ints[I_OFFSET_MASK]:ints[I_OFFSET_MASK] + m]
@@ -621,6 +664,10 @@ def law_kernel(x, nu, J, bias, C, E_f, curvature, E_f_dot, E_p, E_p_dot_nu, v, d
     # [F_v; F] = E^-T w (3.0-8), split where a lagged wrench was measured; a non-finite wrench is ignored
     wrench_valid = all_finite(wrench)
     if wrench_valid:
+        if ints[I_TOOL_AXIS_ROW] >= 0:
+            ok, wrench = wrench_along_tool_axis(x, E_f, LU, pivots, wrench, tool_axis, reals, ints)
+            if not ok:
+                return FALLBACK, out
         covector = generalized_force(x, wrench, reals, ints)
         split = lu_solve_transpose(LU, pivots, covector)
         if reals[R_WRENCH_LAG] > 0:
@@ -801,8 +848,8 @@ def store_terms(terms, x, nu, J, bias, C, E_f, curvature, E_f_dot, E_p, E_p_dot_
 
 
 @compiled
-def law_from_terms(terms, v, desired_velocity, desired_acceleration, desired_force, wrench, integrals, phase,
-                   approach_reference, M, base_torque, reals, ints):
+def law_from_terms(terms, v, desired_velocity, desired_acceleration, desired_force, wrench, tool_axis, integrals,
+                   phase, approach_reference, M, base_torque, reals, ints):
     """``law_kernel`` on the quantities ``store_terms`` wrote."""
     n, d, m, k, configuration = ints[I_N], ints[I_D], ints[I_M], ints[I_K], ints[I_CONFIGURATION]
     s = 0
@@ -825,5 +872,5 @@ def law_from_terms(terms, v, desired_velocity, desired_acceleration, desired_for
     E_p = terms[s:s + k * d].reshape((k, d))
     E_p_dot_nu = terms[s + k * d:s + k * d + k]
     return law_kernel(x, nu, J, bias, C, E_f, curvature, E_f_dot, E_p, E_p_dot_nu, v, desired_velocity,
-                      desired_acceleration, desired_force, wrench, integrals, phase, approach_reference, M,
-                      base_torque, reals, ints)
+                      desired_acceleration, desired_force, wrench, tool_axis, integrals, phase, approach_reference,
+                      M, base_torque, reals, ints)

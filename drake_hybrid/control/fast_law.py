@@ -15,7 +15,11 @@ hands the compile to a background job and keeps this controller on the generic l
 
 Per tick (``evaluate``): the Drake calls the law needs (pose, J_g, J_g-dot v, v, and M or h + g
 where the law needs them), the two compiled calls, and for n = d one inverse dynamics call and a
-small compiled ``finish`` (the saturation; h + g only when a limit is exceeded). Any condition the generic law answers with an error (chart
+small compiled ``finish`` (the saturation; h + g only when a limit is exceeded). With
+``normal_force_axis="tool"`` the compiled law reads the normal row along the tool's axis itself
+(``fast_kernels.wrench_along_tool_axis``: the end-effector frame's z from the pose it already has, E
+as the law factors it), so that reading costs no second evaluation of the constraint space; the
+generic law does it with ``normal_force.tool_axis_wrench``. Any condition the generic law answers with an error (chart
 or rank singularity, non-finite actuation) falls back to ``law.evaluate_law`` for that evaluation,
 which raises the same error; so there is one law, and ``tests/test_fast_law.py`` checks that both
 paths give every output port to 1e-12.
@@ -48,6 +52,7 @@ from drake_hybrid.control.damping import damped_step
 from drake_hybrid.control.fast_compile import cache_folder
 from drake_hybrid.control.fast_kernels import DONE, NEEDS_BASE_TORQUE, NEEDS_INVERSE_DYNAMICS
 from drake_hybrid.control.gains import ControlMode
+from drake_hybrid.control.normal_force import normal_row
 from drake_hybrid.core.charts import EulerZXZChart, PlanarChart, PoseChart
 from drake_hybrid.core.constraints import SelectingConstraint
 from drake_hybrid.core.oracle import check_against_sympy
@@ -249,6 +254,8 @@ def pack_constants(controller, law, space):
     ints[kernels.I_MECHANISM], ints[kernels.I_DAMPING] = int(mechanism), int(damped)
     ints[kernels.I_CONFIGURATION] = chart.configuration_size
     ints[kernels.I_COMPENSATE_TANGENTIAL] = int(law.compensate_tangential_force)
+    ints[kernels.I_TOOL_AXIS_ROW] = (normal_row(m, tuple(space.constraint.kinematic_rows))
+                                     if controller.normal_force_axis == "tool" else -1)
     return np.concatenate(reals), ints
 
 
@@ -299,6 +306,9 @@ class FastLaw:
         # does not type it C-contiguous), so that every controller shares one compiled signature.
         self._empty_matrix, self._empty_vector = np.zeros((2, 2), order="F"), np.zeros(0)
         self._zero_acceleration = np.zeros(n)
+        # The normal row read along the tool's axis in the kernel (control.normal_force): the axis is X's z column.
+        self.reads_tool_axis = bool(ints[kernels.I_TOOL_AXIS_ROW] >= 0)
+        self._no_axis = np.zeros(3)
         starts = np.cumsum([0, n, k, m, m, k, m, k, m, k])
         self._slices = [slice(a, b) for a, b in zip(starts[:-1], starts[1:])]
         self._scalars = int(starts[-1])
@@ -331,6 +341,7 @@ class FastLaw:
         ``approach_reference``: the guarded move's C_r (m)."""
         plant, world, frame, point = self._plant, self._world, self._frame, self._point
         X = plant.CalcRelativeTransform(plant_context, world, frame).GetAsMatrix34()
+        tool_axis = X[:, 2].copy() if self.reads_tool_axis else self._no_axis
         J_g = plant.CalcJacobianSpatialVelocity(plant_context, JacobianWrtVariable.kV, frame, point, world, world)
         A_bias = plant.CalcBiasSpatialAcceleration(plant_context, JacobianWrtVariable.kV, frame, point, world,
                                                    world).get_coeffs()
@@ -350,14 +361,14 @@ class FastLaw:
             start = time.perf_counter()
             try:
                 calls = self._calls(plant, plant_context, forces, X, J_g, A_bias, v, desired_velocity,
-                                    desired_acceleration, desired_force, wrench, integrals, phase, approach_reference,
-                                    M, base)
+                                    desired_acceleration, desired_force, wrench, tool_axis, integrals, phase,
+                                    approach_reference, M, base)
                 if not fast_compile.compiled(calls) and fast_compile.policy() == "background":
                     self._compile_in_background(calls)
                     return None
                 self._terms_into(terms, X, J_g, A_bias, v, reals, ints)
-                self._law(terms, v, desired_velocity, desired_acceleration, desired_force, wrench, integrals, phase,
-                          approach_reference, M, base, reals, ints)
+                self._law(terms, v, desired_velocity, desired_acceleration, desired_force, wrench, tool_axis,
+                          integrals, phase, approach_reference, M, base, reals, ints)
                 fast_compile.record(calls)
             except Exception as error:
                 self.disabled = True
@@ -370,8 +381,8 @@ class FastLaw:
         if self._terms_into(terms, X, J_g, A_bias, v, reals, ints) != 0:
             self.fallbacks += 1                       # the chart's singularity: the generic law raises
             return None
-        status, out = self._law(terms, v, desired_velocity, desired_acceleration, desired_force, wrench, integrals,
-                                phase, approach_reference, M, base, reals, ints)
+        status, out = self._law(terms, v, desired_velocity, desired_acceleration, desired_force, wrench, tool_axis,
+                                integrals, phase, approach_reference, M, base, reals, ints)
         if status == NEEDS_INVERSE_DYNAMICS:
             torque = plant.CalcInverseDynamics(plant_context, out[self._joint_acceleration_slice], forces)
             status = self._finish(out, torque, base, reals, ints)
@@ -384,10 +395,10 @@ class FastLaw:
         return CompiledSolution(out, phase, self._slices, self._scalars)
 
     def _calls(self, plant, plant_context, forces, X, J_g, A_bias, v, desired_velocity, desired_acceleration,
-               desired_force, wrench, integrals, phase, approach_reference, M, base):
+               desired_force, wrench, tool_axis, integrals, phase, approach_reference, M, base):
         """[(compiled function, the numba types of this tick's call)] of the three compiled calls."""
         terms, reals, ints = self._terms, self.reals, self.ints
-        law = (terms, v, desired_velocity, desired_acceleration, desired_force, wrench, integrals, phase,
+        law = (terms, v, desired_velocity, desired_acceleration, desired_force, wrench, tool_axis, integrals, phase,
                approach_reference, M, base, reals, ints)
         out = np.zeros(self._joint_acceleration_slice.stop + self.ints[kernels.I_N])     # as law_kernel's
         torque = plant.CalcInverseDynamics(plant_context, self._zero_acceleration, forces)  # as Drake returns it
