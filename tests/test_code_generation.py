@@ -102,7 +102,10 @@ class Oracle:
         except ValueError:        # sympy's printer refuses e.g. Derivative(sign(x**x), x): the term is skipped
             return None
 
-    def _exact(self, expression, substitutions):
+    def _exact(self, expression, substitutions, strict=False):
+        """The 30-digit real value, or None where it is not a finite real number: an imaginary part
+        above 1e-25 of max(1, |real|) (an entry: sympy's noise from complex intermediates), or
+        ``strict``, of the value's own size (a sub-term: (-1e-4)**11.5 is complex, however small)."""
         try:
             value = sympy.N(expression, 30, subs=substitutions)
         except (ArithmeticError, ValueError, TypeError):
@@ -110,12 +113,13 @@ class Oracle:
         if not value.is_number or value.has(sympy.nan, sympy.zoo, sympy.oo, -sympy.oo):
             return None
         real, imaginary = (float(part) for part in value.as_real_imag())
-        if not math.isfinite(real) or abs(real) > 1e250 or abs(imaginary) > 1e-25 * max(1.0, abs(real)):
+        scale = math.hypot(real, imaginary) if strict else max(1.0, abs(real))
+        if not math.isfinite(real) or abs(real) > 1e250 or abs(imaginary) > 1e-25 * scale:
             return None
         return real
 
     def _real_everywhere(self, substitutions):
-        return all(self._exact(term, substitutions) is not None for term in self._subterms)
+        return all(self._exact(term, substitutions, strict=True) is not None for term in self._subterms)
 
     def values(self, point):
         """The 30-digit value of each entry, or None where it is undefined or where 53-bit arithmetic on
