@@ -5,6 +5,7 @@ near the singularity bound, in saturation and in the guarded move, and with the 
 
 import dataclasses
 import warnings
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -18,6 +19,7 @@ from drake_hybrid.control.gains import ControlMode
 from drake_hybrid.control.safety import SafetyConfig
 from drake_hybrid.scenario.builder import build_scenario
 from drake_hybrid.tasks.registry import BUILT_IN_TASKS, TASKS
+from drake_hybrid.tasks.task_file import load_task_file
 
 pytestmark = pytest.mark.skipif(fast_kernels.NUMBA_ERROR is not None, reason="numba not available")
 
@@ -399,9 +401,6 @@ def test_the_disc_reads_its_axis_in_the_compiled_law_as_the_generic_law_does(rng
     """The disc pressing a plane modelled 8 deg off (its normal row along the tool's axis, the disc's
     default), turned further off at random: the compiled law's wrench change equals the generic law's to
     1e-12 on every output, and the compiled law ran it (no fallback)."""
-    from pathlib import Path
-
-    from drake_hybrid.tasks.task_file import load_task_file
     _, config = load_task_file(Path(__file__).resolve().parents[1] / "models" / "tasks" / "disc_plane.yaml")
     scenario = build_scenario(config, with_loggers=False)
     tool = scenario.controller

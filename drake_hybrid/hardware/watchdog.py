@@ -44,10 +44,10 @@ def status_fields(message, n):
     values = [*message.joint_position, *message.joint_velocity, *message.joint_torque_external]
     if message.num_joints != n or len(message.joint_position) != n or len(values) != 3 * n:
         return message.utime * 1e-6, None, Rejection.WRONG_SIZE
-    # One sum of the Python floats: NaN and inf propagate through it (as in core.linalg.all_finite).
-    if not math.isfinite(sum(values)):
+    values = np.array(values, dtype=float)
+    if not all_finite(values):
         return message.utime * 1e-6, None, Rejection.NON_FINITE
-    return message.utime * 1e-6, np.array(values, dtype=float), Rejection.NONE
+    return message.utime * 1e-6, values, Rejection.NONE
 
 
 def force_torque_fields(message):

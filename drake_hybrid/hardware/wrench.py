@@ -61,8 +61,7 @@ class ForceTorqueConditioning(LeafSystem):
         p_SP = plant.CalcPointsPositions(context, frame, np.asarray(end_effector_point, dtype=float),
                                          self._sensor_frame).ravel()
         p_Scom = plant.CalcPointsPositions(context, tool.body_frame(), tool.default_com(), self._sensor_frame).ravel()
-        # Rows [t; f; a_S; b_S]: the reading's two rows are written per evaluation (scratch, no state).
-        self._rows_S = np.vstack([np.zeros((2, 3)), p_SP, p_SP - p_Scom])
+        self._shifts_S = np.concatenate([p_SP, p_SP - p_Scom])          # [a_S; b_S]
         self._wrench_port = self.DeclareVectorInputPort("sensor_wrench", 6)
         self._state_port = self.DeclareVectorInputPort("estimated_state", plant.num_multibody_states())
         self._context_cache = declare_plant_context_cache(self, plant, self._state_port)
@@ -72,8 +71,7 @@ class ForceTorqueConditioning(LeafSystem):
         # The formula of the module docstring, rotated to world in one product: [t; f; a_S; b_S] R_WS^T;
         # the cross products written out (np.cross and np.concatenate cost more than the arithmetic).
         R_WS = self._sensor_frame.CalcRotationMatrixInWorld(self._context_cache.Eval(context)).matrix()
-        rows = self._rows_S
-        rows[:2] = (self._wrench_port.Eval(context) - self.bias).reshape(2, 3)
+        rows = np.concatenate([self._wrench_port.Eval(context) - self.bias, self._shifts_S]).reshape(4, 3)
         (tx, ty, tz), (fx, fy, fz), (ax, ay, az), (bx, by, bz) = np.dot(rows, R_WS.T).tolist()
         wx, wy, wz = self._weight                           # m_t g
         # shift(reading_W, a) - shift([0; w], b): n = t - a x f - (0 - b x w), f = f - w
