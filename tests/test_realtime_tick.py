@@ -16,7 +16,7 @@ from drake_hybrid.hardware.loop import run_hardware_loop
 from drake_hybrid.hardware.messages import HardwareConfig
 from drake_hybrid.hardware.panda import panda_config, panda_drum_task
 from drake_hybrid.hardware.process_settings import NO_SETTINGS, RealTimeSettings, real_time
-from drake_hybrid.hardware.realtime import miss_causes, replay_timing
+from drake_hybrid.hardware.realtime import TIMED_EVERY, miss_causes, replay_timing
 from drake_hybrid.hardware.tick import PARTS
 from drake_hybrid.station.sensing import WristSensorConfig
 
@@ -47,13 +47,15 @@ def test_the_direct_tick_is_the_simulators_to_the_bit(drum, variant):
     else:
         config.sensor.condition, config.sensor.bandwidth_hz = True, 50.0
         hardware = HardwareConfig(wrench_source="external_torque")
-    runs = [run_hardware_loop(config, hardware, gain_changes=gain_changes, stepping=stepping)
-            for stepping in ("direct", "simulator")]
-    direct, simulated = (run.log for run in runs)
-    assert runs[0].commands_published == runs[1].commands_published == 61
-    assert set(direct) == set(simulated)
+    runs = [run_hardware_loop(config, hardware, gain_changes=gain_changes, stepping=stepping, timed_every=every)
+            for stepping, every in (("direct", 1), ("simulator", 1), ("direct", 3))]
+    direct, simulated, direct_untimed = (run.log for run in runs)
+    assert runs[0].commands_published == runs[1].commands_published == runs[2].commands_published == 61
+    assert set(direct) == set(simulated) == set(direct_untimed)
     for key in direct:
         assert np.array_equal(direct[key], simulated[key], equal_nan=True), key
+        # Timing a tick by part (evaluating ports ahead of the updates) changes nothing computed.
+        assert np.array_equal(direct[key], direct_untimed[key], equal_nan=True), key
     assert len(direct["wire_command"]) == 61
 
 
@@ -69,8 +71,9 @@ def assert_collector_restored(enabled, frozen):
 
 
 def test_a_real_time_run_reports_its_tick_by_part_and_restores_the_process(drum):
-    """A short replayed run with the default real-time settings: the tick's parts are there for every
-    tick and lie within it; the collector, the scheduler and the core are as they were afterwards."""
+    """A short replayed run with the default real-time settings: the tick's parts are there for the start
+    and every TIMED_EVERY-th tick (NaN in the others) and lie within it; the collector, the scheduler
+    and the core are as they were afterwards."""
     config = panda_config(drum, duration=0.05, speed=0.02)
     enabled, frozen = gc.isenabled(), gc.get_freeze_count()
     scheduler, affinity = os.sched_getscheduler(0), os.sched_getaffinity(0)
@@ -82,9 +85,12 @@ def test_a_real_time_run_reports_its_tick_by_part_and_restores_the_process(drum)
     assert set(summary["tick_parts_s"]) == set(PARTS)
     for stats in summary["tick_parts_s"].values():
         assert set(stats) == {"p50", "p99", "max"} and 0 <= stats["p50"] <= stats["p99"] <= stats["max"]
-    assert timing.parts.shape == (51, len(PARTS)) and np.all(timing.parts >= 0)
+    timed = np.arange(51) % TIMED_EVERY == 0
+    assert timing.parts.shape == (51, len(PARTS)) and np.all(np.isnan(timing.parts[~timed]))
+    assert np.all(timing.parts[timed] >= 0)
+    assert summary["ticks_timed_by_part"] == np.sum(timed[1:]) and summary["timed_every"] == TIMED_EVERY
     # The parts are timed inside the tick (status in to command out).
-    assert np.all(timing.parts.sum(axis=1) <= timing.controller_cost)
+    assert np.all(timing.parts[timed].sum(axis=1) <= timing.controller_cost[timed])
     assert summary["deadline_misses"] == (summary["late_wake_up"] + summary["long_tick"])
     settings = summary["real_time"]
     assert set(settings) >= {"collector", "scheduler", "cpu", "idle_states", "law", "wake_up",

@@ -122,14 +122,15 @@ def start_state(config):
 
 def run_hardware_loop(config, hardware=None, duration=None, lcm_url="memq://drake_hybrid_hil", fault=None,
                       robot_hardware=None, connect_robot=True, record=False, sensor_bias=None, gain_changes=(),
-                      stepping="direct"):
+                      stepping="direct", timed_every=1):
     """Run ``config`` as controller side + simulated robot over LCM in lock step (module docstring).
 
     ``fault`` (kind, message, time) -> message or None puts a ``MessageFaultRelay`` between the
     robot's channels (``robot_hardware``, default: the controller's names + "_ROBOT") and the
     controller's. ``connect_robot=False`` runs the controller side alone (no status ever arrives).
     The controller side ticks as it does at real-time rate (``tick.ControllerTick``, ``stepping``
-    "direct"; "simulator": advanced by a Simulator, the reference the direct stepping equals).
+    "direct"; "simulator": advanced by a Simulator, the reference the direct stepping equals;
+    ``timed_every``: ControllerTick's, which changes what is timed, never what is computed).
     """
     if not lcm_url.startswith("memq://"):
         raise ValueError(f"run_hardware_loop runs in one process over memq:// only, got {lcm_url!r}")
@@ -180,7 +181,7 @@ def run_hardware_loop(config, hardware=None, duration=None, lcm_url="memq://drak
 
     robot_simulator = Simulator(robot.diagram, robot_context)
     ApplySimulatorConfig(config.simulator, robot_simulator)
-    tick = ControllerTick(controller, controller_context, stepping)
+    tick = ControllerTick(controller, controller_context, stepping, timed_every)
     published, first_command = 0, None
     wall = {"robot": [], "controller": [], "messages": []}
     status_delay = []

@@ -8,7 +8,9 @@ the law, the command's safety, without a Simulator) and publishes the command; i
 when the process may). It returns a ``TickTiming`` whose ``summary`` holds:
 
 * the controller's cost per tick: wall time from a status's arrival to its command's publication,
-  and the same by part (``tick.PARTS``);
+  and the same by part (``tick.PARTS``) over the ticks timed by part: every ``timed_every``-th
+  (``TIMED_EVERY``; timing a tick by part costs it some 20 us: the ports evaluated ahead of the
+  updates, the clock readings), whose cost is also reported on its own;
 * the period jitter: the spread of the intervals between status arrivals around h;
 * the wake-up delay: how late a status was handled after it was due (with a pacer, which knows when
   it sent it; a real driver's send time is not on this machine's clock);
@@ -55,6 +57,8 @@ WAKE_UPS = ("poll", "spin")
 # The pacer sleeps until this long before a status is due, then spins: a sleep that overshoots by less
 # than this (the kernel's timer slack is 50 us for an ordinary thread, 0 for a real-time one) is not late.
 SPIN_MARGIN = 2e-4
+# A tick in this many is timed by part (ControllerTick.timed_every); the others run without the timing.
+TIMED_EVERY = 10
 
 
 class ReplayPacer:
@@ -162,7 +166,7 @@ def run_controller(station: ControllerStation, lcm: DrakeLcmInterface, duration:
                    initial_state: Optional[Callable[[ControllerStation, Context], None]] = None,
                    first_wait: Optional[float] = None, wall_clock_stamps: bool = False,
                    settings: Optional[RealTimeSettings] = None, wake_up: str = "poll",
-                   stepping: str = "direct") -> TickTiming:
+                   stepping: str = "direct", timed_every: int = TIMED_EVERY) -> TickTiming:
     """Run ``station`` paced by its status channel for ``duration`` s of ticks (module docstring).
 
     ``pacer(k)``, if given, is called before waiting for tick k's status (a memq stand-in for the
@@ -174,8 +178,9 @@ def run_controller(station: ControllerStation, lcm: DrakeLcmInterface, duration:
     ``wall_clock_stamps``: stamp commands with the wall clock (epoch us), as drake-franka-driver
     expects (it drops commands older than its --expire_sec). ``settings``: the real-time settings
     (``process_settings``; default ``RealTimeSettings()``, each refused politely when not permitted;
-    ``NO_SETTINGS`` for none). ``wake_up``: "poll" or "spin" (``_wait_for_status``). ``stepping``:
-    ControllerTick's ("direct", or "simulator" for the reference)."""
+    ``NO_SETTINGS`` for none). ``wake_up``: "poll" or "spin" (``_wait_for_status``). ``stepping``,
+    ``timed_every``: ControllerTick's ("direct", or "simulator" for the reference; a tick in
+    ``timed_every`` timed by part, 1: every one)."""
     if wake_up not in WAKE_UPS:
         raise ArgumentError(f"run_controller: wake_up must be one of {', '.join(WAKE_UPS)}, got {wake_up!r}")
     period = float(station.config.control_period)
@@ -183,7 +188,7 @@ def run_controller(station: ControllerStation, lcm: DrakeLcmInterface, duration:
     context = cast(Diagram, station.diagram).CreateDefaultContext()
     if initial_state is not None:
         initial_state(station, context)
-    tick = ControllerTick(station, context, stepping)
+    tick = ControllerTick(station, context, stepping, timed_every)
     ticks = int(round(duration / period))
     due, arrivals, published, cost, cpu = (np.full(ticks + 1, np.nan) for _ in range(5))
     parts = np.zeros((ticks + 1, len(PARTS)))
@@ -227,23 +232,27 @@ def run_controller(station: ControllerStation, lcm: DrakeLcmInterface, duration:
                         stop=station.stop_reason(context) if stop_vector[0] > 0 else None)
     applied.update(allocated_blocks_kept_per_tick=kept, load_average=[load_at_start, os.getloadavg()[0]])
     timing.summary = summarize(timing, applied, paced=pacer is not None, law=_law_report(station), wake_up=wake_up,
-                               stepping=stepping)
+                               stepping=stepping, timed_every=timed_every)
     return timing
 
 
 def summarize(timing: TickTiming, applied: Dict[str, object], paced: bool, law: str, wake_up: str,
-              stepping: str) -> Dict[str, Any]:
-    """The figures of ``timing`` (module docstring), over the ticks at rate (1..N); tick 0 as ``start_s``."""
+              stepping: str, timed_every: int = 1) -> Dict[str, Any]:
+    """The figures of ``timing`` (module docstring), over the ticks at rate (1..N); tick 0 as ``start_s``;
+    the parts over the ticks timed by part (their rows of ``timing.parts`` finite)."""
     period, rate = timing.period, slice(1, None)
     due, arrivals, published = timing.due[rate], timing.arrivals[rate], timing.published[rate]
     cost, cpu = timing.controller_cost[rate], timing.cpu[rate]
     causes = miss_causes(period, due, arrivals, published, cost, cpu)
+    timed = np.all(np.isfinite(timing.parts[rate]), axis=1)
     return {
         "ticks": timing.ticks + 1, "ticks_at_rate": timing.ticks, "period_s": period, "rate_hz": 1.0 / period,
         "wall_s": float(timing.arrivals[-1] - timing.arrivals[0]),
         "start_s": float(timing.controller_cost[0]),
         "controller_cost_s": statistics(cost),
         "controller_cpu_s": statistics(cpu),
+        "timed_every": timed_every, "ticks_timed_by_part": int(np.sum(timed)),
+        "controller_cost_timed_by_part_s": statistics(cost[timed]),
         "tick_parts_s": {part: statistics(timing.parts[rate, index]) for index, part in enumerate(PARTS)},
         "period_jitter_s": statistics(np.abs(np.diff(arrivals) - period)),
         "wake_up_delay_s": statistics(arrivals - due) if paced else None,
@@ -282,10 +291,11 @@ def start_controller_state(config: ScenarioConfig, start: StartState
 
 def replay_timing(config: ScenarioConfig, hardware: Optional[HardwareConfig] = None, seconds: float = 10.0,
                   lcm_url: str = "memq://drake_hybrid_realtime", settings: Optional[RealTimeSettings] = None,
-                  wake_up: str = "poll", stepping: str = "direct") -> Tuple[TickTiming, HardwareRun]:
+                  wake_up: str = "poll", stepping: str = "direct",
+                  timed_every: int = TIMED_EVERY) -> Tuple[TickTiming, HardwareRun]:
     """A real-time run of ``seconds`` at the config's rate on ``memq://``: record what the robot
     sends in a lock-step run, then replay it at wall-clock rate to a fresh controller side paced by
-    it (``settings``, ``wake_up``, ``stepping``: run_controller's). Returns (TickTiming, the lock-step
+    it (``settings``, ``wake_up``, ``stepping``, ``timed_every``: run_controller's). Returns (TickTiming, the lock-step
     HardwareRun)."""
     if not lcm_url.startswith("memq://"):
         raise ValueError(f"replay_timing replays in this process over memq:// only, got {lcm_url!r}")
@@ -295,5 +305,5 @@ def replay_timing(config: ScenarioConfig, hardware: Optional[HardwareConfig] = N
     station = build_controller_station(config, lcm, hardware, initial_positions=start[1], with_loggers=False)
     pacer = ReplayPacer(lcm, recorded_run.timing.pop("recorded"), station.config.control_period)
     timing = run_controller(station, lcm, seconds, pacer=pacer, initial_state=start_controller_state(config, start),
-                            settings=settings, wake_up=wake_up, stepping=stepping)
+                            settings=settings, wake_up=wake_up, stepping=stepping, timed_every=timed_every)
     return timing, recorded_run

@@ -35,7 +35,7 @@ stepping needs a diagram whose timed events are periodic discrete updates and th
 """
 
 import time
-from typing import Dict, List, Optional, Sequence, Tuple, Union, cast
+from typing import Callable, Dict, List, Optional, Sequence, Tuple, Union, cast
 
 import numpy as np
 from drake import lcmt_force_torque, lcmt_panda_status
@@ -69,18 +69,24 @@ STEPPINGS = ("direct", "simulator")
 _RECEIVE, _WATCHDOG, _WRENCH, _SOURCE, _LAW, _COMMAND, _PUBLISH, _FRAMEWORK = range(len(PARTS))
 
 
+def _no_clock() -> float:
+    """The clock of a tick not timed by part (``ControllerTick.timed_every``)."""
+    return 0.0
+
+
 class _Timing:
     """One periodic timing (period, offset) and what happens at it: the discrete updates of ``updates``
     [(system, its context, a buffer, part)] or the publishes of ``loggers`` (never both: at one time the
-    Simulator publishes before it updates). ``index`` counts its samples: the next one is at offset +
-    index period, as Drake computes it."""
+    Simulator publishes before it updates); ``commands``: whether the command's safety is among the
+    updates. ``index`` counts its samples: the next one is at offset + index period, as Drake computes it."""
 
-    __slots__ = ("period", "offset", "updates", "loggers", "index", "next_time")
+    __slots__ = ("period", "offset", "updates", "loggers", "commands", "index", "next_time")
 
     def __init__(self, period: float, offset: float) -> None:
         self.period, self.offset = period, offset
         self.updates: List[Tuple[System, Context, DiscreteValues, int]] = []
         self.loggers: List[Tuple[System, Context]] = []
+        self.commands = False
         self.index, self.next_time = 0, offset
 
     def start(self, time_now: float) -> None:
@@ -104,19 +110,26 @@ class ControllerTick:
     ``initialize()`` is the start (tick 0: the messages so far, the initialization events, the
     command's first decision); ``advance(k)`` tick k (k h - SAMPLE_LEAD h, the command half a lead
     later; stops at k h + SAMPLE_LEAD h / 2); ``publish(utime)`` sends the tick's command if enabled.
-    ``parts`` holds the last tick's seconds by part (``PARTS``)."""
+    ``parts`` holds the last tick's seconds by part (``PARTS``) if it was timed by part: every
+    ``timed_every``-th tick (1: each), NaN in the others, which skip what the timing adds (the ports
+    evaluated ahead of the updates, the clock readings)."""
 
-    def __init__(self, station: ControllerStation, context: Context, stepping: str = "direct") -> None:
+    def __init__(self, station: ControllerStation, context: Context, stepping: str = "direct",
+                 timed_every: int = 1) -> None:
         if stepping not in STEPPINGS:
             raise ArgumentError(f"ControllerTick: stepping must be one of {', '.join(STEPPINGS)}, got {stepping!r}")
+        if not (isinstance(timed_every, int) and not isinstance(timed_every, bool) and timed_every >= 1):
+            raise ArgumentError(f"ControllerTick: timed_every must be an integer >= 1, got {timed_every!r}")
         if station.diagram is None or station.lcm is None:
             raise ArgumentError("ControllerTick: the station must be built (build_controller_station)")
         self.station, self.context, self.stepping = station, context, stepping
         self.diagram: Diagram = station.diagram
         self.period = float(station.config.control_period)
         self.parts = np.zeros(len(PARTS))
+        self.timed_every = timed_every
         self.statuses = 0
-        self._clock = time.perf_counter
+        self._clock: Callable[[], float] = time.perf_counter
+        self._timed = True
         self._latest: Dict[str, object] = {}
         diagram, lcm, hardware = self.diagram, station.lcm, station.hardware
         # The message inputs, fixed to the empty messages the watchdog reads as "none yet".
@@ -131,6 +144,7 @@ class ControllerTick:
         self._timings = self._collect_timings() if stepping == "direct" else []
         self._time = 0.0
         self._enabled: Optional[bool] = None        # the tick's ``enabled``, when decided with the safety's update
+        self._status_seen = False                   # ``enabled`` once true stays true (below)
         self._lead = SAMPLE_LEAD * self.period
         watchdog_context = station.watchdog.GetMyContextFromRoot(context)
         wrench_port = "sensor_wrench" if station.watchdog.use_force_torque else "torque_external"
@@ -195,9 +209,10 @@ class ControllerTick:
                                     "stepping='simulator'")
             attribute = system.GetUniquePeriodicDiscreteUpdateAttribute()
             if attribute is not None:
-                buffer = system.AllocateDiscreteVariables()
-                timing("update", attribute.period_sec(), attribute.offset_sec()).updates.append(
-                    (system, leaf_context, buffer, self._part_of(system)))
+                buffer, part = system.AllocateDiscreteVariables(), self._part_of(system)
+                at = timing("update", attribute.period_sec(), attribute.offset_sec())
+                at.updates.append((system, leaf_context, buffer, part))
+                at.commands = at.commands or part == _COMMAND
             elif leaf_context.num_discrete_state_groups():
                 raise ArgumentError(f"ControllerTick: system '{system.get_name()}' has discrete state without one "
                                     "periodic update; use stepping='simulator'")
@@ -215,10 +230,9 @@ class ControllerTick:
 
     def _run_events_until(self, end: float) -> None:
         """Every timed event up to ``end`` (inclusive for publishes, as the Simulator's step to ``end``)."""
-        context, clock, parts = self.context, self._clock, self.parts
-        timings = self._timings
+        context, clock, parts, timings = self.context, self._clock, self.parts, self._timings
         while True:
-            now = min(timing.next_time for timing in timings) if timings else np.inf
+            now = min([timing.next_time for timing in timings]) if timings else np.inf
             if now > end:
                 break
             due = [timing for timing in timings if timing.next_time == now]
@@ -227,24 +241,27 @@ class ControllerTick:
             for timing in due:
                 for sink, sink_context in timing.loggers:
                     sink.ForcedPublish(sink_context)
-            updates = [update for timing in due for update in timing.updates]
+            updates = due[0].updates if len(due) == 1 else [update for timing in due for update in timing.updates]
             parts[_FRAMEWORK] += clock() - start
             if updates:
-                self._warm_parts(updates)
+                if self._timed:
+                    self._warm_parts(updates)
                 for system, leaf_context, buffer, part in updates:
                     start = clock()
                     buffer.SetFrom(system.EvalUniquePeriodicDiscreteUpdate(leaf_context))
                     parts[part] += clock() - start
                 start = clock()
-                for system, leaf_context, buffer, part in updates:
+                for _, leaf_context, buffer, _ in updates:
                     leaf_context.get_mutable_discrete_state().SetFrom(buffer)
                 parts[_FRAMEWORK] += clock() - start
-                if any(part == _COMMAND for _, _, _, part in updates):
+                if any([timing.commands for timing in due]):
                     # Whether the command may go out, decided now: the watchdog's status at this time is
                     # already computed, and until the publish nothing but the time (not a status's being
-                    # seen, which is all ``enabled`` reads) changes.
+                    # seen, which is all ``enabled`` reads) changes. A status once seen stays seen (the
+                    # watchdog's records never forget one), so once enabled it is not asked again.
                     start = clock()
-                    self._enabled = self.station.enabled(context)
+                    self._status_seen = self._status_seen or self.station.enabled(context)
+                    self._enabled = self._status_seen
                     parts[_PUBLISH] += clock() - start
             for timing in due:
                 timing.step()
@@ -271,7 +288,7 @@ class ControllerTick:
     def initialize(self) -> None:
         """Tick 0: the messages so far into the diagram, the initialization events (the watchdog takes
         the status, the law its first actuation and start check), the command's first decision."""
-        self.parts[:] = 0.0
+        self._time_parts(True)
         start = self._clock()
         self._take_messages()
         self.parts[_RECEIVE] += self._clock() - start
@@ -295,8 +312,9 @@ class ControllerTick:
 
     def advance(self, k: int) -> None:
         """Tick ``k`` >= 1: the newest messages, the gain change due (``before_tick``), every event up to
-        k h + SAMPLE_LEAD h / 2."""
-        self.parts[:] = 0.0
+        k h + SAMPLE_LEAD h / 2; timed by part if k is a multiple of ``timed_every`` (else ``parts`` is
+        NaN)."""
+        self._time_parts(k % self.timed_every == 0)
         start = self._clock()
         self.station.before_tick(self.context, k)      # as the Simulator would: before the new messages are in
         end = k * self.period + 0.5 * self._lead
@@ -320,6 +338,13 @@ class ControllerTick:
         else:
             self._run_events_until(end)
 
+    def _time_parts(self, timed: bool) -> None:
+        """Time this tick by part (``parts`` zeroed, filled as it runs) or not (``parts`` NaN; every
+        clock reading in the tick is then 0)."""
+        self._timed = timed
+        self._clock = time.perf_counter if timed else _no_clock
+        self.parts[:] = 0.0 if timed else np.nan
+
     def publish(self, utime: Optional[int] = None) -> bool:
         """Publish the tick's command if the safety enables it (``ControllerStation.publish_command``)."""
         start = self._clock()
@@ -330,7 +355,8 @@ class ControllerTick:
 
     def time_receive(self, seconds: float) -> None:
         """Add ``seconds`` of message handling done by the runner (draining the LCM after the status)."""
-        self.parts[_RECEIVE] += seconds
+        if self._timed:
+            self.parts[_RECEIVE] += seconds
 
     def close(self) -> None:
         """Drop the LCM subscriptions."""

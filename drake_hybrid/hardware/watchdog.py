@@ -24,11 +24,12 @@ from pydrake.systems.framework import LeafSystem
 
 from drake_hybrid.control.sampling import tick_offset
 from drake_hybrid.core.kinematics import declare_cached_value
-from drake_hybrid.core.linalg import all_finite
 from drake_hybrid.hardware.messages import HardwareFault, Rejection
 
 # Record layout (one discrete state group per message kind).
 SEEN, STAMP, ARRIVAL, LATENCY, OFFSET, REJECTION, VALUES = range(7)
+# What the watchdog holds as of now: the two records, then each output's value.
+_STATUS_RECORD, _FORCE_TORQUE_RECORD, _STATE, _TORQUE_EXTERNAL, _SENSOR_WRENCH, _STATUS = range(6)
 # Layout of the ``watchdog_status`` output.
 STATUS_FIELDS = ("fault", "status_age", "force_torque_age", "status_rejection", "force_torque_rejection")
 # The faults as the floats the status output carries.
@@ -44,21 +45,21 @@ def status_fields(message, n):
     values = [*message.joint_position, *message.joint_velocity, *message.joint_torque_external]
     if message.num_joints != n or len(message.joint_position) != n or len(values) != 3 * n:
         return message.utime * 1e-6, None, Rejection.WRONG_SIZE
-    values = np.array(values, dtype=float)
-    if not all_finite(values):
+    # all_finite's test on the Python floats as decoded (one sum; NaN and inf propagate through it).
+    if not math.isfinite(sum(values)):
         return message.utime * 1e-6, None, Rejection.NON_FINITE
-    return message.utime * 1e-6, values, Rejection.NONE
+    return message.utime * 1e-6, np.array(values, dtype=float), Rejection.NONE
 
 
 def force_torque_fields(message):
     """(timestamp s, [tx, ty, tz, fx, fy, fz], rejection) of an lcmt_force_torque; None for the
     all-zero message a subscriber holds before the first one arrives."""
-    values = np.array([message.tx, message.ty, message.tz, message.fx, message.fy, message.fz])
-    if message.timestamp == 0 and not np.any(values):
+    values = [message.tx, message.ty, message.tz, message.fx, message.fy, message.fz]
+    if message.timestamp == 0 and not any(values):
         return None
-    if not all_finite(values):
+    if not math.isfinite(sum(values)):
         return message.timestamp * 1e-6, None, Rejection.NON_FINITE
-    return message.timestamp * 1e-6, values, Rejection.NONE
+    return message.timestamp * 1e-6, np.array(values, dtype=float), Rejection.NONE
 
 
 def accept(record, fields, now):
@@ -142,15 +143,15 @@ class MessageWatchdog(LeafSystem):
         self.DeclareInitializationDiscreteUpdateEvent(self._update)
         # The messages on the inputs parsed (status_fields, force_torque_fields): once per message.
         self._parsed = declare_cached_value(self, "parsed messages", self._parse, {self.all_input_ports_ticket()})
-        # The records as of now (state + what is on the inputs), computed once per change of either.
-        self._records = declare_cached_value(self, "records", self._records_now,
-                                             {self.time_ticket(), self.xd_ticket(), self.all_input_ports_ticket()})
-        records = {self._records.ticket()}
-        self.DeclareVectorOutputPort("estimated_state", 2 * n, self._calc_state, prerequisites_of_calc=records)
-        self.DeclareVectorOutputPort("torque_external", n, self._calc_torque_external, prerequisites_of_calc=records)
-        self.DeclareVectorOutputPort("sensor_wrench", 6, self._calc_sensor_wrench, prerequisites_of_calc=records)
-        self.DeclareVectorOutputPort("watchdog_status", len(STATUS_FIELDS), self._calc_status,
-                                     prerequisites_of_calc=records)
+        # Everything as of now (state + what is on the inputs: the records and each output's value),
+        # computed once per change of either; the outputs copy their part of it.
+        self._now = declare_cached_value(self, "as of now", self._as_of_now,
+                                         {self.time_ticket(), self.xd_ticket(), self.all_input_ports_ticket()})
+        now = {self._now.ticket()}
+        for name, size, index in (("estimated_state", 2 * n, _STATE), ("torque_external", n, _TORQUE_EXTERNAL),
+                                  ("sensor_wrench", 6, _SENSOR_WRENCH), ("watchdog_status", len(STATUS_FIELDS),
+                                                                         _STATUS)):
+            self.DeclareVectorOutputPort(name, size, self._copier(index), prerequisites_of_calc=now)
 
     def get_status_input_port(self):
         return self._status_port
@@ -165,13 +166,37 @@ class MessageWatchdog(LeafSystem):
             return status, None
         return status, force_torque_fields(self._force_torque_port.Eval(context))
 
-    def _records_now(self, context):
-        """(status record, F/T record) after the messages on the inputs arrived now."""
+    def _as_of_now(self, context):
+        """(status record, F/T record, estimated_state, torque_external, sensor_wrench, watchdog_status)
+        after the messages on the inputs arrived now."""
         status, force_torque = self._parsed.Eval(context)
         now = context.get_time()
         # The held records read in place (accept copies one only to change it).
-        return (accept(context.get_discrete_state(0).get_value(), status, now),
-                accept(context.get_discrete_state(1).get_value(), force_torque, now))
+        status = accept(context.get_discrete_state(0).get_value(), status, now)
+        force_torque = accept(context.get_discrete_state(1).get_value(), force_torque, now)
+        n = self.num_joints
+        seen = status[SEEN] > 0
+        status_age, force_torque_age = age(status, now), age(force_torque, now)
+        fault = _NONE
+        if not seen:
+            fault = _WAITING_FOR_STATUS
+        elif status_age > self.max_status_age:
+            fault = _STATUS_STALE
+        elif self.use_force_torque and force_torque_age > self.max_force_torque_age:
+            fault = _FORCE_TORQUE_STALE
+        return (status, force_torque, status[VALUES:VALUES + 2 * n] if seen else self._initial_state,
+                status[VALUES + 2 * n:], force_torque[VALUES:],
+                [fault, status_age, force_torque_age if self.use_force_torque else 0.0, status[REJECTION],
+                 force_torque[REJECTION]])
+
+    def _copier(self, index):
+        """An output's calc: its part (``index``) of the values as of now."""
+        now = self._now
+
+        def calc(context, output):
+            output.SetFromVector(now.Eval(context)[index])
+
+        return calc
 
     def status(self, context):
         """{name: value} of ``watchdog_status`` at ``context`` (fault as a HardwareFault)."""
@@ -180,33 +205,7 @@ class MessageWatchdog(LeafSystem):
         status["fault"] = HardwareFault(int(status["fault"]))
         return status
 
-    def _calc_state(self, context, output):
-        record = self._records.Eval(context)[0]
-        n = self.num_joints
-        output.SetFromVector(record[VALUES:VALUES + 2 * n] if record[SEEN] > 0 else self._initial_state)
-
-    def _calc_torque_external(self, context, output):
-        n = self.num_joints
-        output.SetFromVector(self._records.Eval(context)[0][VALUES + 2 * n:])
-
-    def _calc_sensor_wrench(self, context, output):
-        output.SetFromVector(self._records.Eval(context)[1][VALUES:])
-
-    def _calc_status(self, context, output):
-        now = context.get_time()
-        status, force_torque = self._records.Eval(context)
-        status_age, force_torque_age = age(status, now), age(force_torque, now)
-        fault = _NONE
-        if status[SEEN] <= 0:
-            fault = _WAITING_FOR_STATUS
-        elif status_age > self.max_status_age:
-            fault = _STATUS_STALE
-        elif self.use_force_torque and force_torque_age > self.max_force_torque_age:
-            fault = _FORCE_TORQUE_STALE
-        output.SetFromVector([fault, status_age, force_torque_age if self.use_force_torque else 0.0,
-                              status[REJECTION], force_torque[REJECTION]])
-
     def _update(self, context, discrete_state):
-        status, force_torque = self._records.Eval(context)
+        status, force_torque = self._now.Eval(context)[:2]
         discrete_state.get_mutable_vector(0).SetFromVector(status)
         discrete_state.get_mutable_vector(1).SetFromVector(force_torque)
