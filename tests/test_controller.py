@@ -19,8 +19,8 @@ from drake_hybrid.tasks.registry import get_task
 
 MODES = ["velocity-force", "position-force", "impedance-force"]
 INPUTS = ["estimated_state", "measured_wrench", "desired_velocity", "desired_acceleration", "desired_force"]
-OUTPUTS = ["actuation", "velocity_error", "force_error", "constraint_value", "projected_velocity", "force",
-           "tangential_force", "wrench_valid", "position_error"]
+OUTPUTS = ["actuation", "computed_actuation", "velocity_error", "force_error", "constraint_value",
+           "projected_velocity", "force", "tangential_force", "wrench_valid", "position_error"]
 
 
 def window_parts(joints=3):
@@ -54,7 +54,7 @@ def test_port_names_and_sizes():
     assert [dut.get_input_port(i).get_name() for i in range(dut.num_input_ports())] == INPUTS
     assert [dut.get_input_port(i).size() for i in range(dut.num_input_ports())] == [6, 6, 2, 2, 1]
     assert [dut.get_output_port(i).get_name() for i in range(dut.num_output_ports())] == OUTPUTS
-    assert [dut.get_output_port(i).size() for i in range(dut.num_output_ports())] == [3, 2, 1, 1, 2, 1, 2, 1, 2]
+    assert [dut.get_output_port(i).size() for i in range(dut.num_output_ports())] == [3, 3, 2, 1, 1, 2, 1, 2, 1, 2]
     assert dut.CreateDefaultContext().num_continuous_states() == 1 + 2           # xi and e_p
     velocity_dut, _, _ = make_dut("velocity-force")
     assert velocity_dut.CreateDefaultContext().num_continuous_states() == 1       # xi only
@@ -72,6 +72,8 @@ def test_direct_feedthrough_continuous_and_sampled():
         index = continuous.GetInputPort(name).get_index()
         assert continuous.HasDirectFeedthrough(index, actuation), name
         assert not sampled.HasDirectFeedthrough(index, sampled.GetOutputPort("actuation").get_index()), name
+        # The actuation the tick computes is the inputs' (for a system that ticks with the law).
+        assert sampled.HasDirectFeedthrough(index, sampled.GetOutputPort("computed_actuation").get_index()), name
     # Logging outputs are feedthrough of the measurement; position_error is state only.
     assert continuous.HasDirectFeedthrough(continuous.GetInputPort("measured_wrench").get_index(),
                                            continuous.GetOutputPort("force_error").get_index())
@@ -266,6 +268,23 @@ def test_sampled_controller_ticks_just_before_the_plant_step():
     timing = dut.GetUniquePeriodicDiscreteUpdateAttribute()
     assert timing.period_sec() == pytest.approx(2e-3)
     assert 0 < 2e-3 - timing.offset_sec() < 1e-8
+
+
+def test_the_computed_actuation_is_what_the_tick_stores_and_the_held_one_then_holds():
+    """A sampled law's ``computed_actuation`` at a tick's time is the torque its update stores: after the
+    update ``actuation`` reads it, bit for bit, while ``computed_actuation`` already follows the new state."""
+    dut, plant, _ = make_dut("position-force", control_period=1e-3)
+    context = dut.CreateDefaultContext()
+    q, v = np.array([0.4, -0.9, 0.6]), np.array([0.05, -0.02, 0.01])
+    fix_inputs(dut, context, q, v, np.array([0.0, 0.0, 0.0, 0.0, 3.0, -5.0]))
+    context.SetTime(1e-3 * (1.0 - 1e-6))
+    computed = dut.GetOutputPort("computed_actuation").Eval(context).copy()
+    held_before = dut.GetOutputPort("actuation").Eval(context).copy()
+    context.SetDiscreteState(dut.EvalUniquePeriodicDiscreteUpdate(context).get_vector(0).CopyToVector())
+    assert np.array_equal(dut.GetOutputPort("actuation").Eval(context), computed)
+    assert not np.array_equal(held_before, computed)
+    # The integrals moved: the law now computes another torque, the held one stays until the next tick.
+    assert not np.array_equal(dut.GetOutputPort("computed_actuation").Eval(context), computed)
 
 
 def test_bad_inputs_raise_clear_errors():

@@ -88,6 +88,7 @@ def HybridController_(T):
             - path_position_error (only with path_position_error)
             output_ports:
             - actuation
+            - computed_actuation
             - velocity_error
             - force_error
             - constraint_value
@@ -110,7 +111,12 @@ def HybridController_(T):
         approach_reference    m     C_r, the guarded move's reference (only with ``guarded_move``)
         path_position_error   k     e_p measured against a path (only with ``path_position_error``;
                                     e.g. ``systems.path_source.PathSource``)
-        actuation             n_u   joint torques mapped to the actuators
+        actuation             n_u   joint torques mapped to the actuators (held between ticks
+                                    with a ``control_period``)
+        computed_actuation    n_u   the actuation the law computes from the inputs and state now
+                                    (direct feedthrough): what a tick stores and ``actuation``
+                                    holds from then on; for a system that ticks with the law and
+                                    acts on its torque in the same tick (hardware.command)
         velocity_error        k     e_p' = E_p r-dot - r-dot_pd
         force_error           m     e_f = F - F_d
         constraint_value      m     C(r)
@@ -397,6 +403,8 @@ def HybridController_(T):
             else:
                 self.DeclareVectorOutputPort("actuation", n, self._calc_held_actuation,
                                              prerequisites_of_calc={self.xd_ticket()})
+            self.DeclareVectorOutputPort("computed_actuation", n, self._calc_actuation,
+                                         prerequisites_of_calc=solution_ticket)
             start = declare_diagnostic_outputs(self, k, m, self._solution, solution_ticket)
             if self.sampled_diagnostics:
                 # Discrete state group 1: the diagnostics of the last tick (output by Drake: no Python call).

@@ -102,12 +102,14 @@ class TorqueCommandSafety(LeafSystem):
 
     ``torque`` (input) is the command the law asks for (already in the driver's gravity
     convention), ``watchdog_status`` the ``MessageWatchdog``'s. The ``torque`` output is the
-    command decided at the last tick (state): the system ticks half a lead after the controller
-    (at k h - SAMPLE_LEAD h / 2), when the controller's new actuation is out, so the command of a
-    tick goes out in that tick. ``enabled`` is 0 until the first valid status (the runner publishes
-    only while it is 1); ``stop`` is [fault, time of the stop] (fault 0: running; time NaN).
-    ``initialize_command(context)`` decides the first command at the start (after the
-    controller's initialization).
+    command decided at the last tick (state). The system ticks with the controller (at
+    k h - SAMPLE_LEAD h) and reads the torque the law computes at that tick (the
+    ``HybridController``'s ``computed_actuation``, which its update stores), so the command of a
+    tick goes out in that tick, decided in the same event as the law's update. (Wired to a held
+    actuation it would act on the torque of the tick before.) ``enabled`` is 0 until the first
+    valid status (the runner publishes only while it is 1); ``stop`` is [fault, time of the stop]
+    (fault 0: running; time NaN). ``initialize_command(context)`` decides the first command at the
+    start (after the controller's initialization).
 
     Args:
         num_joints: n.
@@ -133,13 +135,12 @@ class TorqueCommandSafety(LeafSystem):
         self._torque_port = self.DeclareVectorInputPort("torque", n)
         self._state_port = self.DeclareVectorInputPort("estimated_state", 2 * n)
         self._status_port = self.DeclareVectorInputPort("watchdog_status", len(STATUS_FIELDS))
-        # State: [command (n); latched fault; stop time; ages and rejections at the stop (4); q at the stop (n)].
-        self._layout = {"command": slice(0, n), "fault": n, "time": n + 1, "details": slice(n + 2, n + 6),
-                        "hold": slice(n + 6, 2 * n + 6)}
-        self.DeclareDiscreteState(2 * n + 6)
-        offset = tick_offset(self.period) + 0.5 * (self.period - tick_offset(self.period))
-        self.DeclarePeriodicDiscreteUpdateEvent(self.period, offset, self._update)
-        self.DeclareVectorOutputPort("torque", n, self._calc_torque, prerequisites_of_calc={self.xd_ticket()})
+        # State: group 0 the command (n), output as it is (by Drake: no Python call in the publish);
+        # group 1 the stop: [latched fault; stop time; ages and rejections at the stop (4); q at the stop (n)].
+        self._layout = {"fault": 0, "time": 1, "details": slice(2, 6), "hold": slice(6, n + 6)}
+        self.DeclarePeriodicDiscreteUpdateEvent(self.period, tick_offset(self.period), self._update)
+        self.DeclareStateOutputPort("torque", self.DeclareDiscreteState(n))
+        self.DeclareDiscreteState(n + 6)
         self._enabled_port = self.DeclareVectorOutputPort("enabled", 1, self._calc_enabled)
         self.DeclareVectorOutputPort("stop", 2, self._calc_stop, prerequisites_of_calc={self.xd_ticket()})
 
@@ -148,46 +149,48 @@ class TorqueCommandSafety(LeafSystem):
 
     def set_initial_command(self, context, command):
         """The command the first one is rate-limited against (e.g. what the driver holds at the start)."""
-        state = context.get_mutable_discrete_state(0).get_mutable_value()
-        state[self._layout["command"]] = np.asarray(command, dtype=float)
+        context.SetDiscreteState(0, np.asarray(command, dtype=float))
 
     def initialize_command(self, context):
         """Decide the command at the start from the inputs there (call after Simulator.Initialize)."""
-        state, reason = self._decide(context)
-        context.get_mutable_discrete_state(0).SetFromVector(state)
+        command, stop, reason = self._decide(context)
+        context.SetDiscreteState(0, command)
+        context.SetDiscreteState(1, stop)
         if reason is not None:
             LOGGER.warning("%s", reason)
 
     def SetDefaultState(self, context, state):
         LeafSystem.SetDefaultState(self, context, state)
-        vector = np.full(2 * self.num_joints + 6, 0.0)
-        vector[self._layout["command"]] = self._initial_command
-        vector[self._layout["time"]] = np.nan
-        state.get_mutable_discrete_state(0).SetFromVector(vector)
+        stop = np.zeros(self.num_joints + 6)
+        stop[self._layout["time"]] = np.nan
+        state.get_mutable_discrete_state(0).SetFromVector(self._initial_command)
+        state.get_mutable_discrete_state(1).SetFromVector(stop)
 
     def _decide(self, context):
-        """(state after this tick, the reason of a stop that starts now or None)."""
-        state = context.get_discrete_state(0).CopyToVector()
+        """(command, stop state after this tick, the reason of a stop that starts now or None)."""
+        command = context.get_discrete_state(0).get_value()
+        stop = context.get_discrete_state(1).get_value()
         status = self._status_port.Eval(context)
+        layout = self._layout
         # HardwareFault values as ints (an IntEnum compares equal to its value; making one costs more).
-        current, latched = int(status[0]), int(state[self._layout["fault"]])
+        current, latched = int(status[0]), int(stop[layout["fault"]])
         reason = None
         escalate = latched == HardwareFault.FORCE_TORQUE_STALE and current == HardwareFault.STATUS_STALE
         if current in _STOPS and (latched == HardwareFault.NONE or escalate):
-            state[self._layout["fault"]] = float(current)
-            state[self._layout["time"]] = context.get_time()
-            state[self._layout["details"]] = status[1:5]
+            stop = stop.copy()
+            stop[layout["fault"]] = float(current)
+            stop[layout["time"]] = context.get_time()
+            stop[layout["details"]] = status[1:5]
             if not escalate:
-                state[self._layout["hold"]] = self._state_port.Eval(context)[:self.num_joints]
+                stop[layout["hold"]] = self._state_port.Eval(context)[:self.num_joints]
             latched = current
-            reason = stop_reason(state, self._layout)
+            reason = stop_reason(stop, layout)
         fault = latched if latched != HardwareFault.NONE else current
         if fault != HardwareFault.WAITING_FOR_STATUS:
-            state[self._layout["command"]] = self._command(context, fault, state)
-        return state, reason
+            command = self._command(context, fault, command, stop)
+        return command, stop, reason
 
-    def _command(self, context, fault, state):
-        previous = state[self._layout["command"]]
+    def _command(self, context, fault, previous, stop):
         n = self.num_joints
         if fault == HardwareFault.NONE:
             wanted = self._torque_port.Eval(context)
@@ -195,36 +198,34 @@ class TorqueCommandSafety(LeafSystem):
             wanted = np.zeros(n)
         else:                                              # FORCE_TORQUE_STALE: hold the joints at the stop
             x = self._state_port.Eval(context)
-            wanted = self.hold_stiffness * (state[self._layout["hold"]] - x[:n]) - self.hold_damping * x[n:]
+            wanted = self.hold_stiffness * (stop[self._layout["hold"]] - x[:n]) - self.hold_damping * x[n:]
         if not all_finite(wanted):
             wanted = np.zeros(n)
         # np.clip, twice, written out (np.clip's dispatch costs more than the two comparisons).
         wanted = np.minimum(np.maximum(wanted, -self.torque_limits), self.torque_limits)
         return np.minimum(np.maximum(wanted, previous - self.max_step), previous + self.max_step)
 
-    def _calc_torque(self, context, output):
-        output.SetFromVector(context.get_discrete_state(0).get_value()[self._layout["command"]])
-
     def _calc_enabled(self, context, output):
         waiting = int(self._status_port.Eval(context)[0]) == HardwareFault.WAITING_FOR_STATUS
         output.SetFromVector([0.0 if waiting else 1.0])
 
     def _calc_stop(self, context, output):
-        state = context.get_discrete_state(0).get_value()
-        output.SetFromVector([state[self._layout["fault"]], state[self._layout["time"]]])
+        stop = context.get_discrete_state(1).get_value()
+        output.SetFromVector([stop[self._layout["fault"]], stop[self._layout["time"]]])
 
     def stop_reason(self, context):
         """The latched stop's reason as a sentence (None while running)."""
-        state = context.get_discrete_state(0).CopyToVector()
-        if state[self._layout["fault"]] == 0:
+        stop = context.get_discrete_state(1).CopyToVector()
+        if stop[self._layout["fault"]] == 0:
             return None
-        return stop_reason(state, self._layout)
+        return stop_reason(stop, self._layout)
 
     def _update(self, context, discrete_state):
-        state, reason = self._decide(context)
+        command, stop, reason = self._decide(context)
         if reason is not None:
             LOGGER.warning("%s", reason)
-        discrete_state.get_mutable_vector(0).SetFromVector(state)
+        discrete_state.get_mutable_vector(0).SetFromVector(command)
+        discrete_state.get_mutable_vector(1).SetFromVector(stop)
 
 
 def stop_reason(state, layout):

@@ -9,9 +9,13 @@
                                        │  (or torque_external ──► ExternalTorqueWrench)              │
     ProfileSource / the task's source ──desired_*─────────────────────────────────► (controller)    │
                         [with gain_changes: a HybridController per gain set ─► GainSelector ─► actuation]
-                                       └─watchdog_status─► TorqueCommandSafety ◄─ DriverGravityCompensation ◄─ actuation
+                                       └─watchdog_status─► TorqueCommandSafety ◄─ DriverGravityCompensation ◄─ computed_actuation
                                                                   │ torque
                                              PandaCommandSender(kTorque) ──► LcmPublisherSystem (forced only)
+
+The watchdog, the law and the command's safety tick together (at k h - SAMPLE_LEAD h): the safety
+reads the torque the law computes in that tick (its ``computed_actuation``, which the law's update
+stores), so each tick is one event, and its command goes out in the tick.
 
 The messages come in on the diagram's input ports ``lcmt_panda_status`` and (with an F/T sensor)
 ``lcmt_force_torque``, as decoded ``drake.lcmt_*`` objects: ``hardware.tick.ControllerTick``
@@ -225,11 +229,14 @@ def build_controller_station(config: ScenarioConfig, lcm: DrakeLcmInterface, har
         builder.Connect(state, gravity.GetInputPort("estimated_state"))
         builder.Connect(gravity.GetOutputPort("torque"), command)
         command = gravity.GetInputPort("torque")
-    selector = None
+    selector = held_selector = None
     if gain_changes:
-        selector = GainSelector(n, period, [round(t / period) for t in times])
+        change_ticks = [round(t / period) for t in times]
+        selector = GainSelector(n, period, change_ticks)
         builder.AddNamedSystem("gain_selector", selector)
         builder.Connect(selector.GetOutputPort("actuation"), command)
+        if with_loggers:           # the held torque of the active law, for the "actuation" log
+            held_selector = builder.AddNamedSystem("held_gain_selector", GainSelector(n, period, change_ticks))
     sender = builder.AddNamedSystem("command_sender", PandaCommandSender(n, PandaControlMode.kTorque))
     builder.Connect(safety.GetOutputPort("torque"), sender.get_input_port())
     publisher = LcmPublisherSystem.Make(hardware.command_channel, lcmt_panda_command, lcm, use_cpp_serializer=True,
@@ -244,14 +251,17 @@ def build_controller_station(config: ScenarioConfig, lcm: DrakeLcmInterface, har
         law = builder.AddNamedSystem("controller" if index == 0 else f"controller_{index}", make_hybrid_controller(
             plant, robot, space, sensor=config.sensor, plant=None, control_period=period,
             plant_time_step=hardware.damping_time_step, **options))
+        # The command's safety ticks with the law and acts on the torque the law computes in that tick.
         connect_hybrid_loop(builder, law, state=state, wrench=wrench_output, source=source,
                             actuation=selector.GetInputPort(f"actuation_{index}") if selector is not None else command,
-                            owner="build_controller_station")
+                            owner="build_controller_station", actuation_output="computed_actuation")
+        if held_selector is not None:
+            builder.Connect(law.GetOutputPort("actuation"), held_selector.GetInputPort(f"actuation_{index}"))
         controllers.append(law)
     station = ControllerStation(
         config=config, hardware=hardware, task=task, robot=robot, controller_plant=plant, constraint_space=space,
         controller=controllers[0], state=state, wrench_output=wrench_output,
-        actuation=(selector.GetOutputPort("actuation") if selector is not None
+        actuation=(held_selector.GetOutputPort("actuation") if held_selector is not None
                    else controllers[0].GetOutputPort("actuation")),
         source=source, wrench_filter=wrench_filter, conditioner=conditioner, watchdog=watchdog, safety=safety,
         command_publisher=publisher, lcm=lcm, controllers=controllers, gain_selector=selector)

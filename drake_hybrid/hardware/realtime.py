@@ -7,7 +7,8 @@ the law, the command's safety, without a Simulator) and publishes the command; i
 ``process_settings.real_time`` (the collector paused, the real-time scheduler and a core of its own
 when the process may). It returns a ``TickTiming`` whose ``summary`` holds:
 
-* the controller's cost per tick: wall time from a status's arrival to its command's publication,
+* the controller's cost per tick: wall time from a status's arrival to its command's publication
+  (each tick prepared before its status arrives, ``tick.ControllerTick.prepare``: ``prepare_s``),
   and the same by part (``tick.PARTS``) over the ticks timed by part: every ``timed_every``-th
   (``TIMED_EVERY``; timing a tick by part costs it some 20 us: the ports evaluated ahead of the
   updates, the clock readings), whose cost is also reported on its own;
@@ -104,6 +105,7 @@ class TickTiming:
     controller_cost: Array                  # s, status handled to command out (the tick)
     cpu: Array                              # s, the thread's CPU time in the tick
     parts: Array                            # s, (ticks + 1) x len(PARTS), the tick by part
+    prepared: Optional[Array] = None        # s, each tick's prepare() before its status (nan: tick 0)
     missed_status: int = 0                  # ticks that ran without a new status (waited max_wait)
     stop: Optional[str] = None
     summary: Dict[str, Any] = field(default_factory=dict)
@@ -190,7 +192,7 @@ def run_controller(station: ControllerStation, lcm: DrakeLcmInterface, duration:
         initial_state(station, context)
     tick = ControllerTick(station, context, stepping, timed_every)
     ticks = int(round(duration / period))
-    due, arrivals, published, cost, cpu = (np.full(ticks + 1, np.nan) for _ in range(5))
+    due, arrivals, published, cost, cpu, prepared = (np.full(ticks + 1, np.nan) for _ in range(6))
     parts = np.zeros((ticks + 1, len(PARTS)))
     missed, blocks = 0, sys.getallocatedblocks()
     clock, thread_clock = time.perf_counter, time.thread_time
@@ -221,6 +223,9 @@ def run_controller(station: ControllerStation, lcm: DrakeLcmInterface, duration:
             cost[k] = clock() - start
             cpu[k] = thread_clock() - cpu_start
             parts[k] = tick.parts
+            if k < ticks:                   # the next tick's preparation, off the critical path
+                tick.prepare(k + 1)
+                prepared[k + 1] = tick.prepare_seconds
             if k == 0:
                 blocks = sys.getallocatedblocks()            # after the start (the law's load makes many)
     kept = (sys.getallocatedblocks() - blocks) / max(ticks, 1)
@@ -228,7 +233,7 @@ def run_controller(station: ControllerStation, lcm: DrakeLcmInterface, duration:
     due = np.where(np.isnan(due), arrivals, due)
     stop_vector = cast(Array, station.safety.GetOutputPort("stop").Eval(station.safety.GetMyContextFromRoot(context)))
     timing = TickTiming(period=period, ticks=ticks, due=due, arrivals=arrivals, published=published,
-                        controller_cost=cost, cpu=cpu, parts=parts, missed_status=missed,
+                        controller_cost=cost, cpu=cpu, parts=parts, prepared=prepared, missed_status=missed,
                         stop=station.stop_reason(context) if stop_vector[0] > 0 else None)
     applied.update(allocated_blocks_kept_per_tick=kept, load_average=[load_at_start, os.getloadavg()[0]])
     timing.summary = summarize(timing, applied, paced=pacer is not None, law=_law_report(station), wake_up=wake_up,
@@ -253,6 +258,7 @@ def summarize(timing: TickTiming, applied: Dict[str, object], paced: bool, law: 
         "controller_cpu_s": statistics(cpu),
         "timed_every": timed_every, "ticks_timed_by_part": int(np.sum(timed)),
         "controller_cost_timed_by_part_s": statistics(cost[timed]),
+        "prepare_s": statistics(timing.prepared[rate]) if timing.prepared is not None else None,
         "tick_parts_s": {part: statistics(timing.parts[rate, index]) for index, part in enumerate(PARTS)},
         "period_jitter_s": statistics(np.abs(np.diff(arrivals) - period)),
         "wake_up_delay_s": statistics(arrivals - due) if paced else None,

@@ -4,21 +4,26 @@ control period, done directly, and timed by part.
 ``ControllerTick`` subscribes to the station's status and F/T channels, decodes each message once
 and sets the newest on the diagram's message inputs (``controller_side``: fixed input values, read
 without a copy). Between two statuses the controller's diagram has a fixed set of timed events: the
-periodic discrete updates of its sampled systems (the watchdog, the law or laws, a wrench filter or
-conditioner, a path source: at k h - SAMPLE_LEAD h; the command's safety half a lead later) and the
-loggers' publishes. The tick runs them as a Simulator would, in its order and at its times (each
+periodic discrete updates of its sampled systems (the watchdog, the law or laws, the command's safety,
+a wrench filter or conditioner, a path source: at k h - SAMPLE_LEAD h, one event) and the loggers'
+publishes. The tick runs them as a Simulator would, in its order and at its times (each
 event's time computed as Drake computes it, offset + j period; at one time the publishes first, then
 every discrete update computed from the same context and applied together; updates due when the
 messages come, at the start, before the messages), so its results are the Simulator's to the last
 bit (tests/test_hardware.py), and it pays for nothing else: no search for the next event over the
 diagram, no copy of the state.
 
-Per tick ``advance(k)``, timed by part (``PARTS``, seconds in ``parts``):
+Before tick k's messages arrive, ``prepare(k)`` does what does not wait for them, off the critical
+path (the runner calls it once the previous command is out): the gain change due, the context at the
+tick's time, the desired values of a source that reads only the time. Then, once its status is in,
+``advance(k)`` (a status in, its command out: the tick), timed by part (``PARTS``, seconds in
+``parts``):
 
 * receive: the messages handled since the status (the F/T reading), put into the subscribers' state;
 * watchdog: the newest valid status and F/T reading, their ages, the watchdog's update;
 * wrench: the measured wrench at the end-effector point (F/T conditioning or external torque, filter);
-* source: the desired velocity, acceleration and force;
+* source: the desired velocity, acceleration and force (a source that reads its inputs: the others
+  are prepared);
 * law: the hybrid law's discrete update (each gain set's);
 * command: the driver's gravity convention, the limits and the stops (``TorqueCommandSafety``);
 * publish: the command encoded and published (``publish``, timed there);
@@ -108,8 +113,9 @@ class ControllerTick:
     ``context``; ``statuses`` counts the statuses received.
 
     ``initialize()`` is the start (tick 0: the messages so far, the initialization events, the
-    command's first decision); ``advance(k)`` tick k (k h - SAMPLE_LEAD h, the command half a lead
-    later; stops at k h + SAMPLE_LEAD h / 2); ``publish(utime)`` sends the tick's command if enabled.
+    command's first decision); ``advance(k)`` tick k (its event at k h - SAMPLE_LEAD h, the law's
+    and the command's; stops at k h + SAMPLE_LEAD h / 2); ``publish(utime)`` sends the tick's command
+    if enabled.
     ``parts`` holds the last tick's seconds by part (``PARTS``) if it was timed by part: every
     ``timed_every``-th tick (1: each), NaN in the others, which skip what the timing adds (the ports
     evaluated ahead of the updates, the clock readings)."""
@@ -142,7 +148,10 @@ class ControllerTick:
             self._subscriptions.append(lcm.Subscribe(hardware.force_torque_channel, self._on_force_torque))
         self._simulator: Optional[Simulator] = Simulator(diagram, context) if stepping == "simulator" else None
         self._timings = self._collect_timings() if stepping == "direct" else []
-        self._time = 0.0
+        self._time = 0.0                            # the Simulator's time (the end of the last tick)
+        self._context_time = context.get_time()     # the context's (the last event's, or prepare()'s)
+        self._prepared = 0                          # the tick prepare() was done for
+        self.prepare_seconds = 0.0
         self._enabled: Optional[bool] = None        # the tick's ``enabled``, when decided with the safety's update
         self._status_seen = False                   # ``enabled`` once true stays true (below)
         self._lead = SAMPLE_LEAD * self.period
@@ -155,6 +164,11 @@ class ControllerTick:
         self._source_ports = ([self._port_and_context(station.source.GetOutputPort(name)) for name in
                                ("desired_velocity", "desired_acceleration", "desired_force")]
                               if station.source is not None else [])
+        # What reads nothing but the time (and its own state): evaluated by prepare() at the tick's time.
+        self._time_only_ports = (self._source_ports if station.source is not None and
+                                 station.source.num_input_ports() == 0 else [])
+        self._law_ports = [self._port_and_context(law.GetOutputPort("computed_actuation"))
+                           for law in station.controllers or [station.controller]]
         safety_context = station.safety.GetMyContextFromRoot(context)
         self._command_inputs = [(station.safety.GetInputPort("torque"), safety_context)]
 
@@ -237,7 +251,9 @@ class ControllerTick:
                 break
             due = [timing for timing in timings if timing.next_time == now]
             start = clock()
-            context.SetTime(now)
+            if now != self._context_time:          # prepare() may have set it already
+                context.SetTime(now)
+                self._context_time = now
             for timing in due:
                 for sink, sink_context in timing.loggers:
                     sink.ForcedPublish(sink_context)
@@ -265,12 +281,9 @@ class ControllerTick:
                     parts[_PUBLISH] += clock() - start
             for timing in due:
                 timing.step()
-            self._time = now
-        if end != self._time:
-            start = clock()
-            context.SetTime(end)
-            self._time = end
-            parts[_FRAMEWORK] += clock() - start
+        # The Simulator's time is now ``end``; the context's stays at the last event's until prepare()
+        # (nothing computed between two ticks reads the time, and a gain change is made at ``end``).
+        self._time = end
 
     def _warm_parts(self, updates: List[Tuple[System, Context, DiscreteValues, int]]) -> None:
         """Evaluate, in the parts' order, what the updates at this time read (module docstring)."""
@@ -279,6 +292,7 @@ class ControllerTick:
             self._warm(self._watchdog_ports, _WATCHDOG)
             self._warm([self._wrench_port], _WRENCH)
             self._warm(self._source_ports, _SOURCE)
+            self._warm(self._law_ports, _LAW)
         elif _COMMAND in parts_due:
             self._warm(self._watchdog_command_ports, _WATCHDOG)
         if _COMMAND in parts_due:
@@ -305,31 +319,54 @@ class ControllerTick:
                     for sink, sink_context in timing.loggers:
                         sink.ForcedPublish(sink_context)
                     timing.step()
-            self._time = time_now
+            self._time = self._context_time = time_now
         safety = self.station.safety
         safety.initialize_command(safety.GetMyMutableContextFromRoot(self.context))
         self.parts[_FRAMEWORK] += self._clock() - start
 
+    def prepare(self, k: int) -> None:
+        """What tick ``k`` >= 1 does before its messages, done before they arrive: the runner calls it
+        after the previous command went out, off the critical path (``advance(k)`` calls it if not;
+        ``prepare_seconds`` is its wall time). As the Simulator would, before the new messages are in:
+        the gain change due at k (``before_tick``, at the previous tick's end time), the updates due
+        then (at the start: offset-0 updates at t0); then the context at tick k's first event time and
+        what reads nothing but the time evaluated there (a source without inputs: the desired values)."""
+        start = time.perf_counter()
+        selector, context = self.station.gain_selector, self.context
+        if self._simulator is not None:
+            self.station.before_tick(context, k)
+            self._simulator.AdvanceTo(self._time)
+        else:
+            if selector is not None and k in selector.change_ticks and self._context_time != self._time:
+                context.SetTime(self._time)
+                self._context_time = self._time
+            self.station.before_tick(context, k)
+            if any(timing.next_time <= self._time for timing in self._timings):
+                self._run_events_until(self._time)
+            first = min([timing.next_time for timing in self._timings]) if self._timings else np.inf
+            if first <= self._end(k):
+                if first != self._context_time:
+                    context.SetTime(first)
+                    self._context_time = first
+                for port, port_context in self._time_only_ports:
+                    port.Eval(port_context)
+        self._prepared = k
+        self.prepare_seconds = time.perf_counter() - start
+
+    def _end(self, k: int) -> float:
+        return k * self.period + 0.5 * self._lead
+
     def advance(self, k: int) -> None:
-        """Tick ``k`` >= 1: the newest messages, the gain change due (``before_tick``), every event up to
+        """Tick ``k`` >= 1: ``prepare(k)`` unless done, the newest messages, every event up to
         k h + SAMPLE_LEAD h / 2; timed by part if k is a multiple of ``timed_every`` (else ``parts`` is
         NaN)."""
+        if self._prepared != k:
+            self.prepare(k)
         self._time_parts(k % self.timed_every == 0)
-        start = self._clock()
-        self.station.before_tick(self.context, k)      # as the Simulator would: before the new messages are in
-        end = k * self.period + 0.5 * self._lead
-        self.parts[_FRAMEWORK] += self._clock() - start
-        # Updates due now (at the start: offset-0 updates at t0) come before the new messages, which were
-        # sent after them.
-        if self._simulator is not None:
-            start = self._clock()
-            self._simulator.AdvanceTo(self._time)
-            self.parts[_FRAMEWORK] += self._clock() - start
-        elif any(timing.next_time <= self._time for timing in self._timings):
-            self._run_events_until(self._time)
         start = self._clock()
         self._take_messages()
         self.parts[_RECEIVE] += self._clock() - start
+        end = self._end(k)
         if self._simulator is not None:
             start = self._clock()
             self._simulator.AdvanceTo(end)

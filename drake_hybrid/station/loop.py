@@ -84,12 +84,12 @@ CONTROLLER_OPTIONS = tuple(name for name in inspect.signature(HybridController._
 def connect_hybrid_loop(builder: DiagramBuilder, controller: System, *, state: OutputPort, wrench: OutputPort,
                         actuation: InputPort, source: Optional[System] = None,
                         supervisor: Optional[ContactSupervisor] = None, conditioner: Optional[System] = None,
-                        owner: str = "connect_hybrid_loop") -> None:
+                        owner: str = "connect_hybrid_loop", actuation_output: str = "actuation") -> None:
     """Every connection of the hybrid loop to and from ``controller``'s ports, in one place::
 
         state ─► controller.estimated_state (and the source's first input, if it has one: the arm's state)
         wrench ─► controller.measured_wrench (and supervisor.measured_wrench)
-        controller.actuation ─► actuation
+        controller.actuation (or actuation_output) ─► actuation
         source ─desired_velocity, desired_acceleration, desired_force─► controller (desired_force ─► supervisor)
         controller ─force, constraint_value─► supervisor ─contact_phase, approach_reference─► controller
         supervisor ─contact_phase─► conditioner (a taring WrenchConditioner)
@@ -98,7 +98,9 @@ def connect_hybrid_loop(builder: DiagramBuilder, controller: System, *, state: O
 
     ``state`` is the arm's [q; v] (a plant's state output, or a real arm's watchdog), ``wrench`` the
     port the controller reads the wrench from, ``actuation`` the input port its torque drives (the
-    plant's actuation, or a real arm's command path). The path's connections are made when the source
+    plant's actuation, or a real arm's command path) from the controller's ``actuation_output``
+    ("actuation"; a real arm's command path, which ticks with the law, reads "computed_actuation",
+    the tick's own torque). The path's connections are made when the source
     has them (a ``PathSource``): the controller must then take the path's position error, and a source
     that waits for the first contact needs a supervisor. Every input is checked unwired first
     (ArgumentError naming it and ``owner``)."""
@@ -109,7 +111,7 @@ def connect_hybrid_loop(builder: DiagramBuilder, controller: System, *, state: O
             guarded_connect(builder, source.GetOutputPort(name), controller.GetInputPort(name), owner)
     guarded_connect(builder, state, controller.GetInputPort("estimated_state"), owner)
     guarded_connect(builder, wrench, controller.GetInputPort("measured_wrench"), owner)
-    guarded_connect(builder, controller.GetOutputPort("actuation"), actuation, owner)
+    guarded_connect(builder, controller.GetOutputPort(actuation_output), actuation, owner)
     if supervisor is not None:
         for name in SUPERVISED_OUTPUTS:
             guarded_connect(builder, controller.GetOutputPort(name), supervisor.GetInputPort(name), owner)
