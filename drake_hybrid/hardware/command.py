@@ -24,7 +24,7 @@ from pydrake.systems.controllers import InverseDynamics
 from pydrake.systems.framework import Diagram, DiagramBuilder, LeafSystem
 from pydrake.systems.primitives import Adder, Gain, MatrixGain
 
-from drake_hybrid.control.sampling import tick_offset
+from drake_hybrid.control.sampling import declare_periodic_update, tick_offset
 from drake_hybrid.core.linalg import all_finite
 from drake_hybrid.hardware.messages import HardwareFault, Rejection
 from drake_hybrid.hardware.watchdog import STATUS_FIELDS
@@ -138,7 +138,7 @@ class TorqueCommandSafety(LeafSystem):
         # State: group 0 the command (n), output as it is (by Drake: no Python call in the publish);
         # group 1 the stop: [latched fault; stop time; ages and rejections at the stop (4); q at the stop (n)].
         self._layout = {"fault": 0, "time": 1, "details": slice(2, 6), "hold": slice(6, n + 6)}
-        self.DeclarePeriodicDiscreteUpdateEvent(self.period, tick_offset(self.period), self._update)
+        declare_periodic_update(self, self.period, tick_offset(self.period), self._update)
         self.DeclareStateOutputPort("torque", self.DeclareDiscreteState(n))
         self.DeclareDiscreteState(n + 6)
         self._enabled_port = self.DeclareVectorOutputPort("enabled", 1, self._calc_enabled)

@@ -254,9 +254,9 @@ def build_controller_station(config: ScenarioConfig, lcm: DrakeLcmInterface, har
         # The command's safety ticks with the law and acts on the torque the law computes in that tick.
         connect_hybrid_loop(builder, law, state=state, wrench=wrench_output, source=source,
                             actuation=selector.GetInputPort(f"actuation_{index}") if selector is not None else command,
-                            owner="build_controller_station", actuation_output="computed_actuation")
-        if held_selector is not None:
-            builder.Connect(law.GetOutputPort("actuation"), held_selector.GetInputPort(f"actuation_{index}"))
+                            owner="build_controller_station", actuation_output="computed_actuation",
+                            held_actuation=(held_selector.GetInputPort(f"actuation_{index}")
+                                            if held_selector is not None else None))
         controllers.append(law)
     station = ControllerStation(
         config=config, hardware=hardware, task=task, robot=robot, controller_plant=plant, constraint_space=space,

@@ -10,8 +10,10 @@ publishes. The tick runs them as a Simulator would, in its order and at its time
 event's time computed as Drake computes it, offset + j period; at one time the publishes first, then
 every discrete update computed from the same context and applied together; updates due when the
 messages come, at the start, before the messages), so its results are the Simulator's to the last
-bit (tests/test_hardware.py), and it pays for nothing else: no search for the next event over the
-diagram, no copy of the state.
+bit (tests/test_realtime_tick.py), and it pays for nothing else: no search for the next event over
+the diagram, no event dispatch for a system that keeps its update's handler
+(``control.sampling.declare_periodic_update``: the handler is called on a copy of the state, as
+Drake calls it), no copy of the state.
 
 Before tick k's messages arrive, ``prepare(k)`` does what does not wait for them, off the critical
 path (the runner calls it once the previous command is out): the gain change due, the context at the
@@ -79,6 +81,10 @@ def _no_clock() -> float:
     return 0.0
 
 
+# A periodic discrete update: (system, its context, a buffer, part, the handler called directly or None).
+_Update = Tuple[System, Context, DiscreteValues, int, Optional[Callable[[Context, DiscreteValues], None]]]
+
+
 class _Timing:
     """One periodic timing (period, offset) and what happens at it: the discrete updates of ``updates``
     [(system, its context, a buffer, part)] or the publishes of ``loggers`` (never both: at one time the
@@ -89,7 +95,7 @@ class _Timing:
 
     def __init__(self, period: float, offset: float) -> None:
         self.period, self.offset = period, offset
-        self.updates: List[Tuple[System, Context, DiscreteValues, int]] = []
+        self.updates: List[_Update] = []
         self.loggers: List[Tuple[System, Context]] = []
         self.commands = False
         self.index, self.next_time = 0, offset
@@ -225,7 +231,7 @@ class ControllerTick:
             if attribute is not None:
                 buffer, part = system.AllocateDiscreteVariables(), self._part_of(system)
                 at = timing("update", attribute.period_sec(), attribute.offset_sec())
-                at.updates.append((system, leaf_context, buffer, part))
+                at.updates.append((system, leaf_context, buffer, part, getattr(system, "periodic_update_handler", None)))
                 at.commands = at.commands or part == _COMMAND
             elif leaf_context.num_discrete_state_groups():
                 raise ArgumentError(f"ControllerTick: system '{system.get_name()}' has discrete state without one "
@@ -262,12 +268,16 @@ class ControllerTick:
             if updates:
                 if self._timed:
                     self._warm_parts(updates)
-                for system, leaf_context, buffer, part in updates:
+                for system, leaf_context, buffer, part, handler in updates:
                     start = clock()
-                    buffer.SetFrom(system.EvalUniquePeriodicDiscreteUpdate(leaf_context))
+                    if handler is None:
+                        buffer.SetFrom(system.EvalUniquePeriodicDiscreteUpdate(leaf_context))
+                    else:                        # what that calls, without Drake's event dispatch
+                        buffer.SetFrom(leaf_context.get_discrete_state())
+                        handler(leaf_context, buffer)
                     parts[part] += clock() - start
                 start = clock()
-                for _, leaf_context, buffer, _ in updates:
+                for _, leaf_context, buffer, _, _ in updates:
                     leaf_context.get_mutable_discrete_state().SetFrom(buffer)
                 parts[_FRAMEWORK] += clock() - start
                 if any([timing.commands for timing in due]):
@@ -285,9 +295,9 @@ class ControllerTick:
         # (nothing computed between two ticks reads the time, and a gain change is made at ``end``).
         self._time = end
 
-    def _warm_parts(self, updates: List[Tuple[System, Context, DiscreteValues, int]]) -> None:
+    def _warm_parts(self, updates: List[_Update]) -> None:
         """Evaluate, in the parts' order, what the updates at this time read (module docstring)."""
-        parts_due = {part for _, _, _, part in updates}
+        parts_due = {update[3] for update in updates}
         if _LAW in parts_due:
             self._warm(self._watchdog_ports, _WATCHDOG)
             self._warm([self._wrench_port], _WRENCH)

@@ -22,7 +22,7 @@ import numpy as np
 from pydrake.common.value import AbstractValue
 from pydrake.systems.framework import LeafSystem
 
-from drake_hybrid.control.sampling import tick_offset
+from drake_hybrid.control.sampling import declare_periodic_update, tick_offset
 from drake_hybrid.core.kinematics import declare_cached_value
 from drake_hybrid.hardware.messages import HardwareFault, Rejection
 
@@ -139,12 +139,10 @@ class MessageWatchdog(LeafSystem):
                                                                     AbstractValue.Make(force_torque_type()))
         self.DeclareDiscreteState(VALUES + 3 * n)
         self.DeclareDiscreteState(VALUES + 6)
-        self.DeclarePeriodicDiscreteUpdateEvent(self.period, tick_offset(self.period), self._update)
+        declare_periodic_update(self, self.period, tick_offset(self.period), self._update)
         self.DeclareInitializationDiscreteUpdateEvent(self._update)
-        # The messages on the inputs parsed (status_fields, force_torque_fields): once per message.
-        self._parsed = declare_cached_value(self, "parsed messages", self._parse, {self.all_input_ports_ticket()})
         # Everything as of now (state + what is on the inputs: the records and each output's value),
-        # computed once per change of either; the outputs copy their part of it.
+        # computed once per change of either (once a tick); the outputs copy their part of it.
         self._now = declare_cached_value(self, "as of now", self._as_of_now,
                                          {self.time_ticket(), self.xd_ticket(), self.all_input_ports_ticket()})
         now = {self._now.ticket()}
@@ -169,7 +167,7 @@ class MessageWatchdog(LeafSystem):
     def _as_of_now(self, context):
         """(status record, F/T record, estimated_state, torque_external, sensor_wrench, watchdog_status)
         after the messages on the inputs arrived now."""
-        status, force_torque = self._parsed.Eval(context)
+        status, force_torque = self._parse(context)
         now = context.get_time()
         # The held records read in place (accept copies one only to change it).
         status = accept(context.get_discrete_state(0).get_value(), status, now)

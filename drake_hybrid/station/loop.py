@@ -84,7 +84,8 @@ CONTROLLER_OPTIONS = tuple(name for name in inspect.signature(HybridController._
 def connect_hybrid_loop(builder: DiagramBuilder, controller: System, *, state: OutputPort, wrench: OutputPort,
                         actuation: InputPort, source: Optional[System] = None,
                         supervisor: Optional[ContactSupervisor] = None, conditioner: Optional[System] = None,
-                        owner: str = "connect_hybrid_loop", actuation_output: str = "actuation") -> None:
+                        owner: str = "connect_hybrid_loop", actuation_output: str = "actuation",
+                        held_actuation: Optional[InputPort] = None) -> None:
     """Every connection of the hybrid loop to and from ``controller``'s ports, in one place::
 
         state ─► controller.estimated_state (and the source's first input, if it has one: the arm's state)
@@ -100,7 +101,8 @@ def connect_hybrid_loop(builder: DiagramBuilder, controller: System, *, state: O
     port the controller reads the wrench from, ``actuation`` the input port its torque drives (the
     plant's actuation, or a real arm's command path) from the controller's ``actuation_output``
     ("actuation"; a real arm's command path, which ticks with the law, reads "computed_actuation",
-    the tick's own torque). The path's connections are made when the source
+    the tick's own torque; ``held_actuation``, if given, takes the held ``actuation`` then: what a log
+    of the applied torque reads). The path's connections are made when the source
     has them (a ``PathSource``): the controller must then take the path's position error, and a source
     that waits for the first contact needs a supervisor. Every input is checked unwired first
     (ArgumentError naming it and ``owner``)."""
@@ -112,6 +114,8 @@ def connect_hybrid_loop(builder: DiagramBuilder, controller: System, *, state: O
     guarded_connect(builder, state, controller.GetInputPort("estimated_state"), owner)
     guarded_connect(builder, wrench, controller.GetInputPort("measured_wrench"), owner)
     guarded_connect(builder, controller.GetOutputPort(actuation_output), actuation, owner)
+    if held_actuation is not None:
+        guarded_connect(builder, controller.GetOutputPort("actuation"), held_actuation, owner)
     if supervisor is not None:
         for name in SUPERVISED_OUTPUTS:
             guarded_connect(builder, controller.GetOutputPort(name), supervisor.GetInputPort(name), owner)

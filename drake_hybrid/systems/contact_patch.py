@@ -34,6 +34,7 @@ from pydrake.math import RigidTransform
 from pydrake.multibody.plant import ContactResults, MultibodyPlant
 from pydrake.systems.framework import Context, LeafSystem
 
+from drake_hybrid.control.sampling import declare_periodic_update
 from drake_hybrid.core.arguments import instance, positive, vector
 from drake_hybrid.core.errors import ArgumentError
 from drake_hybrid.core.hints import Array
@@ -200,7 +201,7 @@ class ContactPatchSensor(LeafSystem):
         self._results = self.DeclareAbstractInputPort("contact_results", AbstractValue.Make(ContactResults()))
         self._poses = self.DeclareAbstractInputPort("body_poses", Value[CppList[RigidTransform]]([]))
         self._state = self.DeclareDiscreteState(NO_PATCH.copy())
-        self.DeclarePeriodicDiscreteUpdateEvent(self.period, 0.0, self._update)
+        declare_periodic_update(self, self.period, 0.0, self._update)
         self.DeclareInitializationDiscreteUpdateEvent(self._update)
         self.DeclareStateOutputPort("patch", self._state)
 

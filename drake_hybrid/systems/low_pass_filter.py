@@ -13,6 +13,7 @@ from pydrake.autodiffutils import AutoDiffXd
 from pydrake.systems.framework import LeafSystem_
 from pydrake.systems.scalar_conversion import TemplateSystem
 
+from drake_hybrid.control.sampling import declare_periodic_update
 from drake_hybrid.core.arguments import number, positive
 from drake_hybrid.core.templates import default_instantiation
 
@@ -73,7 +74,7 @@ def LowPassFilter_(T):
             else:
                 self._alpha = low_pass_coefficient(self.bandwidth_hz, period)
                 state = self.DeclareDiscreteState(size)
-                self.DeclarePeriodicDiscreteUpdateEvent(period, 0.0, self._update)
+                declare_periodic_update(self, period, 0.0, self._update)
                 self.DeclareStateOutputPort("y", state)
 
         def _construct_copy(self, other, converter=None):
