@@ -32,7 +32,7 @@ from pathlib import Path
 from pydrake.lcm import DrakeLcm
 
 from drake_hybrid.hardware.controller_side import build_controller_station
-from drake_hybrid.hardware.loop import run_hardware_loop, start_state
+from drake_hybrid.hardware.loop import run_hardware_loop, simulated_robot_hardware, start_state
 from drake_hybrid.hardware.panda import panda_config, panda_drum_task, panda_table_task
 from drake_hybrid.hardware.process_settings import NO_SETTINGS, RealTimeSettings
 from drake_hybrid.hardware.realtime import ReplayPacer, run_controller, start_controller_state
@@ -50,7 +50,8 @@ def replay(config, recorded, seconds, settings, stepping, url):
     """One replay of ``recorded`` to a fresh controller side: its TickTiming's summary."""
     lcm = DrakeLcm(url)
     start = start_state(config)
-    station = build_controller_station(config, lcm, None, initial_positions=start[1], with_loggers=False)
+    station = build_controller_station(config, lcm, simulated_robot_hardware(config), initial_positions=start[1],
+                                       with_loggers=False)
     timing = run_controller(station, lcm, seconds, pacer=ReplayPacer(lcm, recorded, config.control_period),
                             initial_state=start_controller_state(config, start), settings=settings, stepping=stepping)
     return timing.summary

@@ -8,15 +8,20 @@ import os
 
 import numpy as np
 import pytest
+from drake import lcmt_panda_command
+
+from pydrake.lcm import DrakeLcm
 
 from drake_hybrid.control.gains import HybridGains
 from drake_hybrid.core.errors import ArgumentError
 from drake_hybrid.hardware import process_settings
-from drake_hybrid.hardware.loop import run_hardware_loop
+from drake_hybrid.hardware.controller_side import build_controller_station
+from drake_hybrid.hardware.loop import run_hardware_loop, simulated_robot_hardware, start_state
 from drake_hybrid.hardware.messages import HardwareConfig
 from drake_hybrid.hardware.panda import panda_config, panda_drum_task
 from drake_hybrid.hardware.process_settings import NO_SETTINGS, RealTimeSettings, real_time
-from drake_hybrid.hardware.realtime import TIMED_EVERY, miss_causes, replay_timing
+from drake_hybrid.hardware.realtime import (TIMED_EVERY, ReplayPacer, miss_causes, replay_timing, run_controller,
+                                            start_controller_state)
 from drake_hybrid.hardware.tick import PARTS
 from drake_hybrid.station.sensing import WristSensorConfig
 
@@ -57,6 +62,28 @@ def test_the_direct_tick_is_the_simulators_to_the_bit(drum, variant):
         # Timing a tick by part (evaluating ports ahead of the updates) changes nothing computed.
         assert np.array_equal(direct[key], direct_untimed[key], equal_nan=True), key
     assert len(direct["wire_command"]) == 61
+
+
+def test_a_replayed_controller_side_sends_the_lock_step_runs_commands_to_the_bit(drum):
+    """The controller side at rate (run_controller: each tick prepared before its status arrives, one tick
+    in TIMED_EVERY timed by part), fed what the simulated Panda sent in a lock-step run, sends that run's
+    commands, bit for bit."""
+    config = panda_config(drum, duration=0.03, speed=0.02)
+    lock_step = run_hardware_loop(config, duration=0.03, record=True)
+    lcm = DrakeLcm("memq://replayed_commands")
+    start = start_state(config)
+    station = build_controller_station(config, lcm, simulated_robot_hardware(config), initial_positions=start[1],
+                                       with_loggers=False)
+    sent = []
+    subscription = lcm.Subscribe(station.hardware.command_channel,
+                                 lambda data: sent.append(lcmt_panda_command.decode(data).joint_torque))
+    timing = run_controller(station, lcm, 0.03, pacer=ReplayPacer(lcm, lock_step.timing["recorded"], 1e-3),
+                            initial_state=start_controller_state(config, start), settings=NO_SETTINGS)
+    while lcm.HandleSubscriptions(0) > 0:
+        pass
+    del subscription
+    assert timing.missed_status == 0 and np.all(np.isfinite(timing.prepared[1:]))
+    assert np.array_equal(np.array(sent), lock_step.log["wire_command"])
 
 
 def assert_collector_restored(enabled, frozen):

@@ -120,6 +120,14 @@ def start_state(config):
     return scenario.plant.GetPositionsAndVelocities(plant_context), q0, held, reading, integrals
 
 
+def simulated_robot_hardware(config, hardware=None):
+    """``hardware`` (validated; default HardwareConfig()) for a controller side whose robot is
+    ``config``'s simulated discrete plant: the law compensates that plant's implicit joint damping
+    (``damping_time_step``: its time step), as the directly wired loop's does."""
+    hardware = (hardware or HardwareConfig()).validate()
+    return dataclasses.replace(hardware, damping_time_step=float(config.plant.time_step))
+
+
 def run_hardware_loop(config, hardware=None, duration=None, lcm_url="memq://drake_hybrid_hil", fault=None,
                       robot_hardware=None, connect_robot=True, record=False, sensor_bias=None, gain_changes=(),
                       stepping="direct", timed_every=1):
@@ -134,10 +142,8 @@ def run_hardware_loop(config, hardware=None, duration=None, lcm_url="memq://drak
     """
     if not lcm_url.startswith("memq://"):
         raise ValueError(f"run_hardware_loop runs in one process over memq:// only, got {lcm_url!r}")
-    hardware = (hardware or HardwareConfig()).validate()
     check_hardware_config(config)
-    # The robot here is the simulated discrete plant: the law compensates its implicit joint damping.
-    hardware = dataclasses.replace(hardware, damping_time_step=float(config.plant.time_step))
+    hardware = simulated_robot_hardware(config, hardware)
     if fault is not None and robot_hardware is None:
         robot_hardware = dataclasses.replace(hardware, status_channel=hardware.status_channel + "_ROBOT",
                                              force_torque_channel=hardware.force_torque_channel + "_ROBOT")

@@ -48,7 +48,7 @@ from drake_hybrid.core.arguments import joint_vector
 from drake_hybrid.core.errors import ArgumentError
 from drake_hybrid.core.hints import Array
 from drake_hybrid.hardware.controller_side import ControllerStation, build_controller_station
-from drake_hybrid.hardware.loop import HardwareRun, StartState, run_hardware_loop, start_state
+from drake_hybrid.hardware.loop import HardwareRun, StartState, run_hardware_loop, simulated_robot_hardware, start_state
 from drake_hybrid.hardware.messages import HardwareConfig
 from drake_hybrid.hardware.process_settings import RealTimeSettings, real_time
 from drake_hybrid.hardware.tick import PARTS, ControllerTick
@@ -308,7 +308,9 @@ def replay_timing(config: ScenarioConfig, hardware: Optional[HardwareConfig] = N
     recorded_run = run_hardware_loop(config, hardware, duration=seconds, record=True)
     lcm = DrakeLcm(lcm_url)
     start = start_state(config)
-    station = build_controller_station(config, lcm, hardware, initial_positions=start[1], with_loggers=False)
+    # The controller side the lock-step run had: its robot is the simulated plant.
+    station = build_controller_station(config, lcm, simulated_robot_hardware(config, hardware),
+                                       initial_positions=start[1], with_loggers=False)
     pacer = ReplayPacer(lcm, recorded_run.timing.pop("recorded"), station.config.control_period)
     timing = run_controller(station, lcm, seconds, pacer=pacer, initial_state=start_controller_state(config, start),
                             settings=settings, wake_up=wake_up, stepping=stepping, timed_every=timed_every)
