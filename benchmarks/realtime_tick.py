@@ -101,9 +101,14 @@ def markdown_lines(result):
                      f"{run['ticks_at_rate']} | {run['late_wake_up']} ({run['late_wake_up_after_a_long_tick']}) | "
                      f"{run['long_tick']} ({run['long_tick_preempted']}) |")
     main = result["runs"]["real-time settings"]
-    lines += ["", "The tick by part, real-time settings (us, p50 / p99 / max): " + "; ".join(
+    timed, prepared = main.get("controller_cost_timed_by_part_s"), main.get("prepare_s")
+    lines += ["", f"The tick by part, real-time settings, over the {main.get('ticks_timed_by_part', 0)} ticks timed by "
+              f"part (one in {main.get('timed_every', 1)}; timing a tick by part adds to it: those ticks cost "
+              f"{_ms(timed) if timed else '-'} ms) (us, p50 / p99 / max): " + "; ".join(
         f"{part} {main['tick_parts_s'][part]['p50'] * 1e6:.0f} / {main['tick_parts_s'][part]['p99'] * 1e6:.0f} / "
-        f"{main['tick_parts_s'][part]['max'] * 1e6:.0f}" for part in PARTS) + ".",
+        f"{main['tick_parts_s'][part]['max'] * 1e6:.0f}" for part in PARTS) + ". Each tick prepared before its "
+              f"status arrives (off the critical path, `ControllerTick.prepare`): {_ms(prepared) if prepared else '-'} "
+              "ms.",
               "", "Settings applied: " + "; ".join(f"{key} {value}" for key, value in main["real_time"].items()
                                                    if key in ("scheduler", "cpu", "idle_states", "collector", "law"))
               + ".", "", "Targets: " + "; ".join(

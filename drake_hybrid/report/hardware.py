@@ -76,9 +76,12 @@ def timing_lines(figures: Mapping[str, Any]) -> List[str]:
              f"{ticks} ticks at rate",
              f"  controller cost per tick (status in to command out): {milliseconds(figures['controller_cost_s'])} "
              f"(the thread's CPU time: {milliseconds(figures['controller_cpu_s'])})",
-             "  by part, p50 / p99 / max in us: " + "; ".join(
+             f"  by part, p50 / p99 / max in us ({by_part_ticks(figures)}): " + "; ".join(
                  f"{part} {microseconds(stats)}" for part, stats in figures["tick_parts_s"].items()),
              f"  period jitter |interval - {period * 1e3:g} ms|: {milliseconds(figures['period_jitter_s'])}"]
+    if figures.get("prepare_s") is not None:
+        lines.append(f"  each tick prepared before its status (off the critical path): "
+                     f"{milliseconds(figures['prepare_s'])}")
     if figures["wake_up_delay_s"] is not None:
         lines.append(f"  wake-up delay (status due to handled): {milliseconds(figures['wake_up_delay_s'])}")
     lines += [f"  deadline misses (command more than {period * 1e3:g} ms after its status was due): {misses} of "
@@ -89,6 +92,16 @@ def timing_lines(figures: Mapping[str, Any]) -> List[str]:
               f"{figures['commands_published']} of {figures['ticks']}"]
     lines += [f"  advice: {line}" for line in timing_advice(figures)]
     return lines
+
+
+def by_part_ticks(figures: Mapping[str, Any]) -> str:
+    """Which ticks the parts were timed in, and what those ticks cost (timing by part costs a tick some)."""
+    every = figures.get("timed_every", 1)
+    if every == 1:
+        return "every tick"
+    timed = figures.get("controller_cost_timed_by_part_s")
+    cost = f", which cost {milliseconds(timed)}" if timed is not None else ""
+    return f"one tick in {every}: {figures.get('ticks_timed_by_part', 0)} ticks{cost}"
 
 
 def timing_advice(figures: Mapping[str, Any]) -> List[str]:
