@@ -39,6 +39,7 @@ from drake_hybrid.hardware.realtime import (ReplayPacer, TickTiming, replay_timi
                                             start_controller_state, summarize)
 from drake_hybrid.hardware.tick import PARTS
 from drake_hybrid.hardware.watchdog import accept, age, force_torque_fields
+from drake_hybrid.report.hardware import timing_lines
 
 pytest.importorskip("cmeel")      # example-robot-data (the Panda) is a test extra
 
@@ -349,11 +350,19 @@ def test_hardware_prints_a_summary_and_json_only_with_json(tmp_path, capsys, mon
             "0 (after a long tick: 0), long tick 2 (preempted: 0)") in out
     assert "controller cost per tick (status in to command out): p50 0.3 ms, p99 1.47 ms, max 1.5 ms" in out
     assert "real-time settings: scheduler SCHED_FIFO, priority 50; pinned to core 1 (of [0, 1])" in out
-    assert "by part, p50 / p99 / max in us: receive 0 / 0 / 0; watchdog 0 / 0 / 0; wrench 0 / 0 / 0; " \
+    assert "by part, p50 / p99 / max in us (every tick): receive 0 / 0 / 0; watchdog 0 / 0 / 0; wrench 0 / 0 / 0; " \
            "source 0 / 0 / 0; " \
            "law 300 / 1473 / 1500; command 0 / 0 / 0; publish 0 / 0 / 0; framework 0 / 0 / 0" in out
     assert "advice: 2 long ticks were the tick's own work" in out
     assert "no fault" in out
+    # Parts timed in one tick in 5 (NaN in the others): said, with what those ticks cost.
+    timing = _timing([5e-3, 3e-4, 3e-4, 1.5e-3, 3e-4, 3e-4, 3e-4, 1.2e-3, 3e-4, 3e-4, 3e-4], [2e-5] * 11)
+    timing.parts[np.arange(11) % 5 != 0] = np.nan
+    summary = summarize(timing, _timing_summary()["real_time"], paced=True, law="compiled (numba)", wake_up="poll",
+                        stepping="direct", timed_every=5)
+    assert summary["ticks_timed_by_part"] == 2 and summary["tick_parts_s"]["law"]["p50"] == pytest.approx(3e-4)
+    assert any("by part, p50 / p99 / max in us (one tick in 5: 2 ticks, which cost p50 0.3 ms, p99 0.3 ms" in line
+               for line in timing_lines(summary))
     path = tmp_path / "timing.json"
     assert main(["hardware", "timing", "--duration", "0.01", "--json", str(path)]) == 0
     out = capsys.readouterr().out
