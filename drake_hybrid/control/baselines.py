@@ -47,7 +47,7 @@ from pydrake.systems.scalar_conversion import TemplateSystem
 
 from drake_hybrid.control.gains import ControlMode, HybridGains
 from drake_hybrid.control.law_system import LawSystemParts, MultibodyForcesHolder, declare_diagnostic_outputs
-from drake_hybrid.control.sampling import SAMPLE_LEAD, declare_periodic_update
+from drake_hybrid.control.sampling import declare_periodic_update, tick_offset
 from drake_hybrid.core.errors import ConfigError, DimensionError, check_fields
 from drake_hybrid.core.kinematics import declare_task_input, resolve_frame
 from drake_hybrid.core.linalg import all_finite, solve, value
@@ -153,8 +153,8 @@ def _declare_common(system, T, plant, end_effector_frame, end_effector_point, co
         state_ticket = system.xc_ticket()
     else:
         system.DeclareDiscreteState(integrated + n)
-        offset = float(control_period) * (1.0 - SAMPLE_LEAD) if sample_lead else 0.0
-        declare_periodic_update(system, float(control_period), offset, system._discrete_update)
+        declare_periodic_update(system, float(control_period), tick_offset(control_period, sample_lead),
+                                system._discrete_update)
         system.DeclareInitializationDiscreteUpdateEvent(system._initialize_actuation)
         state_ticket = system.xd_ticket()
     system._solution_cache = system.DeclareCacheEntry(

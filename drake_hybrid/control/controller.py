@@ -40,7 +40,7 @@ from drake_hybrid.control.law_system import LawSystemParts, declare_diagnostic_o
 from drake_hybrid.control.normal_force import NORMAL_FORCE_AXES, tool_axis_wrench
 from drake_hybrid.control.phases import ContactPhase
 from drake_hybrid.control.safety import SafetyConfig, warn_singularity
-from drake_hybrid.control.sampling import SAMPLE_LEAD, declare_periodic_update
+from drake_hybrid.control.sampling import SAMPLE_LEAD, declare_periodic_update, tick_offset
 from drake_hybrid.core.arguments import boolean, describe, instance, matrix, nonnegative, positive, vector
 from drake_hybrid.core.errors import ArgumentError, DimensionError, OffConstraintError
 from drake_hybrid.core.kinematics import AnyScalarContext, declare_task_input, resolve_frame, set_plant_state
@@ -389,8 +389,8 @@ def HybridController_(T):
             else:
                 # Discrete state: [xi; e_p; held actuation].
                 self.DeclareDiscreteState(integrated + n)
-                offset = float(control_period) * (1.0 - SAMPLE_LEAD) if self.sample_lead else 0.0
-                declare_periodic_update(self, float(control_period), offset, self._discrete_update)
+                declare_periodic_update(self, float(control_period), tick_offset(control_period, self.sample_lead),
+                                        self._discrete_update)
                 self.DeclareInitializationDiscreteUpdateEvent(self._initialize_actuation)
                 state_ticket = self.xd_ticket()
             self._solution_cache = self.DeclareCacheEntry(

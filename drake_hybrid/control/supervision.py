@@ -61,7 +61,7 @@ from pydrake.systems.framework import Context, LeafSystem_, OutputPort
 from pydrake.systems.scalar_conversion import TemplateSystem
 
 from drake_hybrid.control.phases import ContactPhase
-from drake_hybrid.control.sampling import SAMPLE_LEAD, declare_periodic_update
+from drake_hybrid.control.sampling import SAMPLE_LEAD, declare_periodic_update, tick_offset
 from drake_hybrid.core.arguments import MAX_TASK_SIZE, describe, instance, number, positive, vector
 from drake_hybrid.core.errors import ArgumentError, ConfigError, check_fields
 from drake_hybrid.core.hints import Array
@@ -187,7 +187,7 @@ def ContactSupervisor_(T):
             initial = np.zeros(3 + 2 * m + 1)
             initial[0] = float(self.initial_phase)
             self._state_index = self.DeclareDiscreteState(initial)
-            declare_periodic_update(self, self.period, self.period * (1.0 - SAMPLE_LEAD), self._update)
+            declare_periodic_update(self, self.period, tick_offset(self.period), self._update)
             self.DeclareVectorOutputPort("contact_phase", 1, self._calc_phase, prerequisites_of_calc={self.xd_ticket()})
             self.DeclareVectorOutputPort("contact_count", 1, self._calc_count, prerequisites_of_calc={self.xd_ticket()})
             self.DeclareVectorOutputPort("approach_reference", m, self._calc_reference,

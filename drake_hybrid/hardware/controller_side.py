@@ -86,11 +86,16 @@ class ControllerStation(HybridSystems):
     transfers: List[Dict[str, Any]] = field(default_factory=list)        # the bumpless transfers made
     bumpless: bool = True                                        # False: keep the integrals (for comparison)
 
+    def changes_gains_at(self, tick: int) -> bool:
+        """Whether another law becomes active at ``tick`` (a gain change)."""
+        return self.gain_selector is not None and tick in self.gain_selector.change_ticks
+
     def before_tick(self, root_context: Context, tick: int) -> None:
         """Make the bumpless transfer to the law that becomes active at ``tick`` (call before the
         controller advances to it; a no-op without gain changes)."""
-        if self.gain_selector is None or tick not in self.gain_selector.change_ticks:
+        if not self.changes_gains_at(tick):
             return
+        assert self.gain_selector is not None
         index = self.gain_selector.change_ticks.index(tick) + 1
         old, new = self.controllers[index - 1], self.controllers[index]
         old_context = old.GetMyContextFromRoot(root_context)

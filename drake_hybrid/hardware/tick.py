@@ -342,12 +342,12 @@ class ControllerTick:
         then (at the start: offset-0 updates at t0); then the context at tick k's first event time and
         what reads nothing but the time evaluated there (a source without inputs: the desired values)."""
         start = time.perf_counter()
-        selector, context = self.station.gain_selector, self.context
+        context = self.context
         if self._simulator is not None:
             self.station.before_tick(context, k)
             self._simulator.AdvanceTo(self._time)
         else:
-            if selector is not None and k in selector.change_ticks and self._context_time != self._time:
+            if self.station.changes_gains_at(k) and self._context_time != self._time:
                 context.SetTime(self._time)
                 self._context_time = self._time
             self.station.before_tick(context, k)

@@ -24,6 +24,7 @@ from pydrake.systems.framework import LeafSystem
 
 from drake_hybrid.control.sampling import declare_periodic_update, tick_offset
 from drake_hybrid.core.kinematics import declare_cached_value
+from drake_hybrid.core.linalg import all_finite
 from drake_hybrid.hardware.messages import HardwareFault, Rejection
 
 # Record layout (one discrete state group per message kind).
@@ -45,8 +46,7 @@ def status_fields(message, n):
     values = [*message.joint_position, *message.joint_velocity, *message.joint_torque_external]
     if message.num_joints != n or len(message.joint_position) != n or len(values) != 3 * n:
         return message.utime * 1e-6, None, Rejection.WRONG_SIZE
-    # all_finite's test on the Python floats as decoded (one sum; NaN and inf propagate through it).
-    if not math.isfinite(sum(values)):
+    if not all_finite(values):
         return message.utime * 1e-6, None, Rejection.NON_FINITE
     return message.utime * 1e-6, np.array(values, dtype=float), Rejection.NONE
 
@@ -57,7 +57,7 @@ def force_torque_fields(message):
     values = [message.tx, message.ty, message.tz, message.fx, message.fy, message.fz]
     if message.timestamp == 0 and not any(values):
         return None
-    if not math.isfinite(sum(values)):
+    if not all_finite(values):
         return message.timestamp * 1e-6, None, Rejection.NON_FINITE
     return message.timestamp * 1e-6, np.array(values, dtype=float), Rejection.NONE
 

@@ -27,7 +27,7 @@ from pydrake.math import tanh as drake_tanh
 from pydrake.systems.framework import LeafSystem_
 from pydrake.systems.scalar_conversion import TemplateSystem
 
-from drake_hybrid.control.sampling import SAMPLE_LEAD, declare_periodic_update
+from drake_hybrid.control.sampling import declare_periodic_update, tick_offset
 from drake_hybrid.core.errors import ConfigError, DimensionError, check_fields
 from drake_hybrid.core.linalg import all_finite, value
 from drake_hybrid.core.templates import default_instantiation
@@ -120,7 +120,7 @@ def SensorFaultInjector_(T):
             self._blocks = {}
             self._input = self.DeclareVectorInputPort("wrench", 6)
             self.DeclareDiscreteState(7)
-            declare_periodic_update(self, self.period, self.period * (1.0 - SAMPLE_LEAD), self._update)
+            declare_periodic_update(self, self.period, tick_offset(self.period), self._update)
             self.DeclareVectorOutputPort("faulty_wrench", 6, self._calc_wrench)
             self.DeclareVectorOutputPort("sequence", 1, self._calc_sequence)
 

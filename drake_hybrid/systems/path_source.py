@@ -49,7 +49,7 @@ from pydrake.systems.framework import LeafSystem_
 from pydrake.systems.scalar_conversion import TemplateSystem
 
 from drake_hybrid.control.phases import ContactPhase
-from drake_hybrid.control.sampling import SAMPLE_LEAD, declare_periodic_update
+from drake_hybrid.control.sampling import declare_periodic_update, tick_offset
 from drake_hybrid.core.arguments import boolean, describe, instance, nonnegative, number, positive, vector
 from drake_hybrid.core.charts import PoseChart
 from drake_hybrid.core.errors import ArgumentError
@@ -216,7 +216,7 @@ def PathSource_(T):
                     raise ArgumentError(f"{owner}: wait_for_contact needs period (the control period, s), got None")
                 self._phase_port = self.DeclareVectorInputPort("contact_phase", 1)
                 self.DeclareDiscreteState(np.array([NOT_STARTED]))
-                declare_periodic_update(self, float(period), float(period) * (1.0 - SAMPLE_LEAD), self._update_start)
+                declare_periodic_update(self, float(period), tick_offset(period), self._update_start)
                 time_tickets.add(self.xd_ticket())
             # The measured x, nu, E_p and E_p-dot once per state; the reference once per time (and start).
             self._task = declare_cached_value(self, "x, nu, E_p, E_p-dot", lambda context: self._calc_task(

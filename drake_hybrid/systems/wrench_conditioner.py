@@ -13,7 +13,7 @@ from pydrake.systems.framework import LeafSystem_
 from pydrake.systems.scalar_conversion import TemplateSystem
 
 from drake_hybrid.control.phases import ContactPhase
-from drake_hybrid.control.sampling import SAMPLE_LEAD, declare_periodic_update
+from drake_hybrid.control.sampling import declare_periodic_update, tick_offset
 from drake_hybrid.core.arguments import boolean, nonnegative, positive
 from drake_hybrid.core.linalg import all_finite, value
 from drake_hybrid.core.templates import default_instantiation
@@ -78,7 +78,7 @@ def WrenchConditioner_(T):
             self._sequence_port = self.DeclareVectorInputPort("sequence", 1) if self.use_sequence else None
             self._phase_port = self.DeclareVectorInputPort("contact_phase", 1) if self.tare else None
             self.DeclareDiscreteState(15)
-            declare_periodic_update(self, self.period, self.period * (1.0 - SAMPLE_LEAD), self._update)
+            declare_periodic_update(self, self.period, tick_offset(self.period), self._update)
             self.DeclareVectorOutputPort("wrench", 6, self._calc_wrench)
 
         def _construct_copy(self, other, converter=None):
